@@ -1,0 +1,225 @@
+"""Headless command line: ``crowd <command> ...`` or ``python -m crowd_addon <command> ...``.
+
+Commands
+--------
+budget
+    The paper's GPU memory model (NumClips_OLD / NumClips_NEW) and a proposed stream
+    count and max offset for a crowd. See ``docs/performance_budget.md``.
+
+Each command is one ``_add_<name>`` function that builds its subparser and one
+``_run_<name>`` function that does the work; heavy modules are imported inside the
+latter so ``crowd --help`` stays fast. Exit codes: 0 success, 2 bad input (usage
+errors and :class:`~crowd_addon.core.errors.CrowdError`, reported on stderr as
+``crowd <command>: error: <message>``).
+
+Units: sizes in bytes; ``--budget-mb`` is in MB of 10**6 bytes, or MiB (2**20 bytes)
+with ``--mib``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+
+from .core.errors import CrowdError
+
+__all__ = ["build_parser", "main"]
+
+MB = 10**6
+MIB = 2**20
+
+
+# ----------------------------------------------------------- argument converters
+
+def _int_at_least(minimum: int):
+    def convert(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be an integer, got {text!r}") from None
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"must be >= {minimum}, got {value}")
+        return value
+    convert.__name__ = "integer"
+    return convert
+
+
+def _positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number, got {text!r}") from None
+    if not math.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text!r}")
+    return value
+
+
+_positive_float.__name__ = "number"
+
+
+# ------------------------------------------------------------------------- budget
+
+def _add_budget(subparsers) -> None:
+    from .core import budget as b  # only for the defaults shown in --help
+
+    p = subparsers.add_parser(
+        "budget",
+        help="paper's memory model and a stream/offset proposal",
+        description="Evaluate Paduraru's memory model (section 5: NumClips_OLD, "
+                    "NumClips_NEW) and propose a stream count S and max offset M whose "
+                    "GPU pose texture fits the budget. Defaults are the paper's inputs. "
+                    "Sizes are bytes; MB means 10**6 bytes unless --mib is given.",
+        epilog="example: crowd budget --bones 82 --pose-bytes 800 --clip-frames 300 "
+               "--budget-mb 520 --max-offset 60")
+    p.add_argument("--agents", type=_int_at_least(1), default=65000,
+                   help="agents in the crowd (default: %(default)s)")
+    p.add_argument("--bones", type=_int_at_least(1), default=b.PAPER_BONES,
+                   help="bones per skeleton, NBones (default: %(default)s)")
+    p.add_argument("--bytes-per-bone", type=_positive_float,
+                   default=float(b.PAPER_BYTES_PER_BONE),
+                   help="SizePerBone of the paper's model, bytes (default: %(default)g, "
+                        "the paper's 0.8 KB pose / 82 bones)")
+    p.add_argument("--pose-bytes", type=_positive_float, default=None,
+                   help="PoseSize in bytes; overrides bones x --bytes-per-bone in the "
+                        "paper's model (the plan always uses the GPU row size)")
+    p.add_argument("--clip-frames", type=_positive_float, nargs="+",
+                   default=[float(b.PAPER_MOTION_LENGTH)], metavar="FRAMES",
+                   help="clip length(s) in frames; the model uses their mean as "
+                        "MotionLength, M may not exceed the shortest (default: 300)")
+    p.add_argument("--budget-mb", type=_positive_float, default=float(b.PAPER_BUDGET_MB),
+                   help="GPU pose budget, MemBudget, in MB = 10**6 B (default: %(default)g)")
+    p.add_argument("--mib", action="store_true",
+                   help="read --budget-mb as MiB (2**20 B) instead of MB")
+    p.add_argument("--max-offset", type=_int_at_least(1), default=None,
+                   help="M in frames; default: chosen by the planner")
+    p.add_argument("--streams", type=_int_at_least(1), default=None,
+                   help="fix the stream count S; default: chosen by the planner")
+    p.add_argument("--fps", type=_positive_float, default=30.0,
+                   help="crowd frames per second (default: %(default)g)")
+    p.add_argument("--unique-agents", type=_int_at_least(0), default=0,
+                   help="agents in the unique pool, one row each (default: %(default)s)")
+    p.add_argument("--transition-slots", type=_int_at_least(0), default=800,
+                   help="transition slots NT, one row each (default: %(default)s)")
+    p.add_argument("--agents-per-key", type=_positive_float, default=4.0,
+                   help="diversity target: most agents per (stream, offset) "
+                        "(default: %(default)g)")
+    p.add_argument("--offset-seconds", type=_positive_float, default=2.0,
+                   help="preferred M in seconds, capped by the shortest clip "
+                        "(default: %(default)g)")
+    p.add_argument("--gpu-bytes-per-bone", type=_positive_float,
+                   default=float(b.GPU_BYTES_PER_BONE),
+                   help="bytes per bone of a GPU pose row (default: %(default)g, "
+                        "three RGBA32F texels)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(handler=_run_budget)
+
+
+def _run_budget(args) -> int:
+    import dataclasses
+    import json
+
+    from .core import budget as b
+
+    unit = MIB if args.mib else MB
+    budget_bytes = args.budget_mb * unit
+    motion_length = sum(args.clip_frames) / len(args.clip_frames)
+    proposal = b.plan(
+        args.agents, budget_bytes, args.bones, args.clip_frames,
+        bytes_per_bone=args.gpu_bytes_per_bone, fps=args.fps,
+        max_agents_per_key=args.agents_per_key, offset_seconds=args.offset_seconds,
+        max_offset=args.max_offset, streams=args.streams,
+        unique_agents=args.unique_agents, transition_slots=args.transition_slots)
+    model = b.memory_model(
+        budget_bytes, motion_length, proposal.max_offset, pose_bytes=args.pose_bytes,
+        bones=args.bones, bytes_per_bone=args.bytes_per_bone)
+
+    if args.json:
+        out = {
+            "units": {"size": "bytes", "length": "frames",
+                      "budget_unit_bytes": unit, "budget_mb": args.budget_mb},
+            "max_offset_source": "--max-offset" if args.max_offset else "planner",
+            "memory_model": dataclasses.asdict(model),
+            "plan": dataclasses.asdict(proposal),
+        }
+        print(json.dumps(out, indent=None, sort_keys=False))
+        return 0
+
+    unit_name = "MiB" if args.mib else "MB"
+    pose_src = ("--pose-bytes" if args.pose_bytes is not None
+                else f"{args.bones} bones x {args.bytes_per_bone:g} B")
+    m_src = "--max-offset" if args.max_offset else "from the plan"
+    n_clips = len(args.clip_frames)
+    lines = [
+        f"Paper memory model (Paduraru s.5), MemBudget {args.budget_mb:g} {unit_name} "
+        f"= {model.budget_bytes:,.0f} B",
+        f"  PoseSize                {model.pose_bytes:,.6g} B ({pose_src})",
+        f"  MotionLength            {model.motion_length:,.6g} frames "
+        f"(mean of {n_clips} clip{'s' if n_clips != 1 else ''})",
+        f"  M                       {model.max_offset} frames ({m_src})",
+        f"  ClipSize_OLD            {model.clip_size_old:,.6g} B",
+        f"  ClipSize_NEW            {model.clip_size_new:,.6g} B",
+        f"  NumClips_OLD            {model.num_clips_old:,}  floor(MemBudget / ClipSize_OLD)",
+        f"  NumClips_NEW            {model.num_clips_new:,}  "
+        "floor(MotionLength / M x NumClips_OLD), the paper's formula",
+        f"  MemBudget/ClipSize_NEW  {model.num_clips_new_direct:,}  "
+        "floor(MemBudget / ClipSize_NEW), direct",
+        f"  (the paper prints NumClips_OLD {b.PAPER_NUM_CLIPS_OLD} and NumClips_NEW "
+        f"{b.PAPER_NUM_CLIPS_NEW:,} for its inputs; its 216 does not follow from them, "
+        "see docs/performance_budget.md)",
+        "",
+        f"Plan for {proposal.agents:,} agents (GPU pose row: {args.bones} bones x "
+        f"{args.gpu_bytes_per_bone:g} B = {proposal.row_bytes:,} B)",
+        f"  streams S               {proposal.streams:,} (budget allows up to "
+        f"{proposal.max_streams:,} at this M)",
+        f"  max offset M            {proposal.max_offset} frames = "
+        f"{proposal.offset_seconds:.2f} s at {args.fps:g} fps",
+        f"  agents per stream       {proposal.agents_per_stream:,.1f}",
+        f"  agents per key          {proposal.agents_per_key:.2f} per (stream, offset), "
+        f"target <= {proposal.target_agents_per_key:g}: "
+        f"{'met' if proposal.meets_target else 'NOT met'}",
+        f"  rows                    {proposal.history_rows:,} history + "
+        f"{proposal.unique_agents:,} unique + {proposal.transition_slots:,} transition "
+        f"= {proposal.total_rows:,}",
+        f"  bytes used              {proposal.bytes_used:,} B of "
+        f"{proposal.budget_bytes:,.0f} B "
+        f"({100.0 * proposal.bytes_used / proposal.budget_bytes:.1f} %)",
+        f"  upload per frame        {proposal.stream_upload_bytes:,} B (S rows); "
+        f"{proposal.peak_upload_bytes:,} B with every unique and transition row",
+    ]
+    lines += [f"  note: {note}" for note in proposal.notes]
+    print("\n".join(lines))
+    return 0
+
+
+# --------------------------------------------------------------------------- main
+
+#: One ``_add_<command>`` per subcommand; later commands (demo, preview, export) add theirs.
+_COMMANDS = (_add_budget,)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``crowd`` parser with one subparser per command."""
+    parser = argparse.ArgumentParser(
+        prog="crowd", description="Crowd animation for Blender (after Paduraru), headless.")
+    subparsers = parser.add_subparsers(dest="command", metavar="<command>")
+    for add in _COMMANDS:
+        add(subparsers)
+    return parser
+
+
+def main(argv=None) -> int:
+    """Run ``crowd`` with ``argv`` (default ``sys.argv[1:]``); return the exit code."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help (0) or a usage error argparse has printed (2)
+        return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
+    if args.command is None:
+        parser.print_help(sys.stderr)
+        return 2
+    try:
+        return args.handler(args)
+    except CrowdError as exc:
+        print(f"{parser.prog} {args.command}: error: {exc}", file=sys.stderr)
+        return 2

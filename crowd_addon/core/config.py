@@ -1,0 +1,143 @@
+"""A crowd's configuration: what the user authors (paper s.4.1 ``UserConfig``).
+
+``CrowdConfig = (skeletons, clips, StreamPool, UniquePool, NT, M, agents, ...)``.
+It is plain data; :class:`~.crowd.Crowd` validates it and builds the runtime.
+:mod:`.config_io` saves and loads it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .agents import assign_offsets, assign_streams
+from .controllers import Controller
+from .errors import CrowdError
+
+__all__ = ["AnimationDef", "CrowdConfig"]
+
+
+@dataclass
+class AnimationDef:
+    """A stream (shared, with pose history) or unique animation: a named controller tree."""
+
+    name: str
+    skeleton: str
+    root: Controller
+
+
+@dataclass
+class CrowdConfig:
+    """Everything needed to build a crowd.
+
+    Attributes
+    ----------
+    skeletons : dict name -> Skeleton.
+    clips : dict name -> Clip.
+    streams : list of AnimationDef (the StreamPool).
+    uniques : list of AnimationDef (the UniquePool).
+    max_offset : M, frames of pose history per stream (offsets are 0..M-1).
+    transition_slots : NT.
+    fps : crowd frame rate (clip times are in frames at this rate).
+    seed : seed used by the agent helpers.
+    when_full : ``"queue"`` or ``"cut"``, default for transition requests when all
+        slots are busy.
+    max_texture_size : GPU texture limit used to lay out the pose texture.
+    start_frame : the frame ``Crowd.reset()`` starts at.
+    agent_stream : (N,) int stream per agent, ``-1`` for agents on a unique.
+    agent_unique : (N,) int unique per agent, ``-1`` for streamed agents.
+    agent_offset : (N,) int offsets (also kept for unique agents: used when they go
+        back to a stream without an explicit offset).
+    agent_position : (N, 3) float32 world positions (metres); agent_heading : (N,)
+        radians about +Z; agent_color : (N, 3) float32 colour variation 0..1.
+    """
+
+    skeletons: dict = field(default_factory=dict)
+    clips: dict = field(default_factory=dict)
+    streams: list = field(default_factory=list)
+    uniques: list = field(default_factory=list)
+    max_offset: int = 60
+    transition_slots: int = 64
+    fps: float = 30.0
+    seed: int = 0
+    when_full: str = "queue"
+    max_texture_size: int = 16384
+    start_frame: int = 0
+    agent_stream: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
+    agent_unique: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
+    agent_offset: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
+    agent_position: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float32))
+    agent_heading: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
+    agent_color: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float32))
+
+    # authoring helpers ---------------------------------------------------------
+    def add_skeleton(self, skeleton):
+        if skeleton.name in self.skeletons:
+            raise CrowdError(f"skeleton {skeleton.name!r} already exists")
+        self.skeletons[skeleton.name] = skeleton
+        return skeleton
+
+    def add_clip(self, clip):
+        if clip.name in self.clips:
+            raise CrowdError(f"clip {clip.name!r} already exists")
+        self.clips[clip.name] = clip
+        return clip
+
+    def add_stream(self, name, skeleton, root):
+        self.streams.append(AnimationDef(str(name), str(skeleton), root))
+        return len(self.streams) - 1
+
+    def add_unique(self, name, skeleton, root):
+        self.uniques.append(AnimationDef(str(name), str(skeleton), root))
+        return len(self.uniques) - 1
+
+    @property
+    def agent_count(self) -> int:
+        return int(self.agent_offset.shape[0])
+
+    def add_agents(self, count, streams=None, stream_weights=None, offsets="uniform",
+                   offset_mean=None, offset_std=None, positions=None, headings=None,
+                   colors=None, seed=None):
+        """Append ``count`` streamed agents.
+
+        ``streams``: None (all streams, drawn with ``stream_weights``), an int, a
+        name, or an array of stream indices per agent. ``offsets``: ``"uniform"``,
+        ``"normal"`` or an array. Returns the new agents' ids.
+        """
+        seed = self.seed + self.agent_count if seed is None else seed
+        names = [s.name for s in self.streams]
+        if streams is None:
+            st = assign_streams(count, len(self.streams), stream_weights, seed)
+        elif isinstance(streams, (str, int, np.integer)):
+            idx = names.index(streams) if isinstance(streams, str) and streams in names \
+                else streams
+            if isinstance(idx, str) or not 0 <= int(idx) < len(names):
+                raise CrowdError(f"agents: unknown stream {streams!r}")
+            st = np.full(count, int(idx), np.int32)
+        else:
+            st = np.asarray(streams, np.int32)
+            if st.shape != (count,):
+                raise CrowdError(f"agents: {st.shape} streams for {count} agents")
+        if isinstance(offsets, str):
+            off = assign_offsets(count, self.max_offset, offsets, seed + 1, offset_mean,
+                                 offset_std)
+        else:
+            off = assign_offsets(count, self.max_offset, "given", offsets=offsets)
+        pos = np.zeros((count, 3), np.float32) if positions is None else \
+            np.asarray(positions, np.float32).reshape(count, 3)
+        head = np.zeros(count, np.float32) if headings is None else \
+            np.asarray(headings, np.float32).reshape(count)
+        if colors is None:
+            col = np.random.default_rng(seed + 2).uniform(0.35, 1.0, (count, 3))
+        else:
+            col = np.asarray(colors, np.float32).reshape(count, 3)
+        first = self.agent_count
+        self.agent_stream = np.concatenate([self.agent_stream, st]).astype(np.int32)
+        self.agent_unique = np.concatenate([self.agent_unique,
+                                            np.full(count, -1, np.int32)]).astype(np.int32)
+        self.agent_offset = np.concatenate([self.agent_offset, off]).astype(np.int32)
+        self.agent_position = np.concatenate([self.agent_position, pos]).astype(np.float32)
+        self.agent_heading = np.concatenate([self.agent_heading, head]).astype(np.float32)
+        self.agent_color = np.concatenate([self.agent_color, col]).astype(np.float32)
+        return np.arange(first, first + count)

@@ -1,0 +1,63 @@
+"""Event tag callbacks into the simulation (paper s.3.3, requirement 3).
+
+``on(name, fn)`` registers ``fn(name, frame, agent_ids)``; ``"*"`` receives every
+event. The crowd calls each callback once per (event, frame) with all agent ids
+that crossed the tag in that frame (int64 array, ascending). A callback that
+raises is logged and recorded in :attr:`EventDispatcher.errors`; the crowd goes on.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import Counter
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["EventDispatcher", "CallbackError"]
+
+log = logging.getLogger("crowd_addon.events")
+
+
+@dataclass(frozen=True)
+class CallbackError:
+    event: str
+    frame: int
+    callback: object
+    error: BaseException
+
+
+class EventDispatcher:
+    def __init__(self):
+        self._handlers = {}
+        self._next = 0
+        self.errors = []
+        self.fired = Counter()          # event name -> agent-crossings delivered
+        self.calls = Counter()          # event name -> frames it fired on
+
+    def on(self, name: str, fn) -> int:
+        """Register ``fn(name, frame, agent_ids)`` for ``name`` (or ``"*"``); returns a handle."""
+        if not callable(fn):
+            raise TypeError(f"event callback for {name!r} is not callable: {fn!r}")
+        self._next += 1
+        self._handlers[self._next] = (str(name), fn)
+        return self._next
+
+    def off(self, handle: int) -> None:
+        self._handlers.pop(handle, None)
+
+    def clear(self) -> None:
+        self._handlers.clear()
+
+    def dispatch(self, frame: int, name: str, agents: np.ndarray) -> None:
+        self.fired[name] += int(agents.size)
+        self.calls[name] += 1
+        for handle, (want, fn) in list(self._handlers.items()):
+            if want != name and want != "*":
+                continue
+            try:
+                fn(name, frame, agents)
+            except Exception as exc:  # noqa: BLE001 - reported, never fatal
+                self.errors.append(CallbackError(name, frame, fn, exc))
+                log.error("event callback %r for %r at frame %d raised %s: %s",
+                          getattr(fn, "__name__", fn), name, frame, type(exc).__name__, exc)

@@ -1,0 +1,200 @@
+"""Evaluation of controller trees in batches, and the frame's dependency graph.
+
+:class:`TreeEvaluator` flattens the trees of all stream and unique roots into one
+node array, groups nodes by (kind, group key, depth, height) and evaluates each
+group with one :class:`~.controllers.Batch`: top-down ``prepare`` (times, weights,
+state machines), then bottom-up ``evaluate`` (poses).
+
+:class:`DependencyGraph` orders the frame's tasks (paper s.4.4-4.5): controller
+batches have no dependency on other trees; a transition blend depends on its
+target only when the target pose is not yet in history (offset 0, or a unique).
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+
+import numpy as np
+
+from . import pose as sqt
+
+__all__ = ["TreeEvaluator", "FrameContext", "DependencyGraph"]
+
+
+class FrameContext:
+    """Per-node frame arrays shared by all batches.
+
+    Attributes
+    ----------
+    poses : (N, B, 10) float32, each node's latest pose (kept between frames).
+    time : (N,) float64, node time in frames.
+    shift : (N,) time subtracted from the parent's time (set by parents' prepare).
+    local_weight : (N,) weight of a node in its parent's output.
+    weight : (N,) effective weight in the root's output (product along the path).
+    params, triggers : per root dict / set, from the simulation.
+    """
+
+    def __init__(self, n_nodes, bones, n_roots):
+        self.poses = sqt.identity_pose((n_nodes, bones))
+        self.time = np.zeros(n_nodes)
+        self.shift = np.zeros(n_nodes)
+        self.local_weight = np.ones(n_nodes)
+        self.weight = np.ones(n_nodes)
+        self.params = [dict() for _ in range(n_roots)]
+        self.triggers = [set() for _ in range(n_roots)]
+        self._emit_roots = []
+        self._emit_names = []
+
+    def emit(self, roots: np.ndarray, names: np.ndarray) -> None:
+        """Record event tags crossed this frame: (root index, tag name id) pairs."""
+        self._emit_roots.append(np.asarray(roots, np.int64))
+        self._emit_names.append(np.asarray(names, np.int64))
+
+    def take_events(self):
+        if not self._emit_roots:
+            return np.zeros(0, np.int64), np.zeros(0, np.int64)
+        r = np.concatenate(self._emit_roots)
+        n = np.concatenate(self._emit_names)
+        self._emit_roots.clear()
+        self._emit_names.clear()
+        return r, n
+
+
+class TreeEvaluator:
+    """Evaluates many controller trees at once.
+
+    Parameters
+    ----------
+    roots : sequence of (controller, skeleton) pairs.
+    bank : ClipBank holding every clip the trees play.
+    bones : pose row width in bones (B_max).
+    """
+
+    def __init__(self, roots, bank, bones):
+        self.bank = bank
+        self.bones = bones
+        nodes, parent, depth, root_of, children, skels = [], [], [], [], [], []
+
+        def visit(ctrl, par, d, r, sk):
+            i = len(nodes)
+            nodes.append(ctrl)
+            parent.append(par)
+            depth.append(d)
+            root_of.append(r)
+            skels.append(sk)
+            children.append([])
+            for c in ctrl.children():
+                children[i].append(visit(c, i, d + 1, r, sk))
+            return i
+
+        self.root_index = np.array([visit(c, -1, 0, r, sk) for r, (c, sk) in enumerate(roots)],
+                                   np.int64)
+        n = len(nodes)
+        height = np.zeros(n, np.int64)
+        for i in reversed(range(n)):
+            if children[i]:
+                height[i] = 1 + max(height[c] for c in children[i])
+        self.nodes = nodes
+        self.parent = np.array(parent, np.int64)
+        self.depth = np.array(depth, np.int64)
+        self.height = height
+        groups = defaultdict(list)
+        for i, ctrl in enumerate(nodes):
+            key_fn = getattr(type(ctrl), "group_key", None)
+            key = (type(ctrl), key_fn(ctrl) if key_fn else None, depth[i], int(height[i]))
+            groups[key].append(i)
+        self.batches = []
+        for (cls, _, d, h), idx in groups.items():
+            batch = cls.Batch([nodes[i] for i in idx], idx, [root_of[i] for i in idx],
+                              [children[i] for i in idx], bank, bones,
+                              [skels[i] for i in idx])
+            batch.depth, batch.height = d, h
+            self.batches.append(batch)
+        self.prepare_order = sorted((b for b in self.batches
+                                     if type(b).prepare is not _base_prepare()),
+                                    key=lambda b: b.depth)
+        self.evaluate_order = sorted(self.batches, key=lambda b: b.height)
+        self.levels = []
+        for d in range(1, int(self.depth.max()) + 1 if n else 1):
+            idx = np.flatnonzero(self.depth == d)
+            self.levels.append((d, idx, self.parent[idx]))
+        self.ctx = FrameContext(n, bones, len(roots))
+
+    def batches_for_roots(self, roots) -> list:
+        """The batches whose nodes belong to any of the given roots."""
+        roots = set(int(r) for r in roots)
+        return [b for b in self.batches if roots.intersection(b.roots.tolist())]
+
+    def reset(self):
+        for b in self.batches:
+            b.reset()
+
+    def prepare(self, root_times: np.ndarray, root_weights: np.ndarray | None = None):
+        """Top-down pass: node times, weights and state machines for this frame."""
+        ctx = self.ctx
+        ctx.time[self.root_index] = root_times
+        ctx.weight[self.root_index] = 1.0 if root_weights is None else root_weights
+        by_depth = defaultdict(list)
+        for b in self.prepare_order:
+            by_depth[b.depth].append(b)
+        for b in by_depth.get(0, ()):
+            b.prepare(ctx)
+        for d, idx, par in self.levels:
+            ctx.time[idx] = ctx.time[par] - ctx.shift[idx]
+            ctx.weight[idx] = ctx.weight[par] * ctx.local_weight[idx]
+            for b in by_depth.get(d, ()):
+                b.prepare(ctx)
+        for t in ctx.triggers:
+            t.clear()
+
+    def evaluate(self, batches=None) -> None:
+        """Bottom-up pass over the given batches (default all), children first."""
+        for b in (self.evaluate_order if batches is None else batches):
+            b.evaluate(self.ctx)
+
+    def root_poses(self) -> np.ndarray:
+        """(R, B, 10) float32 poses of the roots (a copy)."""
+        return self.ctx.poses[self.root_index]
+
+
+def _base_prepare():
+    from .controllers import Batch
+    return Batch.prepare
+
+
+class DependencyGraph:
+    """Tasks with dependencies, run in topological waves.
+
+    A task is a name and a callable. ``waves()`` lists tasks whose dependencies are
+    all in earlier waves; tasks in one wave are independent (a threaded executor
+    could run them together; the crowd runs them in order on one core).
+    """
+
+    def __init__(self):
+        self.tasks = {}
+        self.deps = {}
+
+    def add(self, name, fn, after=()):
+        self.tasks[name] = fn
+        self.deps[name] = set(after)
+
+    def waves(self) -> list:
+        remaining = dict(self.deps)
+        done, out = set(), []
+        while remaining:
+            ready = [t for t, d in remaining.items() if d <= done]
+            if not ready:
+                raise RuntimeError(f"dependency cycle among {sorted(remaining)}")
+            out.append(ready)
+            done.update(ready)
+            for t in ready:
+                del remaining[t]
+        return out
+
+    def run(self) -> list:
+        order = []
+        for wave in self.waves():
+            for name in wave:
+                self.tasks[name]()
+                order.append(name)
+        return order

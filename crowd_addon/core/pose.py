@@ -1,0 +1,144 @@
+"""Local poses as packed SQT arrays and the blend kernels every controller uses.
+
+A local pose of ``B`` bones is a float32 array ``(B, 10)``: scale ``[0:3]``,
+rotation quaternion ``(w, x, y, z)`` ``[3:7]``, translation ``[7:10]``, each
+relative to the parent bone (Blender's ``pose_bone`` matrix_basis composed with
+the rest pose, see ``skeleton``). Batches are ``(n, B, 10)``.
+
+Blending is done on local SQT (DESIGN.md s.3): scale and translation lerp,
+rotation nlerp on the shortest arc.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import quaternion as quat
+
+__all__ = [
+    "WIDTH", "SCALE", "ROT", "TRANS", "identity_pose", "make_pose", "blend2",
+    "blend_weighted", "additive_delta", "apply_additive", "pose_to_matrices",
+]
+
+WIDTH = 10
+SCALE = slice(0, 3)
+ROT = slice(3, 7)
+TRANS = slice(7, 10)
+
+_IDENTITY = np.array([1, 1, 1, 1, 0, 0, 0, 0, 0, 0], np.float32)
+
+
+def identity_pose(shape) -> np.ndarray:
+    """Identity SQT poses shaped ``shape + (10,)`` (float32)."""
+    shape = (shape,) if np.isscalar(shape) else tuple(shape)
+    return np.broadcast_to(_IDENTITY, shape + (WIDTH,)).copy()
+
+
+def make_pose(scale=None, rotation=None, translation=None, bones=None) -> np.ndarray:
+    """Pack separate ``(..., 3)``, ``(..., 4)``, ``(..., 3)`` arrays into SQT float32."""
+    parts = [p for p in (scale, rotation, translation) if p is not None]
+    lead = np.asarray(parts[0]).shape[:-1] if parts else (bones,)
+    out = identity_pose(lead)
+    if scale is not None:
+        out[..., SCALE] = scale
+    if rotation is not None:
+        out[..., ROT] = rotation
+    if translation is not None:
+        out[..., TRANS] = translation
+    return out
+
+
+def blend2(a: np.ndarray, b: np.ndarray, w, out: np.ndarray | None = None) -> np.ndarray:
+    """Two-way blend (paper Eq. 2): ``a + (b - a) * w`` on SQT, nlerp rotations.
+
+    Parameters
+    ----------
+    a, b : (..., B, 10) float32
+    w : scalar, (...,) or (..., B) weights of ``b`` (0 gives ``a``, 1 gives ``b``).
+    """
+    w = np.asarray(w, dtype=a.dtype)
+    if w.ndim < a.ndim - 1:
+        w = w.reshape(w.shape + (1,) * (a.ndim - 1 - w.ndim))
+    w = w[..., None]
+    qa = a[..., ROT]
+    qb = b[..., ROT]
+    sign = np.where(np.sum(qa * qb, axis=-1, keepdims=True) < 0, -1.0, 1.0).astype(a.dtype)
+    if out is None:
+        out = np.empty(np.broadcast_shapes(a.shape, b.shape), a.dtype)
+    np.subtract(b, a, out=out)
+    out[..., ROT] = qb * sign - qa
+    out *= w
+    out += a
+    q = out[..., ROT]
+    q /= np.sqrt(np.sum(q * q, axis=-1, keepdims=True))
+    return out
+
+
+def blend_weighted(poses: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """N-way blend: weighted sum of ``k`` poses, rotations sign-aligned to the first.
+
+    Parameters
+    ----------
+    poses : (n, k, B, 10) float32
+    weights : (n, k) or (n, k, B); per pose (and bone) weights, which must sum to
+        a positive value for every bone (normalised here).
+
+    Returns
+    -------
+    (n, B, 10) float32
+    """
+    w = np.asarray(weights, dtype=poses.dtype)
+    if w.ndim == 2:
+        w = w[:, :, None]
+    total = w.sum(axis=1, keepdims=True)
+    w = w / np.where(total > 0, total, 1)
+    ref = poses[:, :1, :, ROT]
+    sign = np.where(np.sum(poses[..., ROT] * ref, axis=-1) < 0, -1.0, 1.0).astype(poses.dtype)
+    scaled = poses * w[..., None]
+    scaled[..., ROT] *= sign[..., None]
+    out = scaled.sum(axis=1)
+    q = out[..., ROT]
+    q /= np.sqrt(np.sum(q * q, axis=-1, keepdims=True))
+    return out
+
+
+def additive_delta(pose: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """Additive delta of ``pose`` against ``reference`` (both ``(..., B, 10)``).
+
+    ``scale = s / s_ref``, ``rotation = q_ref^-1 * q``, ``translation = t - t_ref``,
+    so that ``apply_additive(reference, delta, 1) == pose``.
+    """
+    out = np.empty(np.broadcast_shapes(pose.shape, reference.shape), pose.dtype)
+    out[..., SCALE] = pose[..., SCALE] / reference[..., SCALE]
+    out[..., ROT] = quat.multiply(quat.conjugate(reference[..., ROT]), pose[..., ROT])
+    out[..., TRANS] = pose[..., TRANS] - reference[..., TRANS]
+    return out
+
+
+def apply_additive(base: np.ndarray, delta: np.ndarray, w) -> np.ndarray:
+    """Layer an additive ``delta`` on ``base`` with weight ``w`` (scalar or ``(..., B)``).
+
+    ``rotation = q_base * nlerp(identity, q_delta, w)``, ``translation = t + w * dt``,
+    ``scale = s * lerp(1, ds, w)``.
+    """
+    w = np.asarray(w, dtype=base.dtype)
+    if w.ndim:
+        w = w[..., None]
+    out = np.empty(np.broadcast_shapes(base.shape, delta.shape), base.dtype)
+    out[..., SCALE] = base[..., SCALE] * (1 + (delta[..., SCALE] - 1) * w)
+    ident = np.zeros_like(delta[..., ROT])
+    ident[..., 0] = 1
+    qd = quat.nlerp(ident, delta[..., ROT], w[..., 0] if w.ndim else w)
+    out[..., ROT] = quat.normalize(quat.multiply(base[..., ROT], qd))
+    out[..., TRANS] = base[..., TRANS] + delta[..., TRANS] * w
+    return out
+
+
+def pose_to_matrices(pose: np.ndarray) -> np.ndarray:
+    """4x4 affine matrices ``(..., 4, 4)`` (T @ R @ S) of SQT poses, in float64."""
+    p = np.asarray(pose, dtype=np.float64)
+    m = np.zeros(p.shape[:-1] + (4, 4))
+    m[..., :3, :3] = quat.to_matrix(p[..., ROT]) * p[..., None, SCALE]
+    m[..., :3, 3] = p[..., TRANS]
+    m[..., 3, 3] = 1
+    return m

@@ -1,0 +1,176 @@
+"""The pose texture (paper Fig. 2) as a CPU mirror, and the blocks to upload per frame.
+
+Layout (DESIGN.md s.3), in *logical rows*: stream rows ``slice * S + stream`` for
+``slice = F mod M``, then ``U`` unique rows, then ``NT`` transition-slot rows. A row
+is one pose: ``B_max`` bones x 3 texels (RGBA32F), the top three rows of each
+bone's skinning matrix, bone-major (texel ``3 * bone + r``).
+
+Logical row ``r`` lives in the texture at texel ``x = (r // H) * 3 * B_max``,
+``y = r % H`` where ``H = min(rows, max_texture_size)``: when the rows do not fit
+the texture's height they wrap into column blocks side by side. The shader's row
+lookup (gpu_shaders/) mirrors :meth:`PoseStorage.texel_of_row`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import CrowdError
+
+__all__ = ["PoseStorage", "UploadRegion"]
+
+
+@dataclass(frozen=True)
+class UploadRegion:
+    """A rectangle of the pose texture to write this frame.
+
+    ``data`` is a C-contiguous float32 view ``(height, width, 4)`` of the mirror,
+    ``x, y`` the texel offset, ``rows`` the logical row range it holds.
+    """
+
+    x: int
+    y: int
+    width: int
+    height: int
+    data: np.ndarray
+    rows: tuple
+
+    @property
+    def nbytes(self) -> int:
+        return int(self.data.nbytes)
+
+
+class PoseStorage:
+    """CPU mirror of the pose texture with per-frame dirty row ranges.
+
+    Parameters
+    ----------
+    streams, max_offset, uniques, slots : S, M, U, NT.
+    bones : B_max, bones per row.
+    max_texture_size : the GPU's largest texture side in texels (GL_MAX_TEXTURE_SIZE).
+
+    Attributes
+    ----------
+    rows : (R, B_max, 3, 4) float32 logical rows (identity matrices initially).
+    width, height : texture size in texels.
+    """
+
+    def __init__(self, streams, max_offset, uniques, slots, bones, max_texture_size=16384):
+        self.S, self.M, self.U, self.NT = int(streams), int(max_offset), int(uniques), int(slots)
+        self.bones = int(bones)
+        self.row_texels = 3 * self.bones
+        self.max_texture_size = int(max_texture_size)
+        n = self.M * self.S + self.U + self.NT
+        self.row_count = n
+        if self.row_texels > self.max_texture_size:
+            raise CrowdError(f"pose texture cannot fit: a row of {self.bones} bones needs "
+                             f"{self.row_texels} texels, max texture size is "
+                             f"{self.max_texture_size}")
+        self.height = max(1, min(n, self.max_texture_size))
+        self.blocks = max(1, -(-n // self.height))
+        self.width = self.blocks * self.row_texels
+        if self.width > self.max_texture_size:
+            raise CrowdError(f"pose texture cannot fit: {n} rows of {self.row_texels} texels "
+                             f"need {self.blocks} column blocks ({self.width} texels wide), "
+                             f"max texture size is {self.max_texture_size}; lower M, streams "
+                             "or transition slots")
+        self.rows = np.zeros((n, self.bones, 3, 4), np.float32)
+        self.rows[:, :, 0, 0] = self.rows[:, :, 1, 1] = self.rows[:, :, 2, 2] = 1
+        self.unique_base = self.M * self.S
+        self.slot_base = self.M * self.S + self.U
+        self._dirty = []
+
+    @property
+    def nbytes(self) -> int:
+        return int(self.rows.nbytes)
+
+    @property
+    def row_bytes(self) -> int:
+        return self.row_texels * 16
+
+    def stream_row(self, slice_, stream):
+        return slice_ * self.S + stream
+
+    def texel_of_row(self, row):
+        """Texel ``(x, y)`` of the first texel of logical ``row`` (arrays allowed)."""
+        row = np.asarray(row)
+        return (row // self.height) * self.row_texels, row % self.height
+
+    def stream_slice(self, slice_) -> np.ndarray:
+        """View ``(S, B_max, 3, 4)`` of one history slice's rows."""
+        a = slice_ * self.S
+        return self.rows[a:a + self.S]
+
+    def unique_rows(self) -> np.ndarray:
+        return self.rows[self.unique_base:self.slot_base]
+
+    def slot_rows(self) -> np.ndarray:
+        return self.rows[self.slot_base:]
+
+    # dirty tracking -----------------------------------------------------------
+    def mark_dirty(self, start, count):
+        """Mark ``count`` logical rows from ``start`` as changed (to upload)."""
+        if count > 0:
+            self._dirty.append((int(start), int(count)))
+
+    def mark_rows_dirty(self, rows: np.ndarray):
+        """Mark arbitrary rows, merged into contiguous runs."""
+        rows = np.unique(np.asarray(rows, np.int64))
+        if rows.size == 0:
+            return
+        breaks = np.flatnonzero(np.diff(rows) != 1) + 1
+        for run in np.split(rows, breaks):
+            self.mark_dirty(run[0], run.size)
+
+    def mark(self) -> int:
+        """A bookmark for :meth:`bytes_since`."""
+        return len(self._dirty)
+
+    def bytes_since(self, mark: int) -> int:
+        """Bytes of the rows marked dirty after ``mark`` (overlaps counted once)."""
+        return sum(c for _, c in self._merged(self._dirty[mark:])) * self.row_bytes
+
+    def dirty_ranges(self) -> list:
+        """Changed ``(start, count)`` row ranges since the last take, merged and sorted."""
+        return self._merged(self._dirty)
+
+    @staticmethod
+    def _merged(ranges) -> list:
+        out = []
+        for start, count in sorted(ranges):
+            if out and start <= out[-1][0] + out[-1][1]:
+                s0, c0 = out[-1]
+                out[-1] = (s0, max(c0, start + count - s0))
+            else:
+                out.append((start, count))
+        return out
+
+    def dirty_bytes(self) -> int:
+        return sum(c for _, c in self.dirty_ranges()) * self.row_bytes
+
+    def take_dirty_regions(self) -> list:
+        """The texture rectangles to upload (split at column-block boundaries) for
+        everything changed since the last call, which they clear."""
+        out = []
+        flat = self.rows.reshape(self.row_count, self.row_texels, 4)
+        for start, count in self.dirty_ranges():
+            r, end = start, start + count
+            while r < end:
+                block, y = divmod(r, self.height)
+                n = min(end - r, self.height - y)
+                out.append(UploadRegion(block * self.row_texels, y, self.row_texels, n,
+                                        flat[r:r + n], (r, r + n)))
+                r += n
+        self._dirty = []
+        return out
+
+    def texture_image(self) -> np.ndarray:
+        """The whole texture ``(height, width, 4)`` float32 as the GPU holds it."""
+        img = np.zeros((self.height, self.width, 4), np.float32)
+        flat = self.rows.reshape(self.row_count, self.row_texels, 4)
+        for b in range(self.blocks):
+            part = flat[b * self.height:(b + 1) * self.height]
+            img[:part.shape[0], b * self.row_texels:(b + 1) * self.row_texels] = part
+        return img

@@ -1,0 +1,147 @@
+"""Local -> model -> skinning matrices, and the CPU reference skinning (paper Eq. 1).
+
+``SkinningPlan.rows`` is the runtime path: local SQT poses ``(n, B, 10)`` to pose
+texture rows ``(n, B_max, 3, 4)`` (the top three rows of ``model @ inverse_bind``
+per bone, float32). It works in a component-major layout ``(3, 4, B, n)`` with
+bones sorted by depth so each hierarchy level is one contiguous slice and one
+``einsum``.
+
+``model_matrices``/``skinning_matrices`` are the float64 reference and
+``skin_vertices`` is the CPU reference skinning the GPU backends are tested
+against.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import pose as sqt
+from .skeleton import Skeleton, local_to_model
+
+__all__ = ["SkinningPlan", "model_matrices", "skinning_matrices", "skin_vertices"]
+
+
+class SkinningPlan:
+    """Precomputed hierarchy order of one skeleton for the fast float32 path."""
+
+    def __init__(self, skeleton: Skeleton, row_bones: int | None = None):
+        b = skeleton.bone_count
+        self.skeleton = skeleton
+        self.bones = b
+        self.row_bones = row_bones or b
+        depth = np.zeros(b, np.int64)
+        for i, p in enumerate(skeleton.parents):
+            if p >= 0:
+                depth[i] = depth[p] + 1
+        perm = np.argsort(depth, kind="stable")
+        inv = np.empty(b, np.int64)
+        inv[perm] = np.arange(b)
+        self.perm = perm
+        self.unperm = inv
+        sorted_depth = depth[perm]
+        par = skeleton.parents[perm]
+        self.sorted_parent = np.where(par >= 0, inv[np.maximum(par, 0)], -1)
+        self.levels = []
+        for d in range(1, int(depth.max()) + 1):
+            a = int(np.searchsorted(sorted_depth, d, "left"))
+            e = int(np.searchsorted(sorted_depth, d, "right"))
+            self.levels.append((a, e, self.sorted_parent[a:e]))
+        self.n_roots = int(np.searchsorted(sorted_depth, 0, "right"))
+        ib = skeleton.inverse_bind[perm][:, :3, :].astype(np.float32)   # (B, 3, 4)
+        self.inv_bind = np.ascontiguousarray(ib.transpose(1, 2, 0))      # (3, 4, B)
+        self._ib_cache = np.zeros((3, 4, b, 0), np.float32)
+
+    def _inverse_bind(self, n):
+        """Inverse bind rows broadcast over ``n`` poses, contiguous (einsum is much
+        faster on it than on a zero-stride view); cached for the largest n."""
+        if self._ib_cache.shape[3] < n:
+            self._ib_cache = np.ascontiguousarray(
+                np.broadcast_to(self.inv_bind[..., None], self.inv_bind.shape + (n,)))
+        return self._ib_cache[:3, :, :, :n]
+
+    def rows(self, local: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """Pose texture rows of local poses.
+
+        Parameters
+        ----------
+        local : (n, >=B, 10) float32 local SQT (extra bones are ignored).
+        out : optional (n, row_bones, 3, 4) float32 to write into (may be a view of
+            the pose storage); bones beyond the skeleton are left untouched.
+
+        Returns
+        -------
+        (n, row_bones, 3, 4) float32: ``(model @ inverse_bind)[:3, :]`` per bone.
+        """
+        n = local.shape[0]
+        if out is None:
+            out = np.zeros((n, self.row_bones, 3, 4), np.float32)
+            out[:, :, 0, 0] = out[:, :, 1, 1] = out[:, :, 2, 2] = 1
+        if n == 0:
+            return out
+        b = self.bones
+        # (n, B, 10) -> (B, 10, n): one 2-D transpose, then a row gather into depth order
+        x = np.ascontiguousarray(local[:, :b].reshape(n, b * sqt.WIDTH).T,
+                                 dtype=np.float32).reshape(b, sqt.WIDTH, n)[self.perm]
+        s, t = x[:, sqt.SCALE].transpose(1, 0, 2), x[:, sqt.TRANS].transpose(1, 0, 2)
+        w, qx, qy, qz = x[:, sqt.ROT].transpose(1, 0, 2)
+        m = np.empty((3, 4, b, n), np.float32)
+        xx, yy, zz = qx * qx, qy * qy, qz * qz
+        xy, xz, yz = qx * qy, qx * qz, qy * qz
+        wx, wy, wz = w * qx, w * qy, w * qz
+        m[0, 0] = (1 - 2 * (yy + zz)) * s[0]
+        m[0, 1] = 2 * (xy - wz) * s[1]
+        m[0, 2] = 2 * (xz + wy) * s[2]
+        m[1, 0] = 2 * (xy + wz) * s[0]
+        m[1, 1] = (1 - 2 * (xx + zz)) * s[1]
+        m[1, 2] = 2 * (yz - wx) * s[2]
+        m[2, 0] = 2 * (xz - wy) * s[0]
+        m[2, 1] = 2 * (yz + wx) * s[1]
+        m[2, 2] = (1 - 2 * (xx + yy)) * s[2]
+        m[:, 3] = t
+        for a, e, par in self.levels:
+            loc = m[:, :, a:e].copy()
+            pm = m[:, :, par]
+            np.einsum("rkbn,kcbn->rcbn", pm[:, :3], loc[:3], out=m[:, :, a:e])
+            m[:, 3, a:e] += pm[:, 3]
+        # skin = model @ inverse_bind, written bone-major (B, 3, 4, n) in skeleton order
+        skin = np.empty((3, 4, b, n), np.float32)
+        np.einsum("rkbn,kcbn->rcbn", m[:, :3], self._inverse_bind(n), out=skin)
+        skin[:, 3] += m[:, 3]
+        skin = skin.transpose(2, 0, 1, 3)[self.unperm]            # (B, 3, 4, n) bone order
+        out[:, :b] = skin.reshape(b * 12, n).T.reshape(n, b, 3, 4)
+        return out
+
+
+def model_matrices(local: np.ndarray, skeleton: Skeleton) -> np.ndarray:
+    """Reference model matrices ``(n, B, 4, 4)`` float64 of local SQT ``(n, B, 10)``."""
+    return local_to_model(sqt.pose_to_matrices(local[:, :skeleton.bone_count]), skeleton)
+
+
+def skinning_matrices(local: np.ndarray, skeleton: Skeleton) -> np.ndarray:
+    """Reference skinning matrices ``(n, B, 4, 4)`` float64: ``model @ inverse_bind``."""
+    return model_matrices(local, skeleton) @ skeleton.inverse_bind
+
+
+def skin_vertices(vertices: np.ndarray, bone_indices: np.ndarray, weights: np.ndarray,
+                  rows: np.ndarray) -> np.ndarray:
+    """CPU reference skinning (paper Eq. 1): ``v' = sum_i w_i (M_i M_ref_i^-1) v``.
+
+    Parameters
+    ----------
+    vertices : (V, 3) rest positions.
+    bone_indices : (V, 4) int bone index per influence.
+    weights : (V, 4) weights per influence (normalised here to sum 1; unused
+        influences have weight 0).
+    rows : (n, B, 3, 4) skinning rows per agent (pose texture rows) or (n, B, 4, 4).
+
+    Returns
+    -------
+    (n, V, 3) float64 skinned positions.
+    """
+    v = np.asarray(vertices, np.float64)
+    w = np.asarray(weights, np.float64)
+    w = w / np.where(w.sum(1, keepdims=True) > 0, w.sum(1, keepdims=True), 1)
+    m = np.asarray(rows, np.float64)[:, :, :3, :]               # (n, B, 3, 4)
+    g = m[:, np.asarray(bone_indices, np.int64)]                 # (n, V, 4, 3, 4)
+    blended = np.einsum("vi,nvirc->nvrc", w, g)                  # (n, V, 3, 4)
+    return np.einsum("nvrc,vc->nvr", blended[..., :3], v) + blended[..., 3]
