@@ -142,7 +142,7 @@ def _run_budget(args) -> int:
             "memory_model": dataclasses.asdict(model),
             "plan": dataclasses.asdict(proposal),
         }
-        print(json.dumps(out, indent=None, sort_keys=False))
+        print(json.dumps(out))
         return 0
 
     unit_name = "MiB" if args.mib else "MB"

@@ -55,23 +55,45 @@ def blend2(a: np.ndarray, b: np.ndarray, w, out: np.ndarray | None = None) -> np
     ----------
     a, b : (..., B, 10) float32
     w : scalar, (...,) or (..., B) weights of ``b`` (0 gives ``a``, 1 gives ``b``).
+
+    Quaternion components are processed one at a time (``(..., B)`` strided views):
+    numpy's inner loop then runs over bones instead of over 4 components, which is
+    several times faster on the packed layout.
     """
     w = np.asarray(w, dtype=a.dtype)
     if w.ndim < a.ndim - 1:
         w = w.reshape(w.shape + (1,) * (a.ndim - 1 - w.ndim))
-    w = w[..., None]
-    qa = a[..., ROT]
-    qb = b[..., ROT]
-    sign = np.where(np.sum(qa * qb, axis=-1, keepdims=True) < 0, -1.0, 1.0).astype(a.dtype)
     if out is None:
         out = np.empty(np.broadcast_shapes(a.shape, b.shape), a.dtype)
     np.subtract(b, a, out=out)
-    out[..., ROT] = qb * sign - qa
-    out *= w
+    neg = _dot4(a, b) < 0
+    if neg.any():
+        # shortest arc: blend toward -q_b where the quaternions point apart
+        idx = np.nonzero(np.broadcast_to(neg, out.shape[:-1]))
+        ai = np.broadcast_to(a, out.shape)[idx]
+        bi = np.broadcast_to(b, out.shape)[idx]
+        out[idx + (ROT,)] = -bi[:, ROT] - ai[:, ROT]
+    out *= w[..., None]
     out += a
-    q = out[..., ROT]
-    q /= np.sqrt(np.sum(q * q, axis=-1, keepdims=True))
+    normalize_rotations(out)
     return out
+
+
+def _dot4(a, b):
+    d = a[..., 3] * b[..., 3]
+    for c in (4, 5, 6):
+        d += a[..., c] * b[..., c]
+    return d
+
+
+def normalize_rotations(p: np.ndarray) -> np.ndarray:
+    """Normalise the rotation quaternions of SQT poses ``p`` in place."""
+    inv = _dot4(p, p)
+    np.sqrt(inv, out=inv)
+    np.divide(1.0, inv, out=inv)
+    for c in (3, 4, 5, 6):
+        p[..., c] *= inv
+    return p
 
 
 def blend_weighted(poses: np.ndarray, weights: np.ndarray) -> np.ndarray:
@@ -97,9 +119,7 @@ def blend_weighted(poses: np.ndarray, weights: np.ndarray) -> np.ndarray:
     scaled = poses * w[..., None]
     scaled[..., ROT] *= sign[..., None]
     out = scaled.sum(axis=1)
-    q = out[..., ROT]
-    q /= np.sqrt(np.sum(q * q, axis=-1, keepdims=True))
-    return out
+    return normalize_rotations(out)
 
 
 def additive_delta(pose: np.ndarray, reference: np.ndarray) -> np.ndarray:

@@ -50,6 +50,7 @@ class SkinningPlan:
         ib = skeleton.inverse_bind[perm][:, :3, :].astype(np.float32)   # (B, 3, 4)
         self.inv_bind = np.ascontiguousarray(ib.transpose(1, 2, 0))      # (3, 4, B)
         self._ib_cache = np.zeros((3, 4, b, 0), np.float32)
+        self._ws = {}
 
     def _inverse_bind(self, n):
         """Inverse bind rows broadcast over ``n`` poses, contiguous (einsum is much
@@ -58,6 +59,28 @@ class SkinningPlan:
             self._ib_cache = np.ascontiguousarray(
                 np.broadcast_to(self.inv_bind[..., None], self.inv_bind.shape + (n,)))
         return self._ib_cache[:3, :, :, :n]
+
+    def _workspace(self, n):
+        """Scratch arrays for ``n`` poses, reused across frames: fresh multi-megabyte
+        temporaries each frame cost more in page faults than the arithmetic."""
+        ws = self._ws.get(n)
+        if ws is None:
+            b = self.bones
+            f32 = np.float32
+            ws = {
+                "xt": np.empty((b * sqt.WIDTH, n), f32),
+                "x": np.empty((b, sqt.WIDTH, n), f32),
+                "t": np.empty((10, b, n), f32),
+                "m": np.empty((3, 4, b, n), f32),
+                "skin": np.empty((3, 4, b, n), f32),
+                "bone_major": np.empty((b, 3, 4, n), f32),
+                "levels": [(np.empty((3, 4, e - a, n), f32), np.empty((3, 4, e - a, n), f32))
+                           for a, e, _ in self.levels],
+            }
+            if len(self._ws) > 8:
+                self._ws.clear()
+            self._ws[n] = ws
+        return ws
 
     def rows(self, local: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """Pose texture rows of local poses.
@@ -79,36 +102,52 @@ class SkinningPlan:
         if n == 0:
             return out
         b = self.bones
+        ws = self._workspace(n)
         # (n, B, 10) -> (B, 10, n): one 2-D transpose, then a row gather into depth order
-        x = np.ascontiguousarray(local[:, :b].reshape(n, b * sqt.WIDTH).T,
-                                 dtype=np.float32).reshape(b, sqt.WIDTH, n)[self.perm]
-        s, t = x[:, sqt.SCALE].transpose(1, 0, 2), x[:, sqt.TRANS].transpose(1, 0, 2)
-        w, qx, qy, qz = x[:, sqt.ROT].transpose(1, 0, 2)
-        m = np.empty((3, 4, b, n), np.float32)
-        xx, yy, zz = qx * qx, qy * qy, qz * qz
-        xy, xz, yz = qx * qy, qx * qz, qy * qz
-        wx, wy, wz = w * qx, w * qy, w * qz
-        m[0, 0] = (1 - 2 * (yy + zz)) * s[0]
-        m[0, 1] = 2 * (xy - wz) * s[1]
-        m[0, 2] = 2 * (xz + wy) * s[2]
-        m[1, 0] = 2 * (xy + wz) * s[0]
-        m[1, 1] = (1 - 2 * (xx + zz)) * s[1]
-        m[1, 2] = 2 * (yz - wx) * s[2]
-        m[2, 0] = 2 * (xz - wy) * s[0]
-        m[2, 1] = 2 * (yz + wx) * s[1]
-        m[2, 2] = (1 - 2 * (xx + yy)) * s[2]
-        m[:, 3] = t
-        for a, e, par in self.levels:
-            loc = m[:, :, a:e].copy()
-            pm = m[:, :, par]
+        np.copyto(ws["xt"], local[:, :b].reshape(n, b * sqt.WIDTH).T)
+        x = np.take(ws["xt"].reshape(b, sqt.WIDTH, n), self.perm, axis=0, out=ws["x"],
+                    mode="clip")
+        s0, s1, s2 = x[:, 0], x[:, 1], x[:, 2]
+        w, qx, qy, qz = x[:, 3], x[:, 4], x[:, 5], x[:, 6]
+        xx, yy, zz, xy, xz, yz, wx, wy, wz, tmp = ws["t"]
+        mul = np.multiply
+        mul(qx, qx, out=xx), mul(qy, qy, out=yy), mul(qz, qz, out=zz)
+        mul(qx, qy, out=xy), mul(qx, qz, out=xz), mul(qy, qz, out=yz)
+        mul(w, qx, out=wx), mul(w, qy, out=wy), mul(w, qz, out=wz)
+        m = ws["m"]
+
+        def diag(dst, p, q, scale):          # (1 - 2 (p + q)) * scale
+            np.add(p, q, out=dst)
+            dst *= -2
+            dst += 1
+            dst *= scale
+
+        def off(dst, p, q, sign, scale):     # 2 (p +- q) * scale
+            (np.add if sign > 0 else np.subtract)(p, q, out=dst)
+            mul(scale, 2, out=tmp)
+            dst *= tmp
+
+        diag(m[0, 0], yy, zz, s0)
+        off(m[0, 1], xy, wz, -1, s1)
+        off(m[0, 2], xz, wy, +1, s2)
+        off(m[1, 0], xy, wz, +1, s0)
+        diag(m[1, 1], xx, zz, s1)
+        off(m[1, 2], yz, wx, -1, s2)
+        off(m[2, 0], xz, wy, -1, s0)
+        off(m[2, 1], yz, wx, +1, s1)
+        diag(m[2, 2], xx, yy, s2)
+        np.copyto(m[:, 3], x[:, 7:10].transpose(1, 0, 2))
+        for (a, e, par), (loc, pm) in zip(self.levels, ws["levels"]):
+            np.copyto(loc, m[:, :, a:e])
+            np.take(m, par, axis=2, out=pm, mode="clip")
             np.einsum("rkbn,kcbn->rcbn", pm[:, :3], loc[:3], out=m[:, :, a:e])
             m[:, 3, a:e] += pm[:, 3]
-        # skin = model @ inverse_bind, written bone-major (B, 3, 4, n) in skeleton order
-        skin = np.empty((3, 4, b, n), np.float32)
+        skin = ws["skin"]
         np.einsum("rkbn,kcbn->rcbn", m[:, :3], self._inverse_bind(n), out=skin)
         skin[:, 3] += m[:, 3]
-        skin = skin.transpose(2, 0, 1, 3)[self.unperm]            # (B, 3, 4, n) bone order
-        out[:, :b] = skin.reshape(b * 12, n).T.reshape(n, b, 3, 4)
+        bone_major = np.take(skin.transpose(2, 0, 1, 3), self.unperm, axis=0,
+                             out=ws["bone_major"], mode="clip")             # (B, 3, 4, n) bone order
+        out[:, :b] = bone_major.reshape(b * 12, n).T.reshape(n, b, 3, 4)
         return out
 
 

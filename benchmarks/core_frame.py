@@ -1,0 +1,173 @@
+"""Core cost per frame at the paper's configuration (Paduraru s.5).
+
+65,000 agents, 256 streams (clips and small controller trees), M = 60, 82 bones,
+800 transition slots kept busy by a steady flow of requests (27 per frame, 30-frame
+blends). Prints ms per ``Crowd.step()`` (median) and bytes uploaded per frame at
+1k, 8k and 65k agents (CPU cost should be flat in agent count), then the time to
+evaluate the same 256 streams with a naive per-stream Python loop as a ratio, and
+ends with one JSON line.
+
+    .venv/bin/python benchmarks/core_frame.py [--steps 60] [--quick]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import sys
+import time
+
+import numpy as np
+
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
+
+from crowd_addon.core import (Blend2, BlendSpace2D, ClipPlayer, Crowd, CrowdConfig,  # noqa: E402
+                              Layer, StateMachine, StateTransition)
+from crowd_addon.core.graph import TreeEvaluator  # noqa: E402
+from crowd_addon.core.skinning import SkinningPlan  # noqa: E402
+from crowd_addon.core.synthetic import humanoid, periodic_clip  # noqa: E402
+
+STREAMS, M, SLOTS, BONES = 256, 60, 800, 82
+
+
+def stream_tree(s: int):
+    """A clip or a small controller tree, cycling through the kinds."""
+    c = lambda k: ClipPlayer(f"clip{(s + k) % 12}")  # noqa: E731
+    kind = s % 5
+    if kind == 0:
+        return c(0)
+    if kind == 1:
+        return Blend2(c(0), c(1), weight=0.35)
+    if kind == 2:
+        return Layer(c(0), ClipPlayer("wave"), mode="additive",
+                     bone_weights={"upperarm.R": 1, "forearm.R": 1, "hand.R": 1})
+    if kind == 3:
+        return BlendSpace2D([c(0), c(1), c(2), c(3)], [(0, 0), (1, 0), (0, 1), (1, 1)],
+                            x=0.3, y=0.6)
+    return StateMachine({"idle": c(0), "cheer": c(5)},
+                        [StateTransition("idle", "cheer", 10, trigger="goal"),
+                         StateTransition("cheer", "idle", 10, trigger="calm")])
+
+
+def build(agents: int) -> Crowd:
+    sk = humanoid("fan", BONES)
+    cfg = CrowdConfig(max_offset=M, transition_slots=SLOTS, seed=1)
+    cfg.add_skeleton(sk)
+    for i in range(12):
+        cfg.add_clip(periodic_clip(sk, f"clip{i}", frames=90 + 20 * i, seed=i,
+                                   events=[("clap", 12.0)] if i % 3 == 0 else ()))
+    cfg.add_clip(periodic_clip(sk, "wave", frames=45, seed=99,
+                               bones=["upperarm.R", "forearm.R", "hand.R"]))
+    for s in range(STREAMS):
+        cfg.add_stream(f"stream{s}", "fan", stream_tree(s))
+    cfg.add_agents(agents)
+    return Crowd(cfg)
+
+
+def run(agents: int, steps: int, rng) -> dict:
+    crowd = build(agents)
+    claps = []
+    crowd.on_event("clap", lambda name, frame, ids: claps.append(ids.size))
+    per_frame = max(1, SLOTS // 30 + 1)
+
+    def frame():
+        who = rng.integers(0, agents, per_frame)
+        crowd.transition_to_streamed(who, int(rng.integers(STREAMS)), 30)
+        if crowd.frame % 40 == 0:
+            for s in range(4, STREAMS, 5):
+                crowd.set_trigger(s, "goal" if crowd.frame % 80 else "calm")
+        crowd.take_upload_regions()
+        return crowd.step()
+
+    for _ in range(45):          # reach the steady state: slots busy, queue in use
+        frame()
+    reports = [frame() for _ in range(steps)]
+    ms = [r.ms for r in reports]
+    return {
+        "agents": agents,
+        "ms_median": statistics.median(ms),
+        "ms_p90": float(np.percentile(ms, 90)),
+        "bytes_per_frame": int(statistics.median(r.upload_bytes for r in reports)),
+        "active_transitions": int(statistics.median(r.transitions_active for r in reports)),
+        "queued": int(crowd.slots.queue.__len__()),
+        "clap_agents_per_frame": float(np.mean(claps)) if claps else 0.0,
+        "row_bytes": crowd.storage.row_bytes,
+        "crowd": crowd,
+    }
+
+
+def naive_streams(crowd: Crowd, repeats: int) -> tuple:
+    """Same 256 streams: batched (the crowd's evaluator + one skinning call) against a
+    Python loop that evaluates each stream's tree and skins it on its own."""
+    cfg = crowd.config
+    sk = cfg.skeletons["fan"]
+    plan = SkinningPlan(sk)
+    singles = [TreeEvaluator([(d.root, sk)], crowd.bank, crowd.B) for d in cfg.streams]
+    batched = TreeEvaluator([(d.root, sk) for d in cfg.streams], crowd.bank, crowd.B)
+    rows = np.zeros((STREAMS, crowd.B, 3, 4), np.float32)
+
+    def batched_frame(f):
+        batched.prepare(np.full(STREAMS, float(f)))
+        batched.evaluate()
+        plan.rows(batched.root_poses(), out=rows)
+
+    def naive_frame(f):
+        for i, ev in enumerate(singles):
+            ev.prepare(np.array([float(f)]))
+            ev.evaluate()
+            plan.rows(ev.root_poses(), out=rows[i:i + 1])
+
+    out = []
+    for fn in (batched_frame, naive_frame):
+        fn(0)
+        t = time.perf_counter()
+        for f in range(1, repeats + 1):
+            fn(f)
+        out.append((time.perf_counter() - t) / repeats * 1e3)
+    return tuple(out)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--steps", type=int, default=60, help="measured steps per size")
+    ap.add_argument("--quick", action="store_true", help="fewer steps (smoke run)")
+    args = ap.parse_args(argv)
+    steps = 10 if args.quick else args.steps
+    rng = np.random.default_rng(7)
+    print(f"core_frame: {STREAMS} streams, M={M}, {SLOTS} transition slots, {BONES} bones, "
+          f"numpy {np.__version__}, {steps} steps per size", flush=True)
+    results = {}
+    for agents in (1_000, 8_000, 65_000):
+        r = run(agents, steps, rng)
+        results[agents] = r
+        print(f"  {agents:>6} agents: {r['ms_median']:6.2f} ms/step median "
+              f"(p90 {r['ms_p90']:.2f}), {r['bytes_per_frame']:,} B uploaded/frame, "
+              f"{r['active_transitions']} active transitions, {r['queued']} queued",
+              flush=True)
+    paper = results[65_000]
+    crowd = paper["crowd"]
+    minimum = (STREAMS + paper["active_transitions"] + crowd.U) * paper["row_bytes"]
+    print(f"  upload minimum (new slice + active rows): {minimum:,} B; "
+          f"measured/minimum = {paper['bytes_per_frame'] / minimum:.3f}")
+    t_batched, t_naive = naive_streams(crowd, 5 if args.quick else 20)
+    print(f"  256 streams, evaluate + skin: batched {t_batched:.2f} ms, naive per-stream "
+          f"loop {t_naive:.2f} ms, ratio {t_naive / t_batched:.1f}x")
+    print(f"  target: < 2 ms per step at 65k agents; measured {paper['ms_median']:.2f} ms "
+          f"({'met' if paper['ms_median'] < 2 else 'NOT met'})")
+    print(json.dumps({
+        "ms_per_step_65k": round(paper["ms_median"], 3),
+        "ms_per_step_8k": round(results[8_000]["ms_median"], 3),
+        "ms_per_step_1k": round(results[1_000]["ms_median"], 3),
+        "bytes_per_frame": paper["bytes_per_frame"],
+        "bytes_minimum": minimum,
+        "active_transitions": paper["active_transitions"],
+        "naive_ms": round(t_naive, 3),
+        "batched_ms": round(t_batched, 3),
+        "naive_ratio": round(t_naive / t_batched, 2),
+    }))
+
+
+if __name__ == "__main__":
+    main()
