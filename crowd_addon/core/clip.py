@@ -18,7 +18,7 @@ import numpy as np
 
 from . import pose as sqt
 from .errors import CrowdError
-from .quaternion import normalize
+from .quaternion import normalize_if_needed
 
 __all__ = ["Clip", "ClipBank"]
 
@@ -58,6 +58,9 @@ class Clip:
                              "(a zero-length clip has no duration)")
         if keys.shape[1] < 1:
             raise CrowdError(f"clip {name!r}: has no bones")
+        if self.bone_names is not None and len(self.bone_names) != keys.shape[1]:
+            raise CrowdError(f"clip {name!r}: {len(self.bone_names)} bone names for "
+                             f"{keys.shape[1]} bones")
         finite = np.isfinite(keys).all(axis=-1)
         if not finite.all():
             f, b = np.argwhere(~finite)[0]
@@ -70,8 +73,8 @@ class Clip:
                              f"bone {self._bone_label(b)}")
         if not (np.isfinite(self.fps) and self.fps > 0):
             raise CrowdError(f"clip {name!r}: fps must be positive, got {self.fps}")
-        packed = keys.astype(np.float32)
-        packed[..., sqt.ROT] = normalize(keys[..., sqt.ROT]).astype(np.float32)
+        packed = np.asarray(self.keys).astype(np.float32)
+        packed[..., sqt.ROT] = normalize_if_needed(keys[..., sqt.ROT])
         events = []
         for ev in self.events:
             try:
@@ -86,9 +89,6 @@ class Clip:
                 raise CrowdError(f"clip {name!r}: event {ev_name!r} at frame {frame} is "
                                  f"outside 0..{keys.shape[0] - 1}")
             events.append((str(ev_name), frame))
-        if self.bone_names is not None and len(self.bone_names) != keys.shape[1]:
-            raise CrowdError(f"clip {name!r}: {len(self.bone_names)} bone names for "
-                             f"{keys.shape[1]} bones")
         object.__setattr__(self, "name", name)
         object.__setattr__(self, "keys", packed)
         object.__setattr__(self, "fps", float(self.fps))

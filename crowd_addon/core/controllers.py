@@ -430,7 +430,7 @@ class StateTransition:
             if len(condition) != 3 or condition[1] not in self.OPS:
                 raise CrowdError(f"state transition {source}->{target}: condition must be "
                                  f"(parameter, op, value) with op in {list(self.OPS)}")
-        self.trigger = trigger
+        self.trigger = None if trigger is None else str(trigger)
         self.condition = None if condition is None else (str(condition[0]), condition[1],
                                                          float(condition[2]))
 
@@ -496,7 +496,10 @@ class StateMachine(Controller):
         def prepare(self, ctx):
             t = ctx.time[self.index]
             for i, (node, root) in enumerate(zip(self.nodes, self.roots)):
-                if np.isnan(self.entered[i]):
+                if np.isnan(self.entered[i]) or t[i] < self.entered[i]:
+                    # first frame, or an enclosing state re-entered: start over
+                    self.current[i] = node.state_names.index(node.initial)
+                    self.fading[i] = False
                     self.entered[i] = t[i]
                 params, triggers = ctx.params[root], ctx.triggers[root]
                 cur = node.state_names[self.current[i]]

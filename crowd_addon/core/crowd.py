@@ -357,7 +357,8 @@ class Crowd:
         return self._current_poses(agents)
 
     def _check_agents(self, agents) -> np.ndarray:
-        a = np.atleast_1d(np.asarray(agents))
+        """Agent ids as a flat int64 array; any shape is accepted and flattened."""
+        a = np.asarray(agents).reshape(-1)
         if a.size and not np.issubdtype(a.dtype, np.integer):
             raise CrowdError(f"agent ids must be integers, got {a.dtype}")
         a = a.astype(np.int64)
@@ -382,26 +383,31 @@ class Crowd:
         """Blend agents to ``stream`` at ``offset`` (default: each agent's own offset)
         over ``duration`` frames (0 switches at once)."""
         agents = self._check_agents(agents)
+        length, policy = self._check_request(duration, when_full)
         s = self._resolve(stream, "stream")
         if offset is None:
             off = self.agent_offset[agents].copy()
         else:
-            off = np.broadcast_to(np.asarray(offset), agents.shape).astype(np.int64)
-            check_offsets(np.asarray(offset).reshape(-1), self.M, "transition")
+            off = np.asarray(offset).reshape(-1)
+            if off.size not in (1, agents.size):
+                raise CrowdError(f"transition: {off.size} offsets for {agents.size} agents")
+            check_offsets(off, self.M, "transition")
+            off = np.broadcast_to(off, agents.shape).astype(np.int64)
         self._check_skeleton(agents, s)
-        return self._request(agents, STREAM, s, off, duration, when_full)
+        return self._request(agents, STREAM, s, off, length, policy)
 
     def transition_to_unique(self, agents, unique, duration, restart=True,
                              when_full=None) -> TransitionResult:
         """Blend agents to unique animation ``unique`` over ``duration`` frames; with
         ``restart`` its clock restarts so it plays from its beginning next frame."""
         agents = self._check_agents(agents)
+        length, policy = self._check_request(duration, when_full)
         u = self._resolve(unique, "unique")
         self._check_skeleton(agents, self.S + u)
         if restart:
             self.unique_start[u] = self.frame + 1
-        return self._request(agents, UNIQUE, u, self.agent_offset[agents].copy(), duration,
-                             when_full)
+        return self._request(agents, UNIQUE, u, self.agent_offset[agents].copy(), length,
+                             policy)
 
     def _check_skeleton(self, agents, root):
         skel = self.root_skeleton[self._agent_root(agents)]
@@ -414,17 +420,24 @@ class Crowd:
         kind, ref, _ = self._playing(agents)
         return np.where(kind == STREAM, ref, self.S + ref)
 
-    def _request(self, agents, kind, ref, offsets, duration, when_full):
+    def _check_request(self, duration, when_full):
+        """(length in whole frames, policy) of a request, validated."""
         policy = self.when_full if when_full is None else when_full
         if policy not in POLICIES:
             raise CrowdError(f"transition: when_full must be one of {POLICIES}, got "
                              f"{policy!r}")
-        d = float(duration)
+        try:
+            d = float(duration)
+        except (TypeError, ValueError):
+            raise CrowdError(f"transition: duration must be a number of frames, got "
+                             f"{duration!r}") from None
         if not (np.isfinite(d) and d >= 0):
             raise CrowdError(f"transition: duration must be >= 0 frames, got {duration!r}")
+        return int(round(d)), policy
+
+    def _request(self, agents, kind, ref, offsets, length, policy):
         agents, first = np.unique(agents, return_index=True)
         offsets = offsets[first]
-        length = int(round(d))
         for a in agents.tolist():
             self.slots.queue.pop(a, None)
         if length == 0:

@@ -114,7 +114,10 @@ def blend_weighted(poses: np.ndarray, weights: np.ndarray) -> np.ndarray:
         w = w[:, :, None]
     total = w.sum(axis=1, keepdims=True)
     w = w / np.where(total > 0, total, 1)
-    ref = poses[:, :1, :, ROT]
+    # align every rotation to the heaviest child's (per bone), never to a child
+    # that does not contribute
+    heaviest = np.argmax(np.broadcast_to(w, poses.shape[:3]), axis=1)        # (n, B)
+    ref = np.take_along_axis(poses[..., ROT], heaviest[:, None, :, None], axis=1)
     sign = np.where(np.sum(poses[..., ROT] * ref, axis=-1) < 0, -1.0, 1.0).astype(poses.dtype)
     scaled = poses * w[..., None]
     scaled[..., ROT] *= sign[..., None]

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = [
-    "identity", "normalize", "multiply", "conjugate", "rotate", "nlerp", "slerp",
+    "identity", "normalize", "normalize_if_needed", "multiply", "conjugate", "rotate", "nlerp", "slerp",
     "to_matrix", "from_matrix",
 ]
 
@@ -20,6 +20,15 @@ def identity(shape=(), dtype=np.float32) -> np.ndarray:
     q = np.zeros(tuple(np.atleast_1d(shape)) + (4,) if shape != () else (4,), dtype)
     q[..., 0] = 1.0
     return q
+
+
+def normalize_if_needed(q: np.ndarray, tol: float = 1e-6) -> np.ndarray:
+    """``q`` as float32, normalising only quaternions whose length is off by more
+    than ``tol``, so stored unit float32 data round-trips bit for bit."""
+    q64 = np.asarray(q, np.float64)
+    n = np.sqrt(np.sum(q64 * q64, axis=-1, keepdims=True))
+    off = np.abs(n - 1) > tol
+    return np.where(off, q64 / np.where(n > 0, n, 1), q64).astype(np.float32)
 
 
 def normalize(q: np.ndarray) -> np.ndarray:

@@ -8,7 +8,7 @@ import numpy as np
 
 from . import pose as sqt
 from .errors import CrowdError
-from .quaternion import normalize
+from .quaternion import normalize_if_needed
 
 __all__ = ["Skeleton", "local_to_model"]
 
@@ -101,6 +101,13 @@ class Skeleton:
         given order); the bind pose rows follow. Cycles and unknown parents raise.
         """
         bone_names = [str(n) for n in bone_names]
+        parent_names = list(parent_names)
+        if len(parent_names) != len(bone_names):
+            raise CrowdError(f"skeleton {name!r}: {len(parent_names)} parent names for "
+                             f"{len(bone_names)} bones")
+        if np.shape(bind_pose)[:1] != (len(bone_names),):
+            raise CrowdError(f"skeleton {name!r} bind pose: expected {len(bone_names)} rows, "
+                             f"got shape {np.shape(bind_pose)}")
         index = {n: i for i, n in enumerate(bone_names)}
         if len(index) != len(bone_names):
             dup = next(n for n in bone_names if bone_names.count(n) > 1)
@@ -190,6 +197,6 @@ def _validated_pose(values, bones, what, names=None) -> np.ndarray:
         b = int(np.flatnonzero(qn < 1e-6)[0])
         raise CrowdError(f"{what}: zero rotation quaternion at bone "
                          f"{names[b] if names else b!r}")
-    out = p.astype(np.float32)
-    out[:, sqt.ROT] = normalize(p[:, sqt.ROT])
+    out = np.asarray(values).astype(np.float32)
+    out[:, sqt.ROT] = normalize_if_needed(p[:, sqt.ROT])
     return out

@@ -82,7 +82,8 @@ def periodic_clip(skeleton: Skeleton, name: str, frames=61, amplitude=0.6, seed=
     keys = np.broadcast_to(skeleton.bind_pose, (frames, b, sqt.WIDTH)).astype(np.float64)
     keys = keys.copy()
     keys[..., sqt.ROT] = quat.multiply(keys[..., sqt.ROT], q)
-    keys[:, 1, sqt.TRANS] += 0.05 * np.sin(t)[:, None] * np.array([0, 0, 1.0])
+    if bones is None or skeleton.bone_names[1] in bones:
+        keys[:, 1, sqt.TRANS] += 0.05 * np.sin(t)[:, None] * np.array([0, 0, 1.0])
     keys[-1] = keys[0]
     return Clip(name, keys, fps=fps, loop=loop, events=events,
                 bone_names=skeleton.bone_names)

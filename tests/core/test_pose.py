@@ -187,8 +187,24 @@ def test_blend_weighted_two_children_equals_blend2():
     assert_pose_close(out, sqt.blend2(poses[:, 0], poses[:, 1], w), atol=2e-6)
 
 
+def clustered_poses(n, k, b, seed):
+    """Children whose rotations lie within 40 degrees of a common one per bone, with
+    random q / -q signs: their weighted average is the same whichever child the signs
+    are aligned to."""
+    rng = np.random.default_rng(seed)
+    poses = random_poses((n, k, b), seed)
+    base = random_poses((n, 1, b), seed + 1)[..., ROT].astype(np.float64)
+    axis = rng.normal(size=(n, k, b, 3))
+    axis /= np.linalg.norm(axis, axis=-1, keepdims=True)
+    half = rng.uniform(0, np.radians(20), (n, k, b, 1))
+    small = np.concatenate([np.cos(half), np.sin(half) * axis], axis=-1)
+    q = quat.multiply(base, small) * rng.choice([-1.0, 1.0], (n, k, b, 1))
+    poses[..., ROT] = q
+    return poses
+
+
 def test_blend_weighted_per_bone_weights_and_shortest_arc():
-    poses = random_poses((3, 4, 6), 20)
+    poses = clustered_poses(3, 4, 6, 20)
     rng = np.random.default_rng(21)
     w = rng.uniform(0.0, 1.0, (3, 4, 6)).astype(np.float32)
     assert_pose_close(sqt.blend_weighted(poses, w), blend_weighted_ref(poses, w), atol=2e-6)
@@ -264,3 +280,18 @@ def test_additive_round_trip_property(seed):
     back = sqt.apply_additive(ref, sqt.additive_delta(p, ref), 1.0)
     assert_pose_close(back, p, atol=3e-6)
     np.testing.assert_allclose(np.linalg.norm(back[:, ROT], axis=1), 1, atol=1e-6)
+
+
+def rot_z(angle_deg):
+    p = sqt.identity_pose(1)
+    a = np.radians(angle_deg)
+    p[0, ROT] = [np.cos(a / 2), 0, 0, np.sin(a / 2)]
+    return p
+
+
+def test_blend_weighted_ignores_zero_weight_child_for_shortest_arc():
+    # 80 and 200 degrees about z are 120 degrees apart: their midpoint is 140 degrees.
+    # Child 0 (0 degrees, weight 0) must not change that.
+    poses = np.stack([rot_z(0), rot_z(80), rot_z(200)])[None]
+    out = sqt.blend_weighted(poses, np.array([[0.0, 0.5, 0.5]], np.float32))
+    assert_pose_close(out[0], rot_z(140), atol=1e-6)
