@@ -97,7 +97,8 @@ def normalize_rotations(p: np.ndarray) -> np.ndarray:
 
 
 def blend_weighted(poses: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """N-way blend: weighted sum of ``k`` poses, rotations sign-aligned to the first.
+    """N-way blend: weighted sum of ``k`` poses, rotations sign-aligned per bone to the
+    heaviest child's (never to a child that does not contribute).
 
     Parameters
     ----------
@@ -114,15 +115,27 @@ def blend_weighted(poses: np.ndarray, weights: np.ndarray) -> np.ndarray:
         w = w[:, :, None]
     total = w.sum(axis=1, keepdims=True)
     w = w / np.where(total > 0, total, 1)
-    # align every rotation to the heaviest child's (per bone), never to a child
-    # that does not contribute
     heaviest = np.argmax(np.broadcast_to(w, poses.shape[:3]), axis=1)        # (n, B)
-    ref = np.take_along_axis(poses[..., ROT], heaviest[:, None, :, None], axis=1)
-    sign = np.where(np.sum(poses[..., ROT] * ref, axis=-1) < 0, -1.0, 1.0).astype(poses.dtype)
-    scaled = poses * w[..., None]
-    scaled[..., ROT] *= sign[..., None]
-    out = scaled.sum(axis=1)
+    ref = np.take_along_axis(poses, heaviest[:, None, :, None], axis=1)      # (n, 1, B, 10)
+    wq = np.where(_dot4(poses, ref) < 0, -w, w)                             # (n, k, B)
+    out = np.einsum("nkbc,nkb->nbc", poses, np.broadcast_to(w, poses.shape[:3]))
+    for c in (3, 4, 5, 6):
+        out[..., c] = np.einsum("nkb,nkb->nb", poses[..., c], wq)
     return normalize_rotations(out)
+
+
+def _qmul(a, b, out, conj_a=False):
+    """Hamilton product of the rotations of SQT poses into ``out[..., ROT]``,
+    component by component (inner loops run over bones, not over 4 components)."""
+    aw, ax, ay, az = (a[..., c] for c in (3, 4, 5, 6))
+    if conj_a:
+        ax, ay, az = -ax, -ay, -az
+    bw, bx, by, bz = (b[..., c] for c in (3, 4, 5, 6))
+    out[..., 3] = aw * bw - ax * bx - ay * by - az * bz
+    out[..., 4] = aw * bx + ax * bw + ay * bz - az * by
+    out[..., 5] = aw * by - ax * bz + ay * bw + az * bx
+    out[..., 6] = aw * bz + ax * by - ay * bx + az * bw
+    return out
 
 
 def additive_delta(pose: np.ndarray, reference: np.ndarray) -> np.ndarray:
@@ -132,10 +145,9 @@ def additive_delta(pose: np.ndarray, reference: np.ndarray) -> np.ndarray:
     so that ``apply_additive(reference, delta, 1) == pose``.
     """
     out = np.empty(np.broadcast_shapes(pose.shape, reference.shape), pose.dtype)
+    np.subtract(pose, reference, out=out)                  # translation (scale redone)
     out[..., SCALE] = pose[..., SCALE] / reference[..., SCALE]
-    out[..., ROT] = quat.multiply(quat.conjugate(reference[..., ROT]), pose[..., ROT])
-    out[..., TRANS] = pose[..., TRANS] - reference[..., TRANS]
-    return out
+    return _qmul(reference, pose, out, conj_a=True)
 
 
 def apply_additive(base: np.ndarray, delta: np.ndarray, w) -> np.ndarray:
@@ -145,16 +157,22 @@ def apply_additive(base: np.ndarray, delta: np.ndarray, w) -> np.ndarray:
     ``scale = s * lerp(1, ds, w)``.
     """
     w = np.asarray(w, dtype=base.dtype)
-    if w.ndim:
-        w = w[..., None]
-    out = np.empty(np.broadcast_shapes(base.shape, delta.shape), base.dtype)
-    out[..., SCALE] = base[..., SCALE] * (1 + (delta[..., SCALE] - 1) * w)
-    ident = np.zeros_like(delta[..., ROT])
-    ident[..., 0] = 1
-    qd = quat.nlerp(ident, delta[..., ROT], w[..., 0] if w.ndim else w)
-    out[..., ROT] = quat.normalize(quat.multiply(base[..., ROT], qd))
-    out[..., TRANS] = base[..., TRANS] + delta[..., TRANS] * w
-    return out
+    shape = np.broadcast_shapes(base.shape, delta.shape)
+    wb = np.broadcast_to(w, shape[:-1])                    # (..., B)
+    # weighted delta: scale and translation lerp from identity, rotation nlerp from
+    # identity on the shortest arc
+    scaled = delta * wb[..., None]
+    scaled[..., SCALE] += 1 - wb[..., None]
+    sign = np.where(delta[..., 3] < 0, -1, 1).astype(base.dtype)
+    for c in (4, 5, 6):
+        scaled[..., c] *= sign
+    scaled[..., 3] = (1 - wb) + wb * delta[..., 3] * sign
+    normalize_rotations(scaled)
+    out = np.empty(shape, base.dtype)
+    np.add(base, scaled, out=out)                          # translation (rest redone)
+    out[..., SCALE] = base[..., SCALE] * scaled[..., SCALE]
+    _qmul(base, scaled, out)
+    return normalize_rotations(out)
 
 
 def pose_to_matrices(pose: np.ndarray) -> np.ndarray:
