@@ -17,6 +17,7 @@ from collections import defaultdict
 import numpy as np
 
 from . import pose as sqt
+from .controllers import Batch
 
 __all__ = ["TreeEvaluator", "FrameContext", "DependencyGraph"]
 
@@ -111,7 +112,7 @@ class TreeEvaluator:
             batch.depth, batch.height = d, h
             self.batches.append(batch)
         self.prepare_order = sorted((b for b in self.batches
-                                     if type(b).prepare is not _base_prepare()),
+                                     if type(b).prepare is not Batch.prepare),
                                     key=lambda b: b.depth)
         self.evaluate_order = sorted(self.batches, key=lambda b: b.height)
         self.levels = []
@@ -155,11 +156,6 @@ class TreeEvaluator:
     def root_poses(self) -> np.ndarray:
         """(R, B, 10) float32 poses of the roots (a copy)."""
         return self.ctx.poses[self.root_index]
-
-
-def _base_prepare():
-    from .controllers import Batch
-    return Batch.prepare
 
 
 class DependencyGraph:

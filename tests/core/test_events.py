@@ -24,17 +24,18 @@ CLIPS = {
 }
 
 
-def build():
+def build(n=N, slots=4):
     sk = humanoid(bones=24)
-    cfg = CrowdConfig(max_offset=M, transition_slots=4)
+    cfg = CrowdConfig(max_offset=M, transition_slots=slots)
     cfg.add_skeleton(sk)
     for i, (name, (frames, tags)) in enumerate(CLIPS.items()):
         cfg.add_clip(periodic_clip(sk, name, frames=frames, seed=i, events=tags))
     cfg.add_stream("s0", "fan", ClipPlayer("c0"))
     cfg.add_stream("s1", "fan", ClipPlayer("c1"))
     cfg.add_unique("u0", "fan", ClipPlayer("c2"))
-    a = np.arange(N)
-    cfg.add_agents(N, streams=a % 2, offsets=(a // 2) % M)
+    a = np.arange(n)
+    offsets = (a // 2) % M if n == N else a % M
+    cfg.add_agents(n, streams=a % 2, offsets=offsets)
     return Crowd(cfg), cfg
 
 
@@ -231,17 +232,8 @@ def test_star_handler_receives_all_events():
 
 def test_events_follow_agents_after_many_reassignments():
     """Enough cuts to push the agent index through its overlay and a rebuild."""
-    sk = humanoid(bones=24)
-    cfg = CrowdConfig(max_offset=M, transition_slots=2)
-    cfg.add_skeleton(sk)
-    for i, (name, (frames, tags)) in enumerate(CLIPS.items()):
-        cfg.add_clip(periodic_clip(sk, name, frames=frames, seed=i, events=tags))
-    cfg.add_stream("s0", "fan", ClipPlayer("c0"))
-    cfg.add_stream("s1", "fan", ClipPlayer("c1"))
-    cfg.add_unique("u0", "fan", ClipPlayer("c2"))
     n = 3000
-    cfg.add_agents(n, streams=np.arange(n) % 2, offsets=np.arange(n) % M)
-    crowd = Crowd(cfg)
+    crowd, cfg = build(n, slots=2)
     rng = np.random.default_rng(4)
     for _ in range(6):
         agents = rng.choice(n, 400, replace=False)
