@@ -70,6 +70,8 @@ class CrowdConfig:
     agent_position: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float32))
     agent_heading: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
     agent_color: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float32))
+    meshes: dict = field(default_factory=dict)
+    lod_distances: tuple = (30.0, 90.0)
 
     # authoring helpers ---------------------------------------------------------
     def add_skeleton(self, skeleton):
@@ -83,6 +85,24 @@ class CrowdConfig:
             raise CrowdError(f"clip {clip.name!r} already exists")
         self.clips[clip.name] = clip
         return clip
+
+    def add_mesh(self, mesh, lods=(0.25, 0.06)):
+        """Set ``mesh`` as its skeleton's proxy, with LODs built at ``lods`` triangle
+        ratios (``()`` for none, or a list of ready :class:`~.mesh.ProxyMesh`)."""
+        from .mesh import ProxyMesh, build_lods
+        if mesh.skeleton not in self.skeletons:
+            raise CrowdError(f"mesh {mesh.name!r}: unknown skeleton {mesh.skeleton!r} "
+                             f"(known: {sorted(self.skeletons)})")
+        bones = self.skeletons[mesh.skeleton].bone_count
+        if int(mesh.bone_indices.max()) >= bones:
+            raise CrowdError(f"mesh {mesh.name!r}: uses bone {int(mesh.bone_indices.max())} "
+                             f"but skeleton {mesh.skeleton!r} has {bones} bones")
+        if lods and all(isinstance(m, ProxyMesh) for m in lods):
+            levels = [mesh, *lods]
+        else:
+            levels = build_lods(mesh, tuple(lods))
+        self.meshes[mesh.skeleton] = levels
+        return levels
 
     def add_stream(self, name, skeleton, root):
         self.streams.append(AnimationDef(str(name), str(skeleton), root))

@@ -43,6 +43,7 @@ from .config import AnimationDef, CrowdConfig
 from .controllers import (Blend2, BlendMask, BlendSpace2D, ClipPlayer, Layer, StateMachine,
                           StateTransition)
 from .errors import CrowdError
+from .mesh import ProxyMesh
 from .skeleton import Skeleton
 from .transitions import POLICIES
 
@@ -50,7 +51,7 @@ __all__ = ["FORMAT", "VERSION", "save_config", "load_config", "register_kind",
            "unregister_kind", "controller_kinds", "ControllerKind", "Encoder", "Decoder"]
 
 FORMAT = "crowd_addon.config"
-VERSION = (1, 0)            # (major, minor): readers accept any minor of their major
+VERSION = (1, 1)            # (major, minor): readers accept any minor of their major
 _REQUIRED = object()
 
 
@@ -413,6 +414,9 @@ _SETTINGS = (  # manifest key = CrowdConfig attribute, JSON type, default (None:
     ("max_offset", "int", None), ("transition_slots", "int", None), ("fps", "number", None),
     ("seed", "int", 0), ("when_full", "str", "queue"), ("max_texture_size", "int", 16384),
     ("start_frame", "int", 0))
+_MESH_ARRAYS = {"positions": ("f", (None, 3)), "normals": ("f", (None, 3)),
+                "triangles": ("iu", (None, 3)), "bone_indices": ("iu", (None, 4)),
+                "bone_weights": ("f", (None, 4))}
 _AGENTS = (("stream", "iu", 1), ("unique", "iu", 1), ("offset", "iu", 1),
            ("position", "f", 3), ("heading", "f", 1), ("color", "f", 3))
 
@@ -445,6 +449,14 @@ def _encode_config(cfg: CrowdConfig) -> tuple:
         m[pool] = [{"name": a.name, "skeleton": a.skeleton,
                     "root": enc.controller(a.root, pool, i, "root")}
                    for i, a in enumerate(getattr(cfg, pool))]
+    m["lod_distances"] = [float(x) for x in cfg.lod_distances]
+    m["meshes"] = []
+    for i, (skel, levels) in enumerate(cfg.meshes.items()):
+        e = enc.at("meshes", i)
+        m["meshes"].append({"skeleton": skel, "levels": [
+            {"name": lv.name, **{k: e.at("levels", j).array(getattr(lv, k), k)
+                                 for k in _MESH_ARRAYS}}
+            for j, lv in enumerate(levels)]})
     e = enc.at("agents")
     m["agents"] = {"count": cfg.agent_count}
     for key, _, _ in _AGENTS:
@@ -535,6 +547,26 @@ def _decode_config(m: dict, dec: Decoder) -> CrowdConfig:
                                              f"(known: {sorted(cfg.skeletons)})")
             d.skeleton = cfg.skeletons[skel]
             out.append(AnimationDef(d.get(a, "name", "str"), skel, d.controller(a, "root")))
+    cfg.lod_distances = tuple(dec.items(m, "lod_distances", "number", [30.0, 90.0]))
+    for i, mesh in enumerate(dec.items(m, "meshes", "object", [])):
+        d = dec.at("meshes", i)
+        skel = d.get(mesh, "skeleton", "str")
+        if skel not in cfg.skeletons:
+            raise d.at("skeleton").error(f"unknown skeleton {skel!r} "
+                                         f"(known: {sorted(cfg.skeletons)})")
+        levels = []
+        for j, lv in enumerate(d.items(mesh, "levels", "object")):
+            dl = d.at("levels", j)
+            arrays = {k: dl.array(lv, k, kinds, shape) for k, (kinds, shape) in
+                      _MESH_ARRAYS.items()}
+            try:
+                levels.append(ProxyMesh(dl.get(lv, "name", "str"), skel,
+                                        bone_count=cfg.skeletons[skel].bone_count, **arrays))
+            except CrowdError as e:
+                raise dl.error(str(e)) from None
+        if not levels:
+            raise d.at("levels").error("a mesh needs at least one level")
+        cfg.meshes[skel] = levels
     agents = dec.get(m, "agents", "object")
     d = dec.at("agents")
     n = d.get(agents, "count", "int")

@@ -14,7 +14,7 @@ from . import quaternion as quat
 from .clip import Clip
 from .skeleton import Skeleton
 
-__all__ = ["humanoid", "periodic_clip"]
+__all__ = ["humanoid", "humanoid_mesh", "periodic_clip"]
 
 
 def humanoid(name="fan", bones=82) -> Skeleton:
@@ -87,3 +87,74 @@ def periodic_clip(skeleton: Skeleton, name: str, frames=61, amplitude=0.6, seed=
     keys[-1] = keys[0]
     return Clip(name, keys, fps=fps, loop=loop, events=events,
                 bone_names=skeleton.bone_names)
+
+
+def humanoid_mesh(skeleton: Skeleton, sides=8, rings=4, name=None):
+    """A low-poly skinned body for :func:`humanoid`-like skeletons.
+
+    One open tube per bone longer than 4 cm (from its parent's head to its own
+    head, skinned to the parent and blending into the bone over its last half) and
+    a sphere on the ``head`` bone if there is one. Returns a
+    :class:`~.mesh.ProxyMesh` in the bind pose.
+    """
+    from .mesh import ProxyMesh
+
+    heads = skeleton.bind_model[:, :3, 3]
+    pos, tris, idx, wts = [], [], [], []
+    base = 0
+    ang = np.arange(sides) * 2 * np.pi / sides
+    for b, p in enumerate(skeleton.parents):
+        if p < 0:
+            continue
+        a, c = heads[p], heads[b]
+        axis = c - a
+        length = float(np.linalg.norm(axis))
+        if length < 0.04:
+            continue
+        axis /= length
+        helper = np.array([1.0, 0, 0]) if abs(axis[0]) < 0.9 else np.array([0, 1.0, 0])
+        u = np.cross(axis, helper)
+        u /= np.linalg.norm(u)
+        v = np.cross(axis, u)
+        radius = float(np.clip(0.22 * length, 0.025, 0.11))
+        t = np.linspace(0, 1, rings)
+        ring = (np.cos(ang)[:, None] * u + np.sin(ang)[:, None] * v) * radius   # (sides, 3)
+        pts = a + t[:, None, None] * (c - a) + ring[None]                        # (rings, sides, 3)
+        pos.append(pts.reshape(-1, 3))
+        wb = np.clip((t - 0.5) / 0.5, 0, 1) * 0.5
+        w = np.stack([1 - wb, wb], 1)
+        wts.append(np.repeat(w, sides, 0))
+        idx.append(np.tile([p, b], (rings * sides, 1)))
+        r0 = base + np.arange(rings - 1)[:, None] * sides
+        s0, s1 = np.arange(sides), (np.arange(sides) + 1) % sides
+        q00, q01 = r0 + s0, r0 + s1
+        q10, q11 = q00 + sides, q01 + sides
+        tris.append(np.stack([np.stack([q00, q01, q11], -1),
+                              np.stack([q00, q11, q10], -1)], 2).reshape(-1, 3))
+        base += rings * sides
+    if "head" in skeleton.bone_names:
+        h = skeleton.bone_names.index("head")
+        lat = np.linspace(0, np.pi, rings + 3)[1:-1]
+        sph = np.concatenate([
+            [[0, 0, -1.0]],
+            np.stack([np.sin(lat)[:, None] * np.cos(ang), np.sin(lat)[:, None] * np.sin(ang),
+                      -np.cos(lat)[:, None] * np.ones_like(ang)], -1).reshape(-1, 3),
+            [[0, 0, 1.0]]])
+        centre = heads[h] + np.array([0, 0, 0.1])
+        pos.append(centre + 0.11 * sph)
+        n_lat = lat.size
+        idx.append(np.tile([h, h], (sph.shape[0], 1)))
+        wts.append(np.tile([1.0, 0.0], (sph.shape[0], 1)))
+        s0, s1 = np.arange(sides), (np.arange(sides) + 1) % sides
+        bottom, top = base, base + 1 + n_lat * sides
+        ring = lambda k, s: base + 1 + k * sides + s                          # noqa: E731
+        f = [np.stack([np.full(sides, bottom), ring(0, s1), ring(0, s0)], -1)]
+        for k in range(n_lat - 1):
+            f.append(np.stack([ring(k, s0), ring(k, s1), ring(k + 1, s1)], -1))
+            f.append(np.stack([ring(k, s0), ring(k + 1, s1), ring(k + 1, s0)], -1))
+        f.append(np.stack([ring(n_lat - 1, s0), ring(n_lat - 1, s1), np.full(sides, top)], -1))
+        tris.append(np.concatenate(f))
+    return ProxyMesh.from_influences(name or f"{skeleton.name}_body", skeleton.name,
+                                     np.concatenate(pos), np.concatenate(tris),
+                                     np.concatenate(idx), np.concatenate(wts),
+                                     bone_count=skeleton.bone_count)

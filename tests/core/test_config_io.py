@@ -70,6 +70,8 @@ def make_config() -> CrowdConfig:
                    headings=np.linspace(0, 6, 90))
     cfg.add_agents(6, streams="kid")
     cfg.add_agents(4, streams=0)
+    cfg.add_mesh(synthetic.humanoid_mesh(fan, sides=5, rings=3))
+    cfg.lod_distances = (12.5, 40.0)
     cfg.agent_stream[-4:] = -1
     cfg.agent_unique[-4:] = 0
     assert cfg.agent_count == 100
@@ -187,7 +189,7 @@ def test_loaded_crowd_animates_identically(saved):
 
 def test_manifest_is_readable_json(saved):
     m = json.loads(saved.read_text())
-    assert m["format"] == config_io.FORMAT and m["version"] == "1.0"
+    assert m["format"] == config_io.FORMAT and m["version"] == "1.1"
     assert m["arrays"]["uri"] == "crowd.npz"
     assert m["settings"] == {"max_offset": 12, "transition_slots": 4, "fps": 24.0, "seed": 7,
                              "when_full": "cut", "max_texture_size": 2048, "start_frame": 5}

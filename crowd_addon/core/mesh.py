@@ -1,0 +1,224 @@
+"""Proxy meshes: the skinned character mesh an agent is drawn with, and its LODs.
+
+A :class:`ProxyMesh` is plain arrays (float32 positions and normals in the bind
+pose, in the skeleton's armature space; ``uint32`` triangles; per vertex the four
+strongest bone influences with weights that sum to 1), the form both GPU backends
+and the USD writer consume. :func:`build_lods` makes cheaper versions for far
+agents by vertex clustering, keeping each cluster's most central vertex (and so its
+influences exactly), so an LOD deforms like the full mesh.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import CrowdError
+
+__all__ = ["ProxyMesh", "vertex_normals", "build_lods", "INFLUENCES"]
+
+INFLUENCES = 4
+
+
+@dataclass(frozen=True, eq=False)
+class ProxyMesh:
+    """A skinned triangle mesh bound to one skeleton (validated on construction).
+
+    Parameters
+    ----------
+    name : str
+    skeleton : the skeleton's name.
+    positions : (V, 3) float32 bind-pose positions (metres, armature space).
+    triangles : (T, 3) uint32 vertex indices.
+    bone_indices : (V, 4) uint16 bone index per influence (0 where unused).
+    bone_weights : (V, 4) float32 weights, descending, summing to 1.
+    normals : (V, 3) float32 unit normals; computed from the triangles when None.
+    bone_count : bones of the skeleton, to validate ``bone_indices`` (None: unchecked).
+
+    Build from any number of influences per vertex with :meth:`from_influences`.
+    """
+
+    name: str
+    skeleton: str
+    positions: np.ndarray
+    triangles: np.ndarray
+    bone_indices: np.ndarray
+    bone_weights: np.ndarray
+    normals: np.ndarray = None
+    bone_count: int | None = None
+
+    def __post_init__(self):
+        what = f"mesh {self.name!r}"
+        pos = np.ascontiguousarray(self.positions, np.float32)
+        if pos.ndim != 2 or pos.shape[1] != 3 or pos.shape[0] == 0:
+            raise CrowdError(f"{what}: positions must be (V, 3) with V >= 1, got "
+                             f"{np.shape(self.positions)}")
+        v = pos.shape[0]
+        _finite(pos, what, "positions")
+        tri = np.asarray(self.triangles)
+        if tri.ndim != 2 or tri.shape[1] != 3 or tri.shape[0] == 0:
+            raise CrowdError(f"{what}: triangles must be (T, 3) with T >= 1, got {tri.shape}")
+        if not np.issubdtype(tri.dtype, np.integer):
+            raise CrowdError(f"{what}: triangles must be integers, got {tri.dtype}")
+        if tri.min() < 0 or tri.max() >= v:
+            bad = int(np.argmax((tri < 0).any(1) | (tri >= v).any(1)))
+            raise CrowdError(f"{what}: triangle {bad} {tri[bad].tolist()} refers to a vertex "
+                             f"outside 0..{v - 1}")
+        idx = np.asarray(self.bone_indices)
+        w = np.ascontiguousarray(self.bone_weights, np.float32)
+        if idx.shape != (v, INFLUENCES) or w.shape != (v, INFLUENCES):
+            raise CrowdError(f"{what}: bone_indices and bone_weights must be ({v}, 4), got "
+                             f"{idx.shape} and {w.shape} (use ProxyMesh.from_influences)")
+        _finite(w, what, "bone_weights")
+        if idx.min() < 0 or (self.bone_count is not None and idx.max() >= self.bone_count):
+            bad = int(np.argmax((idx < 0).any(1) | (idx >= (self.bone_count or 1 << 30)).any(1)))
+            raise CrowdError(f"{what}: vertex {bad} uses bone index {idx[bad].tolist()}, "
+                             f"outside 0..{(self.bone_count or 0) - 1}")
+        sums = w.sum(1)
+        if (w < 0).any() or not np.allclose(sums, 1.0, atol=1e-4):
+            bad = int(np.argmax((w < 0).any(1) | ~np.isclose(sums, 1.0, atol=1e-4)))
+            raise CrowdError(f"{what}: vertex {bad} has weights {w[bad].tolist()}; weights "
+                             "must be >= 0 and sum to 1 (use ProxyMesh.from_influences)")
+        normals = vertex_normals(pos, tri) if self.normals is None else \
+            np.ascontiguousarray(self.normals, np.float32)
+        if normals.shape != pos.shape:
+            raise CrowdError(f"{what}: normals must be {pos.shape}, got {normals.shape}")
+        _finite(normals, what, "normals")
+        object.__setattr__(self, "positions", pos)
+        object.__setattr__(self, "triangles", np.ascontiguousarray(tri, np.uint32))
+        object.__setattr__(self, "bone_indices", np.ascontiguousarray(idx, np.uint16))
+        object.__setattr__(self, "bone_weights", w)
+        object.__setattr__(self, "normals", normals)
+
+    @property
+    def vertex_count(self) -> int:
+        return int(self.positions.shape[0])
+
+    @property
+    def triangle_count(self) -> int:
+        return int(self.triangles.shape[0])
+
+    @property
+    def extent(self) -> np.ndarray:
+        """(2, 3) float32 bind-pose bounding box (min, max)."""
+        return np.stack([self.positions.min(0), self.positions.max(0)])
+
+    @classmethod
+    def from_influences(cls, name, skeleton, positions, triangles, indices, weights,
+                        normals=None, bone_count=None) -> "ProxyMesh":
+        """Keep each vertex's four strongest influences and renormalise them to sum 1.
+
+        ``indices``/``weights`` are (V, K) for any K (pad unused entries with weight 0).
+        A vertex with no positive weight is an error naming it: a skinned crowd has no
+        sensible place for it (Blender would leave it at the object origin's rest).
+        """
+        idx = np.asarray(indices, np.int64)
+        w = np.asarray(weights, np.float64)
+        if idx.ndim != 2 or idx.shape != w.shape:
+            raise CrowdError(f"mesh {name!r}: indices and weights must both be (V, K), got "
+                             f"{idx.shape} and {w.shape}")
+        _finite(w, f"mesh {name!r}", "weights")
+        if (w < 0).any():
+            bad = int(np.argmax((w < 0).any(1)))
+            raise CrowdError(f"mesh {name!r}: vertex {bad} has a negative weight")
+        if idx.shape[1] < INFLUENCES:
+            pad = INFLUENCES - idx.shape[1]
+            idx = np.pad(idx, ((0, 0), (0, pad)))
+            w = np.pad(w, ((0, 0), (0, pad)))
+        order = np.argsort(-w, axis=1, kind="stable")[:, :INFLUENCES]
+        top_w = np.take_along_axis(w, order, 1)
+        top_i = np.take_along_axis(idx, order, 1)
+        total = top_w.sum(1)
+        if (total <= 0).any():
+            bad = np.flatnonzero(total <= 0)
+            raise CrowdError(f"mesh {name!r}: {bad.size} vertices have no bone weight "
+                             f"(first: vertex {int(bad[0])}); weight every vertex to a bone")
+        top_w /= total[:, None]
+        top_i = np.where(top_w > 0, top_i, 0)
+        return cls(name, skeleton, positions, triangles, top_i, top_w.astype(np.float32),
+                   normals, bone_count)
+
+
+def _finite(a, what, field):
+    if not np.isfinite(a).all():
+        bad = int(np.argmax(~np.isfinite(a).reshape(a.shape[0], -1).all(1)))
+        raise CrowdError(f"{what}: {field} of vertex {bad} is not finite")
+
+
+def vertex_normals(positions: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """(V, 3) float32 area-weighted unit vertex normals (+Z where a vertex has none)."""
+    p = np.asarray(positions, np.float64)
+    t = np.asarray(triangles, np.int64)
+    face = np.cross(p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]])
+    n = np.zeros_like(p)
+    for k in range(3):
+        np.add.at(n, t[:, k], face)
+    length = np.linalg.norm(n, axis=1, keepdims=True)
+    n = np.where(length > 1e-12, n / np.maximum(length, 1e-12), (0.0, 0.0, 1.0))
+    return n.astype(np.float32)
+
+
+def build_lods(mesh: ProxyMesh, ratios=(0.25, 0.06)) -> list:
+    """``[mesh, lod1, lod2, ...]``: each LOD keeps about ``ratio`` of the triangles.
+
+    Vertex clustering on a uniform grid over the bind pose: the cell size is
+    searched (bisection on its logarithm) until the triangle count is close to the
+    target; each cell is represented by its vertex nearest the cell's mean, with
+    that vertex's own position, normal and influences; triangles that collapse are
+    dropped. LODs never have more triangles than the level before.
+    """
+    lods = [mesh]
+    for k, ratio in enumerate(ratios, start=1):
+        if not 0 < ratio < 1:
+            raise CrowdError(f"mesh {mesh.name!r}: LOD ratio {ratio} must be in (0, 1)")
+        target = max(1, int(round(mesh.triangle_count * ratio)))
+        prev = lods[-1]
+        lo, hi = np.log(1e-4), np.log(float(np.ptp(mesh.positions, 0).max()) + 1e-6)
+        best = None
+        for _ in range(24):
+            mid = 0.5 * (lo + hi)
+            cand = _cluster(prev, np.exp(mid), f"{mesh.name}.lod{k}")
+            if cand is None:                  # everything collapsed: cells too coarse
+                hi = mid
+                continue
+            if cand.triangle_count <= min(target, prev.triangle_count):
+                best = cand
+                hi = mid                      # fine enough: try finer cells
+                if cand.triangle_count >= 0.9 * target:
+                    break
+            else:
+                lo = mid
+        if best is None:
+            best = _cluster(prev, np.exp(hi), f"{mesh.name}.lod{k}") or prev
+        lods.append(best)
+    return lods
+
+
+def _cluster(mesh: ProxyMesh, cell: float, name: str):
+    p = mesh.positions.astype(np.float64)
+    key = np.floor((p - p.min(0)) / cell).astype(np.int64)
+    _, cluster = np.unique(key, axis=0, return_inverse=True)
+    cluster = cluster.reshape(-1)
+    n = int(cluster.max()) + 1
+    count = np.bincount(cluster, minlength=n).astype(np.float64)
+    mean = np.stack([np.bincount(cluster, p[:, k], n) for k in range(3)], 1) / count[:, None]
+    dist = np.linalg.norm(p - mean[cluster], axis=1)
+    order = np.lexsort((dist, cluster))                 # by cluster, nearest first
+    first = np.ones(order.size, bool)
+    first[1:] = cluster[order[1:]] != cluster[order[:-1]]
+    rep = order[first]                                  # representative vertex per cluster
+    tri = cluster[mesh.triangles.astype(np.int64)]
+    keep = (tri[:, 0] != tri[:, 1]) & (tri[:, 1] != tri[:, 2]) & (tri[:, 0] != tri[:, 2])
+    tri = tri[keep]
+    if tri.shape[0] == 0:
+        return None
+    tri = np.unique(np.sort(tri, 1), axis=0, return_index=True)[1]
+    tri = cluster[mesh.triangles.astype(np.int64)][keep][np.sort(tri)]
+    used = np.unique(tri)
+    remap = np.full(n, -1, np.int64)
+    remap[used] = np.arange(used.size)
+    src = rep[used]
+    return ProxyMesh(name, mesh.skeleton, mesh.positions[src], remap[tri],
+                     mesh.bone_indices[src], mesh.bone_weights[src], mesh.normals[src],
+                     mesh.bone_count)

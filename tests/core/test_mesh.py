@@ -1,0 +1,104 @@
+"""Proxy meshes: top-4 influences, validation, normals and LODs."""
+
+import numpy as np
+import pytest
+
+from crowd_addon.core import CrowdConfig, CrowdError, synthetic
+from crowd_addon.core.mesh import ProxyMesh, build_lods, vertex_normals
+from crowd_addon.core.skinning import skin_vertices, skinning_matrices
+
+QUAD = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], np.float32)
+QUAD_TRI = np.array([[0, 1, 2], [0, 2, 3]])
+
+
+def test_from_influences_keeps_four_strongest_and_renormalises():
+    idx = np.array([[0, 1, 2, 3, 4, 5]] * 4)
+    w = np.array([[0.05, 0.3, 0.1, 0.2, 0.25, 0.1]] * 4)
+    m = ProxyMesh.from_influences("q", "sk", QUAD, QUAD_TRI, idx, w, bone_count=6)
+    assert m.bone_indices[0].tolist() == [1, 4, 3, 2]
+    np.testing.assert_allclose(m.bone_weights[0], np.array([0.3, 0.25, 0.2, 0.1]) / 0.85,
+                               rtol=1e-6)
+    assert m.bone_indices.dtype == np.uint16 and m.triangles.dtype == np.uint32
+
+
+def test_fewer_than_four_influences_are_padded_with_zero_weights():
+    m = ProxyMesh.from_influences("q", "sk", QUAD, QUAD_TRI, [[2]] * 4, [[0.5]] * 4)
+    assert m.bone_indices[:, 0].tolist() == [2] * 4
+    assert m.bone_weights.tolist() == [[1, 0, 0, 0]] * 4
+
+
+@pytest.mark.parametrize("change, message", [
+    (dict(weights=[[1.0], [0.0], [1.0], [1.0]]), "vertex 1"),
+    (dict(weights=[[1.0], [-1.0], [1.0], [1.0]]), "negative weight"),
+    (dict(weights=[[1.0], [np.nan], [1.0], [1.0]]), "not finite"),
+    (dict(indices=[[0], [0], [9], [0]]), "vertex 2 uses bone index"),
+    (dict(triangles=[[0, 1, 4]]), "triangle 0"),
+    (dict(positions=np.full((4, 3), np.inf)), "positions of vertex 0"),
+])
+def test_bad_meshes_are_named(change, message):
+    args = dict(positions=QUAD, triangles=QUAD_TRI, indices=[[0]] * 4, weights=[[1.0]] * 4)
+    args.update(change)
+    with pytest.raises(CrowdError, match=message):
+        ProxyMesh.from_influences("q", "sk", bone_count=3, **args)
+
+
+def test_normals_point_out_of_a_counter_clockwise_quad():
+    n = vertex_normals(QUAD, QUAD_TRI)
+    np.testing.assert_allclose(n, [[0, 0, 1]] * 4, atol=1e-6)
+
+
+def test_humanoid_body_normals_point_away_from_its_bones():
+    sk = synthetic.humanoid(bones=40)
+    m = synthetic.humanoid_mesh(sk)
+    heads = sk.bind_model[:, :3, 3]
+    bone = heads[m.bone_indices[:, 0].astype(int)]
+    # tube vertices sit around their bone's axis: their normal points away from it
+    outward = np.einsum("vi,vi->v", m.normals, m.positions - bone)
+    assert (outward > -1e-3).mean() > 0.9
+
+
+def test_lods_shrink_and_keep_exact_influences():
+    sk = synthetic.humanoid()
+    m = synthetic.humanoid_mesh(sk)
+    lods = build_lods(m, (0.25, 0.06))
+    tris = [lv.triangle_count for lv in lods]
+    assert tris[0] > tris[1] > tris[2] > 0
+    assert tris[1] <= 0.25 * tris[0] and tris[1] >= 0.1 * tris[0]
+    assert tris[2] <= 0.06 * tris[0]
+    # every LOD vertex is a vertex of the full mesh with its own influences
+    full = {(tuple(p), tuple(i), tuple(w)) for p, i, w in
+            zip(m.positions.tolist(), m.bone_indices.tolist(), m.bone_weights.tolist())}
+    for lv in lods[1:]:
+        for p, i, w in zip(lv.positions.tolist(), lv.bone_indices.tolist(),
+                           lv.bone_weights.tolist()):
+            assert (tuple(p), tuple(i), tuple(w)) in full
+
+
+def test_lod_skins_like_the_full_mesh():
+    sk = synthetic.humanoid(bones=30)
+    m = synthetic.humanoid_mesh(sk)
+    lod = build_lods(m, (0.2,))[1]
+    clip = synthetic.periodic_clip(sk, "c")
+    rows = skinning_matrices(clip.keys[5:6], sk)
+    full = skin_vertices(m.positions, m.bone_indices, m.bone_weights, rows)[0]
+    low = skin_vertices(lod.positions, lod.bone_indices, lod.bone_weights, rows)[0]
+    where = {(tuple(p), tuple(i)): k for k, (p, i) in
+             enumerate(zip(m.positions.tolist(), m.bone_indices.tolist()))}
+    src = [where[(tuple(p), tuple(i))] for p, i in
+           zip(lod.positions.tolist(), lod.bone_indices.tolist())]
+    np.testing.assert_allclose(low, full[src], rtol=1e-12)
+
+
+def test_config_add_mesh_checks_skeleton_and_bones():
+    cfg = CrowdConfig()
+    small = cfg.add_skeleton(synthetic.humanoid("small", bones=24))
+    big = synthetic.humanoid("big", bones=40)
+    with pytest.raises(CrowdError, match="unknown skeleton 'big'"):
+        cfg.add_mesh(synthetic.humanoid_mesh(big))
+    wrong = synthetic.humanoid_mesh(big)
+    wrong = ProxyMesh(wrong.name, "small", wrong.positions, wrong.triangles,
+                      wrong.bone_indices, wrong.bone_weights)
+    with pytest.raises(CrowdError, match="skeleton 'small' has 24 bones"):
+        cfg.add_mesh(wrong)
+    levels = cfg.add_mesh(synthetic.humanoid_mesh(small), lods=())
+    assert len(levels) == 1 and cfg.meshes["small"] is levels
