@@ -51,7 +51,7 @@ def stream_tree(s: int):
                          StateTransition("cheer", "idle", 10, trigger="calm")])
 
 
-def build(agents: int) -> Crowd:
+def build(agents: int, gpu_transitions: bool = False) -> Crowd:
     sk = humanoid("fan", BONES)
     cfg = CrowdConfig(max_offset=M, transition_slots=SLOTS, seed=1)
     cfg.add_skeleton(sk)
@@ -63,11 +63,11 @@ def build(agents: int) -> Crowd:
     for s in range(STREAMS):
         cfg.add_stream(f"stream{s}", "fan", stream_tree(s))
     cfg.add_agents(agents)
-    return Crowd(cfg)
+    return Crowd(cfg, gpu_transitions=gpu_transitions)
 
 
-def run(agents: int, steps: int, rng) -> dict:
-    crowd = build(agents)
+def run(agents: int, steps: int, rng, gpu_transitions=False) -> dict:
+    crowd = build(agents, gpu_transitions)
     claps = []
     crowd.on_event("clap", lambda name, frame, ids: claps.append(ids.size))
     per_frame = max(1, SLOTS // 30 + 1)
@@ -79,6 +79,8 @@ def run(agents: int, steps: int, rng) -> dict:
             for s in range(4, STREAMS, 5):
                 crowd.set_trigger(s, "goal" if crowd.frame % 80 else "calm")
         crowd.take_upload_regions()
+        if gpu_transitions:
+            crowd.take_local_upload_regions()
         return crowd.step()
 
     for _ in range(45):          # reach the steady state: slots busy, queue in use
@@ -91,6 +93,7 @@ def run(agents: int, steps: int, rng) -> dict:
         "ms_p90": float(np.percentile(ms, 90)),
         "bytes_per_frame": int(statistics.median(r.upload_bytes for r in reports)),
         "active_transitions": int(statistics.median(r.transitions_active for r in reports)),
+        "started_per_frame": float(np.mean([r.transitions_started for r in reports])),
         "queued": int(crowd.slots.queue.__len__()),
         "clap_agents_per_frame": float(np.mean(claps)) if claps else 0.0,
         "row_bytes": crowd.storage.row_bytes,
@@ -151,15 +154,24 @@ def main(argv=None):
     minimum = (STREAMS + paper["active_transitions"] + crowd.U) * paper["row_bytes"]
     print(f"  upload minimum (new slice + active rows): {minimum:,} B; "
           f"measured/minimum = {paper['bytes_per_frame'] / minimum:.3f}")
+    g = run(65_000, steps, rng, gpu_transitions=True)
+    g_min = 2 * (STREAMS + crowd.U) * g["row_bytes"] + g["started_per_frame"] * g["row_bytes"] * 2
+    print(f"  65000 agents, transitions blended on the GPU (paper s.4.5): {g['ms_median']:6.2f} "
+          f"ms/step median (p90 {g['ms_p90']:.2f}), {g['bytes_per_frame']:,} B uploaded/frame "
+          f"(skinning + local-pose slices; minimum {g_min:,.0f} B)", flush=True)
     t_batched, t_naive = naive_streams(crowd, 5 if args.quick else 20)
     print(f"  256 streams, evaluate + skin: batched {t_batched:.2f} ms, naive per-stream "
           f"loop {t_naive:.2f} ms, ratio {t_naive / t_batched:.1f}x")
-    print(f"  target: < 2 ms per step at 65k agents; measured {paper['ms_median']:.2f} ms "
-          f"({'met' if paper['ms_median'] < 2 else 'NOT met'})")
+    best = min(paper["ms_median"], g["ms_median"])
+    print(f"  target: < 2 ms per step at 65k agents; measured {paper['ms_median']:.2f} ms (CPU "
+          f"transitions), {g['ms_median']:.2f} ms (GPU transitions): "
+          f"{'met' if best < 2 else 'NOT met'}")
     print(json.dumps({
         "ms_per_step_65k": round(paper["ms_median"], 3),
         "ms_per_step_8k": round(results[8_000]["ms_median"], 3),
         "ms_per_step_1k": round(results[1_000]["ms_median"], 3),
+        "ms_per_step_65k_gpu_transitions": round(g["ms_median"], 3),
+        "bytes_per_frame_gpu_transitions": g["bytes_per_frame"],
         "bytes_per_frame": paper["bytes_per_frame"],
         "bytes_minimum": minimum,
         "active_transitions": paper["active_transitions"],

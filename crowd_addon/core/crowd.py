@@ -23,11 +23,26 @@ from .config import CrowdConfig
 from .errors import CrowdError
 from .events import EventDispatcher
 from .graph import DependencyGraph, TreeEvaluator
-from .pose_storage import PoseStorage
+from .pose_storage import LOCAL_IDENTITY, PoseStorage, pack_local_poses
 from .skinning import SkinningPlan
 from .transitions import POLICIES, TransitionResult, TransitionSlots
 
-__all__ = ["Crowd", "StepReport"]
+__all__ = ["Crowd", "StepReport", "GpuTransitionBatch"]
+
+
+@dataclass(frozen=True)
+class GpuTransitionBatch:
+    """The transition slots a GPU blends this frame (paper s.4.5); all ``(n,)``.
+
+    ``slots`` int32 slot indices (pose texture row ``slot_base + slot``);
+    ``target_rows`` int32 logical rows of each target pose in ``local_storage``;
+    ``weights`` float32 ``S``; ``skeletons`` int32 indices into ``Crowd.skeletons``.
+    """
+
+    slots: np.ndarray
+    target_rows: np.ndarray
+    weights: np.ndarray
+    skeletons: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -66,9 +81,17 @@ class Crowd:
     storage : PoseStorage, the pose texture mirror and its dirty rows.
     agent_kind, agent_ref, agent_offset : (N,) agent animation references.
     events : EventDispatcher.
+    gpu_transitions : bool. When true the GPU blends transition slots (paper s.4.5):
+        the CPU neither blends slots nor writes their pose texture rows each frame;
+        instead ``local_storage`` mirrors the local poses the GPU needs and
+        :meth:`gpu_transition_batch` says what to blend. Agent poses and rows asked
+        for on the CPU (``agent_poses``, ``agent_rows``) are still exact.
+    local_storage : PoseStorage or None; with ``gpu_transitions``, a texture of the
+        same geometry as ``storage`` holding local SQT rows (:func:`pack_local_poses`):
+        stream rows = pose history, unique rows = unique poses, slot rows = StartP.
     """
 
-    def __init__(self, config: CrowdConfig):
+    def __init__(self, config: CrowdConfig, gpu_transitions: bool = False):
         cfg = config
         self.config = cfg
         self._validate(cfg)
@@ -90,6 +113,10 @@ class Crowd:
         self.plans = [SkinningPlan(s, self.B) for s in self.skeletons]
         self.storage = PoseStorage(self.S, self.M, self.U, self.NT, self.B,
                                    cfg.max_texture_size)
+        self.gpu_transitions = bool(gpu_transitions)
+        self.local_storage = PoseStorage(self.S, self.M, self.U, self.NT, self.B,
+                                         cfg.max_texture_size, fill=LOCAL_IDENTITY) \
+            if self.gpu_transitions else None
         self.history = sqt.identity_pose((self.M, self.S, self.B))
         self.unique_poses = sqt.identity_pose((self.U, self.B))
         self.unique_start = np.zeros(self.U, np.int64)
@@ -232,8 +259,10 @@ class Crowd:
             self._store_roots()
             self._skin_changed_rows()
             self._collect_events(dispatch=(f == f0))
-        self.storage.take_dirty_regions()
-        self.storage.mark_dirty(0, self.storage.row_count)
+        for st in (self.storage, self.local_storage):
+            if st is not None:
+                st.take_dirty_regions()
+                st.mark_dirty(0, st.row_count)
 
     def _playing(self, agents):
         """(kind, ref, offset) each agent plays, a transition resolved to its target."""
@@ -258,6 +287,7 @@ class Crowd:
         """Advance one frame and return what it cost."""
         t_start = time.perf_counter()
         mark = self.storage.mark()
+        local_mark = self.local_storage.mark() if self.local_storage is not None else 0
         started = self._serve_queue()
         self.frame += 1
         self._finished = 0
@@ -268,7 +298,10 @@ class Crowd:
         ms = (time.perf_counter() - t_start) * 1e3
         self.stats["steps"] += 1
         self.stats["ms_total"] += ms
-        return StepReport(self.frame, ms, self.storage.bytes_since(mark),
+        upload = self.storage.bytes_since(mark)
+        if self.local_storage is not None:
+            upload += self.local_storage.bytes_since(local_mark)
+        return StepReport(self.frame, ms, upload,
                           int(self.slots.active.sum()), started, self._finished,
                           self._events_fired)
 
@@ -305,12 +338,17 @@ class Crowd:
         self._tr_waiting = act[later]
 
     def _transitions_ready(self):
-        self._s_ready = self.slots.evaluate(self._tr_ready, self.frame, self.history, self.M,
-                                            self.unique_poses)
+        self._s_ready = self._blend_slots(self._tr_ready)
 
     def _transitions_waiting(self):
-        self._s_waiting = self.slots.evaluate(self._tr_waiting, self.frame, self.history,
-                                              self.M, self.unique_poses)
+        self._s_waiting = self._blend_slots(self._tr_waiting)
+
+    def _blend_slots(self, slots):
+        """Blend ``slots`` on the CPU, or with GPU transitions only compute ``S`` (the
+        CPU pose is then blended on demand by :meth:`_current_poses`)."""
+        if self.gpu_transitions:
+            return self.slots.weights(slots, self.frame)
+        return self.slots.evaluate(slots, self.frame, self.history, self.M, self.unique_poses)
 
     def _finish_transitions(self):
         slots = np.concatenate([self._tr_ready, self._tr_waiting])
@@ -335,7 +373,11 @@ class Crowd:
         m = kind == UNIQUE
         out[m] = self.unique_poses[ref[m]]
         m = kind == TRANSITION
-        out[m] = self.slots.pose[ref[m]]
+        if m.any():
+            if self.gpu_transitions:        # slots are blended on the GPU: do these here
+                self.slots.evaluate(np.unique(ref[m]), self.frame, self.history, self.M,
+                                    self.unique_poses)
+            out[m] = self.slots.pose[ref[m]]
         return out
 
     def agent_rows_index(self, agents=None) -> np.ndarray:
@@ -349,7 +391,38 @@ class Crowd:
 
     def agent_rows(self, agents=None) -> np.ndarray:
         """Skinning rows ``(n, B, 3, 4)`` float32 the agents are drawn with now."""
-        return self.storage.rows[self.agent_rows_index(agents)]
+        agents = np.arange(self.N) if agents is None else self._check_agents(agents)
+        rows = self.storage.rows[self.agent_rows_index(agents)]
+        tr = np.flatnonzero(self.agent_kind[agents] == TRANSITION)
+        if self.gpu_transitions and tr.size:   # the texture's slot rows live on the GPU
+            poses = self._current_poses(agents[tr])
+            kind, ref, _ = self._playing(agents[tr])
+            skel = self.root_skeleton[np.where(kind == STREAM, ref, self.S + ref)]
+            for k in np.unique(skel):
+                rows[tr[skel == k]] = self.plans[k].rows(poses[skel == k])
+        return rows
+
+    def gpu_transition_batch(self) -> GpuTransitionBatch:
+        """The slots still blending after this frame's step, for the GPU shader."""
+        if not self.gpu_transitions:
+            raise CrowdError("gpu_transition_batch: this crowd blends transitions on the "
+                             "CPU (create it with Crowd(config, gpu_transitions=True))")
+        act = self.slots.active_slots()
+        kind = self.slots.target_kind[act]
+        ref = self.slots.target_ref[act]
+        rows = self.slots.target_rows(act, self.frame, self.S, self.M,
+                                      self.storage.unique_base)
+        skel = self.root_skeleton[np.where(kind == STREAM, ref, self.S + ref)]
+        return GpuTransitionBatch(act.astype(np.int32), rows.astype(np.int32),
+                                  self.slots.weights(act, self.frame).astype(np.float32),
+                                  skel.astype(np.int32))
+
+    def take_local_upload_regions(self):
+        """``local_storage`` rectangles written since the last call (GPU transitions)."""
+        if self.local_storage is None:
+            raise CrowdError("take_local_upload_regions: this crowd has no local pose "
+                             "texture (create it with Crowd(config, gpu_transitions=True))")
+        return self.local_storage.take_dirty_regions()
 
     def agent_poses(self, agents=None) -> np.ndarray:
         """Local poses ``(n, B, 10)`` float32 of the agents now."""
@@ -476,6 +549,9 @@ class Crowd:
         start = self._current_poses(agents)
         rows = self.agent_rows(agents)
         self.slots.start(slots, agents, kind, ref, offsets, length, start, frame)
+        if self.local_storage is not None:
+            self.local_storage.slot_rows()[slots] = pack_local_poses(start)
+            self.local_storage.mark_rows_dirty(self.local_storage.slot_base + slots)
         self.agent_kind[agents] = TRANSITION
         self.agent_ref[agents] = slots
         # the slot shows exactly the agent's current pose until the next step
@@ -562,6 +638,13 @@ class Crowd:
             else:
                 st.unique_rows()[idx] = self.plans[k].rows(self.unique_poses[idx])
         st.mark_dirty(st.unique_base, self.U)
+        if self.local_storage is not None:
+            loc = self.local_storage
+            pack_local_poses(hist, out=loc.stream_slice(sl))
+            pack_local_poses(self.unique_poses, out=loc.unique_rows())
+            loc.mark_dirty(sl * self.S, self.S)
+            loc.mark_dirty(loc.unique_base, self.U)
+            return                      # slot rows are blended and skinned on the GPU
         act = self.slots.active_slots()
         if act.size:
             skel = self.root_skeleton[np.where(self.slots.target_kind[act] == STREAM,

@@ -19,7 +19,24 @@ import numpy as np
 
 from .errors import CrowdError
 
-__all__ = ["PoseStorage", "UploadRegion"]
+__all__ = ["PoseStorage", "UploadRegion", "pack_local_poses", "LOCAL_IDENTITY"]
+
+#: A local-pose texture row entry of the identity SQT: (scale, 0), (w, x, y, z), (t, 0).
+LOCAL_IDENTITY = np.array([[1, 1, 1, 0], [1, 0, 0, 0], [0, 0, 0, 0]], np.float32)
+
+
+def pack_local_poses(poses: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """Local SQT ``(..., B, 10)`` as local-pose texture rows ``(..., B, 3, 4)`` float32.
+
+    Per bone three RGBA texels: ``(sx, sy, sz, 0)``, ``(qw, qx, qy, qz)``,
+    ``(tx, ty, tz, 0)`` -- the layout the GPU transition shader reads.
+    """
+    if out is None:
+        out = np.zeros(poses.shape[:-1] + (3, 4), np.float32)
+    out[..., 0, :3] = poses[..., 0:3]
+    out[..., 1, :] = poses[..., 3:7]
+    out[..., 2, :3] = poses[..., 7:10]
+    return out
 
 
 @dataclass(frozen=True)
@@ -50,6 +67,8 @@ class PoseStorage:
     streams, max_offset, uniques, slots : S, M, U, NT.
     bones : B_max, bones per row.
     max_texture_size : the GPU's largest texture side in texels (GL_MAX_TEXTURE_SIZE).
+    fill : (3, 4) initial value of every bone's entry; default the identity matrix rows
+        (a skinning-matrix texture). :data:`LOCAL_IDENTITY` for a local-pose texture.
 
     Attributes
     ----------
@@ -57,7 +76,8 @@ class PoseStorage:
     width, height : texture size in texels.
     """
 
-    def __init__(self, streams, max_offset, uniques, slots, bones, max_texture_size=16384):
+    def __init__(self, streams, max_offset, uniques, slots, bones, max_texture_size=16384,
+                 fill=None):
         self.S, self.M, self.U, self.NT = int(streams), int(max_offset), int(uniques), int(slots)
         self.bones = int(bones)
         self.row_texels = 3 * self.bones
@@ -77,7 +97,10 @@ class PoseStorage:
                              f"max texture size is {self.max_texture_size}; lower M, streams "
                              "or transition slots")
         self.rows = np.zeros((n, self.bones, 3, 4), np.float32)
-        self.rows[:, :, 0, 0] = self.rows[:, :, 1, 1] = self.rows[:, :, 2, 2] = 1
+        if fill is None:
+            self.rows[:, :, 0, 0] = self.rows[:, :, 1, 1] = self.rows[:, :, 2, 2] = 1
+        else:
+            self.rows[:] = fill
         self.unique_base = self.M * self.S
         self.slot_base = self.M * self.S + self.U
         self._dirty = []

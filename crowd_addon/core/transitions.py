@@ -111,9 +111,19 @@ class TransitionSlots:
         un = kind == UNIQUE
         if un.any():
             target[un] = unique_poses[ref[un]]
-        s = np.clip((frame - self.t0[slots]) / self.length[slots], 0.0, 1.0)
+        s = self.weights(slots, frame)
         self.pose[slots] = sqt.blend2(self.start_pose[slots], target, s.astype(np.float32))
         return s
+
+    def weights(self, slots, frame) -> np.ndarray:
+        """``S = clip((frame - T0) / L, 0, 1)`` of ``slots`` (float64)."""
+        return np.clip((frame - self.t0[slots]) / self.length[slots], 0.0, 1.0)
+
+    def target_rows(self, slots, frame, streams, max_offset, unique_base) -> np.ndarray:
+        """Logical pose-texture row of each slot's target at ``frame``."""
+        ref = self.target_ref[slots]
+        stream_row = ((frame - self.target_offset[slots]) % max_offset) * streams + ref
+        return np.where(self.target_kind[slots] == STREAM, stream_row, unique_base + ref)
 
     def release(self, slots):
         self.active[slots] = False
