@@ -1,0 +1,68 @@
+"""The extension zip builds with Blender's own tool and installs into the bpy module.
+
+Oracle: Blender's extension machinery (``blender_ext.py build`` validates the manifest
+and wheels; ``bpy.ops.extensions.package_install_files`` installs and enables it).
+Runs in a subprocess with Blender's user directories in a temporary folder, so the
+machine's own Blender configuration is never touched.
+"""
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+import zipfile
+
+import pytest
+
+from crowd_addon import packaging
+
+pytest.importorskip("bpy", reason="the bpy module is needed to build the extension")
+
+
+@pytest.fixture(scope="module")
+def extension_zip(tmp_path_factory):
+    out = tmp_path_factory.mktemp("dist")
+    return packaging.build_extension(out, progress=lambda *_: None)[0]
+
+
+def test_zip_carries_sources_shaders_and_wheels_for_every_platform(extension_zip):
+    names = zipfile.ZipFile(extension_zip).namelist()
+    assert "blender_manifest.toml" in names and "__init__.py" in names
+    assert "crowd_addon/core/crowd.py" in names
+    assert not any(n.startswith(("tests/", "benchmarks/", ".venv/")) for n in names)
+    wheels = [n for n in names if n.startswith("wheels/")]
+    for py in ("cp311", "cp313"):
+        for plat in ("manylinux", "win_amd64", "macosx_11_0_arm64"):
+            for pkg in ("moderngl-", "glcontext-"):
+                assert any(pkg in w and py in w and plat in w for w in wheels), (pkg, py, plat)
+    manifest = zipfile.ZipFile(extension_zip).read("blender_manifest.toml").decode()
+    assert 'platforms = ["linux-x64", "windows-x64", "macos-arm64"]' in manifest
+
+
+def test_manifest_must_not_list_wheels_itself():
+    with pytest.raises(Exception, match="leave 'wheels'"):
+        packaging._manifest_with_wheels('wheels = ["x.whl"]\n', [])
+
+
+INSTALL = textwrap.dedent("""
+    import json, sys
+    import bpy
+    zip_path = sys.argv[1]
+    result = bpy.ops.extensions.package_install_files(
+        filepath=zip_path, repo="user_default", enable_on_install=True)
+    name = "bl_ext.user_default.crowd_animation"
+    mod = sys.modules.get(name)
+    print(json.dumps({"result": sorted(result), "enabled": name in bpy.context.preferences.addons,
+                      "file": getattr(mod, "__file__", None)}))
+""")
+
+
+def test_installs_and_enables_in_blender(extension_zip, tmp_path):
+    env = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp_path / "blender_user"))
+    run = subprocess.run([sys.executable, "-c", INSTALL, extension_zip], env=env,
+                         capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr[-2000:]
+    info = json.loads(run.stdout.strip().splitlines()[-1])
+    assert info["result"] == ["FINISHED"] and info["enabled"]
+    assert info["file"].startswith(str(tmp_path / "blender_user"))
