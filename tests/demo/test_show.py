@@ -1,0 +1,120 @@
+"""The stadium show drives a core crowd through goals, a wave, hits and claps."""
+
+import numpy as np
+import pytest
+
+from crowd_addon.core import ClipPlayer, Crowd, CrowdConfig, CrowdError, synthetic
+from crowd_addon.core.agents import STREAM, TRANSITION, UNIQUE
+from crowd_addon.demo.show import ShowPlan, StadiumShow
+
+N = 240
+
+
+def stadium(slots=40, clap_at=7.0):
+    cfg = CrowdConfig(max_offset=20, transition_slots=slots, seed=3)
+    sk = cfg.add_skeleton(synthetic.humanoid("fan", bones=24))
+    for i, name in enumerate(("idle_a", "idle_b", "cheer", "wave", "hit")):
+        cfg.add_clip(synthetic.periodic_clip(
+            sk, name, frames=31 + 10 * i, seed=i, loop=name != "hit",
+            events=[("clap", clap_at)] if name == "idle_a" else ()))
+    for name in ("idle_a", "idle_b", "cheer", "wave"):
+        cfg.add_stream(name, "fan", ClipPlayer(name))
+    for k in range(3):
+        cfg.add_unique(f"hit{k}", "fan", ClipPlayer("hit"))
+    angle = np.linspace(0, 2 * np.pi, N, endpoint=False)
+    cfg.add_agents(N, streams=np.arange(N) % 2, offsets="uniform",
+                   positions=np.stack([40 * np.cos(angle), 30 * np.sin(angle),
+                                       np.zeros(N)], 1))
+    return cfg, angle
+
+
+def run(show, crowd, frames):
+    for _ in range(frames):
+        show.before_step()
+        crowd.step()
+
+
+def test_goal_sends_home_to_cheer_through_slots_then_back():
+    cfg, angle = stadium(slots=40)
+    crowd = Crowd(cfg)
+    home = np.cos(angle) > 0                      # one side of the bowl
+    plan = ShowPlan(goal_frame=2, cheer_frames=60, wave_lap_frames=0, hit_frame=-1)
+    show = StadiumShow(crowd, angle, home, plan=plan)
+    run(show, crowd, 3)
+    assert show.stats.cheering == home.sum() > 40
+    assert show.stats.queued == home.sum() - 40    # more requests than slots: queued
+    assert (crowd.agent_kind[home] == TRANSITION).sum() == 40
+    assert (crowd.agent_kind[~home] == STREAM).all()
+    run(show, crowd, 40)                           # queue drained: all home agents cheer
+    assert (crowd.agent_kind[home] == STREAM).all()
+    assert (crowd.agent_ref[home] == crowd.names.index("cheer")).all()
+    assert (crowd.agent_offset[home] == 0).all()
+    run(show, crowd, 60)                           # cheer over: back to own idle + offset
+    assert (crowd.agent_kind == STREAM).all()
+    np.testing.assert_array_equal(crowd.agent_ref, cfg.agent_stream)
+    np.testing.assert_array_equal(crowd.agent_offset, cfg.agent_offset)
+    assert crowd.slots.served == 2 * home.sum() and show.stats.cut == 0
+
+
+def test_wave_passes_each_seat_once_per_lap_in_angle_order():
+    cfg, angle = stadium(slots=64)
+    crowd = Crowd(cfg)
+    plan = ShowPlan(goal_frame=-1, wave_start=0, wave_lap_frames=60, wave_hold=10,
+                    hit_frame=-1)
+    show = StadiumShow(crowd, angle, np.zeros(N, bool), plan=plan)
+    first_wave = np.full(N, -1)
+    wave = crowd.names.index("wave")
+    for f in range(80):
+        show.before_step()
+        crowd.step()
+        kind, ref, _ = crowd._playing(np.arange(N))
+        now = (kind == STREAM) & (ref == wave) & (first_wave < 0)
+        first_wave[now] = f
+    assert (first_wave >= 0).all() and show.stats.waves == N
+    # the front travels with the seat angle: later seats stand up later
+    assert (np.diff(first_wave) >= 0).all()
+    assert first_wave[-1] - first_wave[0] >= 55
+    run(show, crowd, 30)
+    assert (crowd.agent_kind == STREAM).all()
+    np.testing.assert_array_equal(crowd.agent_ref, cfg.agent_stream)
+
+
+def test_hit_agents_get_their_own_unique_and_return():
+    cfg, angle = stadium()
+    crowd = Crowd(cfg)
+    plan = ShowPlan(goal_frame=-1, wave_lap_frames=0, hit_frame=1)
+    show = StadiumShow(crowd, angle, np.zeros(N, bool), hits=["hit0", "hit1", "hit2"],
+                       hit_frames=20, plan=plan)
+    run(show, crowd, 10)
+    hit = show._hit_ids
+    kind, ref, _ = crowd._playing(hit)
+    assert (kind == UNIQUE).all() and sorted(ref.tolist()) == [0, 1, 2]
+    run(show, crowd, 25)
+    assert (crowd.agent_kind[hit] == STREAM).all()
+
+
+def test_claps_counted_once_per_frame_with_all_agents():
+    cfg, angle = stadium(clap_at=7.0)
+    crowd = Crowd(cfg)
+    show = StadiumShow(crowd, angle, np.zeros(N, bool),
+                       plan=ShowPlan(goal_frame=-1, wave_lap_frames=0, hit_frame=-1))
+    run(show, crowd, 60)
+    # oracle: an idle_a agent at offset O claps at frame F when (F - O) mod 30 == 7
+    period = cfg.clips["idle_a"].keys.shape[0] - 1
+    on_a = cfg.agent_stream == 0
+    expected = {}
+    for f in range(crowd.frame - 59, crowd.frame + 1):
+        n = int(((f - cfg.agent_offset[on_a]) % period == 7).sum())
+        if n:
+            expected[f] = n
+    assert dict(show.stats.claps) == expected
+    assert show.stats.clap_calls == len(expected)
+
+
+def test_bad_show_input_is_named():
+    cfg, angle = stadium()
+    crowd = Crowd(cfg)
+    with pytest.raises(CrowdError, match="one value per agent"):
+        StadiumShow(crowd, angle[:5], np.zeros(N, bool))
+    with pytest.raises(CrowdError, match="unknown stream 'cheers'"):
+        StadiumShow(crowd, angle, np.zeros(N, bool), cheer="cheers")
