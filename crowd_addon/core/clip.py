@@ -196,9 +196,15 @@ class ClipBank:
         i1 = np.minimum(i0 + 1, last)
         f = (u - i0).astype(np.float32)
         base = self.start[clip_ids]
-        a = self.keys[base + i0]
-        b = self.keys[base + i1]
-        return sqt.blend2(a, b, f, out=out)
+        if out is None:
+            out = np.empty((clip_ids.size,) + self.keys.shape[1:], np.float32)
+        np.take(self.keys, base + i0, axis=0, out=out)
+        # at integer times (the common case: speed 1 at whole frames) the key is the pose
+        frac = np.flatnonzero(f)
+        if frac.size:
+            b = self.keys[(base + i1)[frac]]
+            out[frac] = sqt.blend2(out[frac], b, f[frac])
+        return out
 
     def crossings(self, clip_ids: np.ndarray, t0: np.ndarray, t1: np.ndarray):
         """Event tags crossed when clip time goes from ``t0`` (excluded) to ``t1``.
