@@ -5,6 +5,9 @@ Commands
 budget
     The paper's GPU memory model (NumClips_OLD / NumClips_NEW) and a proposed stream
     count and max offset for a crowd. See ``docs/performance_budget.md``.
+export
+    A saved crowd configuration over a frame range, written as UsdSkel (progress on
+    stderr, summary on stdout). See ``docs/usd_export.md``.
 
 Each command is one ``_add_<name>`` function that builds its subparser and one
 ``_run_<name>`` function that does the work; heavy modules are imported inside the
@@ -192,10 +195,101 @@ def _run_budget(args) -> int:
     return 0
 
 
+# ------------------------------------------------------------------------- export
+
+def _frame_range(text: str) -> tuple:
+    """``"FIRST-LAST"`` (e.g. ``1-300``, ``-10-20``) or ``"N"`` -> ``(first, last)``."""
+    import re
+
+    m = re.fullmatch(r"\s*(-?\d+)\s*(?:-\s*(-?\d+)\s*)?", text)
+    if m is None:
+        raise argparse.ArgumentTypeError(f"must be FIRST-LAST or a frame, got {text!r}")
+    first = int(m.group(1))
+    last = first if m.group(2) is None else int(m.group(2))
+    if last < first:
+        raise argparse.ArgumentTypeError(f"last frame {last} is before first frame {first}")
+    return first, last
+
+
+_frame_range.__name__ = "frame range"
+
+
+def _add_export(subparsers) -> None:
+    p = subparsers.add_parser(
+        "export",
+        help="export a crowd shot to USD (UsdSkel)",
+        description="Run a saved crowd configuration over a frame range and write it as "
+                    "UsdSkel: one layer per character, one baked SkelAnimation per "
+                    "stream, shared offset animations, instanceable agents "
+                    "(docs/usd_export.md). The main layer's extension picks the format: "
+                    ".usdc or .usd binary, .usda text; its layers go to <stem>.layers/ "
+                    "beside it. Nothing is written unless the whole export succeeds.",
+        epilog="example: crowd export --config crowd.json --out shot.usdc --frames 1-300")
+    p.add_argument("--config", required=True, metavar="CROWD_JSON",
+                   help="crowd configuration manifest written by config_io.save_config")
+    p.add_argument("--out", required=True, metavar="SHOT_USD",
+                   help="main layer to write (.usdc, .usd or .usda)")
+    p.add_argument("--frames", required=True, type=_frame_range, metavar="FIRST-LAST",
+                   help="shot frames, inclusive; FIRST must not be before the "
+                        "configuration's start frame")
+    p.add_argument("--agents", type=_int_at_least(1), default=None, metavar="N",
+                   help="export only the first N agents (ids 0..N-1); more than the "
+                        "crowd has is an error (default: all)")
+    p.add_argument("--json", action="store_true",
+                   help="print the summary as one JSON object")
+    p.set_defaults(handler=_run_export)
+
+
+def _run_export(args) -> int:
+    import json
+
+    from .core.config_io import load_config
+    from .usd import export_crowd
+
+    config = load_config(args.config)
+    result = export_crowd(config, args.out, args.frames, agents=args.agents,
+                          progress=_progress_printer())
+    if args.json:
+        print(json.dumps({
+            "path": result.path, "layers_dir": result.layers_dir, "files": result.files,
+            "bytes": result.bytes, "frames": list(result.frames), "agents": result.agents,
+            "shared_agents": result.shared_agents, "baked_agents": result.baked_agents,
+            "moving_agents": result.moving_agents,
+            "offset_animations": result.offset_animations,
+            "stream_animations": result.stream_animations,
+            "characters": result.characters, "seconds": result.seconds}))
+        return 0
+    s = result.seconds
+    print("\n".join([
+        f"wrote {result.path} and {len(result.files) - 1} layers in {result.layers_dir} "
+        f"({result.bytes:,} B)",
+        f"  frames {result.frames[0]}-{result.frames[1]} at {config.fps:g} fps, "
+        f"{result.agents:,} agents: {result.shared_agents:,} on "
+        f"{result.offset_animations:,} shared offset animations, "
+        f"{result.baked_agents:,} with their own animation, {result.moving_agents:,} moving",
+        f"  {result.stream_animations:,} stream animations, {result.characters} "
+        f"character{'s' if result.characters != 1 else ''}",
+        f"  {s['total']:.1f} s (simulate {s['simulate']:.1f} s, author "
+        f"{s['author']:.1f} s, write {s['write']:.1f} s)"]))
+    return 0
+
+
+def _progress_printer():
+    """``progress(stage, done, total)`` printing to stderr about every 10% per stage."""
+    shown = {}
+
+    def progress(stage, done, total):
+        tenth = 10 if total <= 0 else done * 10 // total
+        if shown.get(stage, -1) < tenth:
+            shown[stage] = tenth
+            print(f"crowd export: {stage} {done}/{total}", file=sys.stderr, flush=True)
+    return progress
+
+
 # --------------------------------------------------------------------------- main
 
-#: One ``_add_<command>`` per subcommand; later commands (demo, preview, export) add theirs.
-_COMMANDS = (_add_budget,)
+#: One ``_add_<command>`` per subcommand; later commands (demo, preview) add theirs.
+_COMMANDS = (_add_budget, _add_export)
 
 
 def build_parser() -> argparse.ArgumentParser:

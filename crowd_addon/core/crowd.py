@@ -124,9 +124,10 @@ class Crowd:
         self.events = EventDispatcher()
         n = cfg.agent_count
         self.N = n
-        self.agent_position = np.asarray(cfg.agent_position, np.float32)
-        self.agent_heading = np.asarray(cfg.agent_heading, np.float32)
-        self.agent_color = np.asarray(cfg.agent_color, np.float32)
+        # copies: a crowd may move its agents without touching the configuration
+        self.agent_position = np.array(cfg.agent_position, np.float32)
+        self.agent_heading = np.array(cfg.agent_heading, np.float32)
+        self.agent_color = np.array(cfg.agent_color, np.float32)
         self._stream_skel_groups = self._groups(self.root_skeleton[:self.S])
         self._unique_skel_groups = self._groups(self.root_skeleton[self.S:])
         self._build_graph()
@@ -416,6 +417,18 @@ class Crowd:
         return GpuTransitionBatch(act.astype(np.int32), rows.astype(np.int32),
                                   self.slots.weights(act, self.frame).astype(np.float32),
                                   skel.astype(np.int32))
+
+    def stream_events(self, since_frame: int):
+        """Event tags the stream heads crossed at frames ``>= since_frame`` (at most the
+        last M frames are kept): ``(stream, name, frame)`` arrays, in crossing order.
+
+        These are the crossings agents at offset ``O`` receive ``O`` frames later;
+        exporters write them as the streams' event tags.
+        """
+        keep = self._log_frame >= int(since_frame)
+        names = np.asarray(self.bank.tag_names, object)
+        return (self._log_stream[keep].copy(), names[self._log_name[keep]],
+                self._log_frame[keep].copy())
 
     def take_local_upload_regions(self):
         """``local_storage`` rectangles written since the last call (GPU transitions)."""

@@ -1,0 +1,286 @@
+"""USD export cost at the paper's configuration, against per-agent baking.
+
+256 streams (clips, 2-way blends, additive layers, state machines driven by
+triggers), M = 60, 82 bones, 300 frames, synthetic clips and proxy mesh; a
+simulation makes a small share of the crowd react three times in the shot (30-frame
+blends to another stream), so those agents get their own baked animation.
+
+Prints, for 2,000 and 65,000 agents: export time (split into simulate / author /
+write) and bytes, and bytes relative to per-agent baked animation (each agent's own
+SkelAnimation over the shot, at this exporter's bytes per animation-frame; target
+< 5 %). Then the per-agent baseline: Blender's own ``bpy.ops.wm.usd_export`` of N
+armatures sharing one skinned mesh, each playing its stream's baked action through
+an NLA strip shifted by its offset (run in a child process; scaled per agent-frame),
+and the ratios of time and bytes per agent. Ends with one JSON line.
+
+    .venv/bin/python benchmarks/usd_export.py [--quick] [--blender-agents 24]
+        [--blender-frames 60] [--react 0.005] [--keep DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
+sys.path.insert(0, ROOT)
+
+from crowd_addon.core import (Blend2, ClipPlayer, CrowdConfig, Layer,  # noqa: E402
+                              StateMachine, StateTransition)
+from crowd_addon.core.synthetic import humanoid, humanoid_mesh, periodic_clip  # noqa: E402
+
+STREAMS, M, BONES, SLOTS, FRAMES = 256, 60, 82, 800, 300
+FIRST = 1
+REACT_AT = (60, 150, 240)            # shot-relative frames of the crowd's reactions
+
+
+def stream_tree(s: int):
+    c = lambda k: ClipPlayer(f"clip{(s + k) % 12}")  # noqa: E731
+    kind = s % 4
+    if kind == 0:
+        return c(0)
+    if kind == 1:
+        return Blend2(c(0), c(1), weight=0.35)
+    if kind == 2:
+        return Layer(c(0), ClipPlayer("wave"), mode="additive",
+                     bone_weights={"upperarm.R": 1, "forearm.R": 1, "hand.R": 1})
+    return StateMachine({"idle": c(0), "cheer": c(5)},
+                        [StateTransition("idle", "cheer", 10, trigger="goal"),
+                         StateTransition("cheer", "idle", 10, trigger="calm")])
+
+
+def build(agents: int, streams: int = STREAMS) -> CrowdConfig:
+    """The paper's configuration with ``agents`` agents seated on a stadium grid."""
+    sk = humanoid("fan", BONES)
+    cfg = CrowdConfig(max_offset=M, transition_slots=SLOTS, seed=1)
+    cfg.add_skeleton(sk)
+    cfg.add_mesh(humanoid_mesh(sk), lods=())
+    for i in range(12):
+        cfg.add_clip(periodic_clip(sk, f"clip{i}", frames=90 + 20 * i, seed=i,
+                                   events=[("clap", 12.0)] if i % 3 == 0 else ()))
+    cfg.add_clip(periodic_clip(sk, "wave", frames=45, seed=99,
+                               bones=["upperarm.R", "forearm.R", "hand.R"]))
+    for s in range(streams):
+        cfg.add_stream(f"stream{s}", "fan", stream_tree(s))
+    cols = int(np.ceil(np.sqrt(agents * 4)))
+    k = np.arange(agents)
+    pos = np.stack([(k % cols) * 0.8, (k // cols) * 0.9, (k // cols) * 0.4], 1)
+    cfg.add_agents(agents, positions=pos, headings=np.full(agents, np.pi / 2))
+    cfg.start_frame = FIRST
+    return cfg
+
+
+def reactions(share: float, seed: int = 7):
+    """``on_frame``: at each REACT_AT frame ``share`` of the agents blend to another
+    stream over 30 frames; state machines get ``goal`` and later ``calm``."""
+    rng = np.random.default_rng(seed)
+
+    def on_frame(crowd, frame):
+        rel = frame - FIRST
+        if rel in REACT_AT and share > 0:
+            who = rng.choice(crowd.N, max(1, int(crowd.N * share)), replace=False)
+            crowd.transition_to_streamed(who, int(rng.integers(crowd.S)), 30)
+        if rel in (100, 200):
+            for s in range(3, crowd.S, 4):
+                crowd.set_trigger(s, "goal" if rel == 100 else "calm")
+    return on_frame
+
+
+def run_export(agents: int, frames: int, react: float, directory: str) -> dict:
+    from crowd_addon.usd import export_crowd
+
+    cfg = build(agents)
+    t = time.perf_counter()
+    r = export_crowd(cfg, os.path.join(directory, "shot.usdc"), (FIRST, FIRST + frames - 1),
+                     on_frame=reactions(react))
+    seconds = time.perf_counter() - t
+    stream_bytes = sum(v for k, v in r.files.items() if "/streams/" in k)
+    per_anim_frame = stream_bytes / (r.stream_animations * (frames + M - 1))
+    per_agent_baked = per_anim_frame * frames * agents
+    return {"agents": agents, "frames": frames, "seconds": seconds,
+            "simulate_s": r.seconds["simulate"], "author_s": r.seconds["author"],
+            "write_s": r.seconds["write"], "bytes": r.bytes, "files": len(r.files),
+            "shared_agents": r.shared_agents, "baked_agents": r.baked_agents,
+            "offset_animations": r.offset_animations,
+            "stream_animations": r.stream_animations,
+            "bytes_per_animation_frame": per_anim_frame,
+            "per_agent_baked_bytes": per_agent_baked,
+            "bytes_vs_per_agent_baked": r.bytes / per_agent_baked}
+
+
+# ---------------------------------------------------------------- Blender baseline
+def blender_baseline(agents: int, frames: int, directory: str) -> dict:
+    """Bake the streams the first ``agents`` agents play (core, this process), then
+    time Blender's exporter on them in a child process (bpy's own pxr)."""
+    from crowd_addon.core import Crowd
+    from crowd_addon.usd.recorder import record_shot
+
+    cfg = build(agents, streams=agents)          # one stream each: no sharing to help it
+    crowd = Crowd(cfg)
+    last = FIRST + frames - 1
+    shot = record_shot(crowd, np.arange(agents), FIRST, last)
+    sk = cfg.skeletons["fan"]
+    mesh = cfg.meshes["fan"][0]
+    npz = os.path.join(directory, "baseline.npz")
+    np.savez(npz, stream_poses=shot.stream_poses, stream=shot.stream, offset=shot.offset,
+             position=shot.position, heading=shot.heading, parents=sk.parents,
+             bind_model=sk.bind_model, bind_pose=sk.bind_pose,
+             names=np.array(sk.bone_names), positions=mesh.positions,
+             triangles=mesh.triangles, bone_indices=mesh.bone_indices,
+             bone_weights=mesh.bone_weights, frames=np.array([FIRST, last, M]))
+    out = os.path.join(directory, "blender.usdc")
+    run = subprocess.run([sys.executable, __file__, "--blender-worker", npz, out],
+                         capture_output=True, text=True, timeout=3000)
+    if run.returncode != 0:
+        raise RuntimeError(f"Blender baseline failed ({run.returncode}):\n"
+                           f"{run.stdout[-2000:]}{run.stderr[-3000:]}")
+    res = json.loads(run.stdout.strip().splitlines()[-1])
+    res.update(agents=agents, frames=frames,
+               s_per_agent_frame=res["export_s"] / (agents * frames),
+               bytes_per_agent_frame=res["bytes"] / (agents * frames))
+    return res
+
+
+def blender_worker(npz_path: str, out: str) -> None:
+    """Child process: build the scene in bpy and run ``bpy.ops.wm.usd_export``."""
+    import bpy
+    from bpy_extras.anim_utils import action_ensure_channelbag_for_slot
+
+    d = np.load(npz_path)
+    first, last, m = (int(x) for x in d["frames"])
+    names = [str(n) for n in d["names"]]
+    bpy.ops.wm.read_homefile(use_empty=True)
+    scene = bpy.context.scene
+    scene.frame_start, scene.frame_end = first, last
+    t0 = time.perf_counter()
+    arm_data = bpy.data.armatures.new("fan")
+    setup = bpy.data.objects.new("setup", arm_data)
+    scene.collection.objects.link(setup)
+    bpy.context.view_layer.objects.active = setup
+    bpy.ops.object.mode_set(mode="EDIT")
+    heads = d["bind_model"][:, :3, 3]
+    for i, n in enumerate(names):          # synthetic humanoid: bind rotations are identity
+        b = arm_data.edit_bones.new(n)
+        b.head, b.tail = heads[i], heads[i] + (0, 0.05, 0)
+        if d["parents"][i] >= 0:
+            b.parent = arm_data.edit_bones[names[d["parents"][i]]]
+    bpy.ops.object.mode_set(mode="OBJECT")
+    bpy.data.objects.remove(setup)
+    me = bpy.data.meshes.new("body")
+    me.from_pydata(d["positions"].tolist(), [], d["triangles"].tolist())
+    body = bpy.data.objects.new("template", me)
+    for n in names:
+        body.vertex_groups.new(name=n)
+    for v, (idx, w) in enumerate(zip(d["bone_indices"], d["bone_weights"])):
+        for b, wb in zip(idx.tolist(), w.tolist()):
+            if wb > 0:
+                body.vertex_groups[b].add([v], wb, "ADD")
+    actions = {}
+    rest_t = d["bind_pose"][:, 7:10]
+    for s in np.unique(d["stream"]).tolist():           # one baked action per stream
+        act = bpy.data.actions.new(f"stream{s}")
+        slot = act.slots.new(id_type="OBJECT", name="agent")
+        act.layers.new("bake").strips.new(type="KEYFRAME")
+        bag = action_ensure_channelbag_for_slot(act, slot)
+        poses = d["stream_poses"][:, s]                  # (T + M - 1, B, 10)
+        times = np.arange(poses.shape[0], dtype=np.float32)
+        for i, n in enumerate(names):
+            for path, cols, base in (("location", range(7, 10), rest_t[i]),
+                                     ("rotation_quaternion", range(3, 7), None)):
+                for j, c in enumerate(cols):
+                    fc = bag.fcurves.new(f'pose.bones["{n}"].{path}', index=j)
+                    vals = poses[:, i, c] - (base[j] if base is not None else 0)
+                    fc.keyframe_points.add(times.size)
+                    fc.keyframe_points.foreach_set(
+                        "co", np.stack([times, vals], 1).astype(np.float32).ravel())
+        actions[s] = act
+    for a, (s, o) in enumerate(zip(d["stream"].tolist(), d["offset"].tolist())):
+        arm = bpy.data.objects.new(f"agent{a}", arm_data)
+        arm.location = d["position"][a]
+        arm.rotation_euler[2] = float(d["heading"][a])
+        scene.collection.objects.link(arm)
+        body_a = bpy.data.objects.new(f"agent{a}_body", me)
+        body_a.parent = arm
+        body_a.modifiers.new("skin", "ARMATURE").object = arm
+        scene.collection.objects.link(body_a)
+        strip = arm.animation_data_create().nla_tracks.new().strips.new(
+            f"s{s}", first - m + 1 + o, actions[s])
+        assert strip.action_slot is not None          # the action's one slot
+    setup_s = time.perf_counter() - t0
+    t = time.perf_counter()
+    bpy.ops.wm.usd_export(filepath=out, export_animation=True, export_armatures=True,
+                          export_meshes=True, export_materials=False,
+                          use_instancing=False, selected_objects_only=False)
+    export_s = time.perf_counter() - t
+    print(json.dumps({"setup_s": setup_s, "export_s": export_s,
+                      "bytes": os.path.getsize(out)}))
+
+
+# ---------------------------------------------------------------------------- main
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="smoke run: 2k agents, 30 frames")
+    ap.add_argument("--react", type=float, default=0.005,
+                    help="share of agents reacting at each of 3 moments (default 0.5%%)")
+    ap.add_argument("--blender-agents", type=int, default=24)
+    ap.add_argument("--blender-frames", type=int, default=60)
+    ap.add_argument("--keep", metavar="DIR", help="write the exports here and keep them")
+    ap.add_argument("--blender-worker", nargs=2, help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.blender_worker:
+        blender_worker(*args.blender_worker)
+        return
+    sizes = [(2000, 30)] if args.quick else [(2000, FRAMES), (65000, FRAMES)]
+    base = args.keep or tempfile.mkdtemp(prefix="usd_bench_")
+    exports = []
+    try:
+        for agents, frames in sizes:
+            d = os.path.join(base, f"{agents}")
+            os.makedirs(d, exist_ok=True)
+            r = run_export(agents, frames, args.react, d)
+            exports.append(r)
+            print(f"{agents:>6,} agents x {frames} frames: {r['seconds']:6.1f} s "
+                  f"(simulate {r['simulate_s']:.1f}, author {r['author_s']:.1f}, write "
+                  f"{r['write_s']:.1f}), {r['bytes'] / 1e6:8.1f} MB, "
+                  f"{r['baked_agents']:,} baked agents, "
+                  f"{r['offset_animations']:,} offset animations; "
+                  f"{100 * r['bytes_vs_per_agent_baked']:.2f} % of per-agent baked "
+                  f"({r['per_agent_baked_bytes'] / 1e9:.1f} GB)", flush=True)
+            if not args.keep:
+                shutil.rmtree(d)
+        bb = blender_baseline(args.blender_agents, args.blender_frames, base)
+        print(f"Blender usd_export: {bb['agents']} armatures x {bb['frames']} frames in "
+              f"{bb['export_s']:.1f} s (+{bb['setup_s']:.1f} s scene setup), "
+              f"{bb['bytes'] / 1e6:.1f} MB: {1e3 * bb['s_per_agent_frame']:.3f} ms and "
+              f"{bb['bytes_per_agent_frame']:,.0f} B per agent-frame", flush=True)
+    finally:
+        if not args.keep:
+            shutil.rmtree(base, ignore_errors=True)
+    for r in exports:
+        af = r["agents"] * r["frames"]
+        r["time_per_agent_vs_blender"] = (r["seconds"] / af) / bb["s_per_agent_frame"]
+        r["bytes_per_agent_vs_blender"] = (r["bytes"] / af) / bb["bytes_per_agent_frame"]
+        r["blender_estimate_s"] = bb["s_per_agent_frame"] * af
+        print(f"{r['agents']:>6,} agents: per agent {r['time_per_agent_vs_blender']:.4f}x "
+              f"Blender's time (it would take ~{r['blender_estimate_s'] / 3600:.1f} h) and "
+              f"{r['bytes_per_agent_vs_blender']:.4f}x its bytes")
+    big = [r for r in exports if r["agents"] == 65000]
+    figures = {"config": {"streams": STREAMS, "M": M, "bones": BONES, "frames": FRAMES,
+                          "react_share": args.react},
+               "exports": exports, "blender_baseline": bb,
+               "target_65k_under_60s": bool(big and big[0]["seconds"] < 60),
+               "target_bytes_under_5pct": bool(big and big[0]["bytes_vs_per_agent_baked"]
+                                               < 0.05)}
+    print(json.dumps(figures))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,134 @@
+"""The shot's layout: shared offset animations, agents, and agents' own animations.
+
+::
+
+    def Xform "Crowd"                                   (defaultPrim)
+        def Scope "Streams"
+            def Scope "<stream>"
+                def SkelAnimation "offset_<O>"   references streams/<stream> with
+                                                 layer offset +O (paper's (SI, O))
+        def Scope "Agents"
+            def SkelRoot "agent_<id>" (instanceable, SkelBindingAPI,
+                                       references characters/<skeleton>)
+                rel skel:animationSource -> an offset animation, or
+                                            /Crowd/AgentAnimations/agent_<id>
+                xformOp:translate (position), xformOp:rotateZ (heading, degrees)
+        def Scope "AgentAnimations"   (in the sublayer agents.<ext>, one baked
+                                       SkelAnimation per agent that is not static)
+
+A layer offset ``+O`` maps stage time ``F`` to the stream layer's time ``F - O``: the
+stream head ``O`` frames ago, which is what an agent at offset ``O`` shows. Agents
+with the same ``(stream, offset)`` share one offset animation, so there are at most
+``streams x M`` of them, never one per agent.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from pxr import Gf, Sdf, Vt
+
+from .animation import author_animation
+from .layers import apply_api, attribute, define, relationship
+
+__all__ = ["ROOT", "author_offset_animations", "author_agents", "author_agent_animations",
+           "agent_names"]
+
+ROOT = "Crowd"
+_T = Sdf.ValueTypeNames
+_ORDER = Vt.TokenArray(["xformOp:translate", "xformOp:rotateZ"])
+#: agents' own animations are baked this many at a time (bounds memory)
+_CHUNK = 64
+
+
+def agent_names(ids) -> list:
+    """Prim names ``agent_<id>``, zero-padded to the widest id."""
+    ids = np.asarray(ids, np.int64)
+    width = len(str(int(ids.max()))) if ids.size else 1
+    return [f"agent_{i:0{width}d}" for i in ids.tolist()]
+
+
+def author_offset_animations(root: Sdf.PrimSpec, shot, stream_names, stream_assets) -> dict:
+    """One SkelAnimation per ``(stream, offset)`` played by a static agent.
+
+    Returns ``{stream * M + offset: Sdf.Path}``.
+    """
+    m = shot.max_offset
+    keys = np.unique(shot.stream[shot.static] * m + shot.offset[shot.static])
+    streams = define(root, "Streams", "Scope")
+    paths, scope = {}, None
+    for key in keys.tolist():
+        s, o = divmod(key, m)
+        if scope is None or scope.name != stream_names[s]:
+            scope = define(streams, stream_names[s], "Scope")
+        prim = define(scope, f"offset_{o}", "SkelAnimation")
+        prim.referenceList.Prepend(Sdf.Reference(stream_assets[s],
+                                                 layerOffset=Sdf.LayerOffset(o, 1.0)))
+        paths[key] = prim.path
+    return paths
+
+
+def author_agents(root: Sdf.PrimSpec, shot, names, character_assets, sources) -> None:
+    """The agent prims.
+
+    Parameters
+    ----------
+    root : the ``/Crowd`` prim spec.
+    shot : ShotRecording.
+    names : prim name per exported agent.
+    character_assets : asset path per skeleton index.
+    sources : ``skel:animationSource`` target (Sdf.Path) per exported agent.
+    """
+    parent = define(root, "Agents", "Scope")
+    refs = {k: Sdf.Reference(a) for k, a in character_assets.items()}
+    translate = shot.position.astype(np.float64)
+    degrees = np.degrees(shot.heading.astype(np.float64))
+    moving = np.flatnonzero(shot.moving)
+    for i, (name, skel, source) in enumerate(zip(names, shot.agent_skeleton.tolist(),
+                                                 sources)):
+        prim = define(parent, name, "SkelRoot")
+        prim.instanceable = True
+        prim.referenceList.Prepend(refs[skel])
+        apply_api(prim, "SkelBindingAPI")
+        relationship(prim, "skel:animationSource", source)
+        attribute(prim, "xformOp:translate", _T.Float3, Gf.Vec3f(*translate[i]))
+        attribute(prim, "xformOp:rotateZ", _T.Double, float(degrees[i]))
+        attribute(prim, "xformOpOrder", _T.TokenArray, _ORDER, uniform=True)
+    if moving.size:
+        _author_moves(parent, shot, names, moving)
+
+
+def _author_moves(parent, shot, names, moving):
+    layer = parent.layer
+    pos, head = shot.agent_transforms(moving)
+    degrees = np.degrees(head.astype(np.float64))
+    frames = [float(f) for f in shot.frames]
+    for j, i in enumerate(moving.tolist()):
+        base = parent.path.AppendChild(names[i])
+        t_path = base.AppendProperty("xformOp:translate")
+        r_path = base.AppendProperty("xformOp:rotateZ")
+        for k, f in enumerate(frames):
+            layer.SetTimeSample(t_path, f, Gf.Vec3f(*pos[k, j].tolist()))
+            layer.SetTimeSample(r_path, f, float(degrees[k, j]))
+
+
+def author_agent_animations(layer: Sdf.Layer, shot, names, joints_of, progress=None) -> list:
+    """Each non-static agent's own SkelAnimation over the shot, under
+    ``/Crowd/AgentAnimations`` in ``layer``; returns their paths (in agent order).
+
+    ``joints_of`` maps a skeleton index to its joint tokens.
+    """
+    own = np.flatnonzero(~shot.static)
+    crowd = Sdf.PrimSpec(layer, ROOT, Sdf.SpecifierOver)
+    parent = define(crowd, "AgentAnimations", "Scope")
+    paths = []
+    for a in range(0, own.size, _CHUNK):
+        chunk = own[a:a + _CHUNK]
+        poses = shot.agent_poses(chunk)
+        for j, i in enumerate(chunk.tolist()):
+            prim = define(parent, names[i])
+            author_animation(prim, joints_of[int(shot.agent_skeleton[i])], poses[:, j],
+                             shot.frames)
+            paths.append(prim.path)
+        if progress is not None:
+            progress("agent animations", a + chunk.size, own.size)
+    return paths

@@ -1,0 +1,158 @@
+"""Bad input and failures: a clear CrowdError naming the thing at fault, no partial
+file, and a previous export left exactly as it was."""
+
+import os
+
+import pytest
+
+from crowd_addon.core import Crowd
+from crowd_addon.core.errors import CrowdError
+from crowd_addon.usd import export_crowd
+from crowd_addon.usd import files as files_module
+
+from .conftest import FIRST, make_config, simulate
+
+FRAMES = (FIRST, 6)
+
+
+def snapshot(directory):
+    """Every file below ``directory`` with its bytes."""
+    out = {}
+    for root, _, names in os.walk(directory):
+        for n in names:
+            p = os.path.join(root, n)
+            with open(p, "rb") as f:
+                out[os.path.relpath(p, directory)] = f.read()
+    return out
+
+
+@pytest.fixture
+def previous(tmp_path):
+    """A finished export in ``tmp_path`` and a snapshot of it."""
+    export_crowd(make_config(), tmp_path / "shot.usdc", FRAMES, agents=4)
+    return tmp_path / "shot.usdc", snapshot(tmp_path)
+
+
+def unwritable_directory(tmp_path):
+    if os.geteuid() == 0:              # root writes anywhere on disk, but not in /proc
+        return "/proc"
+    ro = tmp_path / "read_only"
+    ro.mkdir()
+    ro.chmod(0o555)
+    return str(ro)
+
+
+def test_unwritable_directory(tmp_path):
+    target = os.path.join(unwritable_directory(tmp_path), "shot.usdc")
+    with pytest.raises(CrowdError, match="cannot write in"):
+        export_crowd(make_config(), target, FRAMES)
+    assert not os.path.exists(target)
+
+
+@pytest.mark.parametrize("path, message", [
+    ("missing/shot.usdc", "does not exist"),
+    ("shot.abc", "ending in .usdc, .usd, .usda"),
+    ("shot", "no extension"),
+])
+def test_bad_output_path(tmp_path, path, message):
+    with pytest.raises(CrowdError, match=message):
+        export_crowd(make_config(), tmp_path / path, FRAMES)
+    assert os.listdir(tmp_path) == []
+
+
+@pytest.mark.parametrize("frames, message", [
+    ((6, 2), "is empty"),
+    ((-3, 4), "before the crowd's start frame 0"),
+    ((1.5, 4), "whole numbers"),
+    (7, "must be \\(first, last\\)"),
+])
+def test_bad_frame_range(previous, frames, message):
+    path, before = previous
+    with pytest.raises(CrowdError, match=message):
+        export_crowd(make_config(), path, frames)
+    assert snapshot(path.parent) == before
+
+
+@pytest.mark.parametrize("agents, message", [
+    (1000, "1000 agents requested but the crowd has 46"),
+    (0, "count >= 1"),
+])
+def test_bad_agent_count(previous, agents, message):
+    path, before = previous
+    with pytest.raises(CrowdError, match=message):
+        export_crowd(make_config(), path, FRAMES, agents=agents)
+    assert snapshot(path.parent) == before
+
+
+def test_skeleton_without_mesh(previous):
+    path, before = previous
+    cfg = make_config()
+    del cfg.meshes["kid"]
+    with pytest.raises(CrowdError, match="skeleton 'kid' has no proxy mesh"):
+        export_crowd(cfg, path, FRAMES)
+    assert snapshot(path.parent) == before
+    export_crowd(cfg, path, FRAMES, agents=6)       # the fan agents alone need no kid
+
+
+def test_not_a_crowd(tmp_path):
+    with pytest.raises(CrowdError, match="expected a CrowdConfig or a Crowd, got dict"):
+        export_crowd({}, tmp_path / "shot.usdc", FRAMES)
+
+
+def test_failing_simulation_writes_nothing(previous):
+    path, before = previous
+
+    def broken(crowd, frame):
+        simulate(crowd, frame)
+        if frame == 5:
+            crowd.transition_to_streamed([0], "no such stream", 3)
+
+    with pytest.raises(CrowdError, match="on_frame callback failed at frame 5: .*"
+                                         "unknown stream 'no such stream'"):
+        export_crowd(make_config(), path, FRAMES, on_frame=broken)
+    assert snapshot(path.parent) == before
+
+
+def test_failure_while_writing_layers_writes_nothing(previous, monkeypatch):
+    path, before = previous
+    calls = []
+    save = files_module.ExportFiles.save
+
+    def fails_on_third_layer(self, layer, name=None):
+        calls.append(name)
+        if len(calls) == 3:
+            raise CrowdError("disk full (simulated)")
+        return save(self, layer, name)
+
+    monkeypatch.setattr(files_module.ExportFiles, "save", fails_on_third_layer)
+    with pytest.raises(CrowdError, match="disk full"):
+        export_crowd(make_config(), path, FRAMES, on_frame=simulate)
+    assert len(calls) == 3
+    assert snapshot(path.parent) == before
+
+
+def test_failed_rename_restores_the_previous_export(previous, monkeypatch):
+    """The swap itself fails at its last step (the main layer's rename): the folder of
+    layers already swapped in is swapped back."""
+    path, before = previous
+
+    def refuse(src, dst):
+        raise PermissionError(13, "Permission denied")
+
+    monkeypatch.setattr(files_module.os, "replace", refuse)
+    with pytest.raises(CrowdError, match="cannot move the export into place"):
+        export_crowd(make_config(), path, FRAMES, on_frame=simulate)
+    assert snapshot(path.parent) == before
+
+
+def test_built_crowd_past_the_shot_is_reset(tmp_path):
+    """A Crowd already past the first frame is reset to its start and re-run: the
+    files are the same as from a fresh configuration."""
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    crowd = Crowd(make_config())
+    crowd.advance_to(10)
+    export_crowd(crowd, tmp_path / "a" / "shot.usda", FRAMES)
+    assert crowd.frame == FRAMES[1]
+    export_crowd(make_config(), tmp_path / "b" / "shot.usda", FRAMES)
+    assert snapshot(tmp_path / "a") == snapshot(tmp_path / "b")

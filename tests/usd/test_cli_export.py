@@ -1,0 +1,95 @@
+"""``crowd export`` from a saved configuration: progress on stderr, a summary, exit
+code 2 and ``crowd export: error: ...`` on bad input, nothing written then."""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from pxr import Usd, UsdSkel
+
+from crowd_addon.cli import main
+from crowd_addon.core.config_io import save_config
+
+from .conftest import FAN_AGENTS, KID_AGENTS, make_config
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def config_path(tmp_path_factory):
+    path = tmp_path_factory.mktemp("config") / "crowd.json"
+    save_config(make_config(), path)
+    return path
+
+
+def test_export_prints_progress_and_summary(config_path, tmp_path, capsys):
+    out = tmp_path / "shot.usdc"
+    assert main(["export", "--config", str(config_path), "--out", str(out),
+                 "--frames", "0-12"]) == 0
+    captured = capsys.readouterr()
+    assert "crowd export: simulate 12/12" in captured.err
+    assert "crowd export: streams 4/4" in captured.err
+    assert f"wrote {out}" in captured.out
+    assert f"{FAN_AGENTS + KID_AGENTS} agents" in captured.out
+    stage = Usd.Stage.Open(str(out))
+    agents = stage.GetPrimAtPath("/Crowd/Agents").GetChildren()
+    assert len(agents) == FAN_AGENTS + KID_AGENTS
+    assert all(UsdSkel.Root(p) and p.IsInstance() for p in agents)
+    assert (stage.GetStartTimeCode(), stage.GetEndTimeCode()) == (0, 12)
+
+
+def test_first_n_agents_as_json(config_path, tmp_path, capsys):
+    out = tmp_path / "shot.usda"
+    assert main(["export", "--config", str(config_path), "--out", str(out),
+                 "--frames", "3", "--agents", "5", "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["agents"] == 5 and summary["frames"] == [3, 3]
+    assert summary["bytes"] == sum(summary["files"].values())
+    stage = Usd.Stage.Open(str(out))
+    names = [p.GetName() for p in stage.GetPrimAtPath("/Crowd/Agents").GetChildren()]
+    assert names == [f"agent_{i}" for i in range(5)]
+    assert out.read_text().startswith("#usda")
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--agents", "1000"], "crowd export: error: export: 1000 agents requested but the "
+                           "crowd has 46"),
+    (["--frames", "5-2"], "last frame 2 is before first frame 5"),
+    (["--frames", "soon"], "must be FIRST-LAST or a frame"),
+    (["--frames=-4-2"], "starts before the crowd's start frame 0"),
+    (["--agents", "0"], "must be >= 1"),
+])
+def test_bad_input_exits_2_and_writes_nothing(config_path, tmp_path, capsys, extra,
+                                               message):
+    args = ["export", "--config", str(config_path), "--out", str(tmp_path / "s.usdc"),
+            "--frames", "0-4", *extra]
+    assert main(args) == 2
+    assert message in capsys.readouterr().err
+    assert os.listdir(tmp_path) == []
+
+
+def test_missing_config_is_named(tmp_path, capsys):
+    assert main(["export", "--config", str(tmp_path / "nope.json"), "--out",
+                 str(tmp_path / "s.usdc"), "--frames", "0-4"]) == 2
+    assert f"crowd export: error: {tmp_path / 'nope.json'}: no such file" in \
+        capsys.readouterr().err
+
+
+def test_help_lists_the_options(capsys):
+    assert main(["export", "--help"]) == 0
+    text = capsys.readouterr().out
+    for option in ("--config", "--out", "--frames", "--agents", "--json"):
+        assert option in text
+
+
+def test_python_m_crowd_addon_export(config_path, tmp_path):
+    out = tmp_path / "shot.usdc"
+    run = subprocess.run([sys.executable, "-m", "crowd_addon", "export", "--config",
+                          str(config_path), "--out", str(out), "--frames", "0-6"],
+                         cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr
+    assert "crowd export: simulate" in run.stderr and "wrote" in run.stdout
+    assert (tmp_path / "shot.layers" / "characters" / "fan.usdc").is_file()
