@@ -298,3 +298,18 @@ def test_shared_tag_name_on_two_streams_gives_one_sorted_call():
         got = [ids.tolist() for _, g, ids in rec.calls if g == f]
         assert got == ([want] if want else []), f
     assert any(len(set(stream[ids])) == 2 for _, _, ids in rec.calls)
+
+
+def test_stream_events_are_the_head_crossings_of_the_last_m_frames():
+    crowd, cfg = build()
+    for _ in range(30):
+        crowd.step()
+    stream, name, frame = crowd.stream_events(crowd.frame - M + 1)
+    expected = []
+    for tag in ("clap", "stomp", "wave"):
+        s, tau, period = tag_info(tag)
+        expected += [(s, tag, h) for h in range(crowd.frame - M + 1, crowd.frame + 1)
+                     if crosses(h, tau, period)]
+    assert sorted(zip(stream.tolist(), name.tolist(), frame.tolist())) == sorted(expected)
+    later = crowd.stream_events(crowd.frame - 3)[2]
+    assert (later >= crowd.frame - 3).all() and later.size < frame.size
