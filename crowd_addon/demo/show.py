@@ -70,13 +70,16 @@ class StadiumShow:
     home : (N,) bool, True for the home section (they cheer at the goal).
     cheer, wave : stream names; hits : unique names, one per agent hit by the ball
         (empty to skip the hit); hit_frames : how long the hit plays.
+    away_reaction : stream the away side blends to at the goal (None: they stay).
+    actors : (N,) bool, the agents the show may move (default all); others (e.g. a
+        second character type) keep playing their stream.
     plan : ShowPlan.
     start_frame : crowd frame the show's timeline starts at (default: the crowd's).
     """
 
     def __init__(self, crowd: Crowd, seat_angle, home, cheer="cheer", wave="wave",
                  hits=(), hit_frames=45, plan: ShowPlan | None = None,
-                 start_frame=None, clap_event="clap"):
+                 start_frame=None, clap_event="clap", away_reaction=None, actors=None):
         self.crowd = crowd
         self.plan = plan or ShowPlan()
         n = crowd.N
@@ -87,6 +90,11 @@ class StadiumShow:
                              f"{self.angle.shape} and {self.home.shape}")
         self.cheer = crowd._resolve(cheer, "stream")
         self.wave = crowd._resolve(wave, "stream")
+        self.away = None if away_reaction is None else crowd._resolve(away_reaction, "stream")
+        self.actors = np.ones(n, bool) if actors is None else np.asarray(actors, bool).reshape(-1)
+        if self.actors.shape != (n,):
+            raise CrowdError(f"show: actors needs one value per agent ({n}), got "
+                             f"{self.actors.shape}")
         self.hits = np.array([crowd._resolve(h, "unique") for h in hits], np.int64)
         self.hit_frames = int(hit_frames)
         self.idle_stream = np.asarray(crowd.config.agent_stream, np.int64).copy()
@@ -97,9 +105,10 @@ class StadiumShow:
         self.t0 = crowd.frame if start_frame is None else int(start_frame)
         self.stats = ShowStats()
         self._returns = defaultdict(list)          # frame -> agent id arrays to send back
-        self._busy = np.zeros(n, bool)             # in a scripted reaction
+        self._busy = ~self.actors                  # in a scripted reaction (or no actor)
         rng = np.random.default_rng(self.plan.seed)
-        self._hit_ids = rng.choice(n, size=min(self.hits.size, n), replace=False)
+        pool = np.flatnonzero(self.actors)
+        self._hit_ids = rng.choice(pool, size=min(self.hits.size, pool.size), replace=False)
         crowd.on_event(clap_event, self._on_clap)
 
     # ----------------------------------------------------------------- callbacks
@@ -121,6 +130,10 @@ class StadiumShow:
             self._request(ids, "stream", self.cheer, offset=0)
             self.stats.cheering += ids.size
             self._later(f + p.cheer_frames, ids)
+            if self.away is not None:
+                ids = np.flatnonzero(~self.home & ~self._busy)
+                self._request(ids, "stream", self.away, offset=0)
+                self._later(f + p.cheer_frames, ids)
         if p.wave_lap_frames > 0 and p.wave_start <= t < p.wave_start + p.wave_laps * \
                 p.wave_lap_frames:
             a0 = (t - p.wave_start) / p.wave_lap_frames * 2 * np.pi

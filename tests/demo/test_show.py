@@ -118,3 +118,23 @@ def test_bad_show_input_is_named():
         StadiumShow(crowd, angle[:5], np.zeros(N, bool))
     with pytest.raises(CrowdError, match="unknown stream 'cheers'"):
         StadiumShow(crowd, angle, np.zeros(N, bool), cheer="cheers")
+
+
+def test_away_side_reacts_and_non_actors_are_never_moved():
+    cfg, angle = stadium(slots=300)
+    crowd = Crowd(cfg)
+    home = np.cos(angle) > 0
+    actors = np.arange(N) % 10 != 0                # every tenth agent is not in the show
+    plan = ShowPlan(goal_frame=0, cheer_frames=30, wave_start=5, wave_lap_frames=40,
+                    wave_hold=5, hit_frame=3)
+    show = StadiumShow(crowd, angle, home, away_reaction="idle_b", actors=actors,
+                       hits=["hit0", "hit1"], plan=plan)
+    ref0 = crowd.agent_ref.copy()
+    for _ in range(60):
+        show.before_step()
+        crowd.step()
+        assert (crowd.agent_kind[~actors] == STREAM).all()
+        np.testing.assert_array_equal(crowd.agent_ref[~actors], ref0[~actors])
+    assert not np.isin(show._hit_ids, np.flatnonzero(~actors)).any()
+    away_agents = np.flatnonzero(~home & actors)
+    assert show.stats.requested >= 2 * (home & actors).sum() + away_agents.size
