@@ -1,0 +1,119 @@
+"""Which agents each instanced draw covers: one draw per (skeleton, LOD).
+
+Agents outside the camera's view (a bounding sphere per skeleton's proxy) are left
+out. An agent's LOD follows its distance to the camera: LOD ``k`` is used from
+``lod_distances[k - 1]`` metres on (``CrowdConfig.lod_distances``), clamped to the
+levels its skeleton's proxy has. The visible agents are grouped by (skeleton, LOD)
+in one flat list (an R32I texture, ``gpu_shaders/agents.glsl``); draw ``g`` reads
+its instances from ``base[g]``. The list is rebuilt only when the camera or the
+agents move.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..core.errors import CrowdError
+from .texture_region import TextureRegion
+
+__all__ = ["DrawGroup", "DrawLists", "lod_levels", "frustum_planes", "proxy_bounds"]
+
+
+def lod_levels(distances: np.ndarray, lod_distances, levels: np.ndarray) -> np.ndarray:
+    """LOD index per agent: ``(N,)`` int, from distances ``(N,)`` in metres, the
+    increasing thresholds ``lod_distances`` and the number of levels ``(N,)`` each
+    agent's proxy has."""
+    lod = np.searchsorted(np.asarray(lod_distances, np.float64), distances, side="right")
+    return np.minimum(lod, np.asarray(levels) - 1)
+
+
+def frustum_planes(view_projection: np.ndarray) -> np.ndarray:
+    """(6, 4) planes ``(n, d)`` with unit ``n`` of a view-projection matrix; a point
+    ``p`` is inside when ``n . p + d >= 0`` for all six (Gribb and Hartmann)."""
+    m = np.asarray(view_projection, np.float64)
+    planes = np.stack([m[3] + m[0], m[3] - m[0], m[3] + m[1], m[3] - m[1], m[3] + m[2],
+                       m[3] - m[2]])
+    return planes / np.linalg.norm(planes[:, :3], axis=1, keepdims=True)
+
+
+def proxy_bounds(extent: np.ndarray, margin: float = 1.5) -> tuple:
+    """``(centre height, radius)`` in metres of a sphere holding a proxy whose
+    bind-pose box is ``extent`` (2, 3), at any heading about +Z, with ``margin`` for
+    poses that reach further than the bind pose."""
+    ext = np.asarray(extent, np.float64)
+    zc = float(ext[:, 2].mean())
+    corners = np.array(np.meshgrid(ext[:, 0], ext[:, 1], ext[:, 2] - zc)).reshape(3, -1)
+    return zc, float(np.linalg.norm(corners, axis=0).max()) * margin
+
+
+@dataclass(frozen=True)
+class DrawGroup:
+    """Instances ``base .. base + count`` of the list: agents of ``skeleton`` at ``lod``."""
+
+    skeleton: int
+    lod: int
+    base: int
+    count: int
+
+
+class DrawLists:
+    """Visible agent ids grouped per (skeleton, LOD), laid out as a flat int32 texture.
+
+    Parameters
+    ----------
+    agent_skeleton : (N,) int skeleton index per agent.
+    lod_counts : (K,) int LOD levels of each skeleton's proxy (0: not drawn).
+    bounds : (K, 2) float ``(centre height, radius)`` per skeleton (:func:`proxy_bounds`).
+    lod_distances : increasing thresholds in metres.
+    max_width : texture width limit in texels.
+
+    Attributes
+    ----------
+    groups : list of :class:`DrawGroup` after :meth:`rebuild`.
+    lod : (N,) int LOD of each agent, ``-1`` where it is not drawn.
+    """
+
+    def __init__(self, agent_skeleton, lod_counts, bounds, lod_distances, max_width=4096):
+        self.agent_skeleton = np.asarray(agent_skeleton, np.int64)
+        self.lod_counts = np.asarray(lod_counts, np.int64)
+        self.bounds = np.asarray(bounds, np.float64).reshape(-1, 2)
+        d = np.asarray(lod_distances, np.float64).reshape(-1)
+        if not (np.isfinite(d).all() and (d > 0).all() and (np.diff(d) > 0).all()):
+            raise CrowdError(f"lod_distances must be increasing positive metres, got "
+                             f"{list(lod_distances)}")
+        self.lod_distances = d
+        self.levels = max(1, int(self.lod_counts.max(initial=1)))
+        n = self.agent_skeleton.size
+        self.width = max(1, min(max_width, n))
+        self.height = max(1, -(-n // self.width))
+        self.image = np.zeros((self.height, self.width, 1), np.int32)
+        self.agent_levels = self.lod_counts[self.agent_skeleton]
+        self.groups = []
+        self.lod = np.full(n, -1, np.int64)
+
+    def rebuild(self, positions: np.ndarray, eye, view_projection=None) -> list:
+        """Regroup the agents at ``positions`` (N, 3) for a camera at ``eye`` (3,),
+        culling against ``view_projection`` (4, 4) when given; returns the texture
+        regions to upload. Agents whose skeleton has no proxy are never drawn."""
+        pos = np.asarray(positions, np.float64)
+        centre = pos.copy()
+        centre[:, 2] += self.bounds[self.agent_skeleton, 0]
+        drawn = self.agent_levels > 0
+        if view_projection is not None:
+            planes = frustum_planes(view_projection)
+            dist = centre @ planes[:, :3].T + planes[:, 3]
+            drawn &= (dist >= -self.bounds[self.agent_skeleton, 1][:, None]).all(1)
+        dist = np.linalg.norm(centre - np.asarray(eye, np.float64), axis=1)
+        self.lod = np.where(drawn, lod_levels(dist, self.lod_distances, self.agent_levels), -1)
+        key = (self.agent_skeleton * self.levels + self.lod)[drawn]
+        key = key.astype(np.int16 if key.size and key.max() < 2 ** 15 else np.int64)
+        order = np.flatnonzero(drawn)[np.argsort(key, kind="stable")]
+        counts = np.bincount(key, minlength=self.lod_counts.size * self.levels)
+        bases = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        self.groups = [DrawGroup(int(g // self.levels), int(g % self.levels), int(bases[g]),
+                                 int(counts[g])) for g in np.flatnonzero(counts)]
+        self.image.reshape(-1)[:order.size] = order
+        rows = max(1, -(-order.size // self.width))
+        return [TextureRegion(0, 0, self.width, rows, self.image[:rows])]

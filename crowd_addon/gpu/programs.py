@@ -1,0 +1,115 @@
+"""What each crowd shader program declares: the one description both backends use.
+
+The GLSL in ``gpu_shaders/`` holds only functions and ``main``; every input,
+output, push constant, sampler and image is declared here, in the vocabulary of
+Blender's ``gpu.types.GPUShaderCreateInfo`` (types ``"VEC3"``, sampler types
+``"FLOAT_2D"``, image formats ``"RGBA32F"``). :mod:`.assembler` turns a
+:class:`ProgramSpec` into ``#version`` + declarations + sources for moderngl, or
+into the create-info calls for Blender's ``gpu`` module.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+__all__ = ["SHADER_DIR", "Interface", "ProgramSpec", "CROWD_DRAW", "TRANSITION_BLEND",
+           "ROW_UPLOAD", "AGENT_TEXELS", "TRANSITION_GROUP", "UPLOAD_GROUP"]
+
+#: gpu_shaders/ at the repository (and extension) root.
+SHADER_DIR = Path(__file__).resolve().parents[2] / "gpu_shaders"
+
+#: RGBA32F texels per agent in the instance texture (gpu_shaders/agents.glsl).
+AGENT_TEXELS = 2
+#: Slots per compute work group of the transition shader.
+TRANSITION_GROUP = 64
+#: Texels per compute work group (along a row) of the row upload shader.
+UPLOAD_GROUP = 64
+
+
+@dataclass(frozen=True)
+class Interface:
+    """A vertex -> fragment interface block (``gpu.types.GPUStageInterfaceInfo``).
+
+    ``members``: ``(qualifier, type, name)`` with qualifier ``"smooth"``, ``"flat"``
+    or ``"no_perspective"``; the block has no instance name, so GLSL uses the
+    member names directly.
+    """
+
+    name: str
+    members: tuple
+
+
+@dataclass(frozen=True)
+class ProgramSpec:
+    """One shader program: its stages' source files and its declarations.
+
+    Stages are tuples of file names in ``gpu_shaders/``, libraries first, the file
+    with ``main`` last. ``vertex_in``/``fragment_out``: ``(slot, type, name)``;
+    ``push_constants``: ``(type, name)``; ``samplers``: ``(slot, sampler type,
+    name)``; ``images``: ``(slot, format, image type, name, qualifiers)``;
+    ``defines``: names the caller must give values for (e.g. ``MAX_BONES``).
+    """
+
+    name: str
+    vertex: tuple = ()
+    fragment: tuple = ()
+    compute: tuple = ()
+    vertex_in: tuple = ()
+    interfaces: tuple = ()
+    push_constants: tuple = ()
+    samplers: tuple = ()
+    images: tuple = ()
+    fragment_out: tuple = ()
+    local_group_size: tuple = ()
+    defines: tuple = ()
+
+    def stages(self) -> dict:
+        """``{stage: source files}`` of the stages this program has."""
+        return {k: v for k, v in (("vertex", self.vertex), ("fragment", self.fragment),
+                                  ("compute", self.compute)) if v}
+
+
+#: Instanced skinning of one (skeleton, LOD) draw and its lit shading.
+CROWD_DRAW = ProgramSpec(
+    name="crowd_draw",
+    vertex=("block_layout.glsl", "pose_layout.glsl", "agents.glsl", "skinning.glsl",
+            "crowd_vert.glsl"),
+    fragment=("crowd_frag.glsl",),
+    vertex_in=((0, "VEC3", "pos"), (1, "VEC3", "nor"), (2, "UVEC4", "bone_idx"),
+               (3, "VEC4", "bone_w")),
+    interfaces=(Interface("crowd_iface", (("smooth", "VEC3", "v_world"),
+                                          ("smooth", "VEC3", "v_normal"),
+                                          ("flat", "VEC3", "v_color"))),),
+    push_constants=(("MAT4", "u_view_proj"), ("IVEC4", "u_pose_layout"),
+                    ("IVEC4", "u_pose_regions"), ("IVEC4", "u_draw"),
+                    ("VEC4", "u_light")),
+    samplers=((0, "FLOAT_2D", "pose_tex"), (1, "FLOAT_2D", "agent_tex"),
+              (2, "INT_2D", "agent_list_tex")),
+    fragment_out=((0, "VEC4", "frag_color"),),
+    defines=("INFLUENCES",),
+)
+
+#: Transition slots blended, posed and skinned on the GPU (paper s.4.5).
+TRANSITION_BLEND = ProgramSpec(
+    name="transition_blend",
+    compute=("block_layout.glsl", "pose_layout.glsl", "sqt.glsl", "transition_comp.glsl"),
+    push_constants=(("IVEC4", "u_pose_layout"), ("IVEC4", "u_pose_regions"),
+                    ("INT", "u_batch_count")),
+    samplers=((0, "FLOAT_2D", "local_tex"), (1, "FLOAT_2D", "skeleton_tex"),
+              (2, "FLOAT_2D", "batch_tex")),
+    images=((0, "RGBA32F", "FLOAT_2D", "pose_img", ("WRITE",)),),
+    local_group_size=(TRANSITION_GROUP,),
+    defines=("MAX_BONES",),
+)
+
+#: Staged rows written into a block-laid texture (pose, local pose or agent texture)
+#: by backends without partial texture updates (Blender's gpu module).
+ROW_UPLOAD = ProgramSpec(
+    name="row_upload",
+    compute=("block_layout.glsl", "row_upload_comp.glsl"),
+    push_constants=(("IVEC4", "u_upload"),),
+    samplers=((0, "FLOAT_2D", "staging_tex"), (1, "INT_2D", "row_index_tex")),
+    images=((0, "RGBA32F", "FLOAT_2D", "dest_img", ("WRITE",)),),
+    local_group_size=(UPLOAD_GROUP, 1),
+)

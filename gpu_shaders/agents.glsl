@@ -1,0 +1,52 @@
+/* Per-agent instance data (DESIGN.md s.3): a row of two RGBA32F texels per agent
+ * in `agent_tex`, in column blocks of the texture's height (block_layout.glsl,
+ * crowd_addon/gpu/instances.py):
+ *   texel 0 = (position x, y, z in metres, heading in radians about +Z)
+ *   texel 1 = (kind, ref, offset, colour as 8-bit r * 65536 + g * 256 + b)
+ * Small integers are exact in float32. A draw instance is mapped to its agent
+ * through `agent_list_tex` (R32I, the agents of one (skeleton, LOD) draw from
+ * u_draw.x, crowd_vert.glsl), so one instanced draw serves any subset of the crowd.
+ */
+
+struct Agent {
+  vec3 position;
+  float heading;
+  int kind;
+  int ref;
+  int offset;
+  vec3 color;
+};
+
+int instance_agent(int instance)
+{
+  int width = textureSize(agent_list_tex, 0).x;
+  return texelFetch(agent_list_tex, linear_texel(u_draw.x + instance, width), 0).r;
+}
+
+Agent agent_record(int agent)
+{
+  ivec2 at = block_row_origin(agent, textureSize(agent_tex, 0).y, 2);
+  vec4 a = texelFetch(agent_tex, at, 0);
+  vec4 b = texelFetch(agent_tex, at + ivec2(1, 0), 0);
+  int rgb = int(b.w);
+  Agent r;
+  r.position = a.xyz;
+  r.heading = a.w;
+  r.kind = int(b.x);
+  r.ref = int(b.y);
+  r.offset = int(b.z);
+  r.color = vec3((rgb >> 16) & 255, (rgb >> 8) & 255, rgb & 255) / 255.0;
+  return r;
+}
+
+/* Rotation by the agent's heading about +Z, as (cos, sin). */
+vec2 agent_turn(Agent agent)
+{
+  return vec2(cos(agent.heading), sin(agent.heading));
+}
+
+/* A model-space (the skeleton's armature space) direction in world space. */
+vec3 turn_z(vec2 turn, vec3 v)
+{
+  return vec3(turn.x * v.x - turn.y * v.y, turn.y * v.x + turn.x * v.y, v.z);
+}
