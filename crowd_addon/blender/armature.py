@@ -1,0 +1,229 @@
+"""Armature objects -> core :class:`Skeleton`; skinned mesh objects -> core :class:`ProxyMesh`.
+
+Conventions (DESIGN.md s.3): every bone of the armature becomes a skeleton bone,
+ordered parents first (:meth:`Skeleton.from_parent_names`); ``skeleton.bone_names``
+is the name -> index mapping. The local SQT of bone ``i`` is its transform relative
+to its parent bone in the pose::
+
+    local_i = inv(parent.bone.matrix_local) @ bone.matrix_local @ pose_bone.matrix_basis
+
+(roots: ``bone.matrix_local @ matrix_basis``), so that core's model matrices equal
+``pose.bones[name].matrix`` (armature space). The bind pose is the rest pose and
+``inverse_bind = inv(bone.matrix_local)``, so skinning matrices are
+``pose.bones[name].matrix @ inv(bone.matrix_local)``, as in the Armature modifier.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..core import pose as sqt
+from ..core import quaternion as quat
+from ..core.errors import CrowdError
+from ..core.mesh import ProxyMesh
+from ..core.skeleton import Skeleton
+
+__all__ = ["skeleton_from_armature", "rest_local", "check_skeleton", "matrices",
+           "relative_to_parent", "sqt_from_matrices", "object_to_armature",
+           "proxy_mesh_from_object"]
+
+
+def _checked(obj, kind: str, noun: str):
+    """``obj`` if it is a live Blender object of type ``kind``, else a CrowdError."""
+    try:
+        found = getattr(obj, "type", None)
+    except ReferenceError:                      # the object was deleted from Blender
+        raise CrowdError(f"the {noun} no longer exists (it was deleted)") from None
+    if found != kind:
+        article = "an" if noun[0] in "aeiou" else "a"
+        raise CrowdError(f"object {getattr(obj, 'name', obj)!r} is not {article} {noun}")
+    return obj
+
+
+def _armature(obj):
+    return _checked(obj, "ARMATURE", "armature")
+
+
+def matrices(collection, prop: str) -> np.ndarray:
+    """``(len(collection), 4, 4)`` float64 row-major matrices of a matrix property read
+    with one ``foreach_get`` (Blender stores them column-major)."""
+    buf = np.empty(len(collection) * 16, np.float32)
+    collection.foreach_get(prop, buf)
+    return buf.reshape(-1, 4, 4).transpose(0, 2, 1).astype(np.float64)
+
+
+def _bones(armature_obj):
+    """Bone names, parent names and ``matrix_local`` (B, 4, 4) in Blender's order."""
+    bones = _armature(armature_obj).data.bones
+    if len(bones) == 0:
+        raise CrowdError(f"armature {armature_obj.name!r} has no bones")
+    names = [b.name for b in bones]
+    parents = [b.parent.name if b.parent else None for b in bones]
+    return names, parents, matrices(bones, "matrix_local")
+
+
+def relative_to_parent(model: np.ndarray, parents: np.ndarray) -> np.ndarray:
+    """Local matrices ``inv(model[parent]) @ model`` (roots keep their model matrix)."""
+    out = model.copy()
+    has = parents >= 0
+    out[..., has, :, :] = np.linalg.inv(model[..., parents[has], :, :]) @ model[..., has, :, :]
+    return out
+
+
+def skeleton_from_armature(armature_obj, name: str | None = None) -> Skeleton:
+    """The armature's bones as a core :class:`Skeleton` named after the object.
+
+    Bind pose: the rest pose relative to the parent bone; ``inverse_bind``:
+    ``inv(bone.matrix_local)`` in float64.
+    """
+    names, parent_names, ml = _bones(armature_obj)
+    index = {n: i for i, n in enumerate(names)}
+    parents = np.array([-1 if p is None else index[p] for p in parent_names])
+    rel = relative_to_parent(ml, parents)
+    bind = sqt.identity_pose(len(names)).astype(np.float64)
+    bind[:, sqt.ROT] = quat.from_matrix(rel[:, :3, :3])
+    bind[:, sqt.TRANS] = rel[:, :3, 3]
+    return Skeleton.from_parent_names(name or armature_obj.name, names, parent_names, bind,
+                                      inverse_bind=np.linalg.inv(ml))
+
+
+def check_skeleton(armature_obj, skeleton: Skeleton) -> None:
+    """Raise unless ``skeleton`` has exactly the armature's bones and hierarchy."""
+    names, parent_names, _ = _bones(armature_obj)
+    parent_of = dict(zip(names, parent_names))
+    if set(names) != set(skeleton.bone_names):
+        extra = sorted(set(skeleton.bone_names) - set(names))
+        missing = sorted(set(names) - set(skeleton.bone_names))
+        raise CrowdError(f"skeleton {skeleton.name!r} does not match armature "
+                         f"{armature_obj.name!r}: bones only in the skeleton {extra}, "
+                         f"only in the armature {missing}")
+    for i, n in enumerate(skeleton.bone_names):
+        p = skeleton.parents[i]
+        if (skeleton.bone_names[p] if p >= 0 else None) != parent_of[n]:
+            raise CrowdError(f"skeleton {skeleton.name!r}: bone {n!r} has a different parent "
+                             f"than in armature {armature_obj.name!r} ({parent_of[n]!r})")
+
+
+def rest_local(armature_obj, skeleton: Skeleton) -> np.ndarray:
+    """``(B, 4, 4)`` float64 rest matrices relative to the parent bone, skeleton order."""
+    names, _, ml = _bones(armature_obj)
+    order = [names.index(n) for n in skeleton.bone_names]
+    return relative_to_parent(ml[order], skeleton.parents.astype(np.int64))
+
+
+def sqt_from_matrices(local: np.ndarray, bone_names, what: str,
+                      frame_labels=None) -> np.ndarray:
+    """SQT ``(..., B, 10)`` float64 of local affine matrices ``(..., B, 4, 4)``.
+
+    A matrix must be rotation x axis scale (no shear, non-zero scale); a negative
+    determinant flips the x scale. Anything else raises a :class:`CrowdError` naming
+    ``what``, the bone and the frame (``frame_labels[i]`` for leading index ``i``).
+    """
+    m3 = local[..., :3, :3]
+    s = np.linalg.norm(m3, axis=-2)                                   # column norms
+    flip = np.linalg.det(m3) < 0
+    s[..., 0] = np.where(flip, -s[..., 0], s[..., 0])
+    tiny = (np.abs(s) < 1e-9).any(-1)
+    r = m3 / np.where(np.abs(s) < 1e-9, 1, s)[..., None, :]
+    err = np.abs(np.swapaxes(r, -1, -2) @ r - np.eye(3)).max((-1, -2))
+    bad = tiny | (err > 1e-4)
+    if bad.any():
+        at = np.argwhere(bad)[0]
+        frame = "" if len(at) < 2 else \
+            f" at frame {frame_labels[at[0]] if frame_labels is not None else at[0]}"
+        kind = "zero scale" if tiny[tuple(at)] else "shear (non-uniform scale inherited " \
+                                                    "through a rotated child)"
+        raise CrowdError(f"{what}: bone {bone_names[at[-1]]!r}{frame} has {kind}; a crowd "
+                         "bone stores scale, rotation and translation only")
+    out = np.empty(local.shape[:-2] + (sqt.WIDTH,))
+    out[..., sqt.SCALE] = s
+    out[..., sqt.ROT] = quat.from_matrix(r)
+    out[..., sqt.TRANS] = local[..., :3, 3]
+    return out
+
+
+def object_to_armature(obj, armature_obj) -> np.ndarray:
+    """(4, 4) float64 ``inv(armature.matrix_world) @ obj.matrix_world``: the object's
+    local coordinates to armature space (the Armature modifier's ``premat``)."""
+    a = np.array(armature_obj.matrix_world, np.float64)
+    return np.linalg.inv(a) @ np.array(obj.matrix_world, np.float64)
+
+
+def _armature_modifier(mesh_obj, armature_obj):
+    what = f"mesh {mesh_obj.name!r}"
+    for i, mod in enumerate(mesh_obj.modifiers):
+        if mod.type == "ARMATURE" and mod.object == armature_obj:
+            break
+    else:
+        raise CrowdError(f"{what} has no Armature modifier deforming {armature_obj.name!r}")
+    before = [m.name for m in mesh_obj.modifiers[:i] if m.show_viewport]
+    if before:
+        raise CrowdError(f"{what}: modifiers {before} run before Armature modifier "
+                         f"{mod.name!r}; the proxy is the base mesh, so apply or remove them")
+    unsupported = [("use_vertex_groups", False, "uses no vertex groups"),
+                   ("use_bone_envelopes", True, "uses bone envelopes"),
+                   ("use_deform_preserve_volume", True, "preserves volume (dual quaternions)"),
+                   ("use_multi_modifier", True, "is a multi-modifier")]
+    for attr, value, text in unsupported:
+        if getattr(mod, attr) == value:
+            raise CrowdError(f"{what}: Armature modifier {mod.name!r} {text}; crowd skinning "
+                             "is linear blend skinning by vertex groups")
+    if mod.vertex_group:
+        raise CrowdError(f"{what}: Armature modifier {mod.name!r} is masked by vertex group "
+                         f"{mod.vertex_group!r}, which crowd skinning does not support")
+    return mod
+
+
+def proxy_mesh_from_object(mesh_obj, armature_obj, skeleton: Skeleton | None = None,
+                           name: str | None = None) -> ProxyMesh:
+    """A skinned mesh object as a core :class:`ProxyMesh` for ``skeleton``.
+
+    Positions are the base mesh (no shape keys, no modifiers after the Armature
+    modifier) in armature space; triangles are the mesh's loop triangles; influences
+    come from vertex groups named after deform bones (others are ignored, as the
+    Armature modifier does). The four strongest per vertex are kept: vertices with
+    more differ from Blender, which blends them all.
+    """
+    _checked(mesh_obj, "MESH", "mesh")
+    _armature(armature_obj)
+    skeleton = skeleton or skeleton_from_armature(armature_obj)
+    _armature_modifier(mesh_obj, armature_obj)
+    if mesh_obj.mode == "EDIT":
+        mesh_obj.update_from_editmode()
+    me = mesh_obj.data
+    v = len(me.vertices)
+    if v == 0:
+        raise CrowdError(f"mesh {mesh_obj.name!r} has no vertices")
+    co = np.empty(v * 3, np.float32)
+    me.vertices.foreach_get("co", co)
+    p = object_to_armature(mesh_obj, armature_obj)
+    pos = co.reshape(v, 3).astype(np.float64) @ p[:3, :3].T + p[:3, 3]
+    me.calc_loop_triangles()
+    tris = np.empty(len(me.loop_triangles) * 3, np.int32)
+    me.loop_triangles.foreach_get("vertices", tris)
+    deform = {b.name for b in armature_obj.data.bones if b.use_deform}
+    bone_of_group = np.array([skeleton.bone_names.index(g.name) if g.name in deform else -1
+                              for g in mesh_obj.vertex_groups] + [-1], np.int64)
+    # vertex group weights have no bulk accessor: one pass over the vertices
+    counts = np.zeros(v, np.int64)
+    groups, weights = [], []
+    for vert in me.vertices:
+        gs = vert.groups
+        counts[vert.index] = len(gs)
+        for g in gs:
+            groups.append(g.group)
+            weights.append(g.weight)
+    groups = np.array(groups, np.int64)
+    bone = bone_of_group[np.where((groups >= 0) & (groups < len(bone_of_group) - 1),
+                                  groups, -1)]
+    w = np.where(bone >= 0, np.array(weights, np.float64), 0.0)
+    k = max(int(counts.max()), 1)
+    row = np.repeat(np.arange(v), counts)
+    col = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
+    idx = np.zeros((v, k), np.int64)
+    wt = np.zeros((v, k))
+    idx[row, col] = np.maximum(bone, 0)
+    wt[row, col] = w
+    return ProxyMesh.from_influences(name or mesh_obj.name, skeleton.name, pos,
+                                     tris.reshape(-1, 3), idx, wt,
+                                     bone_count=skeleton.bone_count)

@@ -1,0 +1,308 @@
+"""Operators: bake (modal, with progress and cancel), agents, preview, list editing.
+
+Every operator reports bad input as an ERROR naming what is at fault
+(:class:`CrowdError` messages) and then changes nothing: a bake replaces the running
+crowd only once the new one is complete.
+"""
+
+import dataclasses
+import time
+
+import numpy as np
+
+import bpy
+from bpy.props import EnumProperty, IntProperty
+
+from ..core.errors import CrowdError
+from . import preview, scene_config
+from .agents import agents_from_scene
+from .props import NODE_KINDS
+
+__all__ = ["CLASSES", "BakeJob"]
+
+
+def _unique_name(existing, base):
+    names = {item.name for item in existing}
+    if base not in names:
+        return base
+    i = 1
+    while f"{base}.{i:03d}" in names:
+        i += 1
+    return f"{base}.{i:03d}"
+
+
+class BakeJob:
+    """A scene's crowd built one unit at a time (one action, then the mesh, then the
+    agents), for a modal operator. Nothing changes in Blender or in the running
+    preview until :attr:`config` is used; :meth:`cancel` just drops the work."""
+
+    def __init__(self, scene):
+        self.steps = scene_config.config_steps(scene)
+        self.done, self.total, self.message = 0, 1, "starting"
+        self.config = None
+
+    def step(self) -> bool:
+        """Do the next unit; False once :attr:`config` is complete. Raises CrowdError."""
+        with preview.suspended():
+            try:
+                self.done, self.total, self.message = next(self.steps)
+            except StopIteration as stop:
+                self.config = stop.value
+                return False
+        return True
+
+    def cancel(self):
+        self.steps.close()
+
+
+class CROWD_OT_bake(bpy.types.Operator):
+    """Bake the crowd's actions into clips, place the agents and start the preview
+    (Esc cancels; the previous crowd stays until the new one is complete)"""
+
+    bl_idname = "crowd.bake"
+    bl_label = "Bake Crowd"
+    bl_options = {"REGISTER"}
+
+    _timer = None
+    _job = None
+
+    def execute(self, context):
+        wm = context.window_manager
+        job = BakeJob(context.scene)
+        wm.progress_begin(0, 1000)
+        try:
+            while job.step():
+                wm.progress_update(int(1000 * job.done / job.total))
+            return self._finish(context, job.config)
+        except CrowdError as e:
+            self.report({"ERROR"}, str(e))
+            return {"CANCELLED"}
+        finally:
+            wm.progress_end()
+
+    def invoke(self, context, event):
+        if context.window is None or bpy.app.background:
+            return self.execute(context)
+        self._job = BakeJob(context.scene)
+        wm = context.window_manager
+        wm.progress_begin(0, 1000)
+        self._timer = wm.event_timer_add(0.001, window=context.window)
+        wm.modal_handler_add(self)
+        return {"RUNNING_MODAL"}
+
+    def modal(self, context, event):
+        if event.type == "ESC":
+            self._job.cancel()
+            self._end(context)
+            self.report({"WARNING"}, "Bake cancelled: the crowd is unchanged")
+            return {"CANCELLED"}
+        if event.type != "TIMER":
+            return {"PASS_THROUGH"}
+        job = self._job
+        try:
+            more = job.step()
+            if not more:
+                self._end(context)
+                return self._finish(context, job.config)
+        except CrowdError as e:
+            self._end(context)
+            self.report({"ERROR"}, str(e))
+            return {"CANCELLED"}
+        context.window_manager.progress_update(int(1000 * job.done / job.total))
+        context.workspace.status_text_set(f"Crowd: {job.message} ({job.done + 1}/"
+                                          f"{job.total}), Esc to cancel")
+        return {"RUNNING_MODAL"}
+
+    def _end(self, context):
+        wm = context.window_manager
+        if self._timer is not None:
+            wm.event_timer_remove(self._timer)
+            self._timer = None
+        wm.progress_end()
+        context.workspace.status_text_set(None)
+
+    def _finish(self, context, config):
+        pv = preview.start(context.scene, config)
+        self.report({"INFO"}, f"Crowd: {len(config.clips)} clips, {pv.crowd.S} streams, "
+                              f"{pv.crowd.U} uniques, {pv.crowd.N} agents")
+        return {"FINISHED"}
+
+
+class CROWD_OT_generate_agents(bpy.types.Operator):
+    """Place the agents from the agent sources (the running crowd gets them without a
+    new bake)"""
+
+    bl_idname = "crowd.generate_agents"
+    bl_label = "Generate Agents"
+    bl_options = {"REGISTER"}
+
+    def execute(self, context):
+        scene = context.scene
+        s = scene.crowd
+        t0 = time.perf_counter()
+        try:
+            agents = agents_from_scene(scene, context.evaluated_depsgraph_get(),
+                                       [a.name for a in s.streams],
+                                       [a.weight for a in s.streams])
+            pv = preview.get(scene)
+            if pv is not None:
+                cfg = dataclasses.replace(
+                    pv.crowd.config, agent_stream=np.zeros(0, np.int32),
+                    agent_unique=np.zeros(0, np.int32), agent_offset=np.zeros(0, np.int32),
+                    agent_position=np.zeros((0, 3), np.float32),
+                    agent_heading=np.zeros(0, np.float32),
+                    agent_color=np.zeros((0, 3), np.float32))
+                cfg.add_agents(agents.count, streams=agents.streams, offsets=agents.offsets,
+                               positions=agents.positions, headings=agents.headings,
+                               colors=agents.colors)
+                preview.start(scene, cfg)
+        except CrowdError as e:
+            self.report({"ERROR"}, str(e))
+            return {"CANCELLED"}
+        self.report({"INFO"}, f"{agents.count} agents in "
+                              f"{(time.perf_counter() - t0) * 1e3:.0f} ms")
+        return {"FINISHED"}
+
+
+class CROWD_OT_preview_toggle(bpy.types.Operator):
+    """Start (bake first) or stop the viewport preview"""
+
+    bl_idname = "crowd.preview_toggle"
+    bl_label = "Toggle Crowd Preview"
+    bl_options = {"REGISTER"}
+
+    def execute(self, context):
+        if preview.get(context.scene) is not None:
+            preview.stop(context.scene)
+            return {"FINISHED"}
+        return bpy.ops.crowd.bake("EXEC_DEFAULT")
+
+    def invoke(self, context, event):
+        if preview.get(context.scene) is not None:
+            return self.execute(context)
+        return bpy.ops.crowd.bake("INVOKE_DEFAULT")
+
+
+# ---------------------------------------------------------------- list editing
+_COLLECTIONS = (
+    ("streams", "Streams", ""), ("uniques", "Uniques", ""), ("nodes", "Nodes", ""),
+    ("inputs", "Inputs", ""), ("transitions", "Transitions", ""),
+    ("agent_sources", "Agent Sources", ""),
+)
+_INDEX = {"streams": "active_stream_index", "uniques": "active_unique_index",
+          "nodes": "active_node_index", "inputs": "active_input_index",
+          "transitions": "active_transition_index", "agent_sources": "active_source_index"}
+
+
+def _owner(settings, collection, pool):
+    """The struct holding ``collection`` (the active stream/unique, node...)."""
+    if collection in ("streams", "uniques", "agent_sources"):
+        return settings
+    anims = settings.streams if pool == "STREAMS" else settings.uniques
+    index = settings.active_stream_index if pool == "STREAMS" else settings.active_unique_index
+    if not 0 <= index < len(anims):
+        raise CrowdError(f"no active {pool.lower()[:-1]}")
+    anim = anims[index]
+    if collection == "nodes":
+        return anim
+    if not 0 <= anim.active_node_index < len(anim.nodes):
+        raise CrowdError(f"{pool.lower()[:-1]} {anim.name!r} has no active node")
+    return anim.nodes[anim.active_node_index]
+
+
+class _ListOperator:
+    collection: EnumProperty(items=_COLLECTIONS)
+    pool: EnumProperty(items=(("STREAMS", "Streams", ""), ("UNIQUES", "Uniques", "")))
+
+    def _target(self, context):
+        owner = _owner(context.scene.crowd, self.collection, self.pool)
+        return owner, getattr(owner, self.collection), _INDEX[self.collection]
+
+
+class CROWD_OT_item_add(_ListOperator, bpy.types.Operator):
+    """Add an item to a crowd list"""
+
+    bl_idname = "crowd.item_add"
+    bl_label = "Add"
+    bl_options = {"REGISTER", "UNDO"}
+
+    kind: EnumProperty(name="Kind", items=NODE_KINDS, default="CLIP")
+
+    def execute(self, context):
+        try:
+            owner, items, index = self._target(context)
+        except CrowdError as e:
+            self.report({"ERROR"}, str(e))
+            return {"CANCELLED"}
+        s = context.scene.crowd
+        item = items.add()
+        if self.collection in ("streams", "uniques"):
+            item.name = _unique_name(items, "Stream" if self.collection == "streams"
+                                     else "Unique")
+            node = item.nodes.add()
+            node.name = "Action"
+            arm = s.armature
+            ad = arm.animation_data if arm is not None else None
+            node.action = ad.action if ad is not None else None
+        elif self.collection == "nodes":
+            item.kind = self.kind
+            item.name = _unique_name(items, self.kind.title().replace("_", " "))
+        elif self.collection == "inputs":
+            item.name = _unique_name(items, "State" if owner.kind == "STATE_MACHINE"
+                                     else "Input")
+        elif self.collection == "agent_sources":
+            item.name = _unique_name(items, "Agents")
+            obj = context.active_object
+            item.object = obj if obj is not None and obj != s.armature else None
+        setattr(owner, index, len(items) - 1)
+        return {"FINISHED"}
+
+
+class CROWD_OT_item_remove(_ListOperator, bpy.types.Operator):
+    """Remove the active item of a crowd list"""
+
+    bl_idname = "crowd.item_remove"
+    bl_label = "Remove"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def execute(self, context):
+        try:
+            owner, items, index = self._target(context)
+        except CrowdError as e:
+            self.report({"ERROR"}, str(e))
+            return {"CANCELLED"}
+        i = getattr(owner, index)
+        if not 0 <= i < len(items):
+            self.report({"ERROR"}, f"nothing selected in {self.collection}")
+            return {"CANCELLED"}
+        items.remove(i)
+        setattr(owner, index, min(i, len(items) - 1) if len(items) else 0)
+        return {"FINISHED"}
+
+
+class CROWD_OT_item_move(_ListOperator, bpy.types.Operator):
+    """Move the active item of a crowd list up or down"""
+
+    bl_idname = "crowd.item_move"
+    bl_label = "Move"
+    bl_options = {"REGISTER", "UNDO"}
+
+    step: IntProperty(default=-1)
+
+    def execute(self, context):
+        try:
+            owner, items, index = self._target(context)
+        except CrowdError as e:
+            self.report({"ERROR"}, str(e))
+            return {"CANCELLED"}
+        i = getattr(owner, index)
+        j = i + self.step
+        if not (0 <= i < len(items) and 0 <= j < len(items)):
+            return {"CANCELLED"}
+        items.move(i, j)
+        setattr(owner, index, j)
+        return {"FINISHED"}
+
+
+CLASSES = (CROWD_OT_bake, CROWD_OT_generate_agents, CROWD_OT_preview_toggle,
+           CROWD_OT_item_add, CROWD_OT_item_remove, CROWD_OT_item_move)

@@ -1,0 +1,233 @@
+"""The "Crowd" tab of the 3D viewport sidebar: lists, settings, bake, preview, stats."""
+
+import bpy
+
+from . import preview
+
+__all__ = ["CLASSES"]
+
+_KIND_ICONS = {"CLIP": "ACTION", "BLEND2": "MOD_MASK", "LAYER": "RENDERLAYERS",
+               "BLEND_SPACE": "MESH_GRID", "STATE_MACHINE": "NODETREE"}
+
+
+class CROWD_UL_animations(bpy.types.UIList):
+    def draw_item(self, _context, layout, _data, item, _icon, _active, _prop):
+        row = layout.row(align=True)
+        row.prop(item, "name", text="", emboss=False, icon="ARMATURE_DATA")
+        row.label(text=f"{len(item.nodes)} nodes")
+        row.prop(item, "weight", text="")
+
+
+class CROWD_UL_nodes(bpy.types.UIList):
+    def draw_item(self, _context, layout, data, item, _icon, _active, _prop):
+        root = data.root or (data.nodes[0].name if len(data.nodes) else "")
+        row = layout.row(align=True)
+        row.prop(item, "name", text="", emboss=False, icon=_KIND_ICONS[item.kind])
+        if item.kind == "CLIP":
+            row.label(text=item.action.name if item.action else "no action")
+        if item.name == root:
+            row.label(text="", icon="HOME")
+
+
+class CROWD_UL_inputs(bpy.types.UIList):
+    def draw_item(self, _context, layout, _data, item, _icon, _active, _prop):
+        row = layout.row(align=True)
+        row.prop(item, "name", text="", emboss=False)
+        row.prop(item, "node", text="")
+
+
+class CROWD_UL_transitions(bpy.types.UIList):
+    def draw_item(self, _context, layout, _data, item, _icon, _active, _prop):
+        layout.label(text=f"{item.source} -> {item.target} ({item.duration:g} f)")
+
+
+class CROWD_UL_sources(bpy.types.UIList):
+    def draw_item(self, _context, layout, _data, item, _icon, _active, _prop):
+        row = layout.row(align=True)
+        row.prop(item, "enabled", text="")
+        row.prop(item, "name", text="", emboss=False)
+        row.label(text=item.object.name if item.object else "no object")
+
+
+def _list(layout, list_id, owner, collection, index, pool="STREAMS", rows=3):
+    row = layout.row()
+    row.template_list(list_id, f"{collection}_{pool}", owner, collection, owner, index,
+                      rows=rows)
+    col = row.column(align=True)
+    for op, icon, extra in (("crowd.item_add", "ADD", {}), ("crowd.item_remove", "REMOVE", {}),
+                            ("crowd.item_move", "TRIA_UP", {"step": -1}),
+                            ("crowd.item_move", "TRIA_DOWN", {"step": 1})):
+        props = col.operator(op, icon=icon, text="")
+        props.collection, props.pool = collection, pool
+        for k, v in extra.items():
+            setattr(props, k, v)
+    return row
+
+
+class _Panel:
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "Crowd"
+
+
+class CROWD_PT_main(_Panel, bpy.types.Panel):
+    bl_label = "Crowd"
+
+    def draw(self, context):
+        scene = context.scene
+        s = scene.crowd
+        layout = self.layout
+        layout.use_property_split = True
+        layout.prop(s, "armature")
+        layout.prop(s, "proxy_mesh")
+        pv = preview.check(scene)
+        row = layout.row(align=True)
+        row.operator("crowd.bake", icon="RENDER_ANIMATION")
+        row.operator("crowd.preview_toggle", text="Preview", icon="HIDE_OFF",
+                     depress=pv is not None)
+        if pv is None:
+            err = preview.last_error(scene)
+            if err:
+                layout.label(text=err, icon="ERROR")
+            return
+        box = layout.box()
+        c = pv.crowd
+        box.label(text=f"{c.N:,} agents, {c.S} streams, {c.U} uniques, "
+                       f"{len(c.config.clips)} clips")
+        box.label(text=f"frame {c.frame}: step {pv.step_ms:.2f} ms, draw {pv.draw_ms:.2f} ms")
+        for text in (pv.status(), pv.draw_error):
+            if text:
+                box.label(text=text, icon="ERROR")
+
+
+def _draw_animation_pool(layout, s, pool):
+    anims = s.streams if pool == "STREAMS" else s.uniques
+    index = "active_stream_index" if pool == "STREAMS" else "active_unique_index"
+    _list(layout, "CROWD_UL_animations", s, pool.lower(), index, pool)
+    i = getattr(s, index)
+    if not 0 <= i < len(anims):
+        return
+    anim = anims[i]
+    layout.prop_search(anim, "root", anim, "nodes")
+    _list(layout, "CROWD_UL_nodes", anim, "nodes", "active_node_index", pool)
+    if 0 <= anim.active_node_index < len(anim.nodes):
+        _draw_node(layout.box(), anim, anim.nodes[anim.active_node_index], pool)
+
+
+def _draw_node(layout, anim, node, pool):
+    layout.use_property_split = True
+    layout.prop(node, "kind")
+    if node.kind == "CLIP":
+        layout.prop(node, "action")
+        layout.prop(node, "speed")
+        layout.prop(node, "start")
+        return
+    row = layout.row()
+    row.template_list("CROWD_UL_inputs", f"inputs_{pool}", node, "inputs", node,
+                      "active_input_index", rows=2)
+    col = row.column(align=True)
+    for op, icon in (("crowd.item_add", "ADD"), ("crowd.item_remove", "REMOVE")):
+        props = col.operator(op, icon=icon, text="")
+        props.collection, props.pool = "inputs", pool
+    if 0 <= node.active_input_index < len(node.inputs):
+        inp = node.inputs[node.active_input_index]
+        layout.prop_search(inp, "node", anim, "nodes")
+        if node.kind == "BLEND_SPACE":
+            layout.prop(inp, "x")
+            layout.prop(inp, "y")
+    if node.kind in ("BLEND2", "LAYER"):
+        layout.prop(node, "weight")
+        layout.prop(node, "weight_parameter")
+    if node.kind == "LAYER":
+        layout.prop(node, "layer_mode")
+        layout.prop(node, "mask_source")
+        if node.mask_source == "BONES":
+            layout.prop(node, "mask_bones")
+        elif node.mask_source == "COLLECTION":
+            layout.prop(node, "mask_collection")
+        if node.layer_mode == "ADDITIVE":
+            layout.prop(node, "reference_action")
+            layout.prop(node, "reference_frame")
+    elif node.kind == "BLEND_SPACE":
+        layout.prop(node, "x_parameter")
+        layout.prop(node, "y_parameter")
+    elif node.kind == "STATE_MACHINE":
+        layout.prop_search(node, "initial_state", node, "inputs")
+        _list(layout, "CROWD_UL_transitions", node, "transitions",
+              "active_transition_index", pool, rows=2)
+        if 0 <= node.active_transition_index < len(node.transitions):
+            tr = node.transitions[node.active_transition_index]
+            for key in ("source", "target", "duration", "trigger", "condition_parameter"):
+                layout.prop(tr, key)
+            if tr.condition_parameter:
+                layout.prop(tr, "condition_op")
+                layout.prop(tr, "condition_value")
+
+
+class CROWD_PT_streams(_Panel, bpy.types.Panel):
+    bl_label = "Streams"
+    bl_parent_id = "CROWD_PT_main"
+
+    def draw(self, context):
+        _draw_animation_pool(self.layout, context.scene.crowd, "STREAMS")
+
+
+class CROWD_PT_uniques(_Panel, bpy.types.Panel):
+    bl_label = "Unique Animations"
+    bl_parent_id = "CROWD_PT_main"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        _draw_animation_pool(self.layout, context.scene.crowd, "UNIQUES")
+
+
+class CROWD_PT_agents(_Panel, bpy.types.Panel):
+    bl_label = "Agents"
+    bl_parent_id = "CROWD_PT_main"
+
+    def draw(self, context):
+        s = context.scene.crowd
+        layout = self.layout
+        _list(layout, "CROWD_UL_sources", s, "agent_sources", "active_source_index")
+        layout.operator("crowd.generate_agents", icon="COMMUNITY")
+        if not 0 <= s.active_source_index < len(s.agent_sources):
+            return
+        src = s.agent_sources[s.active_source_index]
+        col = layout.column()
+        col.use_property_split = True
+        col.prop(src, "object")
+        col.prop(src, "mode")
+        if src.mode == "VERTEX_GROUP" and src.object is not None:
+            col.prop_search(src, "vertex_group", src.object, "vertex_groups")
+        for mode, fields in (("heading_mode", {"FIXED": ("heading",),
+                                               "ATTRIBUTE": ("heading_attribute",),
+                                               "TARGET": ("heading_target",)}),
+                             ("stream_mode", {"ATTRIBUTE": ("stream_attribute",)}),
+                             ("offset_mode", {"NORMAL": ("offset_mean", "offset_std"),
+                                              "ATTRIBUTE": ("offset_attribute",)}),
+                             ("color_mode", {"RANDOM": ("color", "color_variation"),
+                                             "ATTRIBUTE": ("color_attribute",)})):
+            col.prop(src, mode)
+            if mode == "stream_mode" and src.stream_mode == "FIXED":
+                col.prop_search(src, "stream_name", s, "streams")
+            for key in fields.get(getattr(src, mode), ()):
+                col.prop(src, key)
+
+
+class CROWD_PT_settings(_Panel, bpy.types.Panel):
+    bl_label = "Settings"
+    bl_parent_id = "CROWD_PT_main"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        s = context.scene.crowd
+        layout = self.layout
+        layout.use_property_split = True
+        for key in ("max_offset", "transition_slots", "when_full", "seed", "forward_axis",
+                    "lod_near", "lod_far"):
+            layout.prop(s, key)
+
+
+CLASSES = (CROWD_UL_animations, CROWD_UL_nodes, CROWD_UL_inputs, CROWD_UL_transitions,
+           CROWD_UL_sources, CROWD_PT_main, CROWD_PT_streams, CROWD_PT_uniques,
+           CROWD_PT_agents, CROWD_PT_settings)

@@ -1,0 +1,341 @@
+"""Viewport preview: the scene's crowd advanced on frame change and drawn in the 3D view.
+
+One :class:`Preview` per scene (by name) holds the core ``Crowd`` built from the
+scene (:mod:`.scene_config`) and, once a viewport has drawn, a renderer in Blender's
+GPU context:
+
+* OpenGL backend: the moderngl renderer attached to Blender's context
+  (``crowd_addon.gpu.moderngl_backend.ModernGLRenderer.attach``), drawing into the
+  framebuffer the viewport has bound;
+* another backend (Metal, Vulkan): the ``gpu``-module renderer when the GPU package
+  provides one (``crowd_addon.gpu.blender_backend.BlenderGPURenderer``);
+* neither: nothing is drawn, and :attr:`Preview.draw_error` says why (the panel shows it).
+
+The crowd follows ``scene.frame_current``; going backwards re-simulates from the start
+(deterministic, ``Crowd.advance_to``) without reporting the replayed frames' events
+again. When the armature or an action the crowd was built from is deleted the
+preview pauses with a message instead of failing; undo that restores them resumes
+it. Nothing here keeps Blender data between calls, only names, so undo and file
+loads never leave dangling references; after a load the previews marked in the file
+(``scene.crowd.preview_enabled``) are rebuilt, or stopped with the reason.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+import bpy
+
+from .. import api
+from ..core.crowd import Crowd
+from ..core.errors import CrowdError
+from . import scene_config, shared_gl
+from .props import settings_fingerprint
+
+log = logging.getLogger("crowd_addon.preview")
+
+__all__ = ["Preview", "start", "stop", "stop_all", "get", "check", "last_error", "draw_scene",
+           "draw_handle", "on_frame_change", "on_depsgraph_update", "on_undo",
+           "on_load_pre", "on_load_post"]
+
+
+@dataclass
+class Preview:
+    """The running preview of one scene (runtime only, never saved)."""
+
+    scene_name: str
+    crowd: Crowd
+    armature: str
+    actions: tuple
+    fingerprint: int
+    paused: str = ""               # why the crowd stopped advancing ("" = running)
+    stale: bool = False            # settings changed since the crowd was built
+    step_ms: float = 0.0
+    draw_ms: float = 0.0
+    renderer: object = None
+    draw_error: str = ""
+
+    @property
+    def handle(self):
+        """The scene's :class:`crowd_addon.api.CrowdHandle`."""
+        return api.scene_crowd(self.scene_name)
+
+    def status(self) -> str:
+        if self.paused:
+            return f"Paused: {self.paused}"
+        if self.stale:
+            return "Settings changed since the crowd was built: Bake to update"
+        return ""
+
+
+_PREVIEWS: dict = {}
+_ERRORS: dict = {}
+_DRAW = {"handle": None}
+
+
+def get(scene):
+    """The scene's :class:`Preview` or None."""
+    return _PREVIEWS.get(scene.name)
+
+
+def last_error(scene) -> str:
+    """Why the scene's preview stopped or could not start ("" if it did not)."""
+    return _ERRORS.get(scene.name, "")
+
+
+def draw_handle():
+    """The SpaceView3D draw handler's handle while any preview runs, else None."""
+    return _DRAW["handle"]
+
+
+# ------------------------------------------------------------------ start / stop
+def start(scene, config=None) -> Preview:
+    """Build the scene's crowd (from ``config`` when given, else from the scene) and
+    show it; replaces a running preview only once the new crowd is complete."""
+    s = scene.crowd
+    if config is None:
+        with suspended():
+            config = scene_config.config_from_scene(scene)
+    if s.armature is None:
+        raise CrowdError(f"scene {scene.name!r}: no armature chosen")
+    crowd = Crowd(config)
+    pv = Preview(scene.name, crowd, s.armature.name,
+                 tuple(a.name for a in scene_config.used_actions(s)),
+                 settings_fingerprint(s))
+    if crowd.N and not config.meshes:
+        pv.draw_error = "no proxy mesh chosen: agents run but are not drawn"
+    old = _PREVIEWS.pop(scene.name, None)
+    if old is not None:
+        _release(old)
+    _PREVIEWS[scene.name] = pv
+    _ERRORS.pop(scene.name, None)
+    pv.handle.attach(crowd)
+    _advance(scene, pv)
+    if _DRAW["handle"] is None:
+        _DRAW["handle"] = bpy.types.SpaceView3D.draw_handler_add(_draw_callback, (),
+                                                                 "WINDOW", "POST_VIEW")
+    if not s.preview_enabled:
+        s.preview_enabled = True
+    return pv
+
+
+def _release(pv):
+    handle = api.scene_crowd(pv.scene_name)
+    if handle.crowd is pv.crowd:
+        handle.detach()
+    _release_renderer(pv)
+
+
+def _release_renderer(pv):
+    if pv.renderer is not None:
+        renderer, pv.renderer = pv.renderer, None
+        try:
+            renderer.release()
+        except Exception as e:  # noqa: BLE001 - the GPU context may be gone already
+            log.warning("crowd preview of %r: renderer release failed: %s", pv.scene_name, e)
+
+
+def stop(scene) -> None:
+    """Stop the scene's preview and forget its crowd (callbacks registered through
+    :mod:`crowd_addon.api` stay for the next one)."""
+    pv = _PREVIEWS.pop(scene.name, None)
+    if pv is not None:
+        _release(pv)
+    if scene.crowd.preview_enabled:
+        scene.crowd.preview_enabled = False
+    if not _PREVIEWS:
+        _remove_draw_handler()
+
+
+def stop_all() -> None:
+    """Stop every preview without touching scene data (unregister, file load)."""
+    while _PREVIEWS:
+        _release(_PREVIEWS.popitem()[1])
+    _remove_draw_handler()
+
+
+def _remove_draw_handler():
+    handle, _DRAW["handle"] = _DRAW["handle"], None
+    if handle is not None:
+        bpy.types.SpaceView3D.draw_handler_remove(handle, "WINDOW")
+
+
+class suspended:
+    """Context manager: frame changes and depsgraph updates are ignored meanwhile
+    (the bake plays actions with ``frame_set``, which must not drive the preview)."""
+
+    depth = 0
+
+    def __enter__(self):
+        suspended.depth += 1
+
+    def __exit__(self, *exc):
+        suspended.depth -= 1
+
+
+# ---------------------------------------------------------------------- advancing
+def _problem(scene, pv) -> str:
+    """What the preview's crowd lost in the scene ("" when nothing)."""
+    arm = scene.crowd.armature
+    if arm is None:
+        return f"armature {pv.armature!r} was deleted or unset; choose one and Bake"
+    if scene.objects.get(arm.name) is None:
+        return f"armature {arm.name!r} is no longer in the scene"
+    gone = [a for a in pv.actions if bpy.data.actions.get(a) is None]
+    if gone:
+        return f"action {gone[0]!r} was deleted; restore it or Bake without it"
+    return ""
+
+
+def check(scene, settings=True):
+    """Re-check the scene's preview against the scene and return it (None when none
+    runs): what it lost (cheap, every frame) and, with ``settings``, whether the
+    settings changed since the build (a walk over ``scene.crowd``, about 0.1 ms per
+    stream: the panel does it when it redraws). Read-only."""
+    pv = _PREVIEWS.get(scene.name)
+    if pv is not None:
+        if settings:
+            pv.stale = settings_fingerprint(scene.crowd) != pv.fingerprint
+        pv.paused = _problem(scene, pv)
+    return pv
+
+
+def _advance(scene, pv):
+    check(scene, settings=False)
+    if pv.paused:
+        return
+    before = pv.crowd.frame
+    t0 = time.perf_counter()
+    try:
+        pv.handle.advance_to(scene.frame_current)
+    except Exception as e:  # noqa: BLE001 - a preview never takes Blender down
+        pv.paused = f"the crowd stopped at frame {pv.crowd.frame}: {e}"
+        return
+    if pv.crowd.frame != before:
+        pv.step_ms = (time.perf_counter() - t0) * 1e3 / abs(pv.crowd.frame - before)
+
+
+@bpy.app.handlers.persistent
+def on_frame_change(scene, *_):
+    pv = _PREVIEWS.get(scene.name)
+    if pv is not None and not suspended.depth:
+        _advance(scene, pv)
+
+
+@bpy.app.handlers.persistent
+def on_depsgraph_update(scene, *_):
+    pv = _PREVIEWS.get(scene.name)
+    if pv is not None and not suspended.depth:
+        _advance(scene, pv)          # pauses, or resumes what an edit restored
+
+
+@bpy.app.handlers.persistent
+def on_undo(*_):
+    """Undo/redo: drop previews of scenes that are gone, re-check the others (resume
+    when the undo restored what they lost) and keep ``preview_enabled`` truthful."""
+    for name in list(_PREVIEWS):
+        scene = bpy.data.scenes.get(name)
+        if scene is None:
+            _release(_PREVIEWS.pop(name))
+            continue
+        if not scene.crowd.preview_enabled:
+            scene.crowd.preview_enabled = True
+        check(scene)
+        _advance(scene, _PREVIEWS[name])
+    if not _PREVIEWS:
+        _remove_draw_handler()
+
+
+@bpy.app.handlers.persistent
+def on_load_pre(*_):
+    stop_all()
+    _ERRORS.clear()
+
+
+@bpy.app.handlers.persistent
+def on_load_post(*_):
+    """Rebuild the previews the loaded file had running, or stop them with the reason."""
+    for scene in bpy.data.scenes:
+        if getattr(scene, "crowd", None) is None or not scene.crowd.preview_enabled:
+            continue
+        try:
+            start(scene)
+        except CrowdError as e:
+            scene.crowd.preview_enabled = False
+            _ERRORS[scene.name] = f"preview stopped after loading the file: {e}"
+
+
+# -------------------------------------------------------------------------- drawing
+@dataclass(frozen=True)
+class _ViewCamera:
+    """What a renderer needs of a camera: ``eye`` (3,) and ``view_projection`` (4, 4)
+    world -> clip; fields are tuples so that equal views compare equal (renderers
+    redo per-view work only when the view changes)."""
+
+    eye: tuple
+    matrix: tuple
+
+    @property
+    def view_projection(self) -> np.ndarray:
+        return np.array(self.matrix, np.float64)
+
+
+def _make_renderer(crowd):
+    import gpu
+    backend = gpu.platform.backend_type_get()
+    if backend == "OPENGL":
+        try:
+            from ..gpu.moderngl_backend import ModernGLRenderer
+        except ImportError as e:
+            raise CrowdError(f"the moderngl renderer is not available ({e})") from None
+        return ModernGLRenderer.attach(crowd, size=(4, 4))
+    try:
+        from ..gpu.blender_backend import BlenderGPURenderer
+    except ImportError:
+        raise CrowdError(f"the viewport uses the {backend} GPU backend: moderngl needs "
+                         "OpenGL and no gpu-module renderer is installed") from None
+    return BlenderGPURenderer(crowd)
+
+
+def draw_scene(scene, view_matrix, projection_matrix) -> bool:
+    """Draw the scene's crowd into the framebuffer bound now, seen through the 4x4
+    world->view and view->clip matrices; returns whether anything was drawn. Errors
+    are kept in :attr:`Preview.draw_error` and stop further drawing (never raised)."""
+    pv = _PREVIEWS.get(scene.name)
+    if pv is None or pv.draw_error or pv.crowd.N == 0:
+        return False
+    t0 = time.perf_counter()
+    try:
+        if pv.renderer is None:
+            pv.renderer = _make_renderer(pv.crowd)
+        view = np.array(view_matrix, np.float64)
+        cam = _ViewCamera(tuple(np.linalg.inv(view)[:3, 3].tolist()),
+                          tuple(map(tuple, (np.array(projection_matrix, np.float64)
+                                            @ view).tolist())))
+        pv.renderer.sync()
+        mgl = getattr(pv.renderer, "ctx", None)
+        if mgl is None:
+            pv.renderer.render(cam, target=None, clear=None)
+        else:
+            shared = shared_gl.shared_context()
+            shared.before(mgl)
+            pv.renderer.render(cam, target=mgl.detect_framebuffer(), clear=None)
+            shared.after()
+    except Exception as e:  # noqa: BLE001 - a draw callback must never raise
+        pv.draw_error = f"cannot draw: {e}"
+        _release_renderer(pv)
+        return False
+    pv.draw_ms = (time.perf_counter() - t0) * 1e3
+    return True
+
+
+def _draw_callback():
+    ctx = bpy.context
+    rv3d = ctx.region_data
+    if ctx.scene is None or rv3d is None:
+        return
+    draw_scene(ctx.scene, rv3d.view_matrix, rv3d.window_matrix)

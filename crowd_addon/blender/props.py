@@ -1,0 +1,226 @@
+"""The crowd as scene data: PropertyGroups saved in the .blend (``scene.crowd``).
+
+A stream (or unique animation) is a controller tree written as a flat list of named
+nodes; a node's inputs name other nodes of the same animation, and the root is the
+node named by ``root`` (default: the first node). Node kinds mirror the core
+controllers (``crowd_addon.core.controllers``): an action clip, a 2-way blend, a
+layer (override or additive, masked by bone names or a bone collection), a 2-D
+blend space (inputs placed at (x, y) points) and a state machine (inputs are its
+states; transitions fire on triggers and parameter conditions with a fade).
+
+Agents come from agent sources (mesh vertices, a vertex group or instanced points,
+see :mod:`.agents`). Nothing here holds runtime state except ``preview_enabled``,
+which :mod:`.preview` reads after a file load to restart the preview.
+"""
+
+import bpy
+from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProperty,
+                       FloatVectorProperty, IntProperty, PointerProperty, StringProperty)
+from bpy.types import PropertyGroup
+
+__all__ = ["CLASSES", "NODE_KINDS", "settings_fingerprint"]
+
+NODE_KINDS = (
+    ("CLIP", "Action", "Play an action (baked into a clip) at a speed from a start frame"),
+    ("BLEND2", "Blend", "Blend two inputs by a weight or a parameter"),
+    ("LAYER", "Layer", "Override or add a second input on top of the first, on masked bones"),
+    ("BLEND_SPACE", "Blend Space", "Inputs at (x, y) points weighted by two parameters"),
+    ("STATE_MACHINE", "State Machine", "Inputs are states; triggers and conditions switch "
+                                       "between them with a fade"),
+)
+_OPS = tuple((op, op, f"parameter {op} value") for op in ("<", "<=", ">", ">=", "==", "!="))
+
+
+def _is_armature(_self, obj):
+    return obj.type == "ARMATURE"
+
+
+def _is_mesh(_self, obj):
+    return obj.type == "MESH"
+
+
+class CROWD_PG_input(PropertyGroup):
+    """An input of a node: another node of the same animation (``name`` is the label,
+    or the state name in a state machine)."""
+
+    node: StringProperty(name="Node", description="Name of the node this input reads")
+    x: FloatProperty(name="X", description="Blend space sample position, x")
+    y: FloatProperty(name="Y", description="Blend space sample position, y")
+
+
+class CROWD_PG_state_transition(PropertyGroup):
+    source: StringProperty(name="From", default="*",
+                           description="State the transition leaves ('*': any state)")
+    target: StringProperty(name="To", description="State the transition enters")
+    duration: FloatProperty(name="Fade", default=8.0, min=0.0,
+                            description="Cross-fade length in frames (0 cuts)")
+    trigger: StringProperty(name="Trigger",
+                            description="Fires when this trigger is set on the stream")
+    condition_parameter: StringProperty(
+        name="Parameter", description="Fires while 'parameter op value' holds (empty: no "
+                                      "condition)")
+    condition_op: EnumProperty(name="Op", items=_OPS, default=">")
+    condition_value: FloatProperty(name="Value")
+
+
+class CROWD_PG_node(PropertyGroup):
+    kind: EnumProperty(name="Kind", items=NODE_KINDS, default="CLIP")
+    # CLIP
+    action: PointerProperty(name="Action", type=bpy.types.Action)
+    speed: FloatProperty(name="Speed", default=1.0, description="Clip frames per crowd frame")
+    start: FloatProperty(name="Start", default=0.0, description="Clip frame at time 0")
+    # inputs of BLEND2 / LAYER / BLEND_SPACE / STATE_MACHINE
+    inputs: CollectionProperty(type=CROWD_PG_input)
+    active_input_index: IntProperty()
+    # BLEND2 / LAYER
+    weight: FloatProperty(name="Weight", default=0.5, min=0.0, max=1.0)
+    weight_parameter: StringProperty(
+        name="Weight Parameter", description="When set, the weight is this stream "
+                                             "parameter (crowd_addon.api.set_parameter)")
+    # LAYER
+    layer_mode: EnumProperty(name="Mode", default="OVERRIDE", items=(
+        ("OVERRIDE", "Override", "Blend toward the layer pose on the masked bones"),
+        ("ADDITIVE", "Additive", "Add the layer's difference to its reference pose")))
+    mask_source: EnumProperty(name="Mask", default="ALL", items=(
+        ("ALL", "All Bones", "The layer covers every bone"),
+        ("BONES", "Bone Names", "Comma-separated bone names"),
+        ("COLLECTION", "Bone Collection", "The bones of an armature bone collection")))
+    mask_bones: StringProperty(name="Bones", description="Comma-separated bone names")
+    mask_collection: StringProperty(name="Bone Collection")
+    reference_action: PointerProperty(
+        name="Reference", type=bpy.types.Action,
+        description="Additive layers: the action whose pose is the zero of the difference "
+                    "(empty: the rest pose)")
+    reference_frame: FloatProperty(name="Reference Frame", default=0.0, min=0.0)
+    # BLEND_SPACE
+    x_parameter: StringProperty(name="X Parameter", default="x")
+    y_parameter: StringProperty(name="Y Parameter", default="y")
+    # STATE_MACHINE
+    transitions: CollectionProperty(type=CROWD_PG_state_transition)
+    active_transition_index: IntProperty()
+    initial_state: StringProperty(name="Initial State",
+                                  description="Empty: the first input")
+
+
+class CROWD_PG_animation(PropertyGroup):
+    """A stream (shared, with pose history) or a unique animation."""
+
+    nodes: CollectionProperty(type=CROWD_PG_node)
+    active_node_index: IntProperty()
+    root: StringProperty(name="Root", description="Node the animation outputs (empty: the "
+                                                  "first node)")
+    weight: FloatProperty(name="Weight", default=1.0, min=0.0,
+                          description="Relative share of randomly assigned agents")
+
+
+class CROWD_PG_agent_source(PropertyGroup):
+    enabled: BoolProperty(name="Enabled", default=True)
+    object: PointerProperty(name="Object", type=bpy.types.Object)
+    mode: EnumProperty(name="From", default="VERTICES", items=(
+        ("VERTICES", "Vertices", "One agent per vertex of the evaluated mesh"),
+        ("VERTEX_GROUP", "Vertex Group", "One agent per vertex with weight > 0 in a group"),
+        ("INSTANCES", "Instances", "One agent per instance the object generates "
+                                   "(particles, instancing, geometry nodes)")))
+    vertex_group: StringProperty(name="Vertex Group")
+    heading_mode: EnumProperty(name="Heading", default="FIXED", items=(
+        ("FIXED", "Fixed", "Every agent turned by the same angle (instances: their own "
+                           "rotation added)"),
+        ("ATTRIBUTE", "Attribute", "A FLOAT point attribute in radians about +Z"),
+        ("TARGET", "Face Object", "Every agent faces an object")))
+    heading: FloatProperty(name="Angle", subtype="ANGLE", unit="ROTATION")
+    heading_attribute: StringProperty(name="Heading Attribute", default="heading")
+    heading_target: PointerProperty(name="Target", type=bpy.types.Object)
+    stream_mode: EnumProperty(name="Stream", default="RANDOM", items=(
+        ("RANDOM", "Random", "Drawn with the stream weights and the seed"),
+        ("ATTRIBUTE", "Attribute", "An INT point attribute: the stream index"),
+        ("FIXED", "One Stream", "All agents play one stream")))
+    stream_attribute: StringProperty(name="Stream Attribute", default="stream")
+    stream_name: StringProperty(name="Stream")
+    offset_mode: EnumProperty(name="Offset", default="UNIFORM", items=(
+        ("UNIFORM", "Uniform", "Every offset 0..M-1 equally likely"),
+        ("NORMAL", "Normal", "Around a mean, rounded and clipped to 0..M-1"),
+        ("ATTRIBUTE", "Attribute", "An INT point attribute in 0..M-1")))
+    offset_mean: FloatProperty(name="Mean", default=-1.0,
+                               description="Frames (negative: the middle of 0..M-1)")
+    offset_std: FloatProperty(name="Deviation", default=-1.0,
+                              description="Frames (negative: M / 6)")
+    offset_attribute: StringProperty(name="Offset Attribute", default="offset")
+    color_mode: EnumProperty(name="Colour", default="RANDOM", items=(
+        ("RANDOM", "Random", "The base colour varied at random per agent"),
+        ("ATTRIBUTE", "Attribute", "A colour or vector point attribute")))
+    color: FloatVectorProperty(name="Base Colour", subtype="COLOR", size=3, min=0.0,
+                               max=1.0, default=(0.8, 0.8, 0.8))
+    color_variation: FloatProperty(name="Variation", default=0.5, min=0.0, max=1.0,
+                                   subtype="FACTOR")
+    color_attribute: StringProperty(name="Colour Attribute", default="Col")
+
+
+class CROWD_PG_settings(PropertyGroup):
+    armature: PointerProperty(name="Armature", type=bpy.types.Object, poll=_is_armature)
+    proxy_mesh: PointerProperty(name="Proxy Mesh", type=bpy.types.Object, poll=_is_mesh,
+                                description="Mesh skinned to the armature that draws "
+                                            "each agent")
+    streams: CollectionProperty(type=CROWD_PG_animation)
+    active_stream_index: IntProperty()
+    uniques: CollectionProperty(type=CROWD_PG_animation)
+    active_unique_index: IntProperty()
+    max_offset: IntProperty(name="Max Offset (M)", default=60, min=1, soft_max=600,
+                            description="Frames of pose history per stream; agents play "
+                                        "a stream delayed by 0..M-1 frames")
+    transition_slots: IntProperty(name="Transition Slots (NT)", default=64, min=0,
+                                  description="Agents that can blend between animations "
+                                              "at the same time")
+    when_full: EnumProperty(name="When Full", default="QUEUE", items=(
+        ("QUEUE", "Queue", "Wait for a free slot"),
+        ("CUT", "Cut", "Switch at once without blending")))
+    seed: IntProperty(name="Seed", default=0, min=0)
+    forward_axis: EnumProperty(name="Forward", default="NEG_Y", items=(
+        ("NEG_Y", "-Y", "The character faces -Y in its rest pose"),
+        ("POS_Y", "+Y", "The character faces +Y in its rest pose"),
+        ("POS_X", "+X", "The character faces +X in its rest pose"),
+        ("NEG_X", "-X", "The character faces -X in its rest pose")),
+        description="Used to turn agents toward a target")
+    lod_near: FloatProperty(name="LOD 1 From", default=30.0, min=0.0, unit="LENGTH")
+    lod_far: FloatProperty(name="LOD 2 From", default=90.0, min=0.0, unit="LENGTH")
+    agent_sources: CollectionProperty(type=CROWD_PG_agent_source)
+    active_source_index: IntProperty()
+    preview_enabled: BoolProperty(
+        name="Preview", default=False, options=set(),
+        description="Whether the viewport preview runs (restarted after a file load)")
+
+
+CLASSES = (CROWD_PG_input, CROWD_PG_state_transition, CROWD_PG_node, CROWD_PG_animation,
+           CROWD_PG_agent_source, CROWD_PG_settings)
+
+
+def _values(struct, skip):
+    """A hashable tuple of every saved property of ``struct`` (recursively); ID
+    pointers contribute their names."""
+    out = []
+    for prop in struct.bl_rna.properties:
+        key = prop.identifier
+        if key in skip or key == "rna_type":
+            continue
+        value = getattr(struct, key)
+        if prop.type == "COLLECTION":
+            out.append((key, tuple(_values(item, skip) for item in value)))
+        elif prop.type == "POINTER":
+            out.append((key, None if value is None else
+                        (value.name if isinstance(value, bpy.types.ID)
+                         else _values(value, skip))))
+        elif getattr(prop, "is_array", False):
+            out.append((key, tuple(value)))
+        else:
+            out.append((key, value))
+    return tuple(out)
+
+
+_UI_ONLY = {"active_stream_index", "active_unique_index", "active_source_index",
+            "active_node_index", "active_input_index", "active_transition_index",
+            "preview_enabled"}
+
+
+def settings_fingerprint(settings) -> int:
+    """Hash of everything in ``scene.crowd`` a built crowd depends on (UI list indices
+    and the preview switch excluded); equal settings give equal fingerprints."""
+    return hash(_values(settings, _UI_ONLY))

@@ -1,0 +1,72 @@
+"""Register and unregister everything the extension adds to Blender.
+
+:func:`register` adds the property groups (``Scene.crowd``), operators, UI lists and
+panels, and the app handlers the preview needs (file load, frame change, depsgraph
+update, undo/redo; all persistent so they survive file loads). The viewport draw
+handler exists only while a preview runs; the bake's modal timer only while it
+bakes. :func:`unregister` stops every preview (removing the draw handler) and takes
+all of it away again, so register/unregister can alternate any number of times.
+:func:`leftovers` lists anything of ours still registered (tests use it).
+"""
+
+from __future__ import annotations
+
+import bpy
+
+from .. import api
+from . import operators, panels, preview, props
+
+__all__ = ["CLASSES", "HANDLERS", "register", "unregister", "leftovers"]
+
+CLASSES = props.CLASSES + operators.CLASSES + panels.CLASSES
+HANDLERS = (("load_pre", preview.on_load_pre), ("load_post", preview.on_load_post),
+            ("frame_change_post", preview.on_frame_change),
+            ("depsgraph_update_post", preview.on_depsgraph_update),
+            ("undo_post", preview.on_undo), ("redo_post", preview.on_undo))
+
+
+def _ours(fn, wanted) -> bool:
+    """Same function, or the same function of an earlier import of this module (an
+    extension reload brings new function objects)."""
+    return fn is wanted or (getattr(fn, "__module__", None) == wanted.__module__
+                            and getattr(fn, "__qualname__", None) == wanted.__qualname__)
+
+
+def register():
+    for cls in CLASSES:
+        bpy.utils.register_class(cls)
+    bpy.types.Scene.crowd = bpy.props.PointerProperty(type=props.CROWD_PG_settings)
+    for name, fn in HANDLERS:
+        handlers = getattr(bpy.app.handlers, name)
+        for old in [h for h in handlers if _ours(h, fn)]:
+            handlers.remove(old)
+        handlers.append(fn)
+
+
+def unregister():
+    preview.stop_all()
+    api.detach_all()
+    for name, fn in HANDLERS:
+        handlers = getattr(bpy.app.handlers, name)
+        for old in [h for h in handlers if _ours(h, fn)]:
+            handlers.remove(old)
+    if hasattr(bpy.types.Scene, "crowd"):
+        del bpy.types.Scene.crowd
+    for cls in reversed(CLASSES):
+        if cls.is_registered:
+            bpy.utils.unregister_class(cls)
+
+
+def leftovers() -> list:
+    """Descriptions of anything of ours still registered: classes, ``Scene.crowd``,
+    app handlers, the draw handler."""
+    out = [f"class {c.__name__}" for c in CLASSES if c.is_registered]
+    out += [f"bpy.types.{c.__name__}" for c in CLASSES if hasattr(bpy.types, c.__name__)]
+    if hasattr(bpy.types.Scene, "crowd"):
+        out.append("Scene.crowd")
+    for name, fn in HANDLERS:
+        out += [f"handler {name}: {h.__qualname__}" for h in getattr(bpy.app.handlers, name)
+                if _ours(h, fn)]
+    if preview.draw_handle() is not None:
+        out.append("SpaceView3D draw handler")
+    return out

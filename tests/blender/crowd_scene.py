@@ -1,0 +1,191 @@
+"""Small procedural Blender scenes for the extension's tests (bpy, in process).
+
+Loaded by the test modules from their own folder (``sys.path``), since the tests
+run with ``--import-mode=importlib``. Everything is built from scratch in an empty
+factory scene, so no test depends on a file on disk.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+import bpy
+
+BONES = (  # name, parent, head, tail
+    ("root", None, (0, 0, 0), (0, 0, 0.9)),
+    ("spine", "root", (0, 0, 0.9), (0, 0, 1.4)),
+    ("head", "spine", (0, 0, 1.4), (0, 0, 1.7)),
+    ("arm.L", "spine", (0.1, 0, 1.35), (0.6, 0, 1.35)),
+    ("arm.R", "spine", (-0.1, 0, 1.35), (-0.6, 0, 1.35)),
+)
+
+
+def reset():
+    """An empty factory scene at 24 fps, frame range 1..48."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    scene.render.fps, scene.render.fps_base = 24, 1.0
+    scene.frame_start, scene.frame_end = 1, 48
+    scene.frame_set(1)
+    return scene
+
+
+def make_armature(name="Rig"):
+    """A five-bone armature with a bone collection "Arms" (arm.L, arm.R)."""
+    data = bpy.data.armatures.new(name)
+    obj = bpy.data.objects.new(name, data)
+    bpy.context.scene.collection.objects.link(obj)
+    bpy.context.view_layer.objects.active = obj
+    bpy.ops.object.mode_set(mode="EDIT")
+    for bname, parent, head, tail in BONES:
+        eb = data.edit_bones.new(bname)
+        eb.head, eb.tail = head, tail
+        if parent:
+            eb.parent = data.edit_bones[parent]
+    bpy.ops.object.mode_set(mode="OBJECT")
+    arms = data.collections.new("Arms")
+    for bname in ("arm.L", "arm.R"):
+        arms.assign(data.bones[bname])
+    for pb in obj.pose.bones:
+        pb.rotation_mode = "QUATERNION"
+    return obj
+
+
+def make_action(rig, name, seed=0, frames=(1, 13, 25), amplitude=0.5, markers=(),
+                bones=None, loop=True):
+    """An action keying every bone's rotation (or only ``bones``) at ``frames`` with
+    seeded random rotations, the last key equal to the first, a manual frame range
+    over ``frames`` marked cyclic when ``loop``; pose markers ``(name, frame)``. The
+    rig is left with no action assigned."""
+    rng = np.random.default_rng(seed)
+    act = bpy.data.actions.new(name)
+    rig.animation_data_create()
+    rig.animation_data.action = act
+    names = [b[0] for b in BONES] if bones is None else list(bones)
+    first = {}
+    for i, f in enumerate(frames):
+        for bname in names:
+            pb = rig.pose.bones[bname]
+            if i == len(frames) - 1 and len(frames) > 2:
+                q = first[bname]
+            else:
+                axis = rng.normal(size=3)
+                axis /= np.linalg.norm(axis)
+                ang = rng.uniform(-amplitude, amplitude)
+                q = (math.cos(ang / 2), *(math.sin(ang / 2) * axis))
+                first.setdefault(bname, q)
+            pb.rotation_quaternion = q
+            pb.keyframe_insert("rotation_quaternion", frame=f)
+    act.use_frame_range = True
+    act.frame_start, act.frame_end = frames[0], frames[-1]
+    act.use_cyclic = loop
+    for mname, mframe in markers:
+        m = act.pose_markers.new(mname)
+        m.frame = mframe
+    rig.animation_data.action = None
+    for pb in rig.pose.bones:
+        pb.rotation_quaternion = (1, 0, 0, 0)
+    return act
+
+
+def make_proxy(rig, name="Body"):
+    """A box per bone, each box's vertices weighted fully to its bone, deformed by
+    an Armature modifier."""
+    verts, faces, groups = [], [], []
+    cube = np.array([(x, y, z) for x in (-1, 1) for y in (-1, 1) for z in (0, 1)], float)
+    quads = ((0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4),
+             (1, 5, 7, 3))
+    for bname, _parent, head, tail in BONES:
+        h, t = np.array(head, float), np.array(tail, float)
+        base = len(verts)
+        for c in cube:
+            p = h + (t - h) * c[2]
+            verts.append(tuple(p + 0.06 * np.array([c[0], c[1], 0.0])))
+        faces += [tuple(base + i for i in q) for q in quads]
+        groups.append((bname, list(range(base, base + 8))))
+    me = bpy.data.meshes.new(name)
+    me.from_pydata(verts, [], faces)
+    obj = bpy.data.objects.new(name, me)
+    bpy.context.scene.collection.objects.link(obj)
+    for bname, idx in groups:
+        obj.vertex_groups.new(name=bname).add(idx, 1.0, "REPLACE")
+    mod = obj.modifiers.new("Armature", "ARMATURE")
+    mod.object = rig
+    obj.parent = rig
+    return obj
+
+
+def make_seats(nx=10, ny=8, name="Seats", spacing=1.0):
+    """A grid of ``nx * ny`` vertices (no faces) at z = 0, ``spacing`` metres apart."""
+    xs, ys = np.meshgrid(np.arange(nx) * spacing, np.arange(ny) * spacing, indexing="xy")
+    co = np.stack([xs.ravel(), ys.ravel(), np.zeros(xs.size)], 1)
+    me = bpy.data.meshes.new(name)
+    me.vertices.add(co.shape[0])
+    me.vertices.foreach_set("co", co.astype(np.float32).ravel())
+    me.update()
+    obj = bpy.data.objects.new(name, me)
+    bpy.context.scene.collection.objects.link(obj)
+    return obj
+
+
+def add_stream(settings, name, action, pool="streams"):
+    """A stream (or unique) with one action node."""
+    anim = getattr(settings, pool).add()
+    anim.name = name
+    node = anim.nodes.add()
+    node.name = "clip"
+    node.kind = "CLIP"
+    node.action = action
+    return anim
+
+
+def add_node(anim, name, kind, inputs=(), **props):
+    """A node of ``kind`` reading the named ``inputs`` (``(label, node)`` pairs or
+    node names); ``props`` set its other properties."""
+    node = anim.nodes.add()
+    node.name = name
+    node.kind = kind
+    for inp in inputs:
+        label, target = inp if isinstance(inp, tuple) else (inp, inp)
+        i = node.inputs.add()
+        i.name, i.node = label, target
+    for k, v in props.items():
+        setattr(node, k, v)
+    return node
+
+
+class registered:
+    """Context manager: the extension registered in this process for the block
+    (left as found: a registration made by someone else is kept)."""
+
+    def __enter__(self):
+        import crowd_addon
+        self.mine = not hasattr(bpy.types.Scene, "crowd")
+        if self.mine:
+            crowd_addon.register()
+        return self
+
+    def __exit__(self, *exc):
+        import crowd_addon
+        if self.mine:
+            crowd_addon.unregister()
+
+
+def init_gpu():
+    """One tiny Workbench render: after it Blender's gpu module (and a GL context for
+    moderngl) works in background mode (DESIGN.md s.6). Returns the engine used."""
+    scene = bpy.context.scene
+    engine = scene.render.engine
+    size = scene.render.resolution_x, scene.render.resolution_y
+    scene.render.engine = "BLENDER_WORKBENCH"
+    scene.render.resolution_x = scene.render.resolution_y = 8
+    cam = bpy.data.objects.new("InitCamera", bpy.data.cameras.new("InitCamera"))
+    scene.collection.objects.link(cam)
+    scene.camera = cam
+    bpy.ops.render.render()
+    scene.camera = None
+    bpy.data.objects.remove(cam)
+    scene.render.engine = engine
+    scene.render.resolution_x, scene.render.resolution_y = size

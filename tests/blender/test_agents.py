@@ -1,0 +1,257 @@
+"""Agents from scene geometry (crowd_addon.blender.agents).
+
+Oracles: Blender's own object transforms and evaluated geometry (``matrix_world @
+vertex.co`` with mathutils, vertex group weights, depsgraph instances) and mathutils
+rotations for headings; determinism and ranges for the seeded random parts.
+"""
+
+import math
+import os
+import sys
+import time
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+sys.path.insert(0, os.path.dirname(__file__))
+import crowd_scene as cs  # noqa: E402
+from mathutils import Matrix, Vector  # noqa: E402
+
+from crowd_addon.blender.agents import agents_from_source  # noqa: E402
+from crowd_addon.core.errors import CrowdError  # noqa: E402
+
+STREAMS = ["idle", "cheer", "sit"]
+
+
+@pytest.fixture(scope="module", autouse=True)
+def extension():
+    with cs.registered():
+        yield
+
+
+@pytest.fixture
+def scene():
+    return cs.reset()
+
+
+def _source(scene, obj, **props):
+    src = scene.crowd.agent_sources.add()
+    src.name = "seats"
+    src.object = obj
+    for k, v in props.items():
+        setattr(src, k, v)
+    return src
+
+
+def _agents(scene, src, weights=(1, 1, 1), m=30, seed=4, forward="NEG_Y"):
+    return agents_from_source(src, bpy.context.evaluated_depsgraph_get(), streams=STREAMS,
+                              stream_weights=list(weights), max_offset=m, seed=seed,
+                              forward_axis=forward)
+
+
+def _world_vertices(obj):
+    return np.array([tuple(obj.matrix_world @ v.co) for v in obj.data.vertices])
+
+
+def test_one_agent_per_vertex_at_its_world_position(scene):
+    seats = cs.make_seats(7, 5)
+    seats.location = (3.0, -2.0, 1.5)
+    seats.rotation_euler = (0.0, 0.0, 0.7)
+    seats.scale = (2.0, 2.0, 2.0)
+    bpy.context.view_layer.update()
+    a = _agents(scene, _source(scene, seats))
+    assert a.count == 35
+    np.testing.assert_allclose(a.positions, _world_vertices(seats), atol=1e-5)
+    # fixed heading 0 plus the object's own turn about +Z
+    np.testing.assert_allclose(a.headings, 0.7, atol=1e-6)
+
+
+def test_vertex_group_keeps_only_weighted_vertices(scene):
+    seats = cs.make_seats(6, 6)
+    group = seats.vertex_groups.new(name="front")
+    group.add(list(range(0, 36, 3)), 0.8, "REPLACE")
+    group.add([1, 2], 0.0, "REPLACE")               # members with weight 0 are not agents
+    expected = [i for i in range(36)
+                if any(g.group == group.index and g.weight > 0
+                       for g in seats.data.vertices[i].groups)]
+    a = _agents(scene, _source(scene, seats, mode="VERTEX_GROUP", vertex_group="front"))
+    assert a.count == len(expected) == 12
+    np.testing.assert_allclose(a.positions, _world_vertices(seats)[expected], atol=1e-6)
+
+
+def test_headings_from_an_attribute_and_toward_a_target(scene):
+    seats = cs.make_seats(5, 4)
+    seats.rotation_euler.z = 0.25
+    attr = seats.data.attributes.new("heading", "FLOAT", "POINT")
+    values = np.linspace(-1.0, 1.0, 20, dtype=np.float32)
+    attr.data.foreach_set("value", values)
+    bpy.context.view_layer.update()
+    a = _agents(scene, _source(scene, seats, heading_mode="ATTRIBUTE"))
+    np.testing.assert_allclose(a.headings, values + 0.25, atol=1e-6)
+
+    target = bpy.data.objects.new("Pitch", None)
+    scene.collection.objects.link(target)
+    target.location = (2.0, 20.0, 0.0)
+    bpy.context.view_layer.update()
+    for forward, vec in (("NEG_Y", (0, -1, 0)), ("POS_X", (1, 0, 0))):
+        a = _agents(scene, _source(scene, seats, heading_mode="TARGET",
+                                   heading_target=target), forward=forward)
+        for p, h in zip(a.positions, a.headings):
+            facing = Matrix.Rotation(float(h), 3, "Z") @ Vector(vec)
+            to_target = (target.location - Vector(p)).to_2d().normalized()
+            assert (facing.to_2d() - to_target).length < 1e-5
+
+
+def test_offsets_are_seeded_and_within_range(scene):
+    seats = cs.make_seats(20, 20)
+    src = _source(scene, seats)
+    a1, a2 = _agents(scene, src, seed=9), _agents(scene, src, seed=9)
+    a3 = _agents(scene, src, seed=10)
+    assert a1.offsets.min() >= 0 and a1.offsets.max() <= 29
+    assert len(np.unique(a1.offsets)) == 30                  # uniform: every offset used
+    np.testing.assert_array_equal(a1.offsets, a2.offsets)
+    np.testing.assert_array_equal(a1.streams, a2.streams)
+    np.testing.assert_array_equal(a1.colors, a2.colors)
+    assert (a1.offsets != a3.offsets).any()
+    src.offset_mode, src.offset_mean, src.offset_std = "NORMAL", 20.0, 2.0
+    a = _agents(scene, src)
+    assert a.offsets.min() >= 0 and a.offsets.max() <= 29
+    assert abs(a.offsets.mean() - 20.0) < 0.5
+
+
+def test_offsets_streams_and_colours_from_attributes(scene):
+    seats = cs.make_seats(4, 3)
+    me = seats.data
+    off = np.arange(12, dtype=np.int32) % 30
+    me.attributes.new("offset", "INT", "POINT").data.foreach_set("value", off)
+    st = np.arange(12, dtype=np.int32) % 3
+    me.attributes.new("stream", "INT", "POINT").data.foreach_set("value", st)
+    col = np.random.default_rng(0).uniform(0, 1, (12, 4)).astype(np.float32)
+    me.attributes.new("Col", "FLOAT_COLOR", "POINT").data.foreach_set("color", col.ravel())
+    bpy.context.view_layer.update()
+    src = _source(scene, seats, offset_mode="ATTRIBUTE", stream_mode="ATTRIBUTE",
+                  color_mode="ATTRIBUTE")
+    a = _agents(scene, src)
+    np.testing.assert_array_equal(a.offsets, off)
+    np.testing.assert_array_equal(a.streams, st)
+    np.testing.assert_allclose(a.colors, col[:, :3], atol=1e-6)
+    # an offset outside 0..M-1 names the source, the point and the attribute
+    off[5] = 30
+    me.attributes["offset"].data.foreach_set("value", off)
+    bpy.context.view_layer.update()
+    with pytest.raises(CrowdError, match=r"agent source 'seats'.*5.*offset 30.*'offset'"):
+        _agents(scene, src)
+
+
+def test_streams_by_weight_and_by_name(scene):
+    seats = cs.make_seats(30, 30)
+    src = _source(scene, seats)
+    a = _agents(scene, src, weights=(0.0, 3.0, 1.0))
+    assert set(np.unique(a.streams)) == {1, 2}
+    share = (a.streams == 1).mean()
+    assert 0.7 < share < 0.8
+    src.stream_mode, src.stream_name = "FIXED", "sit"
+    assert (_agents(scene, src).streams == 2).all()
+    src.stream_name = "dance"
+    with pytest.raises(CrowdError, match="unknown stream 'dance'"):
+        _agents(scene, src)
+
+
+def test_random_colours_vary_around_the_base(scene):
+    seats = cs.make_seats(10, 10)
+    src = _source(scene, seats, color=(0.2, 0.4, 0.6), color_variation=0.0)
+    np.testing.assert_allclose(_agents(scene, src).colors, [[0.2, 0.4, 0.6]] * 100,
+                               atol=1e-6)
+    src.color_variation = 0.5
+    c = _agents(scene, src).colors
+    base = np.array([0.2, 0.4, 0.6])
+    assert (np.abs(c - base) <= 0.5 * np.maximum(base, 1 - base) + 1e-6).all()
+    assert c.std(0).min() > 0.05
+
+
+def test_instances_use_the_depsgraph_instance_transforms(scene):
+    grid = cs.make_seats(4, 4, name="Stand")
+    grid.rotation_euler.z = 0.5
+    grid.location = (1.0, 2.0, 3.0)
+    grid.instance_type = "VERTS"
+    seat = cs.make_seats(1, 1, name="Seat")
+    seat.parent = grid
+    bpy.context.view_layer.update()
+    a = _agents(scene, _source(scene, grid, mode="INSTANCES"))
+    dg = bpy.context.evaluated_depsgraph_get()
+    truth = [tuple(i.matrix_world.translation) for i in dg.object_instances
+             if i.is_instance and i.parent.original == grid]
+    assert a.count == 16 == len(truth)
+    np.testing.assert_allclose(np.sort(a.positions, 0), np.sort(np.array(truth), 0),
+                               atol=1e-5)
+    np.testing.assert_allclose(a.headings, 0.5, atol=1e-6)
+    src = _source(scene, grid, mode="INSTANCES", heading_mode="ATTRIBUTE")
+    with pytest.raises(CrowdError, match="attributes are read from mesh vertices"):
+        _agents(scene, src)
+
+
+def test_geometry_nodes_point_instances(scene):
+    stand = cs.make_seats(5, 4, name="Stand")
+    seat = cs.make_seats(1, 1, name="Seat")
+    tree = bpy.data.node_groups.new("seats", "GeometryNodeTree")
+    tree.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    tree.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    group_in, group_out = tree.nodes.new("NodeGroupInput"), tree.nodes.new("NodeGroupOutput")
+    on_points = tree.nodes.new("GeometryNodeInstanceOnPoints")
+    info = tree.nodes.new("GeometryNodeObjectInfo")
+    info.inputs["Object"].default_value = seat
+    on_points.inputs["Rotation"].default_value = (0.0, 0.0, -0.3)
+    tree.links.new(group_in.outputs[0], on_points.inputs["Points"])
+    tree.links.new(info.outputs["Geometry"], on_points.inputs["Instance"])
+    tree.links.new(on_points.outputs["Instances"], group_out.inputs[0])
+    stand.modifiers.new("seats", "NODES").node_group = tree
+    stand.location.z = 2.0
+    bpy.context.view_layer.update()
+    a = _agents(scene, _source(scene, stand, mode="INSTANCES"))
+    assert a.count == 20
+    np.testing.assert_allclose(a.positions, _world_vertices(stand), atol=1e-6)
+    np.testing.assert_allclose(a.headings, -0.3, atol=1e-6)
+
+
+def test_bad_sources_name_the_problem(scene):
+    seats = cs.make_seats(2, 2)
+    with pytest.raises(CrowdError, match="agent source 'seats': no object chosen"):
+        _agents(scene, _source(scene, None))
+    with pytest.raises(CrowdError, match="no vertex group 'back'"):
+        _agents(scene, _source(scene, seats, mode="VERTEX_GROUP", vertex_group="back"))
+    with pytest.raises(CrowdError, match="has no attribute 'heading'"):
+        _agents(scene, _source(scene, seats, heading_mode="ATTRIBUTE"))
+    seats.data.attributes.new("heading", "INT", "POINT")
+    with pytest.raises(CrowdError, match="'heading' of 'Seats' is INT on POINT"):
+        _agents(scene, _source(scene, seats, heading_mode="ATTRIBUTE"))
+    empty = bpy.data.objects.new("Empty", None)
+    scene.collection.objects.link(empty)
+    with pytest.raises(CrowdError, match="'Empty' is a EMPTY, not a mesh"):
+        _agents(scene, _source(scene, empty))
+    with pytest.raises(CrowdError, match="generates no instances"):
+        _agents(scene, _source(scene, seats, mode="INSTANCES"))
+
+
+def test_a_stadium_of_65k_seats_in_well_under_a_second(scene):
+    bpy.ops.mesh.primitive_grid_add(x_subdivisions=255, y_subdivisions=255, size=200)
+    stand = bpy.context.active_object
+    stand.vertex_groups.new(name="lower").add(list(range(0, 65536, 2)), 1.0, "REPLACE")
+    target = bpy.data.objects.new("Pitch", None)
+    scene.collection.objects.link(target)
+    bpy.context.view_layer.update()
+    src = _source(scene, stand, heading_mode="TARGET", heading_target=target,
+                  offset_mode="NORMAL")
+    t0 = time.perf_counter()
+    a = _agents(scene, src)
+    t_all = time.perf_counter() - t0
+    assert a.count == 65536
+    src.mode, src.vertex_group = "VERTEX_GROUP", "lower"
+    t0 = time.perf_counter()
+    b = _agents(scene, src)
+    t_group = time.perf_counter() - t0
+    assert b.count == 32768
+    print(f"65,536 agents from vertices: {t_all * 1e3:.0f} ms; "
+          f"32,768 from a vertex group: {t_group * 1e3:.0f} ms")
+    assert t_all < 0.5 and t_group < 0.5
+    assert math.isfinite(float(a.headings.sum()))

@@ -1,0 +1,355 @@
+"""The viewport preview and the extension's registration, in this process.
+
+Oracles: Blender's own bookkeeping (``draw_handler_remove`` refuses a handler that
+is gone, ``bpy.types`` and ``bpy.app.handlers`` list what is registered, a saved and
+reopened .blend), a fresh core ``Crowd`` for determinism, and core's CPU skinning of
+every agent, projected with the same camera, for the pixels the viewport draw path
+writes into an offscreen buffer.
+"""
+
+import os
+import sys
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+sys.path.insert(0, os.path.dirname(__file__))
+import crowd_scene as cs  # noqa: E402
+
+import crowd_addon  # noqa: E402
+from crowd_addon.blender import preview, registration  # noqa: E402
+from crowd_addon.blender.props import settings_fingerprint  # noqa: E402
+from crowd_addon.core import Crowd  # noqa: E402
+from crowd_addon.core.skinning import skin_vertices  # noqa: E402
+from crowd_addon.gpu.camera import look_at, perspective  # noqa: E402
+
+
+@pytest.fixture(scope="module", autouse=True)
+def extension():
+    with cs.registered():
+        yield
+        preview.stop_all()
+
+
+def _build_scene():
+    preview.stop_all()
+    scene = cs.reset()
+    rig = cs.make_armature()
+    walk = cs.make_action(rig, "walk", seed=1, markers=[("step", 7)], amplitude=1.0)
+    s = scene.crowd
+    s.armature, s.proxy_mesh, s.max_offset, s.seed = rig, cs.make_proxy(rig), 8, 3
+    cs.add_stream(s, "walk", walk)
+    src = s.agent_sources.add()
+    src.name, src.object = "seats", cs.make_seats(6, 5, spacing=1.5)
+    src.heading_mode, src.heading = "FIXED", 0.4
+    return scene, rig, walk
+
+
+@pytest.fixture
+def running():
+    scene, rig, walk = _build_scene()
+    assert bpy.ops.crowd.bake() == {"FINISHED"}
+    return scene, rig, walk, preview.get(scene)
+
+
+def _handlers_from(prefix):
+    """Every app handler defined in a module under ``prefix``."""
+    lists = [getattr(bpy.app.handlers, n) for n in dir(bpy.app.handlers)]
+    return [h for lst in lists if isinstance(lst, list) for h in lst
+            if getattr(h, "__module__", "").startswith(prefix)]
+
+
+def _handler_is_gone(handle):
+    with pytest.raises(ValueError, match="already removed"):
+        bpy.types.SpaceView3D.draw_handler_remove(handle, "WINDOW")
+    return True
+
+
+def test_register_unregister_twice_leaves_nothing_behind():
+    mine = hasattr(bpy.types.Scene, "crowd")
+    if mine:
+        crowd_addon.unregister()
+    try:
+        for _ in range(2):
+            crowd_addon.register()
+            assert hasattr(bpy.types, "CROWD_OT_bake") and hasattr(bpy.types, "CROWD_PT_main")
+            assert preview.on_frame_change in bpy.app.handlers.frame_change_post
+            scene, _rig, _walk = _build_scene()
+            bpy.ops.crowd.bake()
+            handle = preview.draw_handle()
+            assert handle is not None
+            crowd_addon.unregister()
+            assert registration.leftovers() == []
+            assert not [n for n in dir(bpy.types) if n.startswith("CROWD_")]
+            assert not hasattr(bpy.types.Scene, "crowd")
+            assert _handlers_from("crowd_addon") == []
+            assert _handler_is_gone(handle)
+    finally:
+        crowd_addon.register()
+
+
+def test_preview_adds_and_removes_its_draw_handler(running):
+    scene, *_ = running
+    handle = preview.draw_handle()
+    assert handle is not None and scene.crowd.preview_enabled
+    assert bpy.ops.crowd.preview_toggle() == {"FINISHED"}
+    assert preview.get(scene) is None and preview.draw_handle() is None
+    assert not scene.crowd.preview_enabled
+    assert _handler_is_gone(handle)
+    assert bpy.ops.crowd.preview_toggle() == {"FINISHED"}            # bakes and starts
+    assert preview.get(scene) is not None and preview.draw_handle() is not None
+
+
+def test_frame_changes_drive_the_crowd_and_scrubbing_back_is_deterministic(running):
+    scene, _rig, _walk, pv = running
+    crowd = pv.crowd
+    for f in range(2, 31):
+        scene.frame_set(f)
+    assert crowd.frame == 30
+    scene.frame_set(17)
+    fresh = Crowd(crowd.config)
+    fresh.advance_to(17)
+    assert crowd.frame == 17
+    np.testing.assert_array_equal(crowd.agent_poses(), fresh.agent_poses())
+    assert pv.step_ms > 0 and not pv.paused
+
+
+def _skinned_boxes(crowd, vp, size):
+    """Pixel bounding boxes (n, 4) of every agent's proxy skinned on the CPU."""
+    mesh = crowd.config.meshes["Rig"][0]
+    verts = skin_vertices(mesh.positions, mesh.bone_indices, mesh.bone_weights,
+                          crowd.agent_rows())                           # (N, V, 3)
+    c, s = np.cos(crowd.agent_heading), np.sin(crowd.agent_heading)
+    x, y = verts[..., 0], verts[..., 1]
+    world = np.stack([c[:, None] * x - s[:, None] * y, s[:, None] * x + c[:, None] * y,
+                      verts[..., 2]], -1) + crowd.agent_position[:, None]
+    clip = np.einsum("ij,nvj->nvi", vp, np.concatenate([world, np.ones_like(x)[..., None]],
+                                                       -1))
+    ndc = clip[..., :2] / clip[..., 3:4]
+    px = (ndc + 1) / 2 * np.array(size)
+    return np.concatenate([px.min(1), px.max(1)], 1)                    # x0 y0 x1 y1
+
+
+def _draw(scene, view, proj, size, after=None):
+    import gpu
+    off = gpu.types.GPUOffScreen(*size)
+    with off.bind():
+        gpu.state.active_framebuffer_get().clear(color=(0, 0, 0, 0), depth=1.0)
+        if after is not None:
+            after()                          # Blender draws first, caching its state
+        drawn = preview.draw_scene(scene, view, proj)
+        if after is not None:
+            after()                          # and must still draw right after the crowd
+    buf = off.texture_color.read()
+    buf.dimensions = size[0] * size[1] * 4
+    img = np.array(buf, np.float32).reshape(size[1], size[0], 4)
+    off.free()
+    return drawn, img
+
+
+def _check_against_core(img, crowd, vp, size):
+    covered = img[..., 3] > 0                                   # rows bottom-up, like GL
+    inside = np.zeros_like(covered)
+    ys, xs = np.mgrid[0:size[1], 0:size[0]] + 0.5
+    for x0, y0, x1, y1 in _skinned_boxes(crowd, vp, size):
+        box = (xs >= x0 - 1.5) & (xs <= x1 + 1.5) & (ys >= y0 - 1.5) & (ys <= y1 + 1.5)
+        assert covered[box].any()                               # every agent shows
+        inside |= box
+    assert covered.sum() > 500
+    assert covered[~inside].sum() <= 0.005 * covered.sum()     # and nothing else does
+    assert img[covered][:, :3].std(0).max() > 5                 # lit, varied colours
+
+
+def test_offscreen_draw_puts_every_agent_where_core_skins_it(running):
+    scene, _rig, _walk, pv = running
+    cs.init_gpu()
+    size = (240, 160)
+    view = look_at((3.75, -9.0, 6.0), (3.75, 3.0, 0.8))
+    proj = perspective(np.radians(55), size[0] / size[1], 0.1, 100.0)
+    images = []
+    for frame in (9, 14):                 # the second draw reuses the renderer
+        scene.frame_set(frame)
+        drawn, img = _draw(scene, view, proj, size)
+        assert drawn, pv.draw_error
+        _check_against_core(img, pv.crowd, proj @ view, size)
+        images.append(img)
+    assert (np.abs(images[1] - images[0]) > 0).any()            # the crowd moved
+
+
+def test_deleting_the_armature_or_an_action_pauses_with_a_message(running):
+    scene, rig, walk, pv = running
+    scene.frame_set(5)
+    bpy.data.objects.remove(rig)
+    scene.frame_set(6)
+    assert pv.crowd.frame == 5
+    assert "armature 'Rig' was deleted" in pv.status()
+    # the undo handler resumes once the scene has what the crowd was built from
+    new_rig = cs.make_armature("Rig")
+    scene.crowd.armature = new_rig
+    preview.on_undo(scene)
+    assert not pv.paused and pv.crowd.frame == 6
+    bpy.data.actions.remove(walk)
+    scene.frame_set(7)
+    assert pv.crowd.frame == 6 and "action 'walk' was deleted" in pv.status()
+    cs.init_gpu()
+    drawn, _ = _draw(scene, look_at((0, -9, 5), (0, 0, 1)), perspective(1.0, 1.0, 0.1, 50),
+                     (32, 32))
+    assert drawn                                                # frozen, still drawn
+
+
+def test_deleting_with_the_delete_operator_pauses_too(running):
+    scene, rig, _walk, pv = running
+    bpy.ops.object.select_all(action="DESELECT")
+    rig.select_set(True)
+    bpy.context.view_layer.objects.active = rig
+    bpy.ops.object.delete()
+    bpy.context.view_layer.update()
+    assert pv.paused
+    scene.frame_set(12)
+    assert pv.crowd.frame == 1
+
+
+def test_changed_settings_mark_the_crowd_stale(running):
+    scene, _rig, _walk, pv = running
+    scene.crowd.max_offset = 9
+    scene.frame_set(2)
+    assert preview.check(scene) is pv                           # as the panel does
+    assert pv.stale and "Bake" in pv.status() and pv.crowd.frame == 2   # still runs
+    scene.crowd.max_offset = 8
+    assert not preview.check(scene).stale
+
+
+def test_generate_agents_updates_the_running_crowd_without_a_bake(running):
+    scene, _rig, _walk, pv = running
+    clips = pv.crowd.config.clips
+    scene.crowd.agent_sources[0].object = cs.make_seats(3, 3, name="Few")
+    assert bpy.ops.crowd.generate_agents() == {"FINISHED"}
+    now = preview.get(scene)
+    assert now.crowd.N == 9 and now.crowd.config.clips is clips
+
+
+def test_settings_survive_save_and_reload_and_the_preview_restarts(running, tmp_path):
+    scene, _rig, _walk, pv = running
+    s = scene.crowd
+    anim = s.streams[0]
+    cs.add_node(anim, "sm", "STATE_MACHINE", [("calm", "clip")], initial_state="calm")
+    tr = anim.nodes["sm"].transitions.add()
+    tr.target, tr.trigger = "calm", "reset"
+    s.when_full, s.lod_far = "CUT", 77.0
+    before = settings_fingerprint(s)
+    agents = pv.crowd.N
+    path = str(tmp_path / "crowd.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    assert preview.get(bpy.context.scene) is None and preview.draw_handle() is None
+    bpy.ops.wm.open_mainfile(filepath=path)
+    scene = bpy.context.scene
+    assert settings_fingerprint(scene.crowd) == before
+    assert scene.crowd.streams[0].nodes["sm"].transitions[0].trigger == "reset"
+    again = preview.get(scene)                                  # load_post rebuilt it
+    assert again is not None and again.crowd.N == agents and preview.draw_handle()
+    # a file whose armature is gone loads with the preview stopped and the reason
+    bpy.data.objects.remove(scene.crowd.armature)
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.open_mainfile(filepath=path)
+    scene = bpy.context.scene
+    assert preview.get(scene) is None and not scene.crowd.preview_enabled
+    assert "no armature chosen" in preview.last_error(scene)
+
+
+class _Layout:
+    """Stands in for ``UILayout`` and checks that every property, list and operator
+    the panels name exists in Blender's RNA (a UI typo would only show in the UI)."""
+
+    use_property_split = False
+
+    def __init__(self, seen):
+        self.seen = seen
+
+    def _sub(self, *_a, **_k):
+        return self
+
+    row = column = box = _sub
+
+    def label(self, text="", **_k):
+        self.seen.append(("label", text))
+
+    def prop(self, data, name, **_k):
+        assert name in data.bl_rna.properties, (data, name)
+        self.seen.append(("prop", name))
+
+    def prop_search(self, data, name, search_data, search_name, **_k):
+        assert name in data.bl_rna.properties and search_name in search_data.bl_rna.properties
+
+    def template_list(self, list_id, _uid, data, coll, active_data, active, **_k):
+        assert hasattr(bpy.types, list_id) and coll in data.bl_rna.properties
+        assert active in active_data.bl_rna.properties
+
+    def operator(self, idname, **_k):
+        mod, name = idname.split(".")
+        assert hasattr(getattr(bpy.ops, mod), name), idname
+        rna = getattr(getattr(bpy.ops, mod), name).get_rna_type()
+        self.seen.append(("operator", idname))
+        return _OpProps(rna)
+
+
+class _OpProps:
+    def __init__(self, rna):
+        object.__setattr__(self, "rna", rna)
+
+    def __setattr__(self, key, value):
+        assert key in self.rna.properties, key
+
+
+def test_panels_draw_existing_properties_and_operators(running):
+    from crowd_addon.blender import panels
+    scene, rig, _walk, pv = running
+    anim = scene.crowd.streams[0]
+    cs.add_node(anim, "sm", "STATE_MACHINE", [("calm", "clip")])
+    anim.nodes["sm"].transitions.add()
+    cs.add_node(anim, "bs", "BLEND_SPACE", ["clip"])
+    cs.add_node(anim, "lay", "LAYER", ["clip", "clip"], layer_mode="ADDITIVE",
+                mask_source="COLLECTION")
+    ctx = type("Ctx", (), {"scene": scene})()
+    seen = []
+    for kind in ("sm", "bs", "lay", "clip"):
+        anim.active_node_index = anim.nodes.find(kind)
+        for cls in panels.CLASSES:
+            if issubclass(cls, bpy.types.Panel):
+                cls.draw(type("P", (), {"layout": _Layout(seen)})(), ctx)
+    labels = [t for k, t in seen if k == "label"]
+    assert any("30 agents, 1 streams" in t for t in labels)
+    assert ("operator", "crowd.bake") in seen and ("prop", "transition_slots") in seen
+
+
+def test_blender_still_draws_right_after_the_crowd(running):
+    """moderngl shares Blender's GL context; Blender's state cache must not be left
+    stale (a textured quad drawn by Blender after the crowd shows its texture)."""
+    import gpu
+    from gpu_extras.batch import batch_for_shader
+    from mathutils import Matrix
+    scene, *_ = running
+    cs.init_gpu()
+    red = gpu.types.GPUTexture((2, 2), format="RGBA8", data=gpu.types.Buffer(
+        "FLOAT", 16, [1.0, 0.0, 0.0, 1.0] * 4))
+    shader = gpu.shader.from_builtin("IMAGE")
+    quad = batch_for_shader(shader, "TRIS", {
+        "pos": ((-1, -1), (0, -1), (0, 1), (-1, -1), (0, 1), (-1, 1)),
+        "texCoord": ((0, 0), (1, 0), (1, 1), (0, 0), (1, 1), (0, 1))})
+
+    def left_half_red():
+        with gpu.matrix.push_pop(), gpu.matrix.push_pop_projection():
+            gpu.matrix.load_identity()
+            gpu.matrix.load_projection_matrix(Matrix.Identity(4))
+            gpu.state.depth_test_set("NONE")
+            shader.bind()
+            shader.uniform_sampler("image", red)
+            quad.draw(shader)
+            gpu.state.depth_test_set("LESS_EQUAL")
+    size = (64, 48)
+    drawn, img = _draw(scene, look_at((3.75, -9.0, 6.0), (3.75, 3.0, 0.8)),
+                       perspective(1.0, 64 / 48, 0.1, 100.0), size, after=left_half_red)
+    assert drawn
+    assert (img[:, :32] == [255, 0, 0, 255]).all()
+    assert (img[:, 32:, 3] > 0).any()                       # the crowd on the right

@@ -1,0 +1,324 @@
+"""Scene properties -> CrowdConfig (crowd_addon.blender.scene_config) and the bake
+operator's error handling.
+
+Oracles: Blender's own pose evaluation (``pose.bones[].matrix`` of the armature
+playing the action) for action streams, and for every other node kind the core
+controller tree written by hand on the same clips: the scene's tree must evaluate
+to the same poses frame by frame.
+"""
+
+import os
+import sys
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+sys.path.insert(0, os.path.dirname(__file__))
+import crowd_scene as cs  # noqa: E402
+
+from crowd_addon.blender import preview, scene_config  # noqa: E402
+from crowd_addon.blender.operators import BakeJob  # noqa: E402
+from crowd_addon.core import (Blend2, BlendSpace2D, ClipPlayer, Crowd, CrowdConfig,  # noqa: E402
+                              Layer, StateMachine, StateTransition)
+from crowd_addon.core.errors import CrowdError  # noqa: E402
+from crowd_addon.core.skinning import model_matrices  # noqa: E402
+
+
+@pytest.fixture(scope="module", autouse=True)
+def extension():
+    with cs.registered():
+        yield
+        preview.stop_all()
+
+
+@pytest.fixture
+def rig_scene():
+    """Scene (24 fps, frames 1..48) with a rig, actions walk (markers), wave (arms
+    only), idle; settings pointing at the rig."""
+    preview.stop_all()
+    scene = cs.reset()
+    rig = cs.make_armature()
+    acts = {"walk": cs.make_action(rig, "walk", seed=1, markers=[("step", 7)]),
+            "wave": cs.make_action(rig, "wave", seed=2, bones=["arm.L", "arm.R"],
+                                   amplitude=1.2),
+            "idle": cs.make_action(rig, "idle", seed=3, frames=(1, 9, 17))}
+    scene.crowd.armature = rig
+    scene.crowd.max_offset = 8
+    return scene, rig, acts
+
+
+def _blender_model(scene, rig, action, frame, skeleton):
+    rig.animation_data.action = action
+    scene.frame_set(int(np.floor(frame)), subframe=float(frame - np.floor(frame)))
+    out = np.array([np.array(rig.pose.bones[n].matrix) for n in skeleton.bone_names])
+    rig.animation_data.action = None
+    return out
+
+
+def test_action_streams_show_blenders_pose_at_each_frame(rig_scene):
+    scene, rig, acts = rig_scene
+    s = scene.crowd
+    cs.add_stream(s, "walk", acts["walk"])
+    fast = cs.add_stream(s, "fast", acts["walk"])
+    fast.nodes[0].speed, fast.nodes[0].start = 2.0, 3.0
+    cfg = scene_config.config_from_scene(scene)
+    sk = cfg.skeletons["Rig"]
+    crowd = Crowd(cfg)
+    for frame in (1, 6, 13, 24, 31):
+        crowd.advance_to(frame)
+        got = model_matrices(np.stack([crowd.pose("walk"), crowd.pose("fast")]), sk)
+        # walk loops with period 24 from its first frame 1; fast shows 3 + 2 (F - 1)
+        for k, clip_t in enumerate((frame - 1, 3 + 2 * (frame - 1))):
+            want = _blender_model(scene, rig, acts["walk"], 1 + clip_t % 24, sk)
+            np.testing.assert_allclose(got[k], want, atol=2e-5, err_msg=f"frame {frame}")
+
+
+def _same_poses(cfg, stream, root, frames, drive=lambda crowd, f: None):
+    """The scene-built stream evaluates like the hand-built ``root`` on the same clips."""
+    ref = CrowdConfig(max_offset=cfg.max_offset, fps=cfg.fps, start_frame=cfg.start_frame)
+    ref.skeletons, ref.clips = cfg.skeletons, cfg.clips
+    ref.add_stream(stream, "Rig", root)
+    a, b = Crowd(cfg), Crowd(ref)
+    for f in frames:
+        for crowd in (a, b):
+            drive(crowd, f)
+            crowd.advance_to(f)
+        np.testing.assert_allclose(a.pose(stream), b.pose(stream), atol=1e-6,
+                                   err_msg=f"{stream} at frame {f}")
+    return a, b
+
+
+def clip(name, origin=1.0):
+    return ClipPlayer(name, 1.0, -origin)
+
+
+def test_blend_by_weight_and_by_parameter(rig_scene):
+    scene, _rig, acts = rig_scene
+    s = scene.crowd
+    for name, props in (("fixed", {"weight": 0.3}), ("param", {"weight_parameter": "w"})):
+        anim = cs.add_stream(s, name, acts["walk"])
+        anim.nodes[0].name = "walk"
+        cs.add_node(anim, "wave", "CLIP", action=acts["wave"])
+        cs.add_node(anim, "mix", "BLEND2", ["walk", "wave"], **props)
+        anim.root = "mix"
+    cfg = scene_config.config_from_scene(scene)
+    _same_poses(cfg, "fixed", Blend2(clip("walk"), clip("wave"), 0.3), range(1, 30, 4))
+
+    def drive(crowd, f):
+        crowd.set_parameter("param", "w", (f % 7) / 6)
+    _same_poses(cfg, "param", Blend2(clip("walk"), clip("wave"), "w"), range(1, 30, 4),
+                drive)
+
+
+@pytest.mark.parametrize("mask", ["BONES", "COLLECTION"])
+def test_override_layer_masked_by_bone_names_or_a_bone_collection(rig_scene, mask):
+    scene, _rig, acts = rig_scene
+    anim = cs.add_stream(scene.crowd, "layered", acts["walk"])
+    anim.nodes[0].name = "walk"
+    cs.add_node(anim, "wave", "CLIP", action=acts["wave"], speed=1.5)
+    cs.add_node(anim, "top", "LAYER", ["walk", "wave"], weight=0.8, mask_source=mask,
+                mask_bones="arm.L, arm.R", mask_collection="Arms")
+    anim.root = "top"
+    cfg = scene_config.config_from_scene(scene)
+    want = Layer(clip("walk"), ClipPlayer("wave", 1.5, -1.5), "override",
+                 {"arm.L": 1.0, "arm.R": 1.0}, 0.8)
+    _same_poses(cfg, "layered", want, range(1, 40, 5))
+
+
+def test_additive_layer_with_a_reference_pose(rig_scene):
+    scene, _rig, acts = rig_scene
+    anim = cs.add_stream(scene.crowd, "add", acts["walk"])
+    anim.nodes[0].name = "walk"
+    cs.add_node(anim, "idle", "CLIP", action=acts["idle"])
+    cs.add_node(anim, "plus", "LAYER", ["walk", "idle"], layer_mode="ADDITIVE",
+                reference_action=acts["idle"], reference_frame=4.0, weight=0.6)
+    anim.root = "plus"
+    cfg = scene_config.config_from_scene(scene)
+    want = Layer(clip("walk"), clip("idle"), "additive", None, 0.6, ("idle", 4.0))
+    _same_poses(cfg, "add", want, range(1, 40, 5))
+
+
+def test_blend_space_places_inputs_at_their_points(rig_scene):
+    scene, _rig, acts = rig_scene
+    anim = cs.add_stream(scene.crowd, "space", acts["walk"])
+    anim.nodes[0].name = "walk"
+    cs.add_node(anim, "wave", "CLIP", action=acts["wave"])
+    cs.add_node(anim, "idle", "CLIP", action=acts["idle"])
+    bs = cs.add_node(anim, "bs", "BLEND_SPACE", ["walk", "wave", "idle"],
+                     x_parameter="speed", y_parameter="mood")
+    for inp, (x, y) in zip(bs.inputs, ((0, 0), (1, 0), (0, 2))):
+        inp.x, inp.y = x, y
+    anim.root = "bs"
+    cfg = scene_config.config_from_scene(scene)
+    want = BlendSpace2D([clip("walk"), clip("wave"), clip("idle")],
+                        [(0, 0), (1, 0), (0, 2)], "speed", "mood")
+
+    def drive(crowd, f):
+        crowd.set_parameter("space", "speed", 0.1 * (f % 9))
+        crowd.set_parameter("space", "mood", 0.3)
+    _same_poses(cfg, "space", want, range(1, 30, 2), drive)
+
+
+def test_state_machine_with_trigger_and_condition_transitions(rig_scene):
+    scene, _rig, acts = rig_scene
+    anim = cs.add_stream(scene.crowd, "fsm", acts["walk"])
+    anim.nodes[0].name = "walk"
+    cs.add_node(anim, "wave", "CLIP", action=acts["wave"])
+    sm = cs.add_node(anim, "sm", "STATE_MACHINE", [("calm", "walk"), ("happy", "wave")],
+                     initial_state="calm")
+    t1 = sm.transitions.add()
+    t1.source, t1.target, t1.duration, t1.trigger = "calm", "happy", 4.0, "hello"
+    t2 = sm.transitions.add()
+    t2.source, t2.target, t2.duration = "*", "calm", 2.0
+    t2.condition_parameter, t2.condition_op, t2.condition_value = "energy", "<", 0.5
+    anim.root = "sm"
+    cfg = scene_config.config_from_scene(scene)
+    want = StateMachine({"calm": ClipPlayer("walk"), "happy": ClipPlayer("wave")},
+                        [StateTransition("calm", "happy", 4.0, trigger="hello"),
+                         StateTransition("*", "calm", 2.0, condition=("energy", "<", 0.5))],
+                        "calm")
+
+    seen = []
+
+    def drive(crowd, f):
+        seen.append((f, crowd.state_of("fsm")[0]))
+        crowd.set_parameter("fsm", "energy", 1.0 if f < 25 else 0.0)
+        if f == 9:
+            crowd.set_trigger("fsm", "hello")
+    a, _ = _same_poses(cfg, "fsm", want, range(1, 40), drive)
+    happy = sorted({f for f, state in seen if state == "happy"})
+    assert happy == list(range(10, 26)) and a.state_of("fsm") == ["calm"]
+
+
+def test_config_carries_settings_mesh_uniques_and_agents(rig_scene):
+    scene, rig, acts = rig_scene
+    s = scene.crowd
+    s.max_offset, s.transition_slots, s.when_full, s.seed = 12, 5, "CUT", 7
+    s.lod_near, s.lod_far = 10.0, 40.0
+    s.proxy_mesh = cs.make_proxy(rig)
+    cs.add_stream(s, "walk", acts["walk"])
+    cs.add_stream(s, "wave", acts["wave"], pool="uniques")
+    src = s.agent_sources.add()
+    src.name, src.object = "seats", cs.make_seats(5, 4)
+    steps = []
+    cfg = scene_config.config_from_scene(scene, progress=lambda *a: steps.append(a))
+    assert (cfg.max_offset, cfg.transition_slots, cfg.when_full, cfg.seed) == (12, 5, "cut", 7)
+    assert cfg.fps == 24.0 and cfg.start_frame == 1 and cfg.lod_distances == (10.0, 40.0)
+    assert sorted(cfg.clips) == ["walk", "wave"]
+    assert cfg.clips["walk"].events == (("step", 6.0),)       # marker at frame 7, clip 1..25
+    assert [d.name for d in cfg.streams] == ["walk"] and [d.name for d in cfg.uniques] == ["wave"]
+    assert list(cfg.meshes) == ["Rig"] and cfg.meshes["Rig"][0].positions.shape == (40, 3)
+    assert cfg.agent_count == 20 and (cfg.agent_offset < 12).all()
+    assert [a[:2] for a in steps] == [(0, 4), (1, 4), (2, 4), (3, 4)]
+    # a unique's clip time starts at 0 when it starts, not at the scene start
+    assert cfg.uniques[0].root.start == 0.0 and cfg.streams[0].root.start == -1.0
+    Crowd(cfg)
+
+
+@pytest.mark.parametrize("setup, message", [
+    (lambda s, a: setattr(s, "armature", None), r"scene '.*': no armature chosen"),
+    (lambda s, a: cs.add_stream(s, "walk", None), r"stream 'walk': node 'clip': no action"),
+    (lambda s, a: cs.add_node(cs.add_stream(s, "w", a["walk"]), "mix", "BLEND2",
+                              ["clip", "nope"]),
+     r"stream 'w': node 'mix': input 1 \('nope'\) names unknown node 'nope'"),
+    (lambda s, a: _root(cs.add_stream(s, "w", a["walk"]), "mix",
+                        cs.add_node, "BLEND2", ["clip"]),
+     r"stream 'w': node 'mix': a blend2 needs 2 inputs, it has 1"),
+    (lambda s, a: _root(cs.add_stream(s, "w", a["walk"]), "loop", cs.add_node, "BLEND2",
+                        ["clip", "loop"]), r"stream 'w': node 'loop': cycle loop -> loop"),
+    (lambda s, a: _root(cs.add_stream(s, "w", a["walk"]), "l", cs.add_node, "LAYER",
+                        ["clip", "clip"], mask_source="BONES", mask_bones="arm.L, tail"),
+     r"stream 'w': node 'l': skeleton 'Rig' has no bone 'tail'"),
+    (lambda s, a: _root(cs.add_stream(s, "w", a["walk"]), "l", cs.add_node, "LAYER",
+                        ["clip", "clip"], mask_source="COLLECTION", mask_collection="Legs"),
+     r"armature 'Rig' has no bone collection 'Legs'"),
+    (lambda s, a: _root(cs.add_stream(s, "w", a["walk"]), "sm", cs.add_node,
+                        "STATE_MACHINE", [("a", "clip"), ("a", "clip")]),
+     r"node 'sm': state names must be unique"),
+    (lambda s, a: (cs.add_stream(s, "w", a["walk"]), cs.add_stream(s, "w", a["idle"])),
+     r"stream names must be unique and not empty \('w'\)"),
+])
+def test_bad_scenes_name_what_is_at_fault(rig_scene, setup, message):
+    scene, _rig, acts = rig_scene
+    setup(scene.crowd, acts)
+    with pytest.raises(CrowdError, match=message):
+        scene_config.config_from_scene(scene)
+
+
+def _root(anim, name, add, kind, inputs, **props):
+    add(anim, name, kind, inputs, **props)
+    anim.root = name
+    return anim
+
+
+def test_bake_operator_reports_bad_actions_and_keeps_the_running_crowd(rig_scene):
+    scene, rig, acts = rig_scene
+    s = scene.crowd
+    cs.add_stream(s, "walk", acts["walk"])
+    assert bpy.ops.crowd.bake() == {"FINISHED"}
+    running = preview.get(scene).crowd
+    # an action for bones the armature lacks, then an empty action
+    alien = bpy.data.actions.new("alien")
+    other = cs.make_armature("Other")
+    with bpy.context.temp_override(active_object=other):
+        other.data.bones["arm.L"].name = "wing"
+    bad = cs.make_action(other, "flap", bones=["wing"])
+    for action, message in ((bad, r"action 'flap' animates bones .* lacks: \['wing'\]"),
+                            (alien, r"action 'alien'")):
+        s.streams[0].nodes[0].action = action
+        with pytest.raises(RuntimeError, match=message):
+            bpy.ops.crowd.bake()
+        assert preview.get(scene).crowd is running
+    assert rig.animation_data.action is None
+
+
+def test_a_cancelled_bake_changes_nothing(rig_scene):
+    scene, _rig, acts = rig_scene
+    cs.add_stream(scene.crowd, "walk", acts["walk"])
+    cs.add_stream(scene.crowd, "idle", acts["idle"])
+    job = BakeJob(scene)
+    assert job.step() and job.message == "baking action 'walk'"
+    assert job.step() and job.message == "baking action 'idle'"
+    job.cancel()
+    assert job.config is None and preview.get(scene) is None
+    job = BakeJob(scene)
+    while job.step():
+        pass
+    assert sorted(job.config.clips) == ["idle", "walk"]
+
+
+class _FakeOperator:
+    """Stands in for the modal operator instance (no event loop in background mode):
+    the operator's own methods run against it."""
+
+    from crowd_addon.blender.operators import CROWD_OT_bake as _op
+    modal, _end, _finish = _op.modal, _op._end, _op._finish
+    _timer = None
+
+    def __init__(self, scene):
+        self._job = BakeJob(scene)
+        self.reports = []
+
+    def report(self, kind, message):
+        self.reports.append((set(kind), message))
+
+
+def test_the_modal_bake_steps_on_timer_events_and_cancels_on_esc(rig_scene):
+    scene, _rig, acts = rig_scene
+    cs.add_stream(scene.crowd, "walk", acts["walk"])
+    cs.add_stream(scene.crowd, "idle", acts["idle"])
+    timer, esc, mouse = (type("Event", (), {"type": t})() for t in ("TIMER", "ESC", "MOUSEMOVE"))
+    op = _FakeOperator(scene)
+    assert op.modal(bpy.context, mouse) == {"PASS_THROUGH"}
+    assert op.modal(bpy.context, timer) == {"RUNNING_MODAL"}
+    assert op.modal(bpy.context, esc) == {"CANCELLED"}
+    assert preview.get(scene) is None and "cancelled" in op.reports[-1][1]
+    op = _FakeOperator(scene)
+    results = [op.modal(bpy.context, timer) for _ in range(5)]
+    assert results == [{"RUNNING_MODAL"}] * 4 + [{"FINISHED"}]
+    assert preview.get(scene).crowd.S == 2 and "2 clips" in op.reports[-1][1]
+    scene.crowd.streams[1].nodes[0].action = None
+    op = _FakeOperator(scene)
+    assert op.modal(bpy.context, timer) == {"CANCELLED"}
+    assert op.reports[-1] == ({"ERROR"}, "stream 'idle': node 'clip': no action chosen")
