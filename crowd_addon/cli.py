@@ -8,6 +8,14 @@ budget
 export
     A saved crowd configuration over a frame range, written as UsdSkel (progress on
     stderr, summary on stdout). See ``docs/usd_export.md``.
+preview
+    A saved crowd configuration rendered headless to a PNG sequence (and an MP4),
+    with a camera that frames the crowd. See ``docs/preview.md``.
+demo
+    The stadium demo, end to end: build, bake, simulate the show, render preview
+    frames, export USD. See ``docs/pipeline.md``.
+build-extension
+    The Blender extension zip with its bundled wheels (``crowd_addon/packaging.py``).
 
 Each command is one ``_add_<name>`` function that builds its subparser and one
 ``_run_<name>`` function that does the work; heavy modules are imported inside the
@@ -23,6 +31,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 
 from .core.errors import CrowdError
@@ -286,10 +295,164 @@ def _progress_printer():
     return progress
 
 
+# ------------------------------------------------------------------------ preview
+
+def _add_preview(subparsers) -> None:
+    from .gpu.preview_render import BACKENDS  # no GL imported: just the names
+
+    p = subparsers.add_parser(
+        "preview",
+        help="render a crowd headless to PNG frames (and an MP4)",
+        description="Run a saved crowd configuration and draw it with the GPU renderer "
+                    "(instanced skinning from the pose texture) through a camera that "
+                    "frames the whole crowd, headless: frame_<F>.png per frame in the "
+                    "output folder, and preview.mp4 with --mp4 (imageio-ffmpeg). Works "
+                    "without a GPU (Mesa llvmpipe). See docs/preview.md.",
+        epilog="example: crowd preview --config crowd.json --out shots/preview --frames "
+               "48 --mp4")
+    p.add_argument("--config", required=True, metavar="CROWD_JSON",
+                   help="crowd configuration manifest written by config_io.save_config")
+    p.add_argument("--out", required=True, metavar="DIR",
+                   help="folder for the frames (created if missing)")
+    p.add_argument("--frames", required=True, type=_int_at_least(1), metavar="N",
+                   help="number of frames to render")
+    p.add_argument("--start", type=int, default=None, metavar="F",
+                   help="first frame (default: the configuration's start frame)")
+    p.add_argument("--width", type=_int_at_least(1), default=960,
+                   help="image width in pixels (default: %(default)s)")
+    p.add_argument("--height", type=_int_at_least(1), default=540,
+                   help="image height in pixels (default: %(default)s)")
+    p.add_argument("--mp4", action="store_true",
+                   help="also write preview.mp4 (H.264 at the crowd's fps; needs an even "
+                        "width and height)")
+    p.add_argument("--backend", choices=BACKENDS, default="moderngl",
+                   help="renderer: moderngl (headless EGL) or blender (Blender's gpu "
+                        "module through bpy) (default: %(default)s)")
+    p.add_argument("--json", action="store_true",
+                   help="print the summary as one JSON object")
+    p.set_defaults(handler=_run_preview)
+
+
+def _run_preview(args) -> int:
+    import json
+
+    from .core.config_io import load_config
+    from .gpu.preview_render import render_preview
+
+    config = load_config(args.config)
+    shown = [-1]
+
+    def progress(done, total):
+        if done * 10 // total > shown[0] or done == total:
+            shown[0] = done * 10 // total
+            print(f"crowd preview: frame {done}/{total}", file=sys.stderr, flush=True)
+
+    r = render_preview(config, args.out, args.frames, start=args.start,
+                       size=(args.width, args.height), mp4=args.mp4, backend=args.backend,
+                       progress=progress)
+    s = r.seconds
+    if args.json:
+        print(json.dumps({
+            "out": args.out, "pngs": r.pngs, "mp4": r.mp4, "frames": list(r.frames),
+            "size": list(r.size), "agents": r.agents, "backend": r.backend,
+            "device": r.device, "upload_bytes_per_frame": r.upload_bytes, "seconds": s}))
+        return 0
+    n = len(r.pngs)
+    print("\n".join([
+        f"wrote {n} frame{'s' if n != 1 else ''} ({r.frames[0]}-{r.frames[1]}) to "
+        f"{args.out}: {os.path.basename(r.pngs[0])} .. {os.path.basename(r.pngs[-1])}, "
+        f"{r.size[0]} x {r.size[1]}",
+        *([f"  {r.mp4}: {n} frames at {config.fps:g} fps"] if r.mp4 else []),
+        f"  {r.agents:,} agents, {r.backend} on {r.device}, "
+        f"{r.upload_bytes:,} B uploaded per frame (median)",
+        f"  {s['total']:.1f} s, {n / s['total']:.1f} frames/s (simulate {s['simulate']:.1f} s, "
+        f"sync {s['sync']:.1f} s, render {s['render']:.1f} s, write {s['write']:.1f} s)"]))
+    return 0
+
+
+# --------------------------------------------------------------------------- demo
+
+def _add_demo(subparsers) -> None:
+    p = subparsers.add_parser(
+        "demo",
+        help="the stadium demo: build, bake, simulate, render preview frames, export USD",
+        description="Build the sample stadium (sample_scenes/build_stadium.py) with one "
+                    "agent per seat, author its crowd and bake its actions with the "
+                    "extension's code, run the show (a goal with cheers through "
+                    "transition slots, a Mexican wave, hits through unique animations, "
+                    "claps counted by an event callback), render preview frames headless "
+                    "(PNG, and MP4 with imageio-ffmpeg) and export stadium.usdc. Needs the "
+                    "bpy module. See docs/pipeline.md.",
+        epilog="example: crowd demo --out demo_out --agents 65000")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    p.add_argument("--agents", type=_int_at_least(10), default=2000, metavar="N",
+                   help="seats, one agent each (default: %(default)s; the paper: 65000)")
+    p.add_argument("--frames", type=_int_at_least(1), default=240, metavar="N",
+                   help="frames to simulate, render and export (default: %(default)s)")
+    p.add_argument("--width", type=_int_at_least(2), default=960)
+    p.add_argument("--height", type=_int_at_least(2), default=540)
+    p.add_argument("--no-mp4", dest="mp4", action="store_false", help="PNG frames only")
+    p.add_argument("--no-usd", dest="usd", action="store_false", help="skip the USD export")
+    p.set_defaults(handler=_run_demo)
+
+
+def _run_demo(args) -> int:
+    from .demo.run import run_demo
+
+    import importlib.util
+    if importlib.util.find_spec("imageio_ffmpeg") is None:
+        args.mp4 = False                    # PNG frames only; say so in the summary
+    s = run_demo(args.out, args.agents, args.frames, (args.width, args.height),
+                 mp4=args.mp4, usd=args.usd)
+    t = s["seconds"]
+    print("\n".join([
+        f"stadium demo in {args.out} ({t['total']:.1f} s)",
+        f"  {s['agents']:,} agents, {s['streams']} streams, {s['uniques']} uniques, "
+        f"{s['characters']} character types, {s['frames']} frames",
+        f"  core step {s['ms_per_step']:.2f} ms/frame, {s['upload_bytes_per_frame']:,} B "
+        f"uploaded/frame, rendered on {s['renderer']}",
+        f"  transitions: {s['transitions_requested']:,} requested, "
+        f"{s['transitions_served']:,} served, {s['queued']:,} queued, {s['cut']} cut",
+        f"  events fired {s['events_fired']:,} (clap: {s['clap_agent_events']:,} agent "
+        f"claps in {s['clap_calls']} callbacks), cheering {s['cheering']:,}, wave "
+        f"{s['wave_agents']:,}, hit {s['hits']}",
+        f"  {s['pngs']} PNG frames" + (f", {s['mp4']}" if s['mp4'] else "")
+        + (f", {s['usd']} ({s['usd_bytes']:,} B)" if "usd" in s else "")]))
+    return 0
+
+
+# --------------------------------------------------------------- build-extension
+
+def _add_build_extension(subparsers) -> None:
+    p = subparsers.add_parser(
+        "build-extension",
+        help="build the Blender extension zip with its bundled wheels",
+        description="Download the moderngl/glcontext wheels for every platform and "
+                    "Python Blender ships (cached in build/wheels) and build the "
+                    "extension zip with Blender's own extension tool (from the bpy "
+                    "module). Install it with Blender > Preferences > Get Extensions > "
+                    "Install from Disk.")
+    p.add_argument("--out", default="dist", metavar="DIR",
+                   help="folder for the zip (default: %(default)s)")
+    p.add_argument("--split-platforms", action="store_true",
+                   help="one zip per platform instead of one for all")
+    p.set_defaults(handler=_run_build_extension)
+
+
+def _run_build_extension(args) -> int:
+    from .packaging import build_extension
+
+    for z in build_extension(args.out, split_platforms=args.split_platforms,
+                             progress=lambda m: print(f"crowd build-extension: {m}",
+                                                      file=sys.stderr, flush=True)):
+        print(z)
+    return 0
+
+
 # --------------------------------------------------------------------------- main
 
-#: One ``_add_<command>`` per subcommand; later commands (demo, preview) add theirs.
-_COMMANDS = (_add_budget, _add_export)
+#: One ``_add_<command>`` per subcommand.
+_COMMANDS = (_add_budget, _add_export, _add_preview, _add_demo, _add_build_extension)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,0 +1,347 @@
+"""GPU frame cost at the paper's configuration (Paduraru s.5), on whatever GL is here.
+
+256 streams, M = 60, 800 transition slots kept busy (27 requests a frame, 30-frame
+blends, blended by the compute shader: ``Crowd(config, gpu_transitions=True)``),
+82-bone ``core.synthetic`` humanoid with ``humanoid_mesh``; agents on a 0.9 m grid
+seen by the camera that frames the whole crowd (``gpu.camera.frame_crowd``).
+LODs on: the mesh (2,058 vertices), ``build_lods`` at 25 % and 6 % of its
+triangles, and a crossed-quad card (8 vertices) past 100 m; LODs off: the full
+mesh for every agent. Prints:
+
+* skinned vertices per second on a 2,000-agent full-mesh frame: a plain
+  instanced-skinning prototype (per-instance attributes, no agent texture, no draw
+  lists; moderngl only), this renderer's draw alone, and the real work (pose and
+  local pose upload + instance updates + transition compute shader + draw);
+* ms per frame for 1k / 10k / 65k agents with LODs on and off (GPU side: sync +
+  draw + finish; ``Crowd.step`` on the CPU is shown apart, see core_frame.py);
+* bytes uploaded per frame against the minimum for GPU transitions: the new
+  skinning and local-pose slices and unique rows, the rows of transitions that
+  started (core writes a started slot's skinning row and its StartP local row),
+  16 B of batch entry per active slot, 32 B per agent whose animation changed;
+* whether 65,000 agents reach 10 frames per second with LODs;
+
+then one line of JSON with the figures.
+
+    .venv/bin/python benchmarks/gpu_frame.py [--quick] [--backend moderngl|blender]
+                                             [--size 960x540]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import sys
+import time
+
+import numpy as np
+
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
+
+from crowd_addon.core import ClipPlayer, Crowd, CrowdConfig  # noqa: E402
+from crowd_addon.core.mesh import ProxyMesh, build_lods  # noqa: E402
+from crowd_addon.core.synthetic import humanoid, humanoid_mesh, periodic_clip  # noqa: E402
+from crowd_addon.gpu.camera import frame_crowd  # noqa: E402
+
+STREAMS, M, SLOTS, BONES = 256, 60, 800, 82
+LOD_DISTANCES = (20.0, 45.0, 100.0)
+BLEND = 30                                   # frames per transition
+PER_FRAME = SLOTS // BLEND + 1               # requests a frame: keeps every slot busy
+THROUGHPUT_AGENTS = 2_000
+
+
+def card_lod(skeleton) -> ProxyMesh:
+    """Far LOD: two crossed vertical quads (8 vertices, 4 triangles) from the feet to
+    above the head, the lower corners on the hips, the upper on the head."""
+    names = skeleton.bone_names
+    hips, head = names.index("hips"), names.index("head")
+    top = float(skeleton.bind_model[head, 2, 3]) + 0.2
+    pos, nor = [], []
+    for side in (np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])):
+        for x, z in ((-0.22, 0.0), (0.22, 0.0), (0.22, top), (-0.22, top)):
+            pos.append(side * x + (0.0, 0.0, z))
+            nor.append(np.cross(side, (0.0, 0.0, 1.0)))
+    pos = np.array(pos)
+    bones = np.where(pos[:, 2] < 0.5, hips, head)[:, None]
+    return ProxyMesh.from_influences(f"{skeleton.name}_card", skeleton.name, pos,
+                                     np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]]),
+                                     bones, np.ones((8, 1)), normals=np.array(nor),
+                                     bone_count=skeleton.bone_count)
+
+
+def build(agents: int, lods: bool) -> Crowd:
+    sk = humanoid("fan", BONES)
+    cfg = CrowdConfig(max_offset=M, transition_slots=SLOTS, seed=1,
+                      lod_distances=LOD_DISTANCES)
+    cfg.add_skeleton(sk)
+    for i in range(12):
+        cfg.add_clip(periodic_clip(sk, f"clip{i}", frames=90 + 20 * i, seed=i, amplitude=0.3))
+    for s in range(STREAMS):
+        cfg.add_stream(f"stream{s}", "fan", ClipPlayer(f"clip{s % 12}"))
+    side = int(np.ceil(np.sqrt(agents)))
+    grid = np.stack(np.meshgrid(np.arange(side), np.arange(side)), -1).reshape(-1, 2)[:agents]
+    rng = np.random.default_rng(2)
+    cfg.add_agents(agents, positions=np.c_[grid * 0.9, np.zeros(agents)],
+                   headings=rng.uniform(-0.4, 0.4, agents) - np.pi / 2)
+    mesh = humanoid_mesh(sk)
+    cfg.add_mesh(mesh, lods=build_lods(mesh, (0.25, 0.06))[1:] + [card_lod(sk)] if lods
+                 else ())
+    return Crowd(cfg, gpu_transitions=True)
+
+
+# ------------------------------------------------------------------- backends
+class ModernGL:
+    name = "moderngl"
+
+    def __init__(self):
+        import moderngl
+        self.ctx = moderngl.create_standalone_context(backend="egl", require=430)
+        self.device = self.ctx.info["GL_RENDERER"]
+
+    def renderer(self, crowd, size):
+        from crowd_addon.gpu.moderngl_backend import ModernGLRenderer
+        return ModernGLRenderer(crowd, self.ctx, size)
+
+    def finish(self, renderer):
+        self.ctx.finish()
+
+
+class Blender:
+    name = "blender"
+
+    def __init__(self):
+        import bpy  # noqa: F401
+        import gpu
+
+        from crowd_addon.gpu.blender_backend import init_headless_gpu
+        init_headless_gpu()
+        self.device = gpu.platform.renderer_get()
+
+    def renderer(self, crowd, size):
+        from crowd_addon.gpu.blender_backend import BlenderGPURenderer
+        return BlenderGPURenderer(crowd, size)
+
+    def finish(self, renderer):
+        with renderer.framebuffer.bind():          # a read waits for the GPU
+            renderer.framebuffer.read_color(0, 0, 1, 1, 4, 0, "UBYTE")
+
+
+# -------------------------------------------------------------------- measuring
+def request(crowd, rng):
+    """Keep the slots busy; returns how many transitions started now."""
+    r = crowd.transition_to_streamed(rng.integers(0, crowd.N, PER_FRAME),
+                                     int(rng.integers(STREAMS)), BLEND)
+    return int(r.started.size)
+
+
+def frames(backend, crowd, renderer, camera, count, rng, warm=40) -> dict:
+    """``warm`` frames to fill the slots (no draw, then one draw), then ``count``
+    measured frames."""
+    if warm:
+        for _ in range(warm):
+            request(crowd, rng)
+            crowd.step()
+            renderer.sync()
+        renderer.render(camera)
+        backend.finish(renderer)
+    step, gpu, sent, minimum, vertices = [], [], [], [], 0
+    st = crowd.storage
+    for _ in range(count):
+        started = request(crowd, rng)
+        t0 = time.perf_counter()
+        report = crowd.step()
+        t1 = time.perf_counter()
+        stats = renderer.sync()
+        renderer.render(camera)
+        backend.finish(renderer)
+        t2 = time.perf_counter()
+        step.append((t1 - t0) * 1e3)
+        gpu.append((t2 - t1) * 1e3)
+        sent.append(stats.upload_bytes)
+        started += report.transitions_started
+        minimum.append(2 * (crowd.S + crowd.U + started) * st.row_bytes
+                       + 16 * report.transitions_active
+                       + 32 * (started + report.transitions_finished))
+        vertices = renderer.stats.vertices
+    return {"step_ms": statistics.median(step), "gpu_ms": statistics.median(gpu),
+            "bytes": int(statistics.median(sent)), "minimum": int(statistics.median(minimum)),
+            "vertices": vertices, "active": report.transitions_active,
+            "lods": {g.lod: g.count for g in renderer.lists.groups}}
+
+
+PROTOTYPE_VS = """#version 430 core
+layout(location = 0) in vec3 pos;
+layout(location = 1) in vec3 nor;
+layout(location = 2) in uvec4 bone_idx;
+layout(location = 3) in vec4 bone_w;
+layout(location = 4) in vec4 agent;          /* per instance: x, y, heading, pose row */
+uniform mat4 u_view_proj;
+uniform sampler2D pose_tex;
+smooth out vec3 v_normal;
+flat out vec3 v_color;
+void main() {
+  int row = int(agent.w);
+  vec4 r0 = vec4(0.0), r1 = vec4(0.0), r2 = vec4(0.0);
+  for (int i = 0; i < INFLUENCES; i++) {
+    int x = 3 * int(bone_idx[i]);
+    r0 += bone_w[i] * texelFetch(pose_tex, ivec2(x, row), 0);
+    r1 += bone_w[i] * texelFetch(pose_tex, ivec2(x + 1, row), 0);
+    r2 += bone_w[i] * texelFetch(pose_tex, ivec2(x + 2, row), 0);
+  }
+  vec4 p = vec4(pos, 1.0);
+  vec3 q = vec3(dot(r0, p), dot(r1, p), dot(r2, p));
+  vec3 n = vec3(dot(r0.xyz, nor), dot(r1.xyz, nor), dot(r2.xyz, nor));
+  float c = cos(agent.z), s = sin(agent.z);
+  v_normal = vec3(c * n.x - s * n.y, s * n.x + c * n.y, n.z);
+  v_color = vec3(0.8);
+  gl_Position = u_view_proj * vec4(c * q.x - s * q.y + agent.x, s * q.x + c * q.y + agent.y,
+                                   q.z, 1.0);
+}
+"""
+PROTOTYPE_FS = """#version 430 core
+smooth in vec3 v_normal;
+flat in vec3 v_color;
+out vec4 frag_color;
+void main() {
+  vec3 n = normalize(gl_FrontFacing ? v_normal : -v_normal);
+  frag_color = vec4(v_color * (0.35 + 0.65 * max(dot(n, normalize(vec3(0.4, -0.6, 0.8))),
+                                                  0.0)), 1.0);
+}
+"""
+
+
+class Prototype:
+    """A plain instanced-skinning draw of the same agents, mesh and pose texture: one
+    indexed instanced call, per-instance attributes, nothing else (moderngl)."""
+
+    def __init__(self, ctx, crowd, camera, size):
+        from crowd_addon.gpu.proxies import proxy_buffers
+        buf = proxy_buffers(crowd.config.meshes["fan"][0])
+        st = crowd.storage
+        self.ctx, self.count = ctx, crowd.N
+        self.vertices = crowd.N * buf.vertex_count
+        self.pose = ctx.texture((st.width, st.height), 4, st.texture_image().tobytes(),
+                                dtype="f4")
+        rows = crowd.agent_rows_index() % st.height
+        inst = np.c_[crowd.agent_position[:, :2], crowd.agent_heading, rows].astype("f4")
+        self.prog = ctx.program(vertex_shader=PROTOTYPE_VS.replace(
+            "INFLUENCES", str(buf.influences)), fragment_shader=PROTOTYPE_FS)
+        self.prog["u_view_proj"].write(np.asarray(camera.view_projection, "f4").T.tobytes())
+        self.vbo = ctx.buffer(buf.interleaved().tobytes())
+        self.ibo = ctx.buffer(buf.indices.tobytes())
+        self.ivbo = ctx.buffer(inst.tobytes())
+        self.vao = ctx.vertex_array(
+            self.prog, [(self.vbo, "3f 3f 4u2 4f", "pos", "nor", "bone_idx", "bone_w"),
+                        (self.ivbo, "4f/i", "agent")], self.ibo, index_element_size=4)
+        self.fbo = ctx.framebuffer(color_attachments=[ctx.renderbuffer(size, 4)],
+                                   depth_attachment=ctx.depth_renderbuffer(size))
+
+    def seconds(self) -> float:
+        """One frame: clear, draw, wait."""
+        self.fbo.use()
+        self.fbo.clear(depth=1.0)
+        self.ctx.enable(self.ctx.DEPTH_TEST)
+        self.pose.use(0)
+        t = time.perf_counter()
+        self.vao.render(instances=self.count)
+        self.ctx.finish()
+        return time.perf_counter() - t
+
+    def release(self):
+        for obj in (self.vao, self.vbo, self.ibo, self.ivbo, self.prog, self.fbo, self.pose):
+            obj.release()
+
+
+def throughput(backend, size, rounds, rng) -> dict:
+    """Skinned vertices per second on the full-mesh throughput frame, best of
+    ``rounds`` interleaved rounds (the machine is shared: interleaving keeps the three
+    figures under the same load): the plain prototype, this renderer's draw alone,
+    and one real frame (request, step, sync, draw; the rate counts sync + draw)."""
+    crowd = build(THROUGHPUT_AGENTS, lods=False)
+    r = backend.renderer(crowd, size)
+    camera = frame_crowd(crowd, aspect=size[0] / size[1])
+    frames(backend, crowd, r, camera, 1, rng)                  # fill the slots, warm up
+    proto = Prototype(backend.ctx, crowd, camera, size) if isinstance(backend, ModernGL) \
+        else None
+    best = {"prototype": 0.0, "draw_only": 0.0, "real_work": 0.0}
+    for _ in range(rounds):
+        if proto is not None:
+            best["prototype"] = max(best["prototype"], proto.vertices / proto.seconds())
+        t = time.perf_counter()
+        r.render(camera)
+        backend.finish(r)
+        best["draw_only"] = max(best["draw_only"], r.stats.vertices / (time.perf_counter() - t))
+        real = frames(backend, crowd, r, camera, 1, rng, warm=0)
+        best["real_work"] = max(best["real_work"], real["vertices"] / real["gpu_ms"] * 1e3)
+    if proto is not None:
+        proto.release()
+    r.release()
+    return best
+
+
+def sizes(backend, size, quick, rng) -> dict:
+    """ms per frame for 1k / 10k / 65k agents, LODs on and off."""
+    n_on, n_off = (2, 1) if quick else (5, 2)
+    table = {}
+    for agents in (1_000, 10_000, 65_000):
+        for lods in (True, False):
+            if agents == 65_000 and not lods and quick:
+                continue
+            crowd = build(agents, lods)
+            r = backend.renderer(crowd, size)
+            count = n_on if lods else max(1, n_off - (agents == 65_000))
+            res = frames(backend, crowd, r, frame_crowd(crowd, aspect=size[0] / size[1]),
+                         count, rng)
+            r.release()
+            table[agents, lods] = res
+            print(f"  {agents:>6} agents, LODs {'on ' if lods else 'off'}: "
+                  f"{res['gpu_ms']:8.1f} ms/frame GPU side ({1e3 / res['gpu_ms']:5.1f} fps), "
+                  f"step {res['step_ms']:5.1f} ms, {res['vertices']:>11,} skinned vertices, "
+                  f"LOD counts {res['lods']}", flush=True)
+    return table
+
+
+# ------------------------------------------------------------------------- main
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true",
+                    help="smoke run: fewer frames, no 65k full-mesh frame")
+    ap.add_argument("--backend", choices=("moderngl", "blender"), default="moderngl")
+    ap.add_argument("--size", default="960x540", help="image WIDTHxHEIGHT (default 960x540)")
+    args = ap.parse_args(argv)
+    size = tuple(int(v) for v in args.size.lower().split("x"))
+    backend = ModernGL() if args.backend == "moderngl" else Blender()
+    rng = np.random.default_rng(7)
+    print(f"gpu_frame: {backend.name} on {backend.device}, {size[0]}x{size[1]}, {STREAMS} "
+          f"streams, M={M}, {SLOTS} slots busy, {BONES} bones, GPU transitions", flush=True)
+    best = throughput(backend, size, 2 if args.quick else 3, rng)
+    proto, raw, real = best["prototype"] or None, best["draw_only"], best["real_work"]
+    limit = proto or raw
+    print(f"  skinned vertices/s, {THROUGHPUT_AGENTS:,} agents x 2,058 vertices, best of "
+          f"interleaved rounds: " + (f"plain prototype {proto / 1e6:.1f} M, " if proto else "")
+          + f"draw only {raw / 1e6:.1f} M, real work {real / 1e6:.1f} M = {real / limit:.0%} "
+          f"of the {'prototype' if proto else 'draw only'} (target >= 80%)", flush=True)
+    table = sizes(backend, size, args.quick, rng)
+    big = table[65_000, True]
+    ratio = big["bytes"] / big["minimum"]
+    print(f"  upload per frame at 65k: {big['bytes']:,} B, minimum {big['minimum']:,} B "
+          f"(ratio {ratio:.3f}, target <= 1.1), {big['active']} active transitions")
+    fps = 1e3 / big["gpu_ms"]
+    fps_all = 1e3 / (big["gpu_ms"] + big["step_ms"])
+    print(f"  65,000 agents with LODs: {fps:.1f} fps GPU side, {fps_all:.1f} fps with "
+          f"Crowd.step: {'met' if fps >= 10 else 'NOT met'} (target >= 10 fps)")
+    print(json.dumps({
+        "backend": backend.name, "device": backend.device, "size": list(size),
+        "prototype_vertices_per_s": proto, "draw_only_vertices_per_s": raw,
+        "real_work_vertices_per_s": real, "real_work_fraction": real / limit,
+        "ms_per_frame": {f"{a}_{'lod' if lods else 'full'}": round(v["gpu_ms"], 2)
+                         for (a, lods), v in table.items()},
+        "step_ms_65k": round(big["step_ms"], 2),
+        "bytes_per_frame_65k": big["bytes"], "bytes_minimum_65k": big["minimum"],
+        "bytes_ratio": round(ratio, 4), "fps_65k_lod": round(fps, 2),
+        "fps_65k_lod_with_step": round(fps_all, 2), "fps_target_met": fps >= 10}))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,158 @@
+"""``crowd demo``: the main job, end to end.
+
+1. build the stadium scene (``sample_scenes/build_stadium.py``, in a child process
+   because it resets Blender's session) with ``--agents`` seats;
+2. open it, author its crowd settings and bake its actions through the extension's
+   own code (:mod:`.stadium`), and save the crowd configuration next to it;
+3. run the stadium show (:mod:`.show`: goal, Mexican wave, hits, claps) and render
+   preview frames headless with the GPU path (PNG, and MP4 when imageio-ffmpeg is
+   there);
+4. export the same show to ``stadium.usdc`` (UsdSkel), re-simulated deterministically;
+5. print a summary and write it as ``summary.json``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from ..core.errors import CrowdError
+
+__all__ = ["run_demo"]
+
+SAMPLE_BUILDER = Path(__file__).resolve().parents[2] / "sample_scenes" / "build_stadium.py"
+
+
+def _bar(done, total, what, stream=sys.stderr, width=30):
+    """A progress bar: redrawn in place on a terminal, every 10% otherwise."""
+    k = int(width * done / max(total, 1))
+    tty = stream.isatty()
+    if not tty and done < total and (10 * done) // max(total, 1) == \
+            (10 * (done - 1)) // max(total, 1):
+        return
+    line = f"  {what:<10} [{'#' * k}{'.' * (width - k)}] {done}/{total}"
+    stream.write(("\r" + line) if tty else line + "\n")
+    if tty and done >= total:
+        stream.write("\n")
+    stream.flush()
+
+
+def _build_scene(path: Path, seats: int, log):
+    if not SAMPLE_BUILDER.is_file():
+        raise CrowdError(f"the stadium builder {SAMPLE_BUILDER} is missing")
+    log(f"building the stadium with {seats:,} seats -> {path}")
+    run = subprocess.run([sys.executable, str(SAMPLE_BUILDER), "--out", str(path),
+                          "--seats", str(seats), "--quiet"], capture_output=True, text=True)
+    if run.returncode != 0:
+        raise CrowdError(f"building the stadium failed:\n{run.stderr.strip()[-2000:]}")
+
+
+def section_camera(stadium, aspect, span=16.0):
+    """A camera on the pitch looking up at the home stand where the wave passes first:
+    close enough that ``span`` metres of seats fill the frame."""
+    import numpy as np
+
+    from ..gpu.camera import Camera
+    pos = stadium.config.agent_position.astype(np.float64)
+    centre = 0.5 * (pos.min(0) + pos.max(0))
+    # seats near angle -pi/2 (the near long side), home first
+    near = np.abs(np.angle(np.exp(1j * (stadium.seat_angle + np.pi / 2)))) < 0.35
+    pick = pos[near & stadium.home] if (near & stadium.home).any() else pos
+    target = pick.mean(0) + np.array([0.0, 0.0, 0.9])
+    inward = centre[:2] - target[:2]
+    inward /= max(np.linalg.norm(inward), 1e-6)
+    fov = np.radians(50.0)
+    dist = span / 2 / np.tan(fov * aspect / 2) if aspect < 1 else span / 2 / np.tan(fov / 2)
+    eye = target + np.r_[inward * dist, 0.35 * dist]
+    return Camera(eye, target, fov, aspect, 0.5, 4 * dist + np.ptp(pos, 0).max())
+
+
+def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
+             mp4: bool = True, usd: bool = True, log=None) -> dict:
+    """Run the stadium demo into ``out_dir``; returns the summary dict."""
+    log = log or (lambda msg: print(msg, file=sys.stderr, flush=True))
+    if agents < 10:
+        raise CrowdError(f"--agents must be at least 10, got {agents}")
+    if frames < 1:
+        raise CrowdError(f"--frames must be at least 1, got {frames}")
+    out = Path(out_dir)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise CrowdError(f"output folder {out}: cannot create it ({e.strerror})") from None
+    if not os.access(out, os.W_OK):
+        raise CrowdError(f"output folder {out}: not writable")
+    t0 = time.perf_counter()
+    seconds = {}
+    blend = out / "stadium.blend"
+    _build_scene(blend, agents, log)
+    seconds["build_scene"] = time.perf_counter() - t0
+
+    t = time.perf_counter()
+    import bpy
+
+    from .. import register, unregister
+    from ..core.config_io import save_config
+    from .stadium import stadium_config
+    bpy.ops.wm.open_mainfile(filepath=str(blend))
+    register()
+    try:
+        log("authoring the crowd and baking its actions")
+        stadium = stadium_config(bpy.context.scene,
+                                 progress=lambda d, n, m: _bar(d + 1, n, "bake"))
+        bpy.context.preferences.filepaths.save_version = 0  # no stadium.blend1 backup
+        bpy.ops.wm.save_mainfile(filepath=str(blend))       # with its crowd settings
+    finally:
+        unregister()
+    cfg = stadium.config
+    save_config(cfg, out / "stadium_crowd.json")
+    seconds["bake"] = time.perf_counter() - t
+
+    from ..core.crowd import Crowd
+    from ..gpu.preview_render import render_preview
+    from .show import StadiumShow
+
+    def make_show(crowd):
+        return StadiumShow(crowd, stadium.seat_angle, stadium.home, cheer="cheer",
+                           wave="wave", hits=stadium.hits, hit_frames=stadium.hit_frames,
+                           away_reaction="groan", actors=stadium.fan)
+
+    log(f"simulating and rendering {frames} frames of {cfg.agent_count:,} agents")
+    t = time.perf_counter()
+    crowd = Crowd(cfg, gpu_transitions=True)
+    show = make_show(crowd)
+    camera = section_camera(stadium, aspect=size[0] / size[1])
+    preview = render_preview(crowd, out / "frames", frames, size=size, mp4=mp4,
+                             before_step=show.before_step, camera=camera,
+                             progress=lambda d, n: _bar(d, n, "render"))
+    seconds["simulate_render"] = time.perf_counter() - t
+    step_ms = crowd.stats["ms_total"] / max(crowd.stats["steps"], 1)
+    summary = {"agents": cfg.agent_count, "streams": len(cfg.streams),
+               "uniques": len(cfg.uniques), "characters": len(cfg.skeletons),
+               "frames": frames, "ms_per_step": round(step_ms, 3),
+               "upload_bytes_per_frame": preview.upload_bytes,
+               "renderer": preview.device, **show.summary(),
+               "pngs": len(preview.pngs), "mp4": preview.mp4}
+
+    if usd:
+        from ..usd.export import export_crowd
+        log("exporting the show to USD")
+        t = time.perf_counter()
+        usd_crowd = Crowd(cfg)
+        usd_show = make_show(usd_crowd)
+        first = usd_crowd.frame                  # the frames the preview shows
+        res = export_crowd(usd_crowd, out / "stadium.usdc", (first, first + frames - 1),
+                           on_frame=usd_show.before_step,
+                           progress=lambda stage, d, n: _bar(d, n, stage))
+        seconds["usd"] = time.perf_counter() - t
+        summary.update(usd=str(res.path), usd_bytes=int(sum(res.files.values())),
+                       usd_baked_agents=res.baked_agents)
+    seconds["total"] = time.perf_counter() - t0
+    summary["seconds"] = {k: round(v, 2) for k, v in seconds.items()}
+    with open(out / "summary.json", "w", encoding="utf-8") as f:
+        json.dump(summary, f, indent=2)
+    return summary

@@ -1,0 +1,180 @@
+"""Offline preview: a saved crowd rendered headless to a PNG sequence and an MP4.
+
+:func:`render_preview` steps a core ``Crowd`` frame by frame, draws it with one of
+the two backends (moderngl on EGL, or Blender's ``gpu`` module after
+:func:`~.blender_gpu.init_headless_gpu`) through a fixed camera that frames the
+whole crowd (:func:`~.camera.frame_crowd`), writes ``frame_<F>.png`` per frame
+(``F`` the crowd frame, at least four digits) and, when asked, ``preview.mp4``
+(H.264 through ``imageio-ffmpeg``, at the crowd's fps). The ``crowd preview``
+command (:mod:`crowd_addon.cli`) is a thin wrapper around it.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..core.crowd import Crowd
+from ..core.errors import CrowdError
+from .camera import frame_crowd
+from .png import write_png
+
+__all__ = ["PreviewResult", "render_preview", "BACKENDS", "MAX_SIZE"]
+
+#: Renderers ``render_preview`` can use.
+BACKENDS = ("moderngl", "blender")
+#: Largest image side accepted, in pixels (the usual GL_MAX_TEXTURE_SIZE).
+MAX_SIZE = 16384
+_PNG_LEVEL = 3                       # zlib level: near level 6 in size, much faster
+
+
+@dataclass
+class PreviewResult:
+    """What :func:`render_preview` wrote.
+
+    ``frames``: (first, last) crowd frames; ``pngs``: paths in order; ``mp4``: path
+    or None; ``size``: (width, height) in pixels; ``device``: the renderer the GL
+    reports; ``seconds``: wall time per stage (``simulate``, ``sync``, ``render``,
+    ``write``, ``total``); ``upload_bytes``: pose and instance bytes sent per frame
+    (median).
+    """
+
+    frames: tuple
+    pngs: list
+    mp4: str | None
+    size: tuple
+    agents: int
+    backend: str
+    device: str
+    upload_bytes: int = 0
+    seconds: dict = field(default_factory=dict)
+
+
+def _check(config, out_dir, frames, size, mp4, backend) -> Path:
+    if backend not in BACKENDS:
+        raise CrowdError(f"unknown backend {backend!r} (choose from {', '.join(BACKENDS)})")
+    if frames < 1:
+        raise CrowdError(f"frames must be at least 1, got {frames}")
+    w, h = size
+    if not (1 <= w <= MAX_SIZE and 1 <= h <= MAX_SIZE):
+        raise CrowdError(f"image size {w} x {h} must be 1..{MAX_SIZE} pixels a side")
+    if mp4 and (w % 2 or h % 2):
+        raise CrowdError(f"an MP4 (H.264, yuv420p) needs an even width and height, got "
+                         f"{w} x {h}")
+    if config.agent_count == 0:
+        raise CrowdError("the crowd has no agents to draw")
+    if not config.meshes:
+        raise CrowdError("the crowd has no proxy mesh to draw its agents with "
+                         "(CrowdConfig.add_mesh)")
+    out = Path(out_dir)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise CrowdError(f"output folder {out}: cannot create it ({e.strerror})") from None
+    if not os.access(out, os.W_OK):
+        raise CrowdError(f"output folder {out}: not writable")
+    return out
+
+
+def _renderer(backend, crowd, size):
+    """(renderer, device name) of ``backend``."""
+    if backend == "moderngl":
+        try:
+            from .moderngl_backend import ModernGLRenderer
+        except ImportError as e:
+            raise CrowdError(f"backend moderngl needs the moderngl package ({e})") from None
+        r = ModernGLRenderer.standalone(crowd, size)
+        return r, r.ctx.info["GL_RENDERER"]
+    try:
+        import bpy  # noqa: F401  (Blender as a module brings the gpu module)
+    except ImportError:
+        raise CrowdError("backend blender needs the bpy module (pip install bpy)") from None
+    import gpu
+    from .blender_backend import BlenderGPURenderer, init_headless_gpu
+    init_headless_gpu()
+    return BlenderGPURenderer(crowd, size), gpu.platform.renderer_get()
+
+
+def _mp4_writer(path, size, fps):
+    try:
+        import imageio_ffmpeg
+    except ImportError:
+        raise CrowdError("--mp4 needs the imageio-ffmpeg package (pip install "
+                         "imageio-ffmpeg)") from None
+    writer = imageio_ffmpeg.write_frames(str(path), size, fps=fps, codec="libx264",
+                                         pix_fmt_out="yuv420p", macro_block_size=2,
+                                         ffmpeg_log_level="error")
+    writer.send(None)
+    return writer
+
+
+def render_preview(config, out_dir, frames: int, start: int | None = None,
+                   size=(960, 540), mp4: bool = False, backend: str = "moderngl",
+                   progress=None, before_step=None, camera=None) -> PreviewResult:
+    """Render ``frames`` frames of ``config`` (a ``CrowdConfig``) from ``start``
+    (default: its start frame) into ``out_dir``; ``progress(done, total)`` is called
+    after each frame. Raises ``CrowdError`` on bad input before writing anything.
+
+    ``config`` may also be a built ``Crowd`` (rendered from where it is, e.g. with GPU
+    transitions); ``before_step(crowd, frame)`` is called before each step with the
+    frame about to be evaluated (the simulation driving the crowd); ``camera``
+    replaces the framing camera."""
+    w, h = (int(v) for v in size)
+    crowd = config if isinstance(config, Crowd) else None
+    config = crowd.config if crowd is not None else config
+    out = _check(config, out_dir, int(frames), (w, h), mp4, backend)
+    t0 = time.perf_counter()
+    seconds = dict.fromkeys(("simulate", "sync", "render", "write"), 0.0)
+    crowd = crowd or Crowd(config)
+    if start is not None:
+        crowd.reset(int(start))
+    seconds["simulate"] += time.perf_counter() - t0
+    renderer, device = _renderer(backend, crowd, (w, h))
+    camera = camera or frame_crowd(crowd, aspect=w / h)
+    mp4_path = out / "preview.mp4" if mp4 else None
+    partial = out / ".preview.partial.mp4"
+    writer = _mp4_writer(partial, (w, h), config.fps) if mp4 else None
+    pngs, uploads, first = [], [], crowd.frame
+    try:
+        for i in range(int(frames)):
+            t = time.perf_counter()
+            if i:
+                if before_step is not None:
+                    before_step(crowd, crowd.frame + 1)
+                crowd.step()
+            t1 = time.perf_counter()
+            uploads.append(renderer.sync().upload_bytes)
+            t2 = time.perf_counter()
+            renderer.render(camera)
+            image = np.ascontiguousarray(renderer.read_image()[..., :3])
+            t3 = time.perf_counter()
+            pngs.append(str(write_png(out / f"frame_{crowd.frame:04d}.png", image,
+                                      _PNG_LEVEL)))
+            if writer is not None:
+                writer.send(image)
+            t4 = time.perf_counter()
+            for k, dt in zip(("simulate", "sync", "render", "write"),
+                             (t1 - t, t2 - t1, t3 - t2, t4 - t3)):
+                seconds[k] += dt
+            if progress is not None:
+                progress(i + 1, int(frames))
+        if writer is not None:
+            t = time.perf_counter()
+            writer.close()
+            writer = None
+            os.replace(partial, mp4_path)
+            seconds["write"] += time.perf_counter() - t
+    finally:
+        if writer is not None:
+            writer.close()
+        if mp4 and partial.exists():
+            partial.unlink()
+        renderer.release()
+    seconds["total"] = time.perf_counter() - t0
+    return PreviewResult((first, crowd.frame), pngs, None if mp4_path is None else
+                         str(mp4_path), (w, h), crowd.N, backend, device,
+                         int(np.median(uploads)), seconds)

@@ -1,0 +1,130 @@
+"""Crowd scenes driven through a renderer, shared by both backends' tests.
+
+Each scene builds its crowd with ``conftest.make_config``, steps it, calls the
+renderer (``make(crowd, size)`` -> a renderer with ``sync``, ``render``,
+``read_image``, ``read_pose_texture``, ``skinned_positions``) and returns named
+arrays: ``gpu/...`` what the renderer gave, ``ref/...`` core's answer for the same
+thing (CPU skinning of ``crowd.agent_rows``, the pose texture mirror, the dirty
+bytes). No GL here: ``blender_backend_run.py`` runs the scenes in a Blender
+subprocess, the tests run the image scenes with moderngl too.
+"""
+
+import importlib.util
+import os
+
+import numpy as np
+
+from crowd_addon.gpu.camera import frame_crowd
+
+
+def _load_conftest():
+    """This directory's conftest (its crowd builders) under a name of its own, so no
+    other directory's ``conftest`` module can stand in for it."""
+    path = os.path.join(os.path.dirname(os.path.abspath(__file__)), "conftest.py")
+    spec = importlib.util.spec_from_file_location("gpu_tests_conftest", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+c = _load_conftest()
+
+SIZE = (200, 150)
+
+
+def _positions(out, key, r, crowd, agents, lod=0):
+    mesh = crowd.config.meshes["fan"][lod]
+    out[f"gpu/{key}"] = r.skinned_positions(agents, lod=lod)
+    out[f"ref/{key}"] = c.world_reference(crowd, agents, mesh)
+
+
+def streamed(make):
+    """Streamed agents at every offset over three frames (three of them moved or
+    turned at the second), the pose texture and the bytes each sync sends."""
+    crowd = c.Crowd(c.make_config(M=8, agents=24))
+    r, out = make(crowd, None), {}
+    st = crowd.storage
+    for f in range(3):
+        if f == 1:
+            crowd.agent_position[[0, 5]] += np.float32([0.5, -0.25, 0.1])
+            crowd.agent_heading[7] += 1.0
+        crowd.step()
+        dirty = st.dirty_ranges()
+        stats = r.sync()
+        out[f"gpu/bytes{f}"] = np.array(stats.pose_bytes)
+        out[f"gpu/instance_bytes{f}"] = np.array(stats.instance_bytes)
+        out[f"ref/rows{f}"] = np.array(sum(n for _, n in dirty))
+        out[f"gpu/texture{f}"] = r.read_pose_texture()
+        out[f"ref/texture{f}"] = st.texture_image()
+        _positions(out, f"frame{f}", r, crowd, np.arange(crowd.N))
+    out["ref/row_bytes"] = np.array(st.row_bytes)
+    return out
+
+
+def unique(make):
+    cfg = c.make_config(uniques=2)
+    c.make_unique(cfg, [1, 5, 9], unique=0)
+    c.make_unique(cfg, [2, 7], unique=1)
+    crowd = c.Crowd(cfg)
+    r, out = make(crowd, None), {}
+    for _ in range(4):
+        crowd.step()
+    r.sync()
+    _positions(out, "unique", r, crowd, np.array([1, 2, 5, 7, 9]))
+    return out
+
+
+def transitions(make, gpu_transitions):
+    """Agents blending towards a stream and a unique, three frames."""
+    crowd = c.Crowd(c.make_config(NT=4), gpu_transitions=gpu_transitions)
+    r, out = make(crowd, None), {}
+    crowd.step()
+    r.sync()
+    agents = np.array([0, 3, 4, 10])
+    crowd.transition_to_streamed(agents[:3], "s2", 6, offset=5)
+    crowd.transition_to_unique(agents[3:], "u0", 5)
+    for f in range(3):
+        crowd.step()
+        out[f"gpu/transitions{f}"] = np.array(r.sync().transitions)
+        _positions(out, f"frame{f}", r, crowd, agents)
+    return out
+
+
+def lods(make):
+    crowd = c.Crowd(c.make_config())
+    r, out = make(crowd, None), {}
+    crowd.step()
+    r.sync()
+    for lod in range(len(crowd.config.meshes["fan"])):
+        _positions(out, f"lod{lod}", r, crowd, np.arange(0, crowd.N, 3), lod)
+    return out
+
+
+def wrapped(make, max_texture_size):
+    """24 streams, M = 24, transitions; ``max_texture_size=256`` wraps the pose rows
+    into three column blocks."""
+    crowd = c.Crowd(c.make_config(M=24, streams=24, NT=8, max_texture_size=max_texture_size))
+    r, out = make(crowd, SIZE), {}
+    for i in range(6):
+        if i == 2:
+            crowd.transition_to_streamed([1, 5, 6], "s7", 8, offset=20)
+        crowd.step()
+        r.sync()
+    out["gpu/blocks"] = np.array(crowd.storage.blocks)
+    r.render(frame_crowd(crowd, aspect=SIZE[0] / SIZE[1]))
+    out["gpu/image"] = r.read_image()
+    _positions(out, "all", r, crowd, np.arange(crowd.N))
+    return out
+
+
+def image(make):
+    """Sixteen agents after five frames, framed by the crowd camera."""
+    crowd = c.Crowd(c.make_config(M=8, agents=16, spacing=0.9))
+    r, out = make(crowd, SIZE), {}
+    for _ in range(5):
+        crowd.step()
+        r.sync()
+    r.render(frame_crowd(crowd, aspect=SIZE[0] / SIZE[1]))
+    out["gpu/image"] = r.read_image()
+    return out
+

@@ -1,0 +1,79 @@
+"""Runs ``backend_scenes`` with the Blender ``gpu`` backend, in its own process.
+
+    python tests/gpu/blender_backend_run.py OUT.npz
+
+Blender's GPU context and moderngl's standalone context do not share a thread
+well (each makes its own context current), so the tests run this in a
+subprocess: ``bpy`` is imported, the GPU initialised by one tiny Workbench
+render (DESIGN.md s.6), every scene run, and the arrays saved as
+``<scene>/<gpu|ref>/<name>``. Also draws one scene the way a viewport draw
+handler does (into a bound ``GPUOffScreen``, no clear of its own).
+"""
+
+import os
+import sys
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path[:0] = [HERE, os.path.dirname(os.path.dirname(HERE))]
+
+import backend_scenes as scenes  # noqa: E402
+from crowd_addon.gpu.camera import frame_crowd  # noqa: E402
+
+#: Exit status when Blender cannot get a GPU context here (the tests skip).
+NO_GPU = 3
+
+
+def viewport(make):
+    """The image scene drawn into a bound GPUOffScreen by a renderer without an image
+    of its own (what a SpaceView3D draw handler does), against its own image."""
+    import gpu
+    own = scenes.image(make)["gpu/image"]
+    crowd = scenes.c.Crowd(scenes.c.make_config(M=8, agents=16, spacing=0.9))
+    r = make(crowd, None)
+    for _ in range(5):
+        crowd.step()
+        r.sync()
+    w, h = scenes.SIZE
+    offscreen = gpu.types.GPUOffScreen(w, h)
+    with offscreen.bind():
+        gpu.state.active_framebuffer_get().clear(color=(0.62, 0.66, 0.72, 1.0), depth=1.0)
+        r.render(frame_crowd(crowd, aspect=w / h), clear=None)
+    buf = offscreen.texture_color.read()
+    buf.dimensions = w * h * 4
+    image = np.frombuffer(buf, np.uint8).reshape(h, w, 4)[::-1]
+    offscreen.free()
+    return {"gpu/image": image, "ref/image": own}
+
+
+def main(path):
+    import bpy  # noqa: F401  (Blender as a module; its gpu module comes with it)
+    from crowd_addon.core import CrowdError
+    from crowd_addon.gpu.blender_backend import BlenderGPURenderer, init_headless_gpu
+    try:
+        init_headless_gpu()
+    except CrowdError as e:
+        print(f"no GPU for Blender here: {e}", file=sys.stderr)
+        sys.exit(NO_GPU)
+
+    def make(crowd, size):
+        return BlenderGPURenderer(crowd, size=size)
+
+    runs = {"streamed": lambda: scenes.streamed(make),
+            "unique": lambda: scenes.unique(make),
+            "transitions_cpu": lambda: scenes.transitions(make, False),
+            "transitions_gpu": lambda: scenes.transitions(make, True),
+            "lods": lambda: scenes.lods(make),
+            "flat": lambda: scenes.wrapped(make, 16384),
+            "wrapped": lambda: scenes.wrapped(make, 256),
+            "image": lambda: scenes.image(make),
+            "viewport": lambda: viewport(make)}
+    out = {}
+    for name, run in runs.items():
+        out.update({f"{name}/{k}": v for k, v in run().items()})
+    np.savez(path, **out)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1])

@@ -1,0 +1,102 @@
+"""The Blender ``gpu`` module backend against core and against the moderngl backend.
+
+Oracles: core's CPU reference skinning (``Crowd.agent_rows`` + ``skin_vertices``)
+for the vertices the backend's vertex stage produces (read back from an RGBA32F
+target, one pixel per vertex: Blender's Python API has no transform feedback),
+core's pose texture mirror and dirty rows for what each frame uploads, and the
+moderngl backend's image of the same frame. Blender runs in a subprocess
+(``blender_backend_run.py``): its GPU context and moderngl's must not share this
+process's thread.
+"""
+
+import importlib.util
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+import backend_scenes as scenes  # noqa: E402
+
+RUNNER = os.path.join(HERE, "blender_backend_run.py")
+NO_GPU = 3
+
+
+@pytest.fixture(scope="module")
+def blender(tmp_path_factory):
+    """``blender(scene)`` -> ``{"gpu/...": ..., "ref/...": ...}`` from the Blender run."""
+    if importlib.util.find_spec("bpy") is None:
+        pytest.skip("needs the bpy module (Blender as a Python module)")
+    out = tmp_path_factory.mktemp("blender_backend") / "scenes.npz"
+    proc = subprocess.run([sys.executable, RUNNER, str(out)], capture_output=True, text=True,
+                          timeout=600)
+    if proc.returncode == NO_GPU:
+        pytest.skip(proc.stderr.strip().splitlines()[-1])
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    data = np.load(out)
+    return lambda scene: {k.split("/", 1)[1]: data[k] for k in data.files
+                          if k.startswith(scene + "/")}
+
+
+def test_streamed_agents_match_cpu_skinning_and_only_dirty_rows_travel(blender, h):
+    d = blender("streamed")
+    for f in range(3):
+        h.assert_close_relative(d[f"gpu/frame{f}"], d[f"ref/frame{f}"])
+        np.testing.assert_array_equal(d[f"gpu/texture{f}"], d[f"ref/texture{f}"])
+        # the dirty rows and a 4-byte row number each, never the whole texture
+        assert d[f"gpu/bytes{f}"] == d[f"ref/rows{f}"] * (d["ref/row_bytes"] + 4)
+        assert d[f"gpu/bytes{f}"] < d[f"ref/texture{f}"].nbytes / 4
+    # agents 0, 5 and 7 moved or turned before frame 1: their two texels + row number
+    assert [int(d[f"gpu/instance_bytes{f}"]) for f in range(3)] == [0, 3 * (32 + 4), 0]
+
+
+def test_unique_agents_match_cpu_skinning(blender, h):
+    d = blender("unique")
+    h.assert_close_relative(d["gpu/unique"], d["ref/unique"])
+
+
+@pytest.mark.parametrize("where", ["cpu", "gpu"])
+def test_agents_mid_transition_match_cpu_skinning(blender, h, where):
+    d = blender(f"transitions_{where}")
+    for f in range(3):
+        h.assert_close_relative(d[f"gpu/frame{f}"], d[f"ref/frame{f}"])
+        # with GPU transitions the compute shader blended the four slots
+        assert d[f"gpu/transitions{f}"] == (4 if where == "gpu" else 0)
+
+
+def test_every_lod_is_skinned_like_its_mesh_on_the_cpu(blender, h):
+    d = blender("lods")
+    assert len([k for k in d if k.startswith("gpu/lod")]) == 3
+    for lod in range(3):
+        h.assert_close_relative(d[f"gpu/lod{lod}"], d[f"ref/lod{lod}"])
+
+
+def test_wrapped_pose_texture_renders_identically(blender, h):
+    flat, wrapped = blender("flat"), blender("wrapped")
+    assert flat["gpu/blocks"] == 1 and wrapped["gpu/blocks"] == 3
+    h.assert_close_relative(wrapped["gpu/all"], wrapped["ref/all"])
+    np.testing.assert_array_equal(wrapped["gpu/all"], flat["gpu/all"])
+    np.testing.assert_array_equal(wrapped["gpu/image"], flat["gpu/image"])
+
+
+def _agreement(a, b, level=2):
+    """Fraction of pixels whose channels all differ by at most ``level`` / 255."""
+    return float((np.abs(a.astype(int) - b.astype(int)).max(-1) <= level).mean())
+
+
+def test_same_frame_renders_like_the_moderngl_backend(blender, renderer):
+    image = blender("image")["gpu/image"]
+    reference = scenes.image(lambda crowd, size: renderer(crowd, size))["gpu/image"]
+    assert (reference[..., :3] != reference[0, 0, :3]).any(-1).mean() > 0.04  # agents show
+    assert _agreement(image, reference) >= 0.995
+    wrapped = blender("wrapped")["gpu/image"]
+    assert _agreement(wrapped, scenes.wrapped(lambda crowd, size: renderer(crowd, size),
+                                              256)["gpu/image"]) >= 0.995
+
+
+def test_drawing_into_the_bound_framebuffer_like_a_draw_handler(blender):
+    d = blender("viewport")
+    np.testing.assert_array_equal(d["gpu/image"], d["ref/image"])

@@ -1,0 +1,114 @@
+"""``crowd preview``: a saved crowd rendered headless to PNG frames and an MP4.
+
+Oracles: ffmpeg (through imageio-ffmpeg) decodes the PNGs and the MP4 and counts
+the MP4's frames, independently of our PNG writer; the Blender backend's frame
+from a subprocess is compared with the moderngl one.
+"""
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from crowd_addon.cli import main
+from crowd_addon.core.config_io import save_config
+
+imageio_ffmpeg = pytest.importorskip("imageio_ffmpeg")
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+
+def decode(path):
+    """Every frame of an image or video file as (n, H, W, 3) uint8, decoded by ffmpeg."""
+    reader = imageio_ffmpeg.read_frames(str(path))
+    w, h = next(reader)["size"]
+    return np.stack([np.frombuffer(f, np.uint8).reshape(h, w, 3) for f in reader])
+
+
+@pytest.fixture
+def config_path(h, tmp_path):
+    path = tmp_path / "crowd.json"
+    save_config(h.make_config(M=8, agents=16, spacing=0.9), path)
+    return path
+
+
+def run(capsys, *argv):
+    code = main(["preview", *map(str, argv)])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_frames_and_mp4_are_written_visible_and_moving(config_path, tmp_path, capsys):
+    out_dir = tmp_path / "shot"
+    code, out, err = run(capsys, "--config", config_path, "--out", out_dir, "--frames", 5,
+                         "--start", 3, "--width", 96, "--height", 64, "--mp4", "--json")
+    assert code == 0, err
+    summary = json.loads(out)
+    assert summary["frames"] == [3, 7] and "frame 5/5" in err
+    pngs = [out_dir / f"frame_{f:04d}.png" for f in range(3, 8)]
+    assert summary["pngs"] == [str(p) for p in pngs]
+    frames = np.concatenate([decode(p) for p in pngs])
+    assert frames.shape == (5, 64, 96, 3)
+    background = frames[0, 0, 0]
+    assert ((frames != background).any(-1).mean((1, 2)) > 0.03).all()     # agents show
+    assert (frames[0] != frames[4]).any(-1).mean() > 0.005                # and move
+    video = out_dir / "preview.mp4"
+    assert summary["mp4"] == str(video)
+    assert imageio_ffmpeg.count_frames_and_secs(str(video))[0] == 5
+    movie = decode(video)
+    assert movie.shape == (5, 64, 96, 3)
+    # lossy H.264, but the same pictures in the same order
+    err_same = np.abs(movie.astype(int) - frames.astype(int)).mean((1, 2, 3))
+    err_shifted = np.abs(movie[1:].astype(int) - frames[:-1].astype(int)).mean((1, 2, 3))
+    assert err_same.max() < 6 and (err_same[1:] < err_shifted).all()
+    assert [p.name for p in out_dir.iterdir() if p.name.startswith(".")] == []
+
+
+def test_text_summary(config_path, tmp_path, capsys):
+    code, out, _ = run(capsys, "--config", config_path, "--out", tmp_path / "s", "--frames", 2,
+                       "--width", 64, "--height", 48)
+    assert code == 0
+    assert out.startswith("wrote 2 frames (0-1)") and "16 agents" in out
+    assert sorted(os.listdir(tmp_path / "s")) == ["frame_0000.png", "frame_0001.png"]
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--frames", 0], "argument --frames: must be >= 1"),
+    (["--frames", 2, "--width", 95, "--mp4"], "even width and height"),
+    (["--frames", 2, "--width", 20000], "1..16384 pixels"),
+])
+def test_bad_input_exits_2_and_writes_nothing(config_path, tmp_path, capsys, args, message):
+    out_dir = tmp_path / "shot"
+    code, _, err = run(capsys, "--config", config_path, "--out", out_dir, *args)
+    assert code == 2
+    assert "crowd preview: error:" in err
+    assert message in err
+    assert not out_dir.exists() or not os.listdir(out_dir)
+
+
+def test_missing_config_and_unwritable_output(config_path, tmp_path, capsys):
+    code, _, err = run(capsys, "--config", tmp_path / "nope.json", "--out", tmp_path / "o",
+                       "--frames", 1)
+    assert code == 2 and err.startswith("crowd preview: error:") and "nope.json" in err
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    code, _, err = run(capsys, "--config", config_path, "--out", blocker / "sub", "--frames", 1)
+    assert code == 2 and err.startswith("crowd preview: error: output folder")
+
+
+def test_blender_backend_renders_the_same_frames(config_path, tmp_path, capsys):
+    if subprocess.run([sys.executable, "-c", "import bpy"], capture_output=True).returncode:
+        pytest.skip("needs the bpy module")
+    args = ["--config", config_path, "--frames", 2, "--width", 96, "--height", 64]
+    assert run(capsys, *args, "--out", tmp_path / "mgl")[0] == 0
+    proc = subprocess.run([sys.executable, "-m", "crowd_addon", "preview", *map(str, args),
+                           "--out", str(tmp_path / "bl"), "--backend", "blender"],
+                          capture_output=True, text=True, cwd=ROOT, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "blender on" in proc.stdout
+    for name in ("frame_0000.png", "frame_0001.png"):
+        a, b = decode(tmp_path / "mgl" / name), decode(tmp_path / "bl" / name)
+        assert (np.abs(a.astype(int) - b.astype(int)).max(-1) <= 2).mean() >= 0.995
