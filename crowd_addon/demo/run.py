@@ -112,14 +112,19 @@ def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
     save_config(cfg, out / "stadium_crowd.json")
     seconds["bake"] = time.perf_counter() - t
 
+    import numpy as np
+
     from ..core.crowd import Crowd
     from ..gpu.preview_render import render_preview
-    from .show import StadiumShow
+    from .show import ShowPlan, StadiumShow
+
+    # the wave starts just before the stand the camera looks at, so it passes early
+    plan = ShowPlan(wave_start_angle=-np.pi / 2 - 0.4)
 
     def make_show(crowd):
         return StadiumShow(crowd, stadium.seat_angle, stadium.home, cheer="cheer",
                            wave="wave", hits=stadium.hits, hit_frames=stadium.hit_frames,
-                           away_reaction="groan", actors=stadium.fan)
+                           away_reaction="groan", actors=stadium.fan, plan=plan)
 
     log(f"simulating and rendering {frames} frames of {cfg.agent_count:,} agents")
     t = time.perf_counter()

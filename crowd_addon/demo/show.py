@@ -42,6 +42,7 @@ class ShowPlan:
     wave_lap_frames: int = 240          # one lap of the bowl
     wave_laps: float = 1.0
     wave_hold: int = 16                 # frames an agent stays up
+    wave_start_angle: float = 0.0       # radians around the bowl where the wave starts
     blend_frames: int = 6               # transition length L
     hit_frame: int = 70
     seed: int = 11
@@ -138,7 +139,7 @@ class StadiumShow:
                 p.wave_lap_frames:
             a0 = (t - p.wave_start) / p.wave_lap_frames * 2 * np.pi
             a1 = (t + 1 - p.wave_start) / p.wave_lap_frames * 2 * np.pi
-            swept = np.mod(self.angle - a0, 2 * np.pi) < (a1 - a0)
+            swept = np.mod(self.angle - p.wave_start_angle - a0, 2 * np.pi) < (a1 - a0)
             ids = np.flatnonzero(swept & ~self._busy)
             self._request(ids, "stream", self.wave, offset=0)
             self.stats.waves += ids.size
