@@ -11,7 +11,8 @@ mesh for every agent. Prints:
 * skinned vertices per second on a 2,000-agent full-mesh frame: a plain
   instanced-skinning prototype (per-instance attributes, no agent texture, no draw
   lists; moderngl only), this renderer's draw alone, and the real work (pose and
-  local pose upload + instance updates + transition compute shader + draw);
+  local pose upload + instance updates + transition compute shader + draw); and
+  the vertex stage alone (rasterizer discard) of the prototype and the draw;
 * ms per frame for 1k / 10k / 65k agents with LODs on and off (GPU side: sync +
   draw + finish; ``Crowd.step`` on the CPU is shown apart, see core_frame.py);
 * bytes uploaded per frame against the minimum for GPU transitions: the new
@@ -264,16 +265,27 @@ def throughput(backend, size, rounds, rng) -> dict:
     frames(backend, crowd, r, camera, 1, rng)                  # fill the slots, warm up
     proto = Prototype(backend.ctx, crowd, camera, size) if isinstance(backend, ModernGL) \
         else None
-    best = {"prototype": 0.0, "draw_only": 0.0, "real_work": 0.0}
-    for _ in range(rounds):
-        if proto is not None:
-            best["prototype"] = max(best["prototype"], proto.vertices / proto.seconds())
+    best = dict.fromkeys(("prototype", "draw_only", "real_work", "prototype_vertex_stage",
+                          "draw_vertex_stage"), 0.0)
+
+    def draw_rate():
         t = time.perf_counter()
         r.render(camera)
         backend.finish(r)
-        best["draw_only"] = max(best["draw_only"], r.stats.vertices / (time.perf_counter() - t))
+        return r.stats.vertices / (time.perf_counter() - t)
+
+    for _ in range(rounds):
+        if proto is not None:
+            best["prototype"] = max(best["prototype"], proto.vertices / proto.seconds())
+        best["draw_only"] = max(best["draw_only"], draw_rate())
         real = frames(backend, crowd, r, camera, 1, rng, warm=0)
         best["real_work"] = max(best["real_work"], real["vertices"] / real["gpu_ms"] * 1e3)
+        if proto is not None:          # the vertex stage alone: rasterizer discard
+            backend.ctx.enable(backend.ctx.RASTERIZER_DISCARD)
+            best["prototype_vertex_stage"] = max(best["prototype_vertex_stage"],
+                                                 proto.vertices / proto.seconds())
+            best["draw_vertex_stage"] = max(best["draw_vertex_stage"], draw_rate())
+            backend.ctx.disable(backend.ctx.RASTERIZER_DISCARD)
     if proto is not None:
         proto.release()
     r.release()
@@ -315,13 +327,17 @@ def main(argv=None):
     rng = np.random.default_rng(7)
     print(f"gpu_frame: {backend.name} on {backend.device}, {size[0]}x{size[1]}, {STREAMS} "
           f"streams, M={M}, {SLOTS} slots busy, {BONES} bones, GPU transitions", flush=True)
-    best = throughput(backend, size, 2 if args.quick else 3, rng)
+    best = throughput(backend, size, 3 if args.quick else 5, rng)
     proto, raw, real = best["prototype"] or None, best["draw_only"], best["real_work"]
     limit = proto or raw
     print(f"  skinned vertices/s, {THROUGHPUT_AGENTS:,} agents x 2,058 vertices, best of "
           f"interleaved rounds: " + (f"plain prototype {proto / 1e6:.1f} M, " if proto else "")
           + f"draw only {raw / 1e6:.1f} M, real work {real / 1e6:.1f} M = {real / limit:.0%} "
           f"of the {'prototype' if proto else 'draw only'} (target >= 80%)", flush=True)
+    if proto:
+        print(f"  vertex stage alone (rasterizer discard): plain prototype "
+              f"{best['prototype_vertex_stage'] / 1e6:.1f} M, this renderer's draw "
+              f"{best['draw_vertex_stage'] / 1e6:.1f} M skinned vertices/s", flush=True)
     table = sizes(backend, size, args.quick, rng)
     big = table[65_000, True]
     ratio = big["bytes"] / big["minimum"]
@@ -335,6 +351,8 @@ def main(argv=None):
         "backend": backend.name, "device": backend.device, "size": list(size),
         "prototype_vertices_per_s": proto, "draw_only_vertices_per_s": raw,
         "real_work_vertices_per_s": real, "real_work_fraction": real / limit,
+        "vertex_stage_prototype_per_s": best["prototype_vertex_stage"] or None,
+        "vertex_stage_draw_per_s": best["draw_vertex_stage"] or None,
         "ms_per_frame": {f"{a}_{'lod' if lods else 'full'}": round(v["gpu_ms"], 2)
                          for (a, lods), v in table.items()},
         "step_ms_65k": round(big["step_ms"], 2),
