@@ -234,8 +234,15 @@ def _add_export(subparsers) -> None:
                     ".usdc or .usd binary, .usda text; its layers go to <stem>.layers/ "
                     "beside it. Nothing is written unless the whole export succeeds.",
         epilog="example: crowd export --config crowd.json --out shot.usdc --frames 1-300")
-    p.add_argument("--config", required=True, metavar="CROWD_JSON",
-                   help="crowd configuration manifest written by config_io.save_config")
+    src = p.add_mutually_exclusive_group()
+    src.add_argument("--config", metavar="CROWD_JSON",
+                     help="crowd configuration manifest written by config_io.save_config")
+    src.add_argument("--blend", metavar="SCENE_BLEND",
+                     help="a .blend whose scene has Crowd settings (needs the bpy module); "
+                          "inside Blender (blender -b scene.blend -c crowd export ...) the "
+                          "open file's scene is used when neither option is given")
+    p.add_argument("--scene", default=None, metavar="NAME",
+                   help="scene of the .blend (default: the active scene)")
     p.add_argument("--out", required=True, metavar="SHOT_USD",
                    help="main layer to write (.usdc, .usd or .usda)")
     p.add_argument("--frames", required=True, type=_frame_range, metavar="FIRST-LAST",
@@ -252,10 +259,9 @@ def _add_export(subparsers) -> None:
 def _run_export(args) -> int:
     import json
 
-    from .core.config_io import load_config
     from .usd import export_crowd
 
-    config = load_config(args.config)
+    config = _export_source(args)
     result = export_crowd(config, args.out, args.frames, agents=args.agents,
                           progress=_progress_printer())
     if args.json:
@@ -281,6 +287,36 @@ def _run_export(args) -> int:
         f"  {s['total']:.1f} s (simulate {s['simulate']:.1f} s, author "
         f"{s['author']:.1f} s, write {s['write']:.1f} s)"]))
     return 0
+
+
+def _export_source(args):
+    """The CrowdConfig to export: a saved configuration, or a Blender scene's Crowd
+    settings baked through the extension (a .blend opened here, or the open file)."""
+    if args.config:
+        from .core.config_io import load_config
+        return load_config(args.config)
+    try:
+        import bpy
+    except ImportError:
+        raise CrowdError("give --config CROWD_JSON, or --blend with the bpy module "
+                         "installed (pip install bpy)") from None
+    from .blender.scene_config import config_from_scene
+    if args.blend:
+        if not os.path.isfile(args.blend):
+            raise CrowdError(f"{args.blend}: no such .blend file")
+        bpy.ops.wm.open_mainfile(filepath=os.path.abspath(args.blend))
+    elif not bpy.data.filepath:
+        raise CrowdError("give --config CROWD_JSON or --blend SCENE_BLEND (no .blend is "
+                         "open)")
+    scene = bpy.context.scene if args.scene is None else bpy.data.scenes.get(args.scene)
+    if scene is None:
+        raise CrowdError(f"no scene {args.scene!r} in {bpy.data.filepath} (scenes: "
+                         f"{[s.name for s in bpy.data.scenes]})")
+    if not hasattr(scene, "crowd"):             # outside an installed extension
+        from . import register
+        register()
+    return config_from_scene(scene, lambda done, total, message: print(
+        f"crowd export: {message}", file=sys.stderr, flush=True))
 
 
 def _progress_printer():

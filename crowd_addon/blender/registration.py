@@ -32,6 +32,9 @@ def _ours(fn, wanted) -> bool:
                             and getattr(fn, "__qualname__", None) == wanted.__qualname__)
 
 
+_cli = None            # handle of the "crowd" command of Blender's -c option
+
+
 def register():
     for cls in CLASSES:
         bpy.utils.register_class(cls)
@@ -41,9 +44,23 @@ def register():
         for old in [h for h in handlers if _ours(h, fn)]:
             handlers.remove(old)
         handlers.append(fn)
+    global _cli
+    if _cli is None and hasattr(bpy.utils, "register_cli_command"):   # Blender 4.2+
+        _cli = bpy.utils.register_cli_command("crowd", _crowd_cli)
+
+
+def _crowd_cli(argv):
+    """``blender -b scene.blend -c crowd <command> ...``: the headless command line with
+    the open file's scene (``export`` reads its Crowd settings)."""
+    from ..cli import main
+    return main(list(argv))
 
 
 def unregister():
+    global _cli
+    if _cli is not None:
+        bpy.utils.unregister_cli_command(_cli)
+        _cli = None
     preview.stop_all()
     api.detach_all()
     for name, fn in HANDLERS:
