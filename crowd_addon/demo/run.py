@@ -14,7 +14,6 @@
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
 import time
@@ -79,13 +78,8 @@ def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
         raise CrowdError(f"--agents must be at least 10, got {agents}")
     if frames < 1:
         raise CrowdError(f"--frames must be at least 1, got {frames}")
-    out = Path(out_dir)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise CrowdError(f"output folder {out}: cannot create it ({e.strerror})") from None
-    if not os.access(out, os.W_OK):
-        raise CrowdError(f"output folder {out}: not writable")
+    from ..gpu.preview_render import output_dir
+    out = output_dir(out_dir)
     t0 = time.perf_counter()
     seconds = {}
     blend = out / "stadium.blend"

@@ -23,7 +23,7 @@ from ..core.errors import CrowdError
 from .camera import frame_crowd
 from .png import write_png
 
-__all__ = ["PreviewResult", "render_preview", "BACKENDS", "MAX_SIZE"]
+__all__ = ["PreviewResult", "render_preview", "output_dir", "BACKENDS", "MAX_SIZE"]
 
 #: Renderers ``render_preview`` can use.
 BACKENDS = ("moderngl", "blender")
@@ -70,7 +70,13 @@ def _check(config, out_dir, frames, size, mp4, backend) -> Path:
     if not config.meshes:
         raise CrowdError("the crowd has no proxy mesh to draw its agents with "
                          "(CrowdConfig.add_mesh)")
-    out = Path(out_dir)
+    return output_dir(out_dir)
+
+
+def output_dir(path) -> Path:
+    """``path`` as a folder that exists and is writable (created if missing), or a
+    CrowdError naming it."""
+    out = Path(path)
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as e:
