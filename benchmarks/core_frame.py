@@ -23,47 +23,17 @@ import numpy as np
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
-from crowd_addon.core import (Blend2, BlendSpace2D, ClipPlayer, Crowd, CrowdConfig,  # noqa: E402
-                              Layer, StateMachine, StateTransition)
+from crowd_addon.core import Crowd  # noqa: E402
 from crowd_addon.core.graph import TreeEvaluator  # noqa: E402
 from crowd_addon.core.skinning import SkinningPlan  # noqa: E402
-from crowd_addon.core.synthetic import humanoid, periodic_clip  # noqa: E402
+from crowd_addon.core.synthetic import paper_config  # noqa: E402
 
 STREAMS, M, SLOTS, BONES = 256, 60, 800, 82
 
 
-def stream_tree(s: int):
-    """A clip or a small controller tree, cycling through the kinds."""
-    c = lambda k: ClipPlayer(f"clip{(s + k) % 12}")  # noqa: E731
-    kind = s % 5
-    if kind == 0:
-        return c(0)
-    if kind == 1:
-        return Blend2(c(0), c(1), weight=0.35)
-    if kind == 2:
-        return Layer(c(0), ClipPlayer("wave"), mode="additive",
-                     bone_weights={"upperarm.R": 1, "forearm.R": 1, "hand.R": 1})
-    if kind == 3:
-        return BlendSpace2D([c(0), c(1), c(2), c(3)], [(0, 0), (1, 0), (0, 1), (1, 1)],
-                            x=0.3, y=0.6)
-    return StateMachine({"idle": c(0), "cheer": c(5)},
-                        [StateTransition("idle", "cheer", 10, trigger="goal"),
-                         StateTransition("cheer", "idle", 10, trigger="calm")])
-
-
 def build(agents: int, gpu_transitions: bool = False) -> Crowd:
-    sk = humanoid("fan", BONES)
-    cfg = CrowdConfig(max_offset=M, transition_slots=SLOTS, seed=1)
-    cfg.add_skeleton(sk)
-    for i in range(12):
-        cfg.add_clip(periodic_clip(sk, f"clip{i}", frames=90 + 20 * i, seed=i,
-                                   events=[("clap", 12.0)] if i % 3 == 0 else ()))
-    cfg.add_clip(periodic_clip(sk, "wave", frames=45, seed=99,
-                               bones=["upperarm.R", "forearm.R", "hand.R"]))
-    for s in range(STREAMS):
-        cfg.add_stream(f"stream{s}", "fan", stream_tree(s))
-    cfg.add_agents(agents)
-    return Crowd(cfg, gpu_transitions=gpu_transitions)
+    return Crowd(paper_config(agents, STREAMS, M, SLOTS, BONES),
+                 gpu_transitions=gpu_transitions)
 
 
 def run(agents: int, steps: int, rng, gpu_transitions=False) -> dict:

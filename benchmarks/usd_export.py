@@ -33,43 +33,18 @@ import numpy as np
 ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
 sys.path.insert(0, ROOT)
 
-from crowd_addon.core import (Blend2, ClipPlayer, CrowdConfig, Layer,  # noqa: E402
-                              StateMachine, StateTransition)
-from crowd_addon.core.synthetic import humanoid, humanoid_mesh, periodic_clip  # noqa: E402
+from crowd_addon.core import CrowdConfig  # noqa: E402
+from crowd_addon.core.synthetic import humanoid_mesh, paper_config  # noqa: E402
 
 STREAMS, M, BONES, SLOTS, FRAMES = 256, 60, 82, 800, 300
 FIRST = 1
 REACT_AT = (60, 150, 240)            # shot-relative frames of the crowd's reactions
 
 
-def stream_tree(s: int):
-    c = lambda k: ClipPlayer(f"clip{(s + k) % 12}")  # noqa: E731
-    kind = s % 4
-    if kind == 0:
-        return c(0)
-    if kind == 1:
-        return Blend2(c(0), c(1), weight=0.35)
-    if kind == 2:
-        return Layer(c(0), ClipPlayer("wave"), mode="additive",
-                     bone_weights={"upperarm.R": 1, "forearm.R": 1, "hand.R": 1})
-    return StateMachine({"idle": c(0), "cheer": c(5)},
-                        [StateTransition("idle", "cheer", 10, trigger="goal"),
-                         StateTransition("cheer", "idle", 10, trigger="calm")])
-
-
 def build(agents: int, streams: int = STREAMS) -> CrowdConfig:
     """The paper's configuration with ``agents`` agents seated on a stadium grid."""
-    sk = humanoid("fan", BONES)
-    cfg = CrowdConfig(max_offset=M, transition_slots=SLOTS, seed=1)
-    cfg.add_skeleton(sk)
-    cfg.add_mesh(humanoid_mesh(sk), lods=())
-    for i in range(12):
-        cfg.add_clip(periodic_clip(sk, f"clip{i}", frames=90 + 20 * i, seed=i,
-                                   events=[("clap", 12.0)] if i % 3 == 0 else ()))
-    cfg.add_clip(periodic_clip(sk, "wave", frames=45, seed=99,
-                               bones=["upperarm.R", "forearm.R", "hand.R"]))
-    for s in range(streams):
-        cfg.add_stream(f"stream{s}", "fan", stream_tree(s))
+    cfg = paper_config(0, streams, M, SLOTS, BONES)
+    cfg.add_mesh(humanoid_mesh(cfg.skeletons["fan"]), lods=())
     cols = int(np.ceil(np.sqrt(agents * 4)))
     k = np.arange(agents)
     pos = np.stack([(k % cols) * 0.8, (k // cols) * 0.9, (k // cols) * 0.4], 1)

@@ -14,7 +14,7 @@ from . import quaternion as quat
 from .clip import Clip
 from .skeleton import Skeleton
 
-__all__ = ["humanoid", "humanoid_mesh", "periodic_clip"]
+__all__ = ["humanoid", "humanoid_mesh", "periodic_clip", "paper_config", "paper_stream_tree"]
 
 
 def humanoid(name="fan", bones=82) -> Skeleton:
@@ -158,3 +158,47 @@ def humanoid_mesh(skeleton: Skeleton, sides=8, rings=4, name=None):
                                      np.concatenate(pos), np.concatenate(tris),
                                      np.concatenate(idx), np.concatenate(wts),
                                      bone_count=skeleton.bone_count)
+
+
+def paper_stream_tree(s: int):
+    """Stream ``s`` of :func:`paper_config`: a clip or a small controller tree, cycling
+    through plain clip, 2-way blend, additive wave layer, 2-D blend space and state
+    machine (triggers ``goal`` / ``calm``)."""
+    from .controllers import (Blend2, BlendSpace2D, ClipPlayer, Layer, StateMachine,
+                              StateTransition)
+    c = lambda k: ClipPlayer(f"clip{(s + k) % 12}")  # noqa: E731
+    kind = s % 5
+    if kind == 0:
+        return c(0)
+    if kind == 1:
+        return Blend2(c(0), c(1), weight=0.35)
+    if kind == 2:
+        return Layer(c(0), ClipPlayer("wave"), mode="additive",
+                     bone_weights={"upperarm.R": 1, "forearm.R": 1, "hand.R": 1})
+    if kind == 3:
+        return BlendSpace2D([c(0), c(1), c(2), c(3)], [(0, 0), (1, 0), (0, 1), (1, 1)],
+                            x=0.3, y=0.6)
+    return StateMachine({"idle": c(0), "cheer": c(5)},
+                        [StateTransition("idle", "cheer", 10, trigger="goal"),
+                         StateTransition("cheer", "idle", 10, trigger="calm")])
+
+
+def paper_config(agents: int, streams: int = 256, max_offset: int = 60, slots: int = 800,
+                 bones: int = 82):
+    """The paper's benchmark configuration (s.5) with synthetic content: ``streams``
+    streams (:func:`paper_stream_tree`) over twelve looping clips of 90-310 frames
+    (``clap`` tags on every third) and an arm wave, M, NT, an ``bones``-bone humanoid
+    and ``agents`` agents (uniform offsets, no mesh, at the origin)."""
+    from .config import CrowdConfig
+    sk = humanoid("fan", bones)
+    cfg = CrowdConfig(max_offset=max_offset, transition_slots=slots, seed=1)
+    cfg.add_skeleton(sk)
+    for i in range(12):
+        cfg.add_clip(periodic_clip(sk, f"clip{i}", frames=90 + 20 * i, seed=i,
+                                   events=[("clap", 12.0)] if i % 3 == 0 else ()))
+    cfg.add_clip(periodic_clip(sk, "wave", frames=45, seed=99,
+                               bones=["upperarm.R", "forearm.R", "hand.R"]))
+    for s in range(streams):
+        cfg.add_stream(f"stream{s}", "fan", paper_stream_tree(s))
+    cfg.add_agents(agents)
+    return cfg
