@@ -1,7 +1,8 @@
 """GPU frame cost at the paper's configuration (Paduraru s.5), on whatever GL is here.
 
 256 streams, M = 60, 800 transition slots kept busy (27 requests a frame, 30-frame
-blends, blended by the compute shader: ``Crowd(config, gpu_transitions=True)``),
+blends), skinned and blended by the compute shader (``Crowd(config, gpu_skinning=True)``:
+the CPU uploads local poses, paper s.4.5),
 82-bone ``core.synthetic`` humanoid with ``humanoid_mesh``; agents on a 0.9 m grid
 seen by the camera that frames the whole crowd (``gpu.camera.frame_crowd``).
 LODs on: the mesh (2,058 vertices), ``build_lods`` at 25 % and 6 % of its
@@ -11,14 +12,14 @@ mesh for every agent. Prints:
 * skinned vertices per second on a 2,000-agent full-mesh frame: a plain
   instanced-skinning prototype (per-instance attributes, no agent texture, no draw
   lists; moderngl only), this renderer's draw alone, and the real work (pose and
-  local pose upload + instance updates + transition compute shader + draw); and
+  local-pose upload + instance updates + skinning-rows compute shader + draw); and
   the vertex stage alone (rasterizer discard) of the prototype and the draw;
 * ms per frame for 1k / 10k / 65k agents with LODs on and off (GPU side: sync +
   draw + finish; ``Crowd.step`` on the CPU is shown apart, see core_frame.py);
-* bytes uploaded per frame against the minimum for GPU transitions: the new
-  skinning and local-pose slices and unique rows, the rows of transitions that
-  started (core writes a started slot's skinning row and its StartP local row),
-  16 B of batch entry per active slot, 32 B per agent whose animation changed;
+* bytes uploaded per frame against the minimum for GPU skinning: the new local-pose
+  slice and unique rows, the StartP row of each transition that started, 16 B of
+  batch entry per row the GPU skins (slice, uniques, active slots), 32 B per agent
+  whose animation changed;
 * whether 65,000 agents reach 10 frames per second with LODs;
 
 then one line of JSON with the figures.
@@ -88,7 +89,7 @@ def build(agents: int, lods: bool) -> Crowd:
     mesh = humanoid_mesh(sk)
     cfg.add_mesh(mesh, lods=build_lods(mesh, (0.25, 0.06))[1:] + [card_lod(sk)] if lods
                  else ())
-    return Crowd(cfg, gpu_transitions=True)
+    return Crowd(cfg, gpu_skinning=True)
 
 
 # ------------------------------------------------------------------- backends
@@ -161,8 +162,8 @@ def frames(backend, crowd, renderer, camera, count, rng, warm=40) -> dict:
         gpu.append((t2 - t1) * 1e3)
         sent.append(stats.upload_bytes)
         started += report.transitions_started
-        minimum.append(2 * (crowd.S + crowd.U + started) * st.row_bytes
-                       + 16 * report.transitions_active
+        minimum.append((crowd.S + crowd.U + started) * st.row_bytes
+                       + 16 * (crowd.S + crowd.U + report.transitions_active)
                        + 32 * (started + report.transitions_finished))
         vertices = renderer.stats.vertices
     return {"step_ms": statistics.median(step), "gpu_ms": statistics.median(gpu),
@@ -326,7 +327,7 @@ def main(argv=None):
     backend = ModernGL() if args.backend == "moderngl" else Blender()
     rng = np.random.default_rng(7)
     print(f"gpu_frame: {backend.name} on {backend.device}, {size[0]}x{size[1]}, {STREAMS} "
-          f"streams, M={M}, {SLOTS} slots busy, {BONES} bones, GPU transitions", flush=True)
+          f"streams, M={M}, {SLOTS} slots busy, {BONES} bones, GPU skinning", flush=True)
     best = throughput(backend, size, 3 if args.quick else 5, rng)
     proto, raw, real = best["prototype"] or None, best["draw_only"], best["real_work"]
     limit = proto or raw

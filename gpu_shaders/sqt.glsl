@@ -9,14 +9,18 @@ struct Sqt {
   vec3 translation;
 };
 
-/* Bone `bone` of logical row `row` of the local-pose texture `local_tex`:
- * texels (sx, sy, sz, 0), (qw, qx, qy, qz), (tx, ty, tz, 0). */
+/* Bone `bone` of logical row `row` of the local-pose texture `local_tex`: the ten
+ * SQT floats in three texels (sx, sy, sz, qw), (qx, qy, qz, tx), (ty, tz, 0, 0)
+ * (crowd_addon/core/pose_storage.py, LOCAL_IDENTITY). */
 Sqt fetch_local_pose(int row, int bone)
 {
+  vec4 a = texelFetch(local_tex, pose_texel(row, 3 * bone), 0);
+  vec4 b = texelFetch(local_tex, pose_texel(row, 3 * bone + 1), 0);
+  vec4 c = texelFetch(local_tex, pose_texel(row, 3 * bone + 2), 0);
   Sqt p;
-  p.scale = texelFetch(local_tex, pose_texel(row, 3 * bone), 0).xyz;
-  p.rotation = texelFetch(local_tex, pose_texel(row, 3 * bone + 1), 0);
-  p.translation = texelFetch(local_tex, pose_texel(row, 3 * bone + 2), 0).xyz;
+  p.scale = a.xyz;
+  p.rotation = vec4(a.w, b.xyz);
+  p.translation = vec3(b.w, c.xy);
   return p;
 }
 

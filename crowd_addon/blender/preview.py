@@ -102,7 +102,7 @@ def start(scene, config=None) -> Preview:
             config = scene_config.config_from_scene(scene)
     if s.armature is None:
         raise CrowdError(f"scene {scene.name!r}: no armature chosen")
-    crowd = Crowd(config)
+    crowd = Crowd(config, gpu_skinning=True)
     pv = Preview(scene.name, crowd, s.armature.name,
                  tuple(a.name for a in scene_config.used_actions(s)),
                  settings_fingerprint(s))

@@ -113,23 +113,26 @@ class AgentIndex:
     def lookup(self, keys: np.ndarray):
         """Agents for each key: ``(ids, which)`` where ``which`` indexes ``keys``."""
         keys = np.asarray(keys, np.int64)
-        lo = np.searchsorted(self.sorted_keys, keys, "left")
-        hi = np.searchsorted(self.sorted_keys, keys, "right")
-        counts = hi - lo
-        which = np.repeat(np.arange(keys.size), counts)
-        pos = np.repeat(lo - np.cumsum(counts) + counts, counts) + np.arange(counts.sum())
-        ids = self.order[pos]
+        ids, which = _ranges(self.sorted_keys, keys, self.order, np.arange(keys.size))
         keep = ~self.stale[ids]
         ids, which = ids[keep], which[keep]
         if self.overlay.size:
-            ok = self.keys[self.overlay]
+            # agents changed since the rebuild: the same search the other way round,
+            # each overlay agent's key among the sorted query keys
             srt = np.argsort(keys, kind="stable")
-            j = np.searchsorted(keys[srt], ok)
-            j = np.minimum(j, keys.size - 1)
-            hit = keys[srt][j] == ok
-            # every query position holding that key gets the agent
-            for a, k in zip(self.overlay[hit], ok[hit]):
-                w = np.flatnonzero(keys == k)
-                ids = np.concatenate([ids, np.full(w.size, a)])
-                which = np.concatenate([which, w])
+            which2, ids2 = _ranges(keys[srt], self.keys[self.overlay], srt, self.overlay)
+            ids = np.concatenate([ids, ids2])
+            which = np.concatenate([which, which2])
         return ids, which
+
+
+def _ranges(sorted_keys, queries, sorted_values, query_values):
+    """Every (value of a sorted key equal to a query, value of that query) pair:
+    ``(sorted_values[j], query_values[i])`` for all ``sorted_keys[j] == queries[i]``."""
+    lo = np.searchsorted(sorted_keys, queries, "left")
+    counts = np.searchsorted(sorted_keys, queries, "right") - lo
+    total = int(counts.sum())
+    if total == 0:
+        return sorted_values[:0], query_values[:0]
+    pos = np.repeat(lo - np.cumsum(counts) + counts, counts) + np.arange(total)
+    return sorted_values[pos], np.repeat(query_values, counts)

@@ -75,13 +75,19 @@ class Batch:
 
     # helpers -----------------------------------------------------------------
     def param_values(self, ctx, specs, default=0.0) -> np.ndarray:
-        """Resolve a number-or-parameter-name per node into a float array."""
-        out = np.empty(len(specs), np.float64)
-        for i, (spec, root) in enumerate(zip(specs, self.roots)):
-            if isinstance(spec, str):
-                out[i] = ctx.params[root].get(spec, default)
-            else:
-                out[i] = spec
+        """Resolve a number-or-parameter-name per node into a float array (numbers
+        are gathered once; only named parameters are looked up each frame)."""
+        tables = self.__dict__.setdefault("_param_tables", {})
+        table = tables.get(id(specs))
+        if table is None or table[0] is not specs:
+            const = np.array([0.0 if isinstance(v, str) else v for v in specs], np.float64)
+            named = [(i, v, int(r)) for i, (v, r) in enumerate(zip(specs, self.roots))
+                     if isinstance(v, str)]
+            table = tables[id(specs)] = (specs, const, named)
+        _, const, named = table
+        out = const.copy()
+        for i, name, root in named:
+            out[i] = ctx.params[root].get(name, default)
         return out
 
 
@@ -289,6 +295,10 @@ class Layer(Controller):
                     self.ref[i] = self.bank.sample([c], [float(node.reference[1])])[0]
             self.specs = [node.weight for node in self.nodes]
             self.additive = self.nodes[0].mode == "additive"
+            # bones no node of the batch layers stay the base pose, computed on none
+            used = np.flatnonzero(self.bw.max(axis=0) > 0)
+            self.bones_used = slice(None) if used.size == self.bones else used
+            self.ref_used = self.ref[:, self.bones_used]
 
         def prepare(self, ctx):
             w = np.clip(self.param_values(ctx, self.specs), 0.0, 1.0)
@@ -297,13 +307,18 @@ class Layer(Controller):
             ctx.local_weight[self.il] = self.w.max(axis=1)
 
         def evaluate(self, ctx):
-            base = ctx.poses[self.ib]
-            lay = ctx.poses[self.il]
+            out = ctx.poses[self.ib]
+            b = self.bones_used
+            base = out[:, b]
+            lay = ctx.poses[self.il[:, None], b] if isinstance(b, np.ndarray) \
+                else ctx.poses[self.il]
+            w = self.w[:, b]
             if self.additive:
-                delta = sqt.additive_delta(lay, self.ref)
-                ctx.poses[self.index] = sqt.apply_additive(base, delta, self.w)
+                delta = sqt.additive_delta(lay, self.ref_used)
+                out[:, b] = sqt.apply_additive(base, delta, w)
             else:
-                ctx.poses[self.index] = sqt.blend2(base, lay, self.w)
+                out[:, b] = sqt.blend2(base, lay, w)
+            ctx.poses[self.index] = out
 
 
 def _bone_weights(spec, skeleton, what) -> np.ndarray:
@@ -486,6 +501,12 @@ class StateMachine(Controller):
             self.src_entered = np.zeros(n)
             self.snapshot = sqt.identity_pose((n, self.bones))
             self.has_snapshot = np.zeros(n, bool)
+            self.initial = self.current.copy()
+            width = max(len(c) for c in self.child_index)
+            self.kids = np.array([c + c[:1] * (width - len(c)) for c in self.child_index],
+                                 np.int64)                   # (n, most states), padded
+            self.all_kids = np.concatenate([np.asarray(c, np.int64) for c in self.child_index])
+            self.rows = np.arange(n)
 
         def reset(self):
             self.setup()
@@ -495,13 +516,18 @@ class StateMachine(Controller):
 
         def prepare(self, ctx):
             t = ctx.time[self.index]
+            # first frame, or an enclosing state re-entered: start over
+            restart = np.isnan(self.entered) | (t < self.entered)
+            if restart.any():
+                self.current[restart] = self.initial[restart]
+                self.fading[restart] = False
+                self.entered[restart] = t[restart]
+            # every transition needs a trigger or a parameter: only nodes whose stream
+            # has one set this frame can fire
             for i, (node, root) in enumerate(zip(self.nodes, self.roots)):
-                if np.isnan(self.entered[i]) or t[i] < self.entered[i]:
-                    # first frame, or an enclosing state re-entered: start over
-                    self.current[i] = node.state_names.index(node.initial)
-                    self.fading[i] = False
-                    self.entered[i] = t[i]
                 params, triggers = ctx.params[root], ctx.triggers[root]
+                if not (params or triggers):
+                    continue
                 cur = node.state_names[self.current[i]]
                 for tr in node.transitions:
                     if tr.target == cur or tr.source not in ("*", cur):
@@ -510,20 +536,19 @@ class StateMachine(Controller):
                         self._enter(i, node.state_names.index(tr.target), tr.duration, t[i],
                                     ctx)
                         break
-                if self.fading[i]:
-                    self.fade_t[i] = t[i] - self.entered[i]
-                    if self.fade_t[i] >= self.fade_len[i]:
-                        self.fading[i] = False
-            ci = self.child_index
-            for i in range(len(self.nodes)):
-                kids = ci[i]
-                ctx.local_weight[kids] = 0.0
-                ctx.shift[kids[self.current[i]]] = self.entered[i]
-                w = min(self.fade_t[i] / self.fade_len[i], 1.0) if self.fading[i] else 1.0
-                ctx.local_weight[kids[self.current[i]]] = w
-                if self.fading[i] and self.source[i] >= 0:
-                    ctx.shift[kids[self.source[i]]] = self.src_entered[i]
-                    ctx.local_weight[kids[self.source[i]]] = 1.0 - w
+            f = self.fading
+            self.fade_t[f] = t[f] - self.entered[f]
+            self.fading &= ~(f & (self.fade_t >= self.fade_len))
+            current = self.kids[self.rows, self.current]
+            ctx.local_weight[self.all_kids] = 0.0
+            ctx.shift[current] = self.entered
+            w = np.where(self.fading, np.minimum(self.fade_t / self.fade_len, 1.0), 1.0)
+            ctx.local_weight[current] = w
+            m = np.flatnonzero(self.fading & (self.source >= 0))
+            if m.size:
+                source = self.kids[m, self.source[m]]
+                ctx.shift[source] = self.src_entered[m]
+                ctx.local_weight[source] = 1.0 - w[m]
 
         def _enter(self, i, state, duration, now, ctx):
             if self.fading[i]:
@@ -540,12 +565,10 @@ class StateMachine(Controller):
             self.fade_t[i] = 0.0
 
         def evaluate(self, ctx):
-            ci = np.array([k[c] for k, c in zip(self.child_index, self.current)], np.int64)
-            out = ctx.poses[ci]
+            out = ctx.poses[self.kids[self.rows, self.current]]
             fading = np.flatnonzero(self.fading)
             if fading.size:
-                src_idx = np.array([self.child_index[i][max(self.source[i], 0)]
-                                    for i in fading], np.int64)
+                src_idx = self.kids[fading, np.maximum(self.source[fading], 0)]
                 src = np.where((self.source[fading] >= 0)[:, None, None],
                                ctx.poses[src_idx], self.snapshot[fading])
                 w = (self.fade_t[fading] / self.fade_len[fading]).astype(np.float32)

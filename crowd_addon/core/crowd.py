@@ -5,7 +5,8 @@ Frame ``F`` (paper s.4.2): every stream root is evaluated once and written to
 history slice ``F mod M``; uniques are evaluated (current pose only); transition
 slots blend (those whose target is already in history first, those that need this
 frame's target after it: the dependency graph of s.4.4-4.5); local poses become
-skinning rows for exactly the rows that changed; event tags crossed by the stream
+skinning rows for exactly the rows that changed (on the CPU, or with
+``gpu_skinning`` on the GPU from the local poses); event tags crossed by the stream
 heads ``O`` frames ago call back for the agents at offset ``O``.
 """
 
@@ -23,26 +24,34 @@ from .config import CrowdConfig
 from .errors import CrowdError
 from .events import EventDispatcher
 from .graph import DependencyGraph, TreeEvaluator
-from .pose_storage import LOCAL_IDENTITY, PoseStorage, pack_local_poses
+from .pose_storage import LOCAL_IDENTITY, PoseStorage
 from .skinning import SkinningPlan
 from .transitions import POLICIES, TransitionResult, TransitionSlots
 
-__all__ = ["Crowd", "StepReport", "GpuTransitionBatch"]
+__all__ = ["Crowd", "StepReport", "GpuSkinningBatch"]
 
 
 @dataclass(frozen=True)
-class GpuTransitionBatch:
-    """The transition slots a GPU blends this frame (paper s.4.5); all ``(n,)``.
+class GpuSkinningBatch:
+    """Pose texture rows the GPU writes (``gpu_skinning``); all ``(n,)``.
 
-    ``slots`` int32 slot indices (pose texture row ``slot_base + slot``);
-    ``target_rows`` int32 logical rows of each target pose in ``local_storage``;
-    ``weights`` float32 ``S``; ``skeletons`` int32 indices into ``Crowd.skeletons``.
+    Row ``rows[i]`` of the pose texture becomes the skinning rows of the local pose
+    ``blend(local[rows[i]], local[sources[i]], weights[i])`` (``local`` = the local-pose
+    texture, ``storage``) of skeleton ``skeletons[i]``. A stream or unique row is its
+    own source with weight 1; a transition slot row blends its StartP towards the
+    target's row by ``S`` (paper s.4.5).
+
+    ``rows``, ``sources`` int32 logical rows; ``weights`` float32; ``skeletons`` int32
+    indices into ``Crowd.skeletons``.
     """
 
-    slots: np.ndarray
-    target_rows: np.ndarray
+    rows: np.ndarray
+    sources: np.ndarray
     weights: np.ndarray
     skeletons: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.rows.size)
 
 
 @dataclass(frozen=True)
@@ -78,20 +87,21 @@ class Crowd:
     frame : int, the last evaluated frame.
     history : (M, S, B, 10) float32 local-pose ring of the streams.
     unique_poses : (U, B, 10) float32 current poses of the uniques.
-    storage : PoseStorage, the pose texture mirror and its dirty rows.
+    storage : PoseStorage, the texture the CPU keeps and uploads, with its dirty rows:
+        the pose texture of skinning rows, or with ``gpu_skinning`` the local-pose
+        texture (``history`` and ``unique_poses`` are then views of it, and slot rows
+        hold each transition's StartP).
     agent_kind, agent_ref, agent_offset : (N,) agent animation references.
     events : EventDispatcher.
-    gpu_transitions : bool. When true the GPU blends transition slots (paper s.4.5):
-        the CPU neither blends slots nor writes their pose texture rows each frame;
-        instead ``local_storage`` mirrors the local poses the GPU needs and
-        :meth:`gpu_transition_batch` says what to blend. Agent poses and rows asked
-        for on the CPU (``agent_poses``, ``agent_rows``) are still exact.
-    local_storage : PoseStorage or None; with ``gpu_transitions``, a texture of the
-        same geometry as ``storage`` holding local SQT rows (:func:`pack_local_poses`):
-        stream rows = pose history, unique rows = unique poses, slot rows = StartP.
+    gpu_skinning : bool. When true the GPU turns local poses into skinning rows and
+        blends the transition slots (paper s.4.5): the CPU only evaluates the
+        streams and uniques into ``storage`` (uploading 10 of 12 floats a bone
+        instead of a 3x4 matrix) and :meth:`gpu_skinning_batch` says which rows the
+        GPU must write. Agent poses and rows asked for on the CPU (``agent_poses``,
+        ``agent_rows``, ``stream_rows``) are still exact.
     """
 
-    def __init__(self, config: CrowdConfig, gpu_transitions: bool = False):
+    def __init__(self, config: CrowdConfig, gpu_skinning: bool = False):
         cfg = config
         self.config = cfg
         self._validate(cfg)
@@ -111,14 +121,24 @@ class Crowd:
         self.evaluator = TreeEvaluator([(d.root, cfg.skeletons[d.skeleton]) for d in defs],
                                        self.bank, self.B)
         self.plans = [SkinningPlan(s, self.B) for s in self.skeletons]
+        self.gpu_skinning = bool(gpu_skinning)
         self.storage = PoseStorage(self.S, self.M, self.U, self.NT, self.B,
-                                   cfg.max_texture_size)
-        self.gpu_transitions = bool(gpu_transitions)
-        self.local_storage = PoseStorage(self.S, self.M, self.U, self.NT, self.B,
-                                         cfg.max_texture_size, fill=LOCAL_IDENTITY) \
-            if self.gpu_transitions else None
-        self.history = sqt.identity_pose((self.M, self.S, self.B))
-        self.unique_poses = sqt.identity_pose((self.U, self.B))
+                                   cfg.max_texture_size,
+                                   fill=LOCAL_IDENTITY if self.gpu_skinning else None)
+        if self.gpu_skinning:
+            local = self.storage.sqt_view()
+            self.history = local[:self.storage.unique_base].reshape(
+                self.M, self.S, self.B, sqt.WIDTH)
+            self.unique_poses = local[self.storage.unique_base:self.storage.slot_base]
+            self._slot_start_rows = local[self.storage.slot_base:]
+            rows = np.arange(self.storage.slot_base)
+            self._row_skeleton = self.root_skeleton[
+                np.where(rows < self.storage.unique_base, rows % max(self.S, 1),
+                         self.S + rows - self.storage.unique_base)].astype(np.int32)
+        else:
+            self.history = sqt.identity_pose((self.M, self.S, self.B))
+            self.unique_poses = sqt.identity_pose((self.U, self.B))
+        self._skin_pending = []
         self.unique_start = np.zeros(self.U, np.int64)
         self.slots = TransitionSlots(self.NT, self.B)
         self.events = EventDispatcher()
@@ -260,10 +280,9 @@ class Crowd:
             self._store_roots()
             self._skin_changed_rows()
             self._collect_events(dispatch=(f == f0))
-        for st in (self.storage, self.local_storage):
-            if st is not None:
-                st.take_dirty_regions()
-                st.mark_dirty(0, st.row_count)
+        self.storage.take_dirty_regions()
+        self.storage.mark_dirty(0, self.storage.row_count)
+        self._skin_pending = [(0, self.storage.slot_base)]
 
     def _playing(self, agents):
         """(kind, ref, offset) each agent plays, a transition resolved to its target."""
@@ -288,7 +307,6 @@ class Crowd:
         """Advance one frame and return what it cost."""
         t_start = time.perf_counter()
         mark = self.storage.mark()
-        local_mark = self.local_storage.mark() if self.local_storage is not None else 0
         started = self._serve_queue()
         self.frame += 1
         self._finished = 0
@@ -300,8 +318,6 @@ class Crowd:
         self.stats["steps"] += 1
         self.stats["ms_total"] += ms
         upload = self.storage.bytes_since(mark)
-        if self.local_storage is not None:
-            upload += self.local_storage.bytes_since(local_mark)
         return StepReport(self.frame, ms, upload,
                           int(self.slots.active.sum()), started, self._finished,
                           self._events_fired)
@@ -345,9 +361,9 @@ class Crowd:
         self._s_waiting = self._blend_slots(self._tr_waiting)
 
     def _blend_slots(self, slots):
-        """Blend ``slots`` on the CPU, or with GPU transitions only compute ``S`` (the
+        """Blend ``slots`` on the CPU, or with GPU skinning only compute ``S`` (the
         CPU pose is then blended on demand by :meth:`_current_poses`)."""
-        if self.gpu_transitions:
+        if self.gpu_skinning:
             return self.slots.weights(slots, self.frame)
         return self.slots.evaluate(slots, self.frame, self.history, self.M, self.unique_poses)
 
@@ -375,7 +391,7 @@ class Crowd:
         out[m] = self.unique_poses[ref[m]]
         m = kind == TRANSITION
         if m.any():
-            if self.gpu_transitions:        # slots are blended on the GPU: do these here
+            if self.gpu_skinning:           # slots are blended on the GPU: do these here
                 self.slots.evaluate(np.unique(ref[m]), self.frame, self.history, self.M,
                                     self.unique_poses)
             out[m] = self.slots.pose[ref[m]]
@@ -393,30 +409,60 @@ class Crowd:
     def agent_rows(self, agents=None) -> np.ndarray:
         """Skinning rows ``(n, B, 3, 4)`` float32 the agents are drawn with now."""
         agents = np.arange(self.N) if agents is None else self._check_agents(agents)
-        rows = self.storage.rows[self.agent_rows_index(agents)]
-        tr = np.flatnonzero(self.agent_kind[agents] == TRANSITION)
-        if self.gpu_transitions and tr.size:   # the texture's slot rows live on the GPU
-            poses = self._current_poses(agents[tr])
-            kind, ref, _ = self._playing(agents[tr])
-            skel = self.root_skeleton[np.where(kind == STREAM, ref, self.S + ref)]
-            for k in np.unique(skel):
-                rows[tr[skel == k]] = self.plans[k].rows(poses[skel == k])
-        return rows
+        index = self.agent_rows_index(agents)
+        if not self.gpu_skinning:
+            return self.storage.rows[index]
+        # the skinning rows live on the GPU: skin each distinct row once, here
+        used, inverse = np.unique(index, return_inverse=True)
+        return self._skin_logical_rows(used)[inverse.reshape(-1)]
 
-    def gpu_transition_batch(self) -> GpuTransitionBatch:
-        """The slots still blending after this frame's step, for the GPU shader."""
-        if not self.gpu_transitions:
-            raise CrowdError("gpu_transition_batch: this crowd blends transitions on the "
-                             "CPU (create it with Crowd(config, gpu_transitions=True))")
+    def _skin_logical_rows(self, rows) -> np.ndarray:
+        """Skinning rows ``(n, B, 3, 4)`` of logical pose texture ``rows`` (GPU skinning
+        mode): the local poses of stream/unique rows, blended slots."""
+        st = self.storage
+        out = np.zeros((rows.size, self.B, 3, 4), np.float32)
+        local = st.sqt_view()
+        is_slot = rows >= st.slot_base
+        poses = np.empty((rows.size, self.B, sqt.WIDTH), np.float32)
+        poses[~is_slot] = local[rows[~is_slot]]
+        skel = np.empty(rows.size, np.int64)
+        skel[~is_slot] = self._row_skeleton[rows[~is_slot]]
+        if is_slot.any():
+            slots = rows[is_slot] - st.slot_base
+            self.slots.evaluate(slots, self.frame, self.history, self.M, self.unique_poses)
+            poses[is_slot] = self.slots.pose[slots]
+            kind, ref = self.slots.target_kind[slots], self.slots.target_ref[slots]
+            skel[is_slot] = self.root_skeleton[np.where(kind == STREAM, ref, self.S + ref)]
+        for k in np.unique(skel):
+            out[skel == k] = self.plans[k].rows(poses[skel == k])
+        return out
+
+    def gpu_skinning_batch(self) -> GpuSkinningBatch:
+        """The pose texture rows the GPU must write now (``gpu_skinning``): every
+        stream and unique row whose local pose changed since the last call (the new
+        history slice and the uniques after a step; everything after a reset) and
+        every active transition slot. Call it after uploading ``take_upload_regions``."""
+        if not self.gpu_skinning:
+            raise CrowdError("gpu_skinning_batch: this crowd skins on the CPU (create it "
+                             "with Crowd(config, gpu_skinning=True))")
+        ranges = PoseStorage._merged(self._skin_pending)
+        self._skin_pending = []
+        own = np.concatenate([np.arange(a, a + n, dtype=np.int64) for a, n in ranges]) \
+            if ranges else np.zeros(0, np.int64)
         act = self.slots.active_slots()
         kind = self.slots.target_kind[act]
         ref = self.slots.target_ref[act]
-        rows = self.slots.target_rows(act, self.frame, self.S, self.M,
-                                      self.storage.unique_base)
-        skel = self.root_skeleton[np.where(kind == STREAM, ref, self.S + ref)]
-        return GpuTransitionBatch(act.astype(np.int32), rows.astype(np.int32),
-                                  self.slots.weights(act, self.frame).astype(np.float32),
-                                  skel.astype(np.int32))
+        target = self.slots.target_rows(act, self.frame, self.S, self.M,
+                                        self.storage.unique_base)
+        slot_rows = self.storage.slot_base + act
+        return GpuSkinningBatch(
+            np.concatenate([own, slot_rows]).astype(np.int32),
+            np.concatenate([own, target]).astype(np.int32),
+            np.concatenate([np.ones(own.size), self.slots.weights(act, self.frame)]
+                           ).astype(np.float32),
+            np.concatenate([self._row_skeleton[own],
+                            self.root_skeleton[np.where(kind == STREAM, ref, self.S + ref)]]
+                           ).astype(np.int32))
 
     def stream_events(self, since_frame: int):
         """Event tags the stream heads crossed at frames ``>= since_frame`` (at most the
@@ -429,13 +475,6 @@ class Crowd:
         names = np.asarray(self.bank.tag_names, object)
         return (self._log_stream[keep].copy(), names[self._log_name[keep]],
                 self._log_frame[keep].copy())
-
-    def take_local_upload_regions(self):
-        """``local_storage`` rectangles written since the last call (GPU transitions)."""
-        if self.local_storage is None:
-            raise CrowdError("take_local_upload_regions: this crowd has no local pose "
-                             "texture (create it with Crowd(config, gpu_transitions=True))")
-        return self.local_storage.take_dirty_regions()
 
     def agent_poses(self, agents=None) -> np.ndarray:
         """Local poses ``(n, B, 10)`` float32 of the agents now."""
@@ -560,15 +599,14 @@ class Crowd:
         if slots.size == 0:
             return
         start = self._current_poses(agents)
-        rows = self.agent_rows(agents)
+        if self.gpu_skinning:
+            self._slot_start_rows[slots] = start        # StartP, blended on the GPU
+        else:
+            # the slot shows exactly the agent's current pose until the next step
+            self.storage.rows[self.storage.slot_base + slots] = self.agent_rows(agents)
         self.slots.start(slots, agents, kind, ref, offsets, length, start, frame)
-        if self.local_storage is not None:
-            self.local_storage.slot_rows()[slots] = pack_local_poses(start)
-            self.local_storage.mark_rows_dirty(self.local_storage.slot_base + slots)
         self.agent_kind[agents] = TRANSITION
         self.agent_ref[agents] = slots
-        # the slot shows exactly the agent's current pose until the next step
-        self.storage.rows[self.storage.slot_base + slots] = rows
         self.storage.mark_rows_dirty(self.storage.slot_base + slots)
         self.index.set(agents, self._agent_keys(agents))
         self.stats["transitions_served"] += int(slots.size)
@@ -637,6 +675,12 @@ class Crowd:
     def _skin_changed_rows(self):
         st = self.storage
         sl = self.frame % self.M
+        if self.gpu_skinning:   # history and uniques are views of the local texture
+            for start, count in ((sl * self.S, self.S), (st.unique_base, self.U)):
+                st.mark_dirty(start, count)
+                if count:
+                    self._skin_pending.append((start, count))
+            return
         hist = self.history[sl]
         for k, idx, cont in self._stream_skel_groups:
             if cont is not None:
@@ -651,13 +695,6 @@ class Crowd:
             else:
                 st.unique_rows()[idx] = self.plans[k].rows(self.unique_poses[idx])
         st.mark_dirty(st.unique_base, self.U)
-        if self.local_storage is not None:
-            loc = self.local_storage
-            pack_local_poses(hist, out=loc.stream_slice(sl))
-            pack_local_poses(self.unique_poses, out=loc.unique_rows())
-            loc.mark_dirty(sl * self.S, self.S)
-            loc.mark_dirty(loc.unique_base, self.U)
-            return                      # slot rows are blended and skinned on the GPU
         act = self.slots.active_slots()
         if act.size:
             skel = self.root_skeleton[np.where(self.slots.target_kind[act] == STREAM,
@@ -719,4 +756,7 @@ class Crowd:
         """Pose texture rows ``(B, 3, 4)`` of ``PH_stream(offset)``."""
         s = self._resolve(stream, "stream")
         check_offsets(np.array([offset]), self.M, "pose")
-        return self.storage.rows[((self.frame - int(offset)) % self.M) * self.S + s].copy()
+        row = ((self.frame - int(offset)) % self.M) * self.S + s
+        if self.gpu_skinning:
+            return self._skin_logical_rows(np.array([row]))[0]
+        return self.storage.rows[row].copy()

@@ -111,12 +111,17 @@ def blend_weighted(poses: np.ndarray, weights: np.ndarray) -> np.ndarray:
     (n, B, 10) float32
     """
     w = np.asarray(weights, dtype=poses.dtype)
-    if w.ndim == 2:
+    per_node = w.ndim == 2
+    if per_node:
         w = w[:, :, None]
     total = w.sum(axis=1, keepdims=True)
     w = w / np.where(total > 0, total, 1)
-    heaviest = np.argmax(np.broadcast_to(w, poses.shape[:3]), axis=1)        # (n, B)
-    ref = np.take_along_axis(poses, heaviest[:, None, :, None], axis=1)      # (n, 1, B, 10)
+    if per_node:        # one heaviest child a node: a plain gather, not one a bone
+        heaviest = np.argmax(w[:, :, 0], axis=1)                             # (n,)
+        ref = poses[np.arange(poses.shape[0]), heaviest][:, None]            # (n, 1, B, 10)
+    else:
+        heaviest = np.argmax(np.broadcast_to(w, poses.shape[:3]), axis=1)    # (n, B)
+        ref = np.take_along_axis(poses, heaviest[:, None, :, None], axis=1)  # (n, 1, B, 10)
     wq = np.where(_dot4(poses, ref) < 0, -w, w)                             # (n, k, B)
     out = np.einsum("nkbc,nkb->nbc", poses, np.broadcast_to(w, poses.shape[:3]))
     for c in (3, 4, 5, 6):

@@ -9,6 +9,12 @@ Logical row ``r`` lives in the texture at texel ``x = (r // H) * 3 * B_max``,
 ``y = r % H`` where ``H = min(rows, max_texture_size)``: when the rows do not fit
 the texture's height they wrap into column blocks side by side. The shader's row
 lookup (gpu_shaders/) mirrors :meth:`PoseStorage.texel_of_row`.
+
+With GPU skinning (``Crowd(config, gpu_skinning=True)``) the CPU keeps a
+*local-pose* texture of the same geometry instead: each bone's three texels hold
+its local SQT ``(sx, sy, sz, qw), (qx, qy, qz, tx), (ty, tz, 0, 0)``, so the
+history is a strided view of the mirror (:meth:`PoseStorage.sqt_view`) and the
+GPU turns rows into skinning matrices.
 """
 
 from __future__ import annotations
@@ -19,24 +25,14 @@ import numpy as np
 
 from .errors import CrowdError
 
-__all__ = ["PoseStorage", "UploadRegion", "pack_local_poses", "LOCAL_IDENTITY"]
+__all__ = ["PoseStorage", "UploadRegion", "LOCAL_IDENTITY", "LOCAL_FLOATS"]
 
-#: A local-pose texture row entry of the identity SQT: (scale, 0), (w, x, y, z), (t, 0).
-LOCAL_IDENTITY = np.array([[1, 1, 1, 0], [1, 0, 0, 0], [0, 0, 0, 0]], np.float32)
+#: A local-pose texture keeps a bone's SQT in the first ten of its twelve texel floats.
+LOCAL_FLOATS = 10
 
-
-def pack_local_poses(poses: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-    """Local SQT ``(..., B, 10)`` as local-pose texture rows ``(..., B, 3, 4)`` float32.
-
-    Per bone three RGBA texels: ``(sx, sy, sz, 0)``, ``(qw, qx, qy, qz)``,
-    ``(tx, ty, tz, 0)`` -- the layout the GPU transition shader reads.
-    """
-    if out is None:
-        out = np.zeros(poses.shape[:-1] + (3, 4), np.float32)
-    out[..., 0, :3] = poses[..., 0:3]
-    out[..., 1, :] = poses[..., 3:7]
-    out[..., 2, :3] = poses[..., 7:10]
-    return out
+#: A local-pose texture row entry of the identity SQT: the ten SQT floats
+#: ``(sx, sy, sz, qw, qx, qy, qz, tx, ty, tz)`` then two zeros, as three RGBA texels.
+LOCAL_IDENTITY = np.array([[1, 1, 1, 1], [0, 0, 0, 0], [0, 0, 0, 0]], np.float32)
 
 
 @dataclass(frozen=True)
@@ -131,6 +127,12 @@ class PoseStorage:
 
     def slot_rows(self) -> np.ndarray:
         return self.rows[self.slot_base:]
+
+    def sqt_view(self) -> np.ndarray:
+        """The rows of a local-pose texture as SQT poses ``(R, B_max, 10)``: a strided
+        view (writes land in the texture mirror), the first ten of each bone's twelve
+        floats."""
+        return self.rows.reshape(self.row_count, self.bones, 12)[..., :LOCAL_FLOATS]
 
     # dirty tracking -----------------------------------------------------------
     def mark_dirty(self, start, count):

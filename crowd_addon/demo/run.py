@@ -122,7 +122,7 @@ def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
 
     log(f"simulating and rendering {frames} frames of {cfg.agent_count:,} agents")
     t = time.perf_counter()
-    crowd = Crowd(cfg, gpu_transitions=True)
+    crowd = Crowd(cfg, gpu_skinning=True)
     show = make_show(crowd)
     camera = section_camera(stadium, aspect=size[0] / size[1])
     preview = render_preview(crowd, out / "frames", frames, size=size, mp4=mp4,

@@ -8,7 +8,7 @@ there, or into its own offscreen image (headless after :func:`init_headless_gpu`
 
 What Blender's Python API lacks is worked around on the GPU:
 
-* no sub-image texture writes: each frame the dirty rows of the pose, local pose
+* no sub-image texture writes: each frame the dirty rows of the pose (or local-pose)
   and agent textures are staged in a small texture made for the frame, their row
   numbers in another (R32I), and :data:`~.programs.ROW_UPLOAD` scatters
   the rows with ``imageStore`` (4 bytes of row number per row on top of the rows);
@@ -33,10 +33,10 @@ from .blender_gpu import (CROWD_CAPTURE, UPLOAD_INTS, float_texture, init_headle
 from .draw_lists import DrawLists, proxy_bounds
 from .instances import InstanceData
 from .moderngl_backend import FrameStats
-from .programs import (CROWD_DRAW, ROW_UPLOAD, TRANSITION_BLEND, TRANSITION_GROUP,
+from .programs import (CROWD_DRAW, ROW_UPLOAD, SKIN_ROWS, SKIN_GROUP,
                        UPLOAD_GROUP)
 from .proxies import agent_skeletons, copies_per_instance, crowd_proxies
-from .skeleton_data import skeleton_image
+from .skeleton_data import batch_image, fill_batch, skeleton_image
 from .texture_region import TextureRegion, stage_rows
 
 __all__ = ["BlenderGPURenderer", "init_headless_gpu"]   # the latter from .blender_gpu
@@ -99,12 +99,15 @@ class BlenderGPURenderer:
         if crowd.N >= _EXACT_INT:
             raise CrowdError(f"Blender gpu backend: {crowd.N} agents, at most {_EXACT_INT - 1}")
         self.layout = (st.height, st.row_texels, crowd.M, crowd.S)
-        self.pose_tex = float_texture(gpu, st.texture_image())
-        crowd.take_upload_regions()                 # the whole texture is on the GPU now
+        # the whole texture the CPU keeps goes up now; with GPU skinning the pose
+        # texture is filled by the compute shader at the end of __init__
         self.local_tex = None
-        if crowd.gpu_transitions:
-            self.local_tex = float_texture(gpu, crowd.local_storage.texture_image())
-            crowd.take_local_upload_regions()
+        if crowd.gpu_skinning:
+            self.local_tex = float_texture(gpu, st.texture_image())
+            self.pose_tex = gpu.types.GPUTexture((st.width, st.height), format="RGBA32F")
+        else:
+            self.pose_tex = float_texture(gpu, st.texture_image())
+        crowd.take_upload_regions()
         self.instances = InstanceData(crowd, self.limit)
         self.agent_tex = float_texture(gpu, self.instances.texture_image())
         self._agents_on_gpu = self.instances.records.copy()
@@ -120,7 +123,7 @@ class BlenderGPURenderer:
         self._upload_ints = program(gpu, UPLOAD_INTS)
         self.meshes = {(k, lod): _Mesh(gpu, buf) for k, levels in enumerate(self.proxies)
                        for lod, buf in enumerate(levels)}
-        self._build_transitions()
+        self._build_skinning()
         self.size = None if size is None else (int(size[0]), int(size[1]))
         self.framebuffer = None
         if self.size is not None:
@@ -130,15 +133,15 @@ class BlenderGPURenderer:
                                                         color_slots=(self.color_tex,))
 
     # -------------------------------------------------------------------- setup
-    def _build_transitions(self):
-        self.transition_program = None
-        if not self.crowd.gpu_transitions or self.crowd.NT == 0:
+    def _build_skinning(self):
+        self.skin_program = None
+        if not self.crowd.gpu_skinning:
             return
         self.skeleton_tex = float_texture(self.gpu, skeleton_image(self.crowd.skeletons,
                                                                     self.crowd.B))
-        self.batch_width = min(self.crowd.NT, 1024)
-        self.transition_program = program(self.gpu, TRANSITION_BLEND,
-                                           {"MAX_BONES": self.crowd.B})
+        self.batch_image = batch_image(self.crowd.storage.row_count)
+        self.skin_program = program(self.gpu, SKIN_ROWS, {"MAX_BONES": self.crowd.B})
+        self._run_skinning()
 
     # ------------------------------------------------------------------- upload
     def _write_rows(self, texture, block_rows, staged, rows) -> int:
@@ -196,43 +199,39 @@ class BlenderGPURenderer:
 
     # -------------------------------------------------------------------- frame
     def sync(self) -> FrameStats:
-        """Bring the GPU up to the crowd's current frame: dirty pose (and local pose)
-        rows, changed instance texels, the transition compute shader."""
+        """Bring the GPU up to the crowd's current frame: dirty pose (or local-pose)
+        rows, changed instance texels, with GPU skinning the skinning-rows shader."""
         crowd, s = self.crowd, FrameStats()
-        height = crowd.storage.height
-        s.pose_bytes = self._write_rows(self.pose_tex, height,
-                                        *stage_rows(crowd.take_upload_regions()))
-        if self.local_tex is not None:
-            s.local_bytes = self._write_rows(self.local_tex, height,
-                                             *stage_rows(crowd.take_local_upload_regions()))
+        target = self.local_tex if crowd.gpu_skinning else self.pose_tex
+        written = self._write_rows(target, crowd.storage.height,
+                                   *stage_rows(crowd.take_upload_regions()))
+        if crowd.gpu_skinning:
+            s.local_bytes = written
+        else:
+            s.pose_bytes = written
         s.instance_bytes = self._write_instances()
         if self.instances.moved:
             self._list_key = None
-        if self.transition_program is not None:
-            s.batch_bytes, s.transitions = self._run_transitions()
+        if self.skin_program is not None:
+            s.batch_bytes, s.skinned_rows = self._run_skinning()
         self.stats = s
         return s
 
-    def _run_transitions(self):
-        batch = self.crowd.gpu_transition_batch()
-        n = int(batch.slots.size)
+    def _run_skinning(self):
+        n, texel_rows = fill_batch(self.batch_image, self.crowd.gpu_skinning_batch())
         if n == 0:
             return 0, 0
-        rows = -(-n // self.batch_width)
-        image = np.zeros((rows * self.batch_width, 4), np.float32)
-        image[:n] = np.stack([batch.slots, batch.target_rows, batch.weights,
-                              batch.skeletons], 1)
-        batch_tex = float_texture(self.gpu, image.reshape(rows, self.batch_width, 4))
-        shader = self.transition_program
+        batch_tex = float_texture(self.gpu, self.batch_image[:texel_rows])
+        shader = self.skin_program
         use_program(self.gpu, shader)
-        self._set_pose_uniforms(shader)
+        shader.uniform_int("u_pose_layout", self.layout)
         shader.uniform_int("u_batch_count", n)
         shader.uniform_sampler("local_tex", self.local_tex)
         shader.uniform_sampler("skeleton_tex", self.skeleton_tex)
         shader.uniform_sampler("batch_tex", batch_tex)
         shader.image("pose_img", self.pose_tex)
-        self.gpu.compute.dispatch(shader, -(-n // TRANSITION_GROUP), 1, 1)
-        return image.nbytes, n
+        self.gpu.compute.dispatch(shader, -(-n // SKIN_GROUP), 1, 1)
+        return self.batch_image[:texel_rows].nbytes, n
 
     def _regroup(self, camera):
         """Rebuild the draw lists when the camera or the agents moved."""

@@ -4,10 +4,11 @@ Headless on EGL (:meth:`ModernGLRenderer.standalone`, Mesa llvmpipe needs no GPU
 or inside an already-current GL context such as Blender's OpenGL viewport
 (:meth:`ModernGLRenderer.attach`). Each frame, after ``Crowd.step``:
 
-* :meth:`~ModernGLRenderer.sync` writes exactly the pose texture rectangles core
-  marked dirty (``Crowd.take_upload_regions``; with GPU transitions also the local
-  pose texture's), the instance texels of agents whose reference or placement
-  changed, and runs the transition compute shader for ``Crowd.gpu_transition_batch``;
+* :meth:`~ModernGLRenderer.sync` writes exactly the texture rectangles core marked
+  dirty (``Crowd.take_upload_regions``: pose texture rows, or with GPU skinning
+  local-pose rows) and the instance texels of agents whose reference or placement
+  changed; with GPU skinning it then runs the skinning-rows compute shader for
+  ``Crowd.gpu_skinning_batch`` (new history slice, uniques, transition slots);
   :attr:`~ModernGLRenderer.stats` counts the bytes;
 * :meth:`~ModernGLRenderer.render` draws one instanced call per (skeleton, LOD),
   regrouping agents by camera distance only when the camera or the agents moved.
@@ -24,24 +25,24 @@ from .assembler import gl_sources
 from .camera import Camera
 from .draw_lists import DrawLists, proxy_bounds
 from .instances import InstanceData
-from .programs import CROWD_DRAW, TRANSITION_BLEND, TRANSITION_GROUP
+from .programs import CROWD_DRAW, SKIN_ROWS, SKIN_GROUP
 from .proxies import INTERLEAVED_FORMAT, agent_skeletons, copies_per_instance, crowd_proxies
-from .skeleton_data import skeleton_image
+from .skeleton_data import batch_image, fill_batch, skeleton_image
 
 __all__ = ["ModernGLRenderer", "FrameStats"]
 
 GL_VERSION = 430
 _POSE_UNIT, _AGENT_UNIT, _LIST_UNIT = 0, 1, 2          # CROWD_DRAW sampler slots
-_LOCAL_UNIT, _SKELETON_UNIT, _BATCH_UNIT = 0, 1, 2     # TRANSITION_BLEND sampler slots
+_LOCAL_UNIT, _SKELETON_UNIT, _BATCH_UNIT = 0, 1, 2     # SKIN_ROWS sampler slots
 
 
 @dataclass
 class FrameStats:
     """What the last :meth:`ModernGLRenderer.sync` / :meth:`~ModernGLRenderer.render` did.
 
-    ``pose_bytes``/``local_bytes``: pose / local pose texture bytes written;
+    ``pose_bytes``/``local_bytes``: pose / local-pose texture bytes written;
     ``instance_bytes``, ``list_bytes``, ``batch_bytes``: instance texture, draw list
-    and transition batch bytes; ``transitions``: slots blended by the compute shader;
+    and skinning batch bytes; ``skinned_rows``: pose rows the compute shader wrote;
     ``draws``, ``instances``, ``vertices``: instanced calls, agents and skinned
     vertices of the last render.
     """
@@ -51,7 +52,7 @@ class FrameStats:
     instance_bytes: int = 0
     list_bytes: int = 0
     batch_bytes: int = 0
-    transitions: int = 0
+    skinned_rows: int = 0
     draws: int = 0
     instances: int = 0
     vertices: int = 0
@@ -119,13 +120,15 @@ class ModernGLRenderer:
                              f"max texture size {limit}; set CrowdConfig.max_texture_size = "
                              f"{limit}")
         self.layout = (st.height, st.row_texels, crowd.M, crowd.S)
-        self.pose_tex = self._texture((st.width, st.height), st.texture_image())
-        crowd.take_upload_regions()                 # the whole texture is on the GPU now
+        # the whole texture the CPU keeps goes up now; with GPU skinning the pose
+        # texture is filled by the compute shader at the end of __init__
         self.local_tex = None
-        if crowd.gpu_transitions:
-            self.local_tex = self._texture((st.width, st.height),
-                                           crowd.local_storage.texture_image())
-            crowd.take_local_upload_regions()
+        if crowd.gpu_skinning:
+            self.local_tex = self._texture((st.width, st.height), st.texture_image())
+            self.pose_tex = self._texture((st.width, st.height), None)
+        else:
+            self.pose_tex = self._texture((st.width, st.height), st.texture_image())
+        crowd.take_upload_regions()
         self.instances = InstanceData(crowd, limit)
         self.agent_tex = self._texture((self.instances.width, self.instances.height),
                                        self.instances.texture_image())
@@ -138,10 +141,12 @@ class ModernGLRenderer:
         self.list_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self._list_camera = None
         self._build_meshes()
-        self._build_transitions()
+        self._build_skinning()
         self._attachments = (ctx.renderbuffer(self.size, 4), ctx.depth_renderbuffer(self.size))
         self.fbo = ctx.framebuffer(color_attachments=[self._attachments[0]],
                                    depth_attachment=self._attachments[1])
+        if self.skin_program is not None:
+            self._run_skinning()
 
     # ------------------------------------------------------------------ contexts
     @classmethod
@@ -173,7 +178,8 @@ class ModernGLRenderer:
     def _texture(self, size, image, components=4, dtype="f4"):
         tex = self.ctx.texture(size, components, dtype=dtype)
         tex.filter = (self._mgl.NEAREST, self._mgl.NEAREST)
-        tex.write(np.ascontiguousarray(image))
+        if image is not None:
+            tex.write(np.ascontiguousarray(image))
         return tex
 
     def _programs(self, influences):
@@ -202,17 +208,16 @@ class ModernGLRenderer:
                                           index_element_size=4),
                     self.ctx.vertex_array(capture, [_layout(vbo, capture)]), vbo, ibo)
 
-    def _build_transitions(self):
-        self.transition_program = None
-        if not self.crowd.gpu_transitions or self.crowd.NT == 0:
+    def _build_skinning(self):
+        self.skin_program = None
+        if not self.crowd.gpu_skinning:
             return
         skeletons = skeleton_image(self.crowd.skeletons, self.crowd.B)
         self.skeleton_tex = self._texture(skeletons.shape[1::-1], skeletons)
-        width = min(self.crowd.NT, 1024)
-        self.batch_image = np.zeros((-(-self.crowd.NT // width), width, 4), np.float32)
-        self.batch_tex = self._texture((width, self.batch_image.shape[0]), self.batch_image)
-        src = gl_sources(TRANSITION_BLEND, {"MAX_BONES": self.crowd.B})
-        self.transition_program = self.ctx.compute_shader(src["compute_shader"])
+        self.batch_image = batch_image(self.crowd.storage.row_count)
+        self.batch_tex = self._texture(self.batch_image.shape[1::-1], self.batch_image)
+        src = gl_sources(SKIN_ROWS, {"MAX_BONES": self.crowd.B})
+        self.skin_program = self.ctx.compute_shader(src["compute_shader"])
 
     def _set(self, program, name, value):
         if name in program:                         # the GLSL compiler may drop unused ones
@@ -228,41 +233,43 @@ class ModernGLRenderer:
     def sync(self) -> FrameStats:
         """Bring the GPU up to the crowd's current frame (see the module docstring)."""
         crowd, s = self.crowd, FrameStats()
-        s.pose_bytes = sum(_write(self.pose_tex, r) for r in crowd.take_upload_regions())
-        if self.local_tex is not None:
-            s.local_bytes = sum(_write(self.local_tex, r)
-                                for r in crowd.take_local_upload_regions())
+        target = self.local_tex if crowd.gpu_skinning else self.pose_tex
+        written = sum(_write(target, r) for r in crowd.take_upload_regions())
+        if crowd.gpu_skinning:
+            s.local_bytes = written
+        else:
+            s.pose_bytes = written
         s.instance_bytes = sum(_write(self.agent_tex, r)
                                for r in self.instances.update(crowd))
         if self.instances.moved:
             self._list_camera = None
-        if self.transition_program is not None:
-            s.batch_bytes, s.transitions = self._run_transitions()
+        if self.skin_program is not None:
+            s.batch_bytes, s.skinned_rows = self._run_skinning()
         self.stats = s
         return s
 
-    def _run_transitions(self):
-        batch = self.crowd.gpu_transition_batch()
-        n = int(batch.slots.size)
+    def _run_skinning(self):
+        n, texel_rows = fill_batch(self.batch_image, self.crowd.gpu_skinning_batch())
         if n == 0:
             return 0, 0
-        flat = self.batch_image.reshape(-1, 4)
-        flat[:n] = np.stack([batch.slots, batch.target_rows, batch.weights, batch.skeletons],
-                            1).astype(np.float32)
         width = self.batch_image.shape[1]
-        rows = -(-n // width)
-        self.batch_tex.write(np.ascontiguousarray(self.batch_image[:rows]),
-                             viewport=(0, 0, width, rows))
-        prog = self.transition_program
-        self._pose_uniforms(prog)
+        full, rest = divmod(n, width)           # whole texel rows, then the last part
+        if full:
+            self.batch_tex.write(np.ascontiguousarray(self.batch_image[:full]),
+                                 viewport=(0, 0, width, full))
+        if rest:
+            self.batch_tex.write(np.ascontiguousarray(self.batch_image[full, :rest]),
+                                 viewport=(0, full, rest, 1))
+        prog = self.skin_program
+        self._set(prog, "u_pose_layout", self.layout)
         self._set(prog, "u_batch_count", n)
         self.local_tex.use(_LOCAL_UNIT)
         self.skeleton_tex.use(_SKELETON_UNIT)
         self.batch_tex.use(_BATCH_UNIT)
         self.pose_tex.bind_to_image(0, read=False, write=True)
-        prog.run(-(-n // TRANSITION_GROUP))
+        prog.run(-(-n // SKIN_GROUP))
         self.ctx.memory_barrier()
-        return rows * width * 16, n
+        return n * 16, n
 
     def _bind_draw(self, program, view_projection, draw):
         """Uniforms of one draw; ``draw`` = (list base, agents, vertices a copy, copies)."""
@@ -352,7 +359,7 @@ class ModernGLRenderer:
         """Free this renderer's GL objects, and its context when :meth:`standalone` made
         it (an attached context belongs to its owner and stays)."""
         objects = [self.pose_tex, self.local_tex, self.agent_tex, self.list_tex, self.fbo,
-                   *self._attachments, self.transition_program, getattr(self, "skeleton_tex", None),
+                   *self._attachments, self.skin_program, getattr(self, "skeleton_tex", None),
                    getattr(self, "batch_tex", None)]
         objects += [p for pair in self.programs.values() for p in pair]
         for m in self.meshes.values():

@@ -135,7 +135,7 @@ def render_preview(config, out_dir, frames: int, start: int | None = None,
     out = _check(config, out_dir, int(frames), (w, h), mp4, backend)
     t0 = time.perf_counter()
     seconds = dict.fromkeys(("simulate", "sync", "render", "write"), 0.0)
-    crowd = crowd or Crowd(config)
+    crowd = crowd or Crowd(config, gpu_skinning=True)
     if start is not None:
         crowd.reset(int(start))
     seconds["simulate"] += time.perf_counter() - t0

@@ -13,16 +13,16 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["SHADER_DIR", "Interface", "ProgramSpec", "CROWD_DRAW", "TRANSITION_BLEND",
-           "ROW_UPLOAD", "AGENT_TEXELS", "TRANSITION_GROUP", "UPLOAD_GROUP"]
+__all__ = ["SHADER_DIR", "Interface", "ProgramSpec", "CROWD_DRAW", "SKIN_ROWS",
+           "ROW_UPLOAD", "AGENT_TEXELS", "SKIN_GROUP", "UPLOAD_GROUP"]
 
 #: gpu_shaders/ at the repository (and extension) root.
 SHADER_DIR = Path(__file__).resolve().parents[2] / "gpu_shaders"
 
 #: RGBA32F texels per agent in the instance texture (gpu_shaders/agents.glsl).
 AGENT_TEXELS = 2
-#: Slots per compute work group of the transition shader.
-TRANSITION_GROUP = 64
+#: Batch entries (rows) per compute work group of the skinning-rows shader.
+SKIN_GROUP = 64
 #: Texels per compute work group (along a row) of the row upload shader.
 UPLOAD_GROUP = 64
 
@@ -73,8 +73,8 @@ class ProgramSpec:
 #: Instanced skinning of one (skeleton, LOD) draw and its lit shading.
 CROWD_DRAW = ProgramSpec(
     name="crowd_draw",
-    vertex=("block_layout.glsl", "pose_layout.glsl", "agents.glsl", "skinning.glsl",
-            "crowd_vert.glsl"),
+    vertex=("block_layout.glsl", "pose_layout.glsl", "pose_rows.glsl", "agents.glsl",
+            "skinning.glsl", "crowd_vert.glsl"),
     fragment=("crowd_frag.glsl",),
     vertex_in=((0, "VEC3", "pos"), (1, "VEC3", "nor"), (2, "UVEC4", "bone_idx"),
                (3, "VEC4", "bone_w")),
@@ -90,16 +90,16 @@ CROWD_DRAW = ProgramSpec(
     defines=("INFLUENCES",),
 )
 
-#: Transition slots blended, posed and skinned on the GPU (paper s.4.5).
-TRANSITION_BLEND = ProgramSpec(
-    name="transition_blend",
-    compute=("block_layout.glsl", "pose_layout.glsl", "sqt.glsl", "transition_comp.glsl"),
-    push_constants=(("IVEC4", "u_pose_layout"), ("IVEC4", "u_pose_regions"),
-                    ("INT", "u_batch_count")),
+#: Local poses made skinning rows on the GPU, transition slots blended on the way
+#: (paper s.4.5).
+SKIN_ROWS = ProgramSpec(
+    name="skin_rows",
+    compute=("block_layout.glsl", "pose_layout.glsl", "sqt.glsl", "skin_rows_comp.glsl"),
+    push_constants=(("IVEC4", "u_pose_layout"), ("INT", "u_batch_count")),
     samplers=((0, "FLOAT_2D", "local_tex"), (1, "FLOAT_2D", "skeleton_tex"),
               (2, "FLOAT_2D", "batch_tex")),
     images=((0, "RGBA32F", "FLOAT_2D", "pose_img", ("WRITE",)),),
-    local_group_size=(TRANSITION_GROUP,),
+    local_group_size=(SKIN_GROUP,),
     defines=("MAX_BONES",),
 )
 

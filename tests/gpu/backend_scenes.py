@@ -74,9 +74,9 @@ def unique(make):
     return out
 
 
-def transitions(make, gpu_transitions):
+def transitions(make, gpu_skinning):
     """Agents blending towards a stream and a unique, three frames."""
-    crowd = c.Crowd(c.make_config(NT=4), gpu_transitions=gpu_transitions)
+    crowd = c.Crowd(c.make_config(NT=4), gpu_skinning=gpu_skinning)
     r, out = make(crowd, None), {}
     crowd.step()
     r.sync()
@@ -85,7 +85,7 @@ def transitions(make, gpu_transitions):
     crowd.transition_to_unique(agents[3:], "u0", 5)
     for f in range(3):
         crowd.step()
-        out[f"gpu/transitions{f}"] = np.array(r.sync().transitions)
+        out[f"gpu/skinned_rows{f}"] = np.array(r.sync().skinned_rows)
         _positions(out, f"frame{f}", r, crowd, agents)
     return out
 

@@ -11,13 +11,13 @@ import pytest
 
 from crowd_addon.core import CrowdError
 from crowd_addon.gpu.assembler import GLSL_VERSION, blender_create_info, gl_sources
-from crowd_addon.gpu.programs import CROWD_DRAW, ROW_UPLOAD, TRANSITION_BLEND, ProgramSpec
+from crowd_addon.gpu.programs import CROWD_DRAW, ROW_UPLOAD, SKIN_ROWS, ProgramSpec
 
-DEFINES = {CROWD_DRAW.name: {"INFLUENCES": 2}, TRANSITION_BLEND.name: {"MAX_BONES": 30},
+DEFINES = {CROWD_DRAW.name: {"INFLUENCES": 2}, SKIN_ROWS.name: {"MAX_BONES": 30},
            ROW_UPLOAD.name: {}}
 
 
-@pytest.mark.parametrize("spec", [CROWD_DRAW, TRANSITION_BLEND, ROW_UPLOAD],
+@pytest.mark.parametrize("spec", [CROWD_DRAW, SKIN_ROWS, ROW_UPLOAD],
                          ids=lambda s: s.name)
 def test_gl_sources_compile_and_expose_every_declaration(gl, spec):
     src = gl_sources(spec, DEFINES[spec.name])
@@ -50,7 +50,7 @@ def test_blender_info_has_no_version_and_one_call_per_declaration():
 
 def test_missing_define_and_source_are_named():
     with pytest.raises(CrowdError, match="MAX_BONES"):
-        gl_sources(TRANSITION_BLEND)
+        gl_sources(SKIN_ROWS)
     with pytest.raises(CrowdError, match="nope.glsl"):
         gl_sources(ProgramSpec("broken", compute=("nope.glsl",), local_group_size=(1,)))
 
@@ -66,9 +66,9 @@ def test_programs_compile_in_blenders_gpu_module():
         scene.render.resolution_x = scene.render.resolution_y = 8
         bpy.ops.render.render()           # initialises the GPU in background mode
         from crowd_addon.gpu.assembler import blender_create_info
-        from crowd_addon.gpu.programs import CROWD_DRAW, ROW_UPLOAD, TRANSITION_BLEND
+        from crowd_addon.gpu.programs import CROWD_DRAW, ROW_UPLOAD, SKIN_ROWS
         for spec, defines in ((CROWD_DRAW, {"INFLUENCES": 4}),
-                              (TRANSITION_BLEND, {"MAX_BONES": 30}), (ROW_UPLOAD, {})):
+                              (SKIN_ROWS, {"MAX_BONES": 30}), (ROW_UPLOAD, {})):
             gpu.shader.create_from_info(blender_create_info(spec, defines).build(gpu))
             print("compiled", spec.name)
     """)

@@ -63,8 +63,9 @@ def test_agents_mid_transition_match_cpu_skinning(blender, h, where):
     d = blender(f"transitions_{where}")
     for f in range(3):
         h.assert_close_relative(d[f"gpu/frame{f}"], d[f"ref/frame{f}"])
-        # with GPU transitions the compute shader blended the four slots
-        assert d[f"gpu/transitions{f}"] == (4 if where == "gpu" else 0)
+        # with GPU skinning the compute shader wrote the three streams' new rows, the
+        # unique's and the four blending slots'
+        assert d[f"gpu/skinned_rows{f}"] == (3 + 1 + 4 if where == "gpu" else 0)
 
 
 def test_every_lod_is_skinned_like_its_mesh_on_the_cpu(blender, h):

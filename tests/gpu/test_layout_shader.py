@@ -28,7 +28,7 @@ void main()
 
 def run_probe(gl, storage, operands):
     spec = ProgramSpec("layout_probe", compute=("block_layout.glsl", "pose_layout.glsl"),
-                       push_constants=(("IVEC4", "u_pose_layout"), ("IVEC4", "u_pose_regions")),
+                       push_constants=(("IVEC4", "u_pose_layout"),),
                        local_group_size=(64,))
     program = gl.compute_shader(gl_sources(spec)["compute_shader"] + PROBE)
     program["u_pose_layout"].value = (storage.height, storage.row_texels, storage.M, storage.S)

@@ -36,17 +36,34 @@ def test_gpu_texture_equals_core_mirror_with_wrapped_rows(h, renderer):
     np.testing.assert_array_equal(r.read_pose_texture(), crowd.storage.texture_image())
 
 
-def test_gpu_transition_mode_uploads_local_rows_not_slot_rows(h, renderer):
-    crowd = h.Crowd(h.make_config(NT=4), gpu_transitions=True)
+def test_gpu_skinning_uploads_local_rows_and_writes_the_pose_texture(h, renderer):
+    crowd = h.Crowd(h.make_config(M=24, streams=24, NT=4, max_texture_size=256),
+                    gpu_skinning=True)
+    cpu = h.Crowd(h.make_config(M=24, streams=24, NT=4, max_texture_size=256))
+    assert crowd.storage.blocks > 1                     # wrapped rows on both textures
     r = renderer(crowd)
-    loc = crowd.local_storage
-    for i in range(8):
+    st = crowd.storage
+    for i in range(26):                                 # more than M: every slice rewritten
         started = 0
-        if i == 2:       # a request fills its slots' rows once, on the CPU (core's rule)
+        if i == 2:       # a request's slots send their StartP once (core's rule)
             started = crowd.transition_to_streamed([0, 1, 2], "s1", 4).started.size
+            cpu.transition_to_streamed([0, 1, 2], "s1", 4)
         crowd.step()
-        pose_expected, local_expected = crowd.storage.dirty_bytes(), loc.dirty_bytes()
+        cpu.step()
+        expected = st.dirty_bytes()
         stats = r.sync()
-        assert (stats.pose_bytes, stats.local_bytes) == (pose_expected, local_expected)
-        assert stats.pose_bytes == (crowd.S + crowd.U + started) * crowd.storage.row_bytes
-        assert stats.batch_bytes > 0 if crowd.slots.active.any() else stats.batch_bytes == 0
+        assert (stats.pose_bytes, stats.local_bytes) == (0, expected)
+        assert stats.local_bytes == (crowd.S + crowd.U + started) * st.row_bytes
+        assert stats.skinned_rows == crowd.S + crowd.U + crowd.slots.active.sum()
+        # the rows the GPU wrote are the CPU crowd's pose texture rows
+        gpu_rows = r.read_pose_texture()
+        used = np.unique(cpu.agent_rows_index())
+        x, y = st.texel_of_row(used)
+        for row, x0, y0 in zip(used, x, y):
+            np.testing.assert_allclose(gpu_rows[y0, x0:x0 + st.row_texels],
+                                       cpu.storage.rows[row].reshape(-1, 4), atol=2e-5)
+    hist = np.arange(st.slot_base)                      # every history and unique row
+    x, y = st.texel_of_row(hist)
+    got = np.stack([r.read_pose_texture()[y0, x0:x0 + st.row_texels] for x0, y0 in zip(x, y)])
+    np.testing.assert_allclose(got, cpu.storage.rows[:st.slot_base].reshape(got.shape),
+                               atol=2e-5)

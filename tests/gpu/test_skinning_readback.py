@@ -36,10 +36,10 @@ def test_unique_agents_match_cpu_skinning(h, renderer):
     h.assert_close_relative(r.skinned_positions(agents), h.world_reference(crowd, agents, mesh))
 
 
-@pytest.mark.parametrize("gpu_transitions", [False, True])
-def test_agents_mid_transition_match_cpu_skinning(h, renderer, gpu_transitions):
+@pytest.mark.parametrize("gpu_skinning", [False, True])
+def test_agents_mid_transition_match_cpu_skinning(h, renderer, gpu_skinning):
     cfg = h.make_config(NT=4)
-    crowd = h.Crowd(cfg, gpu_transitions=gpu_transitions)
+    crowd = h.Crowd(cfg, gpu_skinning=gpu_skinning)
     r = renderer(crowd)
     crowd.step()
     r.sync()

@@ -1,10 +1,11 @@
-"""The transition compute shader (paper s.4.5) against core's CPU transitions.
+"""The skinning-rows compute shader (paper s.4.5) against core's CPU skinning.
 
-Two crowds from one configuration get the same requests; one blends its slots on
-the CPU, the other (``gpu_transitions=True``) hands them to the GPU. Every frame
-the slot rows the shader wrote into the pose texture must equal the CPU crowd's
-slot rows. Two skeletons of different sizes exercise the per-slot skeleton and
-the end of a shorter skeleton; a small max texture size wraps the rows.
+Two crowds from one configuration get the same requests; one skins and blends on
+the CPU, the other (``gpu_skinning=True``) uploads local poses and hands the rest to
+the GPU. Every frame the rows the shader wrote into the pose texture (the new
+history slice, the unique, the transition slots) must equal the CPU crowd's rows.
+Two skeletons of different sizes exercise the per-row skeleton and the end of a
+shorter skeleton; a small max texture size wraps the rows.
 """
 
 import numpy as np
@@ -47,11 +48,24 @@ def requests(crowd, i):
         crowd.transition_to_streamed([2], "walk", 3)            # re-target mid-blend
 
 
-def test_gpu_slot_rows_match_cpu_transition_rows(renderer):
-    cpu, gpu = Crowd(config()), Crowd(config(), gpu_transitions=True)
+def _row(texture, st, row, bones):
+    x, y = st.texel_of_row(row)
+    return texture[y, x:x + 3 * bones].reshape(bones, 3, 4)
+
+
+def _close(got, want):
+    return np.abs(got - want).max() <= 1e-4 * np.abs(want).max()
+
+
+def test_gpu_rows_match_cpu_slice_unique_and_transition_rows(renderer):
+    cpu, gpu = Crowd(config()), Crowd(config(), gpu_skinning=True)
     assert gpu.storage.blocks > 1
     r = renderer(gpu)
     st = cpu.storage
+    texture = r.read_pose_texture()             # after the renderer's first batch
+    for row in range(st.slot_base):             # the whole history and the unique
+        b = gpu.skeletons[gpu._row_skeleton[row]].bone_count
+        assert _close(_row(texture, st, row, b), st.rows[row, :b]), row
     checked = 0
     for i in range(16):
         for crowd in (cpu, gpu):
@@ -59,32 +73,35 @@ def test_gpu_slot_rows_match_cpu_transition_rows(renderer):
             crowd.step()
         stats = r.sync()
         active = cpu.slots.active_slots()
-        np.testing.assert_array_equal(np.sort(gpu.gpu_transition_batch().slots), active)
-        assert stats.transitions == active.size
+        np.testing.assert_array_equal(gpu.slots.active_slots(), active)
+        assert stats.skinned_rows == gpu.S + gpu.U + active.size
         texture = r.read_pose_texture()
-        x, y = st.texel_of_row(st.slot_base + active)
-        for slot, xx, yy in zip(active, x, y):
-            skel = cpu.skeletons[int(gpu.gpu_transition_batch().skeletons[
-                np.flatnonzero(gpu.gpu_transition_batch().slots == slot)[0]])]
-            b = skel.bone_count
-            got = texture[yy, xx:xx + 3 * b].reshape(b, 3, 4)
-            want = st.rows[st.slot_base + slot, :b]
-            err = np.abs(got - want).max()
-            assert err <= 1e-4 * np.abs(want).max(), (i, slot, err)
+        sl = gpu.frame % gpu.M
+        for row in [*range(sl * gpu.S, (sl + 1) * gpu.S), st.unique_base]:
+            b = gpu.skeletons[gpu._row_skeleton[row]].bone_count
+            assert _close(_row(texture, st, row, b), st.rows[row, :b]), (i, row)
+        for slot in active:
+            kind, ref = gpu.slots.target_kind[slot], gpu.slots.target_ref[slot]
+            k = gpu.root_skeleton[ref if kind == 0 else gpu.S + ref]
+            b = gpu.skeletons[k].bone_count
+            got = _row(texture, st, st.slot_base + slot, b)
+            assert _close(got, st.rows[st.slot_base + slot, :b]), (i, slot)
             checked += 1
     assert checked > 40
 
 
-def test_gpu_transition_agents_render_like_the_cpu_crowd(renderer):
+def test_gpu_skinned_agents_render_like_the_cpu_crowd(renderer):
     """What is drawn (transform feedback) agrees too, for agents mid-transition."""
-    cpu, gpu = Crowd(config()), Crowd(config(), gpu_transitions=True)
+    cpu, gpu = Crowd(config()), Crowd(config(), gpu_skinning=True)
     rc, rg = renderer(cpu), renderer(gpu)
-    agents = np.array([0, 2, 4])
+    agents = np.array([0, 2, 4, 20, 21, 25])
     for i in range(5):
         for crowd in (cpu, gpu):
             requests(crowd, i)
             crowd.step()
         rc.sync()
         rg.sync()
-    a, b = rc.skinned_positions(agents), rg.skinned_positions(agents)
+    a, b = rc.skinned_positions(agents[:3]), rg.skinned_positions(agents[:3])
+    assert np.abs(a - b).max() <= 1e-4 * np.abs(a).max()
+    a, b = rc.skinned_positions(agents[3:]), rg.skinned_positions(agents[3:])
     assert np.abs(a - b).max() <= 1e-4 * np.abs(a).max()
