@@ -87,38 +87,57 @@ def check_offsets(offsets, max_offset, what="agent"):
 class AgentIndex:
     """Finds the agents that play a given reference key, without per-frame sorting.
 
-    Keys are integers (the crowd uses ``stream * M + offset`` for streamed agents and
-    ``S * M + unique`` for unique ones). A sorted copy is rebuilt only after many
-    changes; changes since the last rebuild live in a small overlay.
+    Keys are small non-negative integers (the crowd uses ``stream * M + offset`` for
+    streamed agents and ``S * M + unique`` for unique ones, so fewer than the pose
+    texture's rows). The agents are kept grouped by key (a radix argsort, O(N)) with
+    each key's first position, so a lookup is two array reads per key. Agents changed
+    since the last regrouping live in a small overlay searched apart; the index
+    regroups once the overlay passes ``max(256, N / 64)`` agents.
     """
 
     def __init__(self, keys: np.ndarray):
         self.keys = np.asarray(keys, np.int64).copy()
+        if self.keys.size and self.keys.min() < 0:
+            raise ValueError("AgentIndex: keys must be >= 0")
+        self.key_count = int(self.keys.max()) + 1 if self.keys.size else 1
         self._rebuild()
 
     def _rebuild(self):
-        self.order = np.argsort(self.keys, kind="stable")
-        self.sorted_keys = self.keys[self.order]
+        small = np.int16 if self.key_count <= np.iinfo(np.int16).max else np.int32
+        self.order = np.argsort(self.keys.astype(small), kind="stable")   # radix sort
+        counts = np.bincount(self.keys, minlength=self.key_count)
+        self.first = np.concatenate([[0], np.cumsum(counts)])             # (K + 1,)
         self.stale = np.zeros(self.keys.shape[0], bool)
         self.overlay = np.zeros(0, np.int64)
 
     def set(self, agents: np.ndarray, keys: np.ndarray):
         agents = np.asarray(agents, np.int64)
+        keys = np.asarray(keys, np.int64)
         self.keys[agents] = keys
+        if keys.size and int(keys.max()) >= self.key_count:
+            self.key_count = int(keys.max()) + 1
+            self._rebuild()
+            return
         self.stale[agents] = True
         self.overlay = np.union1d(self.overlay, agents)
-        if self.overlay.size > max(1024, self.keys.shape[0] // 8):
+        if self.overlay.size > max(256, self.keys.shape[0] // 64):
             self._rebuild()
 
     def lookup(self, keys: np.ndarray):
         """Agents for each key: ``(ids, which)`` where ``which`` indexes ``keys``."""
         keys = np.asarray(keys, np.int64)
-        ids, which = _ranges(self.sorted_keys, keys, self.order, np.arange(keys.size))
+        known = np.clip(keys, 0, self.key_count - 1)
+        lo = np.where(keys == known, self.first[known], 0)
+        counts = np.where(keys == known, self.first[known + 1], 0) - lo
+        total = int(counts.sum())
+        pos = np.repeat(lo - np.cumsum(counts) + counts, counts) + np.arange(total)
+        ids = self.order[pos]
+        which = np.repeat(np.arange(keys.size), counts)
         keep = ~self.stale[ids]
         ids, which = ids[keep], which[keep]
         if self.overlay.size:
-            # agents changed since the rebuild: the same search the other way round,
-            # each overlay agent's key among the sorted query keys
+            # agents changed since the regrouping: each one's key among the sorted
+            # query keys
             srt = np.argsort(keys, kind="stable")
             which2, ids2 = _ranges(keys[srt], self.keys[self.overlay], srt, self.overlay)
             ids = np.concatenate([ids, ids2])

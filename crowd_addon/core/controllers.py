@@ -54,6 +54,11 @@ class Batch:
     def __init__(self, nodes, index, roots, child_index, bank, bones, skeletons):
         self.nodes = nodes
         self.index = np.asarray(index, np.int64)
+        # where the batch writes its poses: a slice when its nodes are contiguous
+        # (the evaluator numbers them so), else the index array
+        contiguous = self.index.size and (np.diff(self.index) == 1).all()
+        self.out = slice(int(self.index[0]), int(self.index[-1]) + 1) if contiguous \
+            else self.index
         self.roots = np.asarray(roots, np.int64)
         self.child_index = child_index
         self.bank = bank
@@ -131,7 +136,10 @@ class ClipPlayer(Controller):
 
         def evaluate(self, ctx):
             t = self.start + self.speed * ctx.time[self.index]
-            ctx.poses[self.index] = self.bank.sample(self.clip_ids, t)
+            if isinstance(self.out, slice):
+                self.bank.sample(self.clip_ids, t, out=ctx.poses[self.out])
+            else:
+                ctx.poses[self.out] = self.bank.sample(self.clip_ids, t)
             active = ctx.weight[self.index] > 0
             # A node that was not playing, or whose time went back, starts fresh:
             # tags exactly at its current time fire.
@@ -168,7 +176,7 @@ class Blend2(Controller):
             ctx.local_weight[self.ib] = w
 
         def evaluate(self, ctx):
-            ctx.poses[self.index] = sqt.blend2(ctx.poses[self.ia], ctx.poses[self.ib],
+            ctx.poses[self.out] = sqt.blend2(ctx.poses[self.ia], ctx.poses[self.ib],
                                                self.w.astype(np.float32))
 
 
@@ -227,7 +235,7 @@ class BlendMask(Controller):
             ctx.local_weight[self.ci] = self.w.max(axis=2)
 
         def evaluate(self, ctx):
-            ctx.poses[self.index] = sqt.blend_weighted(ctx.poses[self.ci], self.w)
+            ctx.poses[self.out] = sqt.blend_weighted(ctx.poses[self.ci], self.w)
 
     @staticmethod
     def group_key(node):
@@ -318,7 +326,7 @@ class Layer(Controller):
                 out[:, b] = sqt.apply_additive(base, delta, w)
             else:
                 out[:, b] = sqt.blend2(base, lay, w)
-            ctx.poses[self.index] = out
+            ctx.poses[self.out] = out
 
 
 def _bone_weights(spec, skeleton, what) -> np.ndarray:
@@ -412,7 +420,7 @@ class BlendSpace2D(Controller):
             ctx.local_weight[self.ci] = self.w
 
         def evaluate(self, ctx):
-            ctx.poses[self.index] = sqt.blend_weighted(ctx.poses[self.ci],
+            ctx.poses[self.out] = sqt.blend_weighted(ctx.poses[self.ci],
                                                        self.w.astype(np.float32))
 
 
@@ -573,4 +581,4 @@ class StateMachine(Controller):
                                ctx.poses[src_idx], self.snapshot[fading])
                 w = (self.fade_t[fading] / self.fade_len[fading]).astype(np.float32)
                 out[fading] = sqt.blend2(src, out[fading], w)
-            ctx.poses[self.index] = out
+            ctx.poses[self.out] = out

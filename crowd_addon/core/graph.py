@@ -88,22 +88,35 @@ class TreeEvaluator:
                 children[i].append(visit(c, i, d + 1, r, sk))
             return i
 
-        self.root_index = np.array([visit(c, -1, 0, r, sk) for r, (c, sk) in enumerate(roots)],
-                                   np.int64)
+        root_index = [visit(c, -1, 0, r, sk) for r, (c, sk) in enumerate(roots)]
         n = len(nodes)
         height = np.zeros(n, np.int64)
         for i in reversed(range(n)):
             if children[i]:
                 height[i] = 1 + max(height[c] for c in children[i])
-        self.nodes = nodes
-        self.parent = np.array(parent, np.int64)
-        self.depth = np.array(depth, np.int64)
-        self.height = height
         groups = defaultdict(list)
         for i, ctrl in enumerate(nodes):
             key_fn = getattr(type(ctrl), "group_key", None)
             key = (type(ctrl), key_fn(ctrl) if key_fn else None, depth[i], int(height[i]))
             groups[key].append(i)
+        # renumber the nodes group by group, so each batch writes one contiguous range
+        # of the frame arrays (a slice, not a scatter)
+        old = [i for idx in groups.values() for i in idx]
+        new = np.empty(n, np.int64)
+        new[old] = np.arange(n)
+        nodes = [nodes[i] for i in old]
+        parent = [int(new[parent[i]]) if parent[i] >= 0 else -1 for i in old]
+        depth = [depth[i] for i in old]
+        root_of = [root_of[i] for i in old]
+        skels = [skels[i] for i in old]
+        children = [[int(new[c]) for c in children[i]] for i in old]
+        height = height[old]
+        groups = {key: [int(new[i]) for i in idx] for key, idx in groups.items()}
+        self.root_index = new[np.asarray(root_index, np.int64)]
+        self.nodes = nodes
+        self.parent = np.array(parent, np.int64)
+        self.depth = np.array(depth, np.int64)
+        self.height = height
         self.batches = []
         for (cls, _, d, h), idx in groups.items():
             batch = cls.Batch([nodes[i] for i in idx], idx, [root_of[i] for i in idx],
