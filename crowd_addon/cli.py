@@ -259,11 +259,19 @@ def _add_export(subparsers) -> None:
 def _run_export(args) -> int:
     import json
 
-    from .usd import export_crowd
-
-    config = _export_source(args)
-    result = export_crowd(config, args.out, args.frames, agents=args.agents,
-                          progress=_progress_printer())
+    if args.config:
+        from .core.config_io import load_config
+        from .usd import export_crowd
+        config = load_config(args.config)
+        result = export_crowd(config, args.out, args.frames, agents=args.agents,
+                              progress=_progress_printer())
+    else:                       # the scene's Crowd settings, baked as the panel does
+        scene = _export_scene(args)
+        from .blender.export import export_scene
+        config, result = export_scene(
+            scene, args.out, args.frames, agents=args.agents,
+            progress=_progress_printer(), on_bake=lambda done, total, message: print(
+                f"crowd export: {message}", file=sys.stderr, flush=True))
     if args.json:
         print(json.dumps({
             "path": result.path, "layers_dir": result.layers_dir, "files": result.files,
@@ -289,18 +297,14 @@ def _run_export(args) -> int:
     return 0
 
 
-def _export_source(args):
-    """The CrowdConfig to export: a saved configuration, or a Blender scene's Crowd
-    settings baked through the extension (a .blend opened here, or the open file)."""
-    if args.config:
-        from .core.config_io import load_config
-        return load_config(args.config)
+def _export_scene(args):
+    """The Blender scene to export (needs bpy): the active (or ``--scene``) scene of
+    the .blend opened here, or of the open file inside Blender."""
     try:
         import bpy
     except ImportError:
         raise CrowdError("give --config CROWD_JSON, or --blend with the bpy module "
                          "installed (pip install bpy)") from None
-    from .blender.scene_config import config_from_scene
     if args.blend:
         if not os.path.isfile(args.blend):
             raise CrowdError(f"{args.blend}: no such .blend file")
@@ -315,8 +319,7 @@ def _export_source(args):
     if not hasattr(scene, "crowd"):             # outside an installed extension
         from . import register
         register()
-    return config_from_scene(scene, lambda done, total, message: print(
-        f"crowd export: {message}", file=sys.stderr, flush=True))
+    return scene
 
 
 def _progress_printer():

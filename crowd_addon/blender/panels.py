@@ -1,4 +1,5 @@
-"""The "Crowd" tab of the 3D viewport sidebar: lists, settings, bake, preview, stats."""
+"""The "Crowd" tab of the 3D viewport sidebar: lists, settings, bake, preview, USD
+export, stats."""
 
 import bpy
 
@@ -85,6 +86,7 @@ class CROWD_PT_main(_Panel, bpy.types.Panel):
         row.operator("crowd.bake", icon="RENDER_ANIMATION")
         row.operator("crowd.preview_toggle", text="Preview", icon="HIDE_OFF",
                      depress=pv is not None)
+        layout.operator("crowd.export_usd", text="Export USD...", icon="EXPORT")
         if pv is None:
             err = preview.last_error(scene)
             if err:

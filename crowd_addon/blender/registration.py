@@ -1,8 +1,9 @@
 """Register and unregister everything the extension adds to Blender.
 
 :func:`register` adds the property groups (``Scene.crowd``), operators, UI lists and
-panels, and the app handlers the preview needs (file load, frame change, depsgraph
-update, undo/redo; all persistent so they survive file loads). The viewport draw
+panels, the File > Export menu entry, and the app handlers the preview needs (file
+load, frame change, depsgraph update, undo/redo; all persistent so they survive file
+loads). The viewport draw
 handler exists only while a preview runs; the bake's modal timer only while it
 bakes. :func:`unregister` stops every preview (removing the draw handler) and takes
 all of it away again, so register/unregister can alternate any number of times.
@@ -14,11 +15,12 @@ from __future__ import annotations
 import bpy
 
 from .. import api
-from . import operators, panels, preview, props
+from . import export, operators, panels, preview, props
 
-__all__ = ["CLASSES", "HANDLERS", "register", "unregister", "leftovers"]
+__all__ = ["CLASSES", "HANDLERS", "MENUS", "register", "unregister", "leftovers"]
 
-CLASSES = props.CLASSES + operators.CLASSES + panels.CLASSES
+CLASSES = props.CLASSES + operators.CLASSES + export.CLASSES + panels.CLASSES
+MENUS = export.MENUS           # (menu type name, draw function)
 HANDLERS = (("load_pre", preview.on_load_pre), ("load_post", preview.on_load_post),
             ("frame_change_post", preview.on_frame_change),
             ("depsgraph_update_post", preview.on_depsgraph_update),
@@ -44,6 +46,9 @@ def register():
         for old in [h for h in handlers if _ours(h, fn)]:
             handlers.remove(old)
         handlers.append(fn)
+    for menu, fn in MENUS:
+        _remove_menu_entries(menu, fn)
+        getattr(bpy.types, menu).append(fn)
     global _cli
     if _cli is None and hasattr(bpy.utils, "register_cli_command"):   # Blender 4.2+
         _cli = bpy.utils.register_cli_command("crowd", _crowd_cli)
@@ -63,6 +68,8 @@ def unregister():
         _cli = None
     preview.stop_all()
     api.detach_all()
+    for menu, fn in MENUS:
+        _remove_menu_entries(menu, fn)
     for name, fn in HANDLERS:
         handlers = getattr(bpy.app.handlers, name)
         for old in [h for h in handlers if _ours(h, fn)]:
@@ -74,9 +81,22 @@ def unregister():
             bpy.utils.unregister_class(cls)
 
 
+def _menu_entries(menu, fn) -> list:
+    """Our draw functions (this import's or an earlier one's) in a menu."""
+    cls = getattr(bpy.types, menu)
+    if not cls.is_extended():
+        return []
+    return [f for f in cls._dyn_ui_initialize() if _ours(f, fn)]
+
+
+def _remove_menu_entries(menu, fn):
+    for old in _menu_entries(menu, fn):
+        getattr(bpy.types, menu).remove(old)
+
+
 def leftovers() -> list:
     """Descriptions of anything of ours still registered: classes, ``Scene.crowd``,
-    app handlers, the draw handler."""
+    app handlers, menu entries, the draw handler."""
     out = [f"class {c.__name__}" for c in CLASSES if c.is_registered]
     out += [f"bpy.types.{c.__name__}" for c in CLASSES if hasattr(bpy.types, c.__name__)]
     if hasattr(bpy.types.Scene, "crowd"):
@@ -84,6 +104,8 @@ def leftovers() -> list:
     for name, fn in HANDLERS:
         out += [f"handler {name}: {h.__qualname__}" for h in getattr(bpy.app.handlers, name)
                 if _ours(h, fn)]
+    for menu, fn in MENUS:
+        out += [f"menu {menu}: {f.__qualname__}" for f in _menu_entries(menu, fn)]
     if preview.draw_handle() is not None:
         out.append("SpaceView3D draw handler")
     return out
