@@ -74,7 +74,7 @@ class ProgramSpec:
 CROWD_DRAW = ProgramSpec(
     name="crowd_draw",
     vertex=("block_layout.glsl", "pose_layout.glsl", "pose_rows.glsl", "agents.glsl",
-            "skinning.glsl", "crowd_vert.glsl"),
+            "skinning.glsl", "crowd_vertex.glsl", "crowd_vert.glsl"),
     fragment=("crowd_frag.glsl",),
     vertex_in=((0, "VEC3", "pos"), (1, "VEC3", "nor"), (2, "UVEC4", "bone_idx"),
                (3, "VEC4", "bone_w")),
