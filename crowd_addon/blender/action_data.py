@@ -27,6 +27,8 @@ CHANNELS = {"location": (0, 3), "rotation_quaternion": (3, 4), "rotation_euler":
             "rotation_axis_angle": (10, 4), "scale": (14, 3)}
 CHANNEL_WIDTH = 17
 _PATH = re.compile(r'^pose\.bones\["((?:[^"\\]|\\.)*)"\](.*)$')
+# the rest of a pose-bone data path -> (first column, width) of its channel block
+_PROPS = {"." + prop: cols for prop, cols in CHANNELS.items()}
 
 
 @dataclass(eq=False)
@@ -42,7 +44,8 @@ class BoneCurve:
 class ActionSource:
     """What :mod:`.bake` needs of one action.
 
-    curves : the bone F-curves, in the order of ``keys``.
+    fcurves : the bone F-curves, in the order of ``keys``.
+    bones, columns : (C,) int64 skeleton bone and channel column of each curve.
     keys : their keyframes packed (:class:`CurveSet`).
     fast : (C,) bool, curves the numpy evaluator reproduces; the others (modifiers
         other than Cycles within the key range, easing, sampled points) are
@@ -56,7 +59,9 @@ class ActionSource:
     action: object
     slot: object
     name: str
-    curves: list
+    fcurves: list
+    bones: np.ndarray
+    columns: np.ndarray
     keys: CurveSet
     fast: np.ndarray
     times: np.ndarray
@@ -64,6 +69,12 @@ class ActionSource:
     events: tuple
     frame_set_reason: str | None = None
     notes: list = field(default_factory=list)
+
+    @property
+    def curves(self) -> list:
+        """The curves as :class:`BoneCurve` (F-curve, bone, column), in ``keys`` order."""
+        return [BoneCurve(fc, int(b), int(c))
+                for fc, b, c in zip(self.fcurves, self.bones, self.columns)]
 
 
 def resolve_slot(action, armature_obj, slot=None):
@@ -88,7 +99,7 @@ def resolve_slot(action, armature_obj, slot=None):
     if ad is not None and ad.action == action and ad.action_slot is not None:
         return ad.action_slot
     usable = [s for s in slots if s.target_id_type in ("OBJECT", "UNSPECIFIED")
-              and action_fcurves(action, s)]
+              and _has_fcurves(_fcurve_owner(action, s))]
     if len(usable) == 1:
         return usable[0]
     if not usable:
@@ -99,14 +110,25 @@ def resolve_slot(action, armature_obj, slot=None):
 
 def action_fcurves(action, slot) -> list:
     """The F-curves of ``slot`` in ``action`` (all F-curves of a legacy action)."""
+    owner = _fcurve_owner(action, slot)
+    return [] if owner is None else list(owner.fcurves)
+
+
+def _has_fcurves(owner) -> bool:
+    return owner is not None and len(owner.fcurves) > 0
+
+
+def _fcurve_owner(action, slot):
+    """What holds the F-curves of ``slot``: its channelbag, or the legacy action
+    itself (``owner.fcurves``, ``owner.groups``), or None."""
     if slot is None:
-        return list(action.fcurves)
+        return action
     for layer in action.layers:
         for strip in layer.strips:
             bag = strip.channelbag(slot)
             if bag is not None:
-                return list(bag.fcurves)
-    return []
+                return bag
+    return None
 
 
 @functools.lru_cache(maxsize=4096)
@@ -120,12 +142,53 @@ def _bone_path(data_path):
     return (re.sub(r"\\(.)", r"\1", name) if "\\" in name else name), m.group(2)
 
 
-def _check_finite(arr, start, whats, part, action):
-    """Raise naming the curve and key of the first non-finite row of packed ``arr``."""
+@functools.lru_cache(maxsize=4096)
+def _curve_target(data_path):
+    """(bone name, rest of the path, (first column, width) of the channel or None) of
+    a ``pose.bones["..."]`` data path, else Nones."""
+    bone, rest = _bone_path(data_path)
+    return bone, rest, None if bone is None else _PROPS.get(rest)
+
+
+@functools.lru_cache(maxsize=64)
+def _targets(paths: tuple, bone_names: tuple):
+    """What F-curves with data paths ``paths`` animate on a skeleton of ``bone_names``
+    (cached: an action's paths seldom change between bakes).
+
+    Returns read-only arrays per curve: bone index (-1: not a pose-bone path or a
+    bone the skeleton lacks), first column and width of the channel (width 0: not
+    a bone channel), whether it is a ``rotation_mode`` curve; and the names of the
+    bones the skeleton lacks, in curve order."""
+    index = {n: i for i, n in enumerate(bone_names)}
+    bone = np.full(len(paths), -1, np.int64)
+    first_column = np.zeros(len(paths), np.int64)
+    width = np.zeros(len(paths), np.int64)
+    rotation_mode = np.zeros(len(paths), bool)
+    missing = []
+    for c, path in enumerate(paths):
+        name, rest, prop = _curve_target(path)
+        if name is None:
+            continue
+        b = index.get(name)
+        if b is None:
+            missing.append(name)
+            continue
+        bone[c] = b
+        rotation_mode[c] = rest == ".rotation_mode"
+        if prop is not None:
+            first_column[c], width[c] = prop
+    for a in (bone, first_column, width, rotation_mode):
+        a.flags.writeable = False
+    return bone, first_column, width, rotation_mode, tuple(missing)
+
+
+def _check_finite(arr, start, what, part, action):
+    """Raise naming the curve and key of the first non-finite row of packed ``arr``
+    (``what(c)``: bone, property and array index of curve ``c``)."""
     if not np.isfinite(arr).all():
         row = int(np.argmax(~np.isfinite(arr).all(1)))
         c = int(np.searchsorted(start, row, side="right") - 1)
-        bone, prop, i = whats[c]
+        bone, prop, i = what(c)
         raise CrowdError(f"action {action!r}, bone {bone!r}, {prop}[{i}]: {part} "
                          f"{row - start[c]} is not finite "
                          f"({arr[row].tolist()})")
@@ -142,6 +205,70 @@ def _is_cyclic(fc) -> bool:
             and m.mode_after in ("REPEAT", "REPEAT_OFFSET"))
 
 
+def _bulk(collection, prop, dtype):
+    """``prop`` of every item of ``collection`` with one ``foreach_get``."""
+    buf = np.empty(len(collection), dtype)
+    collection.foreach_get(prop, buf)
+    return buf
+
+
+def _read_keys(fields, kps, start, which=None):
+    """Keyframe properties into packed arrays, one ``foreach_get`` per curve and
+    field: ``fields`` is ``((prop, packed), ...)``, arrays ``(N, ...)`` alike whose
+    rows ``start[c]:start[c+1]`` (``start``: a list) are curve ``c``'s keys; curves
+    ``which`` (default all)."""
+    width = fields[0][1][:1].size
+    views = []
+    for prop, packed in fields:
+        view = packed.reshape(-1)
+        if view.dtype == np.float32:    # a buffer: slices of a memoryview cost less
+            view = memoryview(view)     # (enums are read as sequences: numpy only)
+        views.append((prop, view))
+    edges = start if width == 1 else [i * width for i in start]
+    get = type(kps[0]).foreach_get      # unbound: skips the RNA attribute lookup per call
+    spans = zip(kps, edges, edges[1:]) if which is None else \
+        ((kps[c], edges[c], edges[c + 1]) for c in which)
+    if len(views) == 1:
+        (prop, view), = views
+        for kp, a, b in spans:
+            if a != b:
+                get(kp, prop, view[a:b])
+        return
+    for kp, a, b in spans:
+        if a != b:
+            for prop, view in views:
+                get(kp, prop, view[a:b])
+
+
+@functools.cache
+def _interpolation_fits_bytes() -> bool:
+    """Whether every ``Keyframe.interpolation`` value fits a byte."""
+    import bpy
+    values = [e.value for e in bpy.types.Keyframe.bl_rna.properties["interpolation"].enum_items]
+    return min(values) >= 0 and max(values) < 256
+
+
+def _read_interpolation_enum(ipo, keys, kps, group):
+    """``Keyframe.interpolation`` of curves ``group`` (equal key counts) into ``ipo``.
+
+    ``foreach_get`` hands an enum over item by item whatever the buffer, and a
+    ``bytearray`` takes the items fastest (the values are below 256)."""
+    members = group.tolist()
+    if not _interpolation_fits_bytes():
+        bounds = keys.start.tolist()
+        _read_keys((("interpolation", ipo),), kps, bounds, members)
+        return
+    index, k = keys.key_index(group)
+    parts = []
+    get = type(kps[0]).foreach_get
+    for c in members:
+        part = bytearray(k)
+        get(kps[c], "interpolation", part)
+        parts.append(part)
+    values = np.frombuffer(b"".join(parts), np.uint8)
+    ipo[index] = values if isinstance(index, slice) else values.reshape(len(members), k)
+
+
 def read_action(armature_obj, skeleton, action, fps: float, scene_fps: float,
                 slot=None, loop=None) -> ActionSource:
     """Read and validate ``action`` for ``armature_obj`` baked at ``fps``.
@@ -154,45 +281,65 @@ def read_action(armature_obj, skeleton, action, fps: float, scene_fps: float,
         (manual frame range if set, else the span of its bone keys).
     loop : None to take it from the action (manual range "Cyclic Animation", or every
         bone F-curve cycling through a Cycles modifier), else True/False.
+
+    Per-curve flags (mute, validity, array index, extrapolation) are read for all
+    F-curves at once; the keyframes with one ``foreach_get`` per curve and field.
     """
     name = action.name
     slot = resolve_slot(action, armature_obj, slot)
-    index = {n: i for i, n in enumerate(skeleton.bone_names)}
-    curves, whats, counts, missing, reason = [], [], [], [], None
-    for fc in action_fcurves(action, slot):
-        bone, rest = _bone_path(fc.data_path)
-        if bone is None:
-            continue
-        if bone not in index:
-            missing.append(bone)
-            continue
-        if fc.mute or not fc.is_valid:
-            continue
-        if rest == ".rotation_mode":
-            reason = f"it animates the rotation mode of bone {bone!r}"
-        prop = rest[1:] if rest.startswith(".") else None
-        if prop not in CHANNELS or not 0 <= fc.array_index < CHANNELS[prop][1]:
-            continue
-        if fc.group is not None and fc.group.mute:
-            reason = f"F-curve group {fc.group.name!r} is muted"
-        n = len(fc.keyframe_points)
-        if n == 0 and len(fc.sampled_points) == 0 and len(fc.modifiers) == 0:
-            continue                              # an empty curve animates nothing
-        curves.append(BoneCurve(fc, index[bone], CHANNELS[prop][0] + fc.array_index))
-        whats.append((bone, prop, fc.array_index))
-        counts.append(n)
-    if missing:
-        raise CrowdError(f"action {name!r} animates bones that armature "
-                         f"{armature_obj.name!r} lacks: {sorted(set(missing))}")
-    if not curves:
+    owner = _fcurve_owner(action, slot)
+    fcs = [] if owner is None else list(owner.fcurves)
+    selected, reason = [], None
+    if fcs:
+        coll = owner.fcurves
+        bone, first_column, width, rotation_mode, missing = _targets(
+            tuple([fc.data_path for fc in fcs]), skeleton.bone_names)
+        if missing:
+            raise CrowdError(f"action {name!r} animates bones that armature "
+                             f"{armature_obj.name!r} lacks: {sorted(set(missing))}")
+        live = (bone >= 0) & ~_bulk(coll, "mute", bool) & _bulk(coll, "is_valid", bool)
+        array_index = _bulk(coll, "array_index", np.int32)
+        extrapolation = _bulk(coll, "extrapolation", np.int32)
+        channel = live & (0 <= array_index) & (array_index < width)
+        column = (first_column + array_index).tolist()
+        groups = getattr(owner, "groups", None)
+        muted_groups = groups is None or any(g.mute for g in groups)
+        # the reason is the one given by the last curve that gives one
+        moded = np.flatnonzero(live & rotation_mode)
+        reason_at = int(moded[-1]) if moded.size else -1
+        if moded.size:
+            reason = ("it animates the rotation mode of bone "
+                      f"{skeleton.bone_names[bone[reason_at]]!r}")
+        bone = bone.tolist()
+        for c in np.flatnonzero(channel).tolist():
+            fc = fcs[c]
+            if muted_groups and c > reason_at and fc.group is not None and fc.group.mute:
+                reason = f"F-curve group {fc.group.name!r} is muted"
+            kp = fc.keyframe_points
+            n = len(kp)
+            mods = fc.modifiers
+            modded = len(mods) > 0
+            if n == 0 and not modded and len(fc.sampled_points) == 0:
+                continue                              # an empty curve animates nothing
+            selected.append((c, kp, n, bone[c], column[c], mods if modded else None))
+    if not selected:
         raise CrowdError(f"action {name!r} is empty: no F-curves for the bones of armature "
                          f"{armature_obj.name!r}")
-    start = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-    co = np.zeros((int(start[-1]), 2), np.float32)
-    for c, bc in enumerate(curves):
-        if counts[c]:
-            bc.fcurve.keyframe_points.foreach_get("co", co[start[c]:start[c + 1]].reshape(-1))
-    _check_finite(co, start, whats, "key", name)
+    which, kps, counts, bones, columns, mods = (list(v) for v in zip(*selected))
+    fcurves = [fcs[c] for c in which]
+    linear_value = fcurves[0].bl_rna.properties["extrapolation"].enum_items["LINEAR"].value
+    extrapolation = extrapolation[which]
+
+    def what(c):
+        prop = next(p for p, (col, w) in CHANNELS.items() if col <= columns[c] < col + w)
+        return skeleton.bone_names[bones[c]], prop, columns[c] - CHANNELS[prop][0]
+
+    start = np.zeros(len(counts) + 1, np.int64)
+    np.cumsum(counts, out=start[1:])
+    bounds = start.tolist()
+    co = np.empty((bounds[-1], 2), np.float32)
+    _read_keys((("co", co),), kps, bounds)
+    _check_finite(co, start, what, "key", name)
     keyed = np.flatnonzero(np.array(counts) > 0)
     first, last = co[start[keyed], 0], co[start[keyed + 1] - 1, 0]
 
@@ -200,22 +347,22 @@ def read_action(armature_obj, skeleton, action, fps: float, scene_fps: float,
         begin, end = float(action.frame_start), float(action.frame_end)
         auto_loop = bool(action.use_cyclic)
     else:
-        sampled = [(bc.fcurve.sampled_points[0].co[0], bc.fcurve.sampled_points[-1].co[0])
-                   for c, bc in enumerate(curves) if not counts[c]
-                   and len(bc.fcurve.sampled_points)]
-        lows = list(first) + [a for a, _ in sampled]
-        highs = list(last) + [b for _, b in sampled]
+        sampled = [(fc.sampled_points[0].co[0], fc.sampled_points[-1].co[0])
+                   for fc, n in zip(fcurves, counts) if not n and len(fc.sampled_points)]
+        lows = first.tolist() + [a for a, _ in sampled]
+        highs = last.tolist() + [b for _, b in sampled]
         if not lows:
             raise CrowdError(f"action {name!r} has no keyframes and no manual frame range")
         begin, end = float(min(lows)), float(max(highs))
-        auto_loop = all(_is_cyclic(bc.fcurve) for bc in curves)
+        auto_loop = all(m is not None and _is_cyclic(fc) for fc, m in zip(fcurves, mods))
     if not end > begin:
         raise CrowdError(f"action {name!r} is one frame long (frame {begin:g}); a clip needs "
                          "at least two frames")
     loop = auto_loop if loop is None else bool(loop)
     times, notes = _sample_times(name, begin, end, scene_fps / fps, loop)
-    keys, fast = _read_interpolation(name, curves, whats, co, start, keyed,
-                                     times.astype(np.float32))
+    keys, fast = _read_interpolation(name, mods, kps, what, co, start, keyed,
+                                     times.astype(np.float32),
+                                     extrapolation == linear_value)
 
     step = (times[-1] - times[0]) / (len(times) - 1)
     events = []
@@ -225,11 +372,19 @@ def read_action(armature_obj, skeleton, action, fps: float, scene_fps: float,
             raise CrowdError(f"action {name!r}: pose marker {m.name!r} at frame {m.frame} is "
                              f"outside the action's frames {begin:g}..{end:g}")
         events.append((m.name, float(min(max(f, 0.0), len(times) - 1))))
-    return ActionSource(action, slot, name, curves, keys, fast, times, loop, tuple(events),
+    return ActionSource(action, slot, name, fcurves, np.array(bones, np.int64),
+                        np.array(columns, np.int64), keys, fast, times, loop, tuple(events),
                         reason, notes)
 
 
-def _read_interpolation(name, curves, whats, co, start, keyed, times32):
+def _modifiers_allow(mods, inside) -> bool:
+    """Whether a curve with modifiers ``mods`` is still its keys (no active modifier,
+    or only Cycles while the samples stay ``inside`` its keys)."""
+    kinds = {m.type for m in mods if not m.mute}
+    return not kinds or (inside and kinds == {"CYCLES"})
+
+
+def _read_interpolation(name, mods, kps, what, co, start, keyed, times32, extrap_linear):
     """Complete the packed keys with interpolation and handles where they matter,
     and decide which curves the numpy evaluator takes.
 
@@ -240,45 +395,43 @@ def _read_interpolation(name, curves, whats, co, start, keyed, times32):
     and handles are not read: dense motion capture costs one ``foreach_get`` per
     curve.
     """
-    n = len(curves)
+    n = len(mods)
     ipo = np.full(len(co), LINEAR, np.int32)
     linear = np.zeros(n, bool)
     keys = CurveSet(co, ipo, None, None, start, linear)
     left = right = None
+    bounds = start.tolist()
     inside = np.zeros(n, bool)
     inside[keyed] = ((co[start[keyed], 0] <= times32[0])
                      & (times32[-1] <= co[start[keyed + 1] - 1, 0]))
-    eligible = []
-    for c in keyed:
-        mods = curves[c].fcurve.modifiers
-        kinds = {m.type for m in mods if not m.mute} if len(mods) else set()
-        if not kinds or (inside[c] and kinds == {"CYCLES"}):
-            eligible.append(c)
+    inside = inside.tolist()
+    eligible = [c for c in keyed.tolist()
+                if mods[c] is None or _modifiers_allow(mods[c], inside[c])]
     fast = np.zeros(n, bool)
     for group in keys.groups(eligible, frames_only=True):
-        x = co[start[group[0]]:start[group[0] + 1], 0]
+        x = co[bounds[group[0]]:bounds[group[0] + 1], 0]
         if not (np.diff(x) > 0).all():
             continue
         fast[group] = True
         at = np.minimum(np.searchsorted(x, times32), len(x) - 1)
         if (x[at] == times32).all():
             continue
-        for c in group:
-            fc = curves[c].fcurve
-            fc.keyframe_points.foreach_get("interpolation", ipo[start[c]:start[c + 1]])
-            linear[c] = fc.extrapolation == "LINEAR"
+        _read_interpolation_enum(ipo, keys, kps, group)
+        linear[group] = extrap_linear[group]
         modes = keys.rows(ipo, group)                                    # (m, K)
         fast[group] = modes.max(1) <= BEZIER                # easing: FCurve.evaluate
-        for c in group[(modes == BEZIER).any(1)]:
+        bezier = group[(modes == BEZIER).any(1)].tolist()
+        if bezier:
             if left is None:
                 left, right = np.zeros_like(co), np.zeros_like(co)
-            kp, span = curves[c].fcurve.keyframe_points, slice(start[c], start[c + 1])
-            kp.foreach_get("handle_left", left[span].reshape(-1))
-            kp.foreach_get("handle_right", right[span].reshape(-1))
+            if len(bezier) == n:
+                bezier = None                             # all curves: no index lists
+            _read_keys((("handle_left", left), ("handle_right", right)), kps, bounds,
+                       bezier)
     if left is None:
         return keys, fast
-    _check_finite(left, start, whats, "left handle of key", name)
-    _check_finite(right, start, whats, "right handle of key", name)
+    _check_finite(left, start, what, "left handle of key", name)
+    _check_finite(right, start, what, "right handle of key", name)
     return CurveSet(co, ipo, left, right, start, linear), fast
 
 

@@ -23,8 +23,8 @@ from ..core.errors import CrowdError
 from ..core.mesh import ProxyMesh
 from ..core.skeleton import Skeleton
 
-__all__ = ["skeleton_from_armature", "rest_local", "check_skeleton", "matrices",
-           "relative_to_parent", "sqt_from_matrices", "object_to_armature",
+__all__ = ["skeleton_from_armature", "rest_local", "check_skeleton", "skeleton_and_rest",
+           "matrices", "relative_to_parent", "sqt_from_matrices", "object_to_armature",
            "proxy_mesh_from_object"]
 
 
@@ -57,8 +57,8 @@ def _bones(armature_obj):
     bones = _armature(armature_obj).data.bones
     if len(bones) == 0:
         raise CrowdError(f"armature {armature_obj.name!r} has no bones")
-    names = [b.name for b in bones]
-    parents = [b.parent.name if b.parent else None for b in bones]
+    names = bones.keys()
+    parents = [None if p is None else p.name for p in (b.parent for b in bones)]
     return names, parents, matrices(bones, "matrix_local")
 
 
@@ -70,26 +70,41 @@ def relative_to_parent(model: np.ndarray, parents: np.ndarray) -> np.ndarray:
     return out
 
 
+def _skeleton(armature_obj, name, names, parent_names, ml):
+    """The skeleton of bones read by :func:`_bones`, with the rest pose relative to the
+    parent ``(B, 4, 4)`` and its rotations ``(B, 4)`` float64 in Blender's order."""
+    index = {n: i for i, n in enumerate(names)}
+    parents = np.array([-1 if p is None else index[p] for p in parent_names])
+    inverse = np.linalg.inv(ml)
+    rel = _relative_rest(ml, parents, inverse)
+    rot = quat.from_matrix(rel[:, :3, :3])
+    bind = sqt.identity_pose(len(names)).astype(np.float64)
+    bind[:, sqt.ROT] = rot
+    bind[:, sqt.TRANS] = rel[:, :3, 3]
+    skeleton = Skeleton.from_parent_names(name or armature_obj.name, names, parent_names,
+                                          bind, inverse_bind=inverse)
+    return skeleton, rel, rot
+
+
+def _relative_rest(ml, parents, inverse):
+    """:func:`relative_to_parent` of rest matrices ``ml`` (B, 4, 4) given their
+    inverses (the same numbers: LAPACK inverts each matrix on its own)."""
+    rel = ml.copy()
+    has = parents >= 0
+    rel[has] = inverse[parents[has]] @ ml[has]
+    return rel
+
+
 def skeleton_from_armature(armature_obj, name: str | None = None) -> Skeleton:
     """The armature's bones as a core :class:`Skeleton` named after the object.
 
     Bind pose: the rest pose relative to the parent bone; ``inverse_bind``:
     ``inv(bone.matrix_local)`` in float64.
     """
-    names, parent_names, ml = _bones(armature_obj)
-    index = {n: i for i, n in enumerate(names)}
-    parents = np.array([-1 if p is None else index[p] for p in parent_names])
-    rel = relative_to_parent(ml, parents)
-    bind = sqt.identity_pose(len(names)).astype(np.float64)
-    bind[:, sqt.ROT] = quat.from_matrix(rel[:, :3, :3])
-    bind[:, sqt.TRANS] = rel[:, :3, 3]
-    return Skeleton.from_parent_names(name or armature_obj.name, names, parent_names, bind,
-                                      inverse_bind=np.linalg.inv(ml))
+    return _skeleton(armature_obj, name, *_bones(armature_obj))[0]
 
 
-def check_skeleton(armature_obj, skeleton: Skeleton) -> None:
-    """Raise unless ``skeleton`` has exactly the armature's bones and hierarchy."""
-    names, parent_names, _ = _bones(armature_obj)
+def _check_skeleton(armature_obj, skeleton, names, parent_names):
     parent_of = dict(zip(names, parent_names))
     if set(names) != set(skeleton.bone_names):
         extra = sorted(set(skeleton.bone_names) - set(names))
@@ -104,11 +119,37 @@ def check_skeleton(armature_obj, skeleton: Skeleton) -> None:
                              f"than in armature {armature_obj.name!r} ({parent_of[n]!r})")
 
 
+def check_skeleton(armature_obj, skeleton: Skeleton) -> None:
+    """Raise unless ``skeleton`` has exactly the armature's bones and hierarchy."""
+    names, parent_names, _ = _bones(armature_obj)
+    _check_skeleton(armature_obj, skeleton, names, parent_names)
+
+
 def rest_local(armature_obj, skeleton: Skeleton) -> np.ndarray:
     """``(B, 4, 4)`` float64 rest matrices relative to the parent bone, skeleton order."""
     names, _, ml = _bones(armature_obj)
     order = [names.index(n) for n in skeleton.bone_names]
     return relative_to_parent(ml[order], skeleton.parents.astype(np.int64))
+
+
+def skeleton_and_rest(armature_obj, skeleton: Skeleton | None = None):
+    """What a bake needs of the armature's bones, read once.
+
+    Returns ``(skeleton, order, rest, rest_rot)``: ``skeleton`` as
+    :func:`skeleton_from_armature` makes it (or the one given, checked with
+    :func:`check_skeleton`), ``order`` the Blender index of each skeleton bone,
+    ``rest`` :func:`rest_local` and ``rest_rot`` its rotations ``(B, 4)`` float64.
+    """
+    names, parent_names, ml = _bones(armature_obj)
+    index = {n: i for i, n in enumerate(names)}
+    if skeleton is None:
+        skeleton, rel, rot = _skeleton(armature_obj, None, names, parent_names, ml)
+        order = np.array([index[n] for n in skeleton.bone_names], np.int64)
+        return skeleton, order, rel[order], rot[order]
+    _check_skeleton(armature_obj, skeleton, names, parent_names)
+    order = np.array([index[n] for n in skeleton.bone_names], np.int64)
+    rest = relative_to_parent(ml[order], skeleton.parents.astype(np.int64))
+    return skeleton, order, rest, quat.from_matrix(rest[:, :3, :3])
 
 
 def sqt_from_matrices(local: np.ndarray, bone_names, what: str,

@@ -25,18 +25,17 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core import pose as sqt
-from ..core import quaternion as quat
 from ..core.clip import Clip
 from ..core.errors import CrowdError
 from ..core.skeleton import Skeleton
 from . import fcurve_eval
 from .action_data import CHANNEL_WIDTH, read_action
-from .armature import (check_skeleton, matrices, relative_to_parent, rest_local,
-                       skeleton_from_armature, sqt_from_matrices)
+from .armature import matrices, relative_to_parent, skeleton_and_rest, sqt_from_matrices
 
 __all__ = ["BakeResult", "bake_actions", "fast_path_blocker"]
 
 FCURVES, FRAME_SET = "fcurves", "frame_set"
+_BLOCK_ELEMENTS = 16384       # frames x bones per block of the rotation composition
 
 
 @dataclass(frozen=True, eq=False)
@@ -59,15 +58,29 @@ def fast_path_blocker(armature_obj) -> str | None:
     """Why the armature's pose is more than its F-curves (so only frame_set is
     exact), or None."""
     for pb in armature_obj.pose.bones:
-        active = [c.name for c in pb.constraints if not c.mute]
-        if active:
-            return f"bone {pb.name!r} has constraints {active}"
+        constraints = pb.constraints
+        if len(constraints):
+            active = [c.name for c in constraints if not c.mute]
+            if active:
+                return f"bone {pb.name!r} has constraints {active}"
     ad = armature_obj.animation_data
     if ad is not None:
         driven = [d.data_path for d in ad.drivers if d.data_path.startswith("pose.")]
         if driven:
             return f"drivers animate {driven[0]!r}"
-    for b in armature_obj.data.bones:
+    bones = armature_obj.data.bones
+    if len(bones) == 0:
+        return None
+    flags = {}                          # read for all bones at once, checked where odd
+    for prop, dtype in (("inherit_scale", np.int32), ("use_inherit_rotation", bool),
+                        ("use_local_location", bool), ("use_relative_parent", bool)):
+        flags[prop] = np.empty(len(bones), dtype)
+        bones.foreach_get(prop, flags[prop])
+    full = bones[0].bl_rna.properties["inherit_scale"].enum_items["FULL"].value
+    unusual = ((flags["inherit_scale"] != full) | ~flags["use_inherit_rotation"]
+               | ~flags["use_local_location"] | flags["use_relative_parent"])
+    for i in np.flatnonzero(unusual).tolist():        # in bone order, as before
+        b = bones[i]
         if b.parent is None:
             continue
         if b.inherit_scale != "FULL":
@@ -104,10 +117,7 @@ def bake_actions(armature_obj, actions, fps: float, progress=None, *, loop=None,
     if not (np.isfinite(fps) and fps > 0):
         raise CrowdError(f"bake fps must be positive, got {fps}")
     scene = scene or bpy.context.scene
-    if skeleton is None:
-        skeleton = skeleton_from_armature(armature_obj)
-    else:
-        check_skeleton(armature_obj, skeleton)
+    skeleton, bone_order, rest, rest_rot = skeleton_and_rest(armature_obj, skeleton)
     scene_fps = scene.render.fps / scene.render.fps_base
     pairs = [a if isinstance(a, tuple) else (a, None) for a in actions]
     if not pairs:
@@ -131,7 +141,7 @@ def bake_actions(armature_obj, actions, fps: float, progress=None, *, loop=None,
     total = sum(len(s.times) for s in sources)
     done = 0
     clips, methods, notes = [], {}, []
-    rig = _rig_state(armature_obj, skeleton)
+    rig = _rig_state(armature_obj, skeleton, bone_order, rest, rest_rot)
     with _Playback(scene, armature_obj, skeleton) as playback:
         for src in sources:
             reason = "requested" if method == FRAME_SET else rig_reason or src.frame_set_reason
@@ -156,13 +166,20 @@ def bake_actions(armature_obj, actions, fps: float, progress=None, *, loop=None,
     return BakeResult(skeleton, tuple(clips), methods, tuple(notes))
 
 
-def _rig_state(armature_obj, skeleton) -> dict:
+def _rig_state(armature_obj, skeleton, bone_order, rest, rest_rot) -> dict:
     """What every action's F-curve bake needs of the armature, in skeleton order:
     current pose channels ``defaults`` (B, 17) float32 (unanimated channels keep
     them), ``modes`` (rotation modes), ``connected`` (B,) bool, and the rest pose
-    relative to the parent as quaternions ``q0`` (4, B) and matrices ``r0`` (B, 3, 4)."""
+    relative to the parent as quaternions ``q0`` (4, B) and matrices ``r0`` (B, 3, 4).
+
+    ``bone_order``: Blender index of each skeleton bone; ``rest``, ``rest_rot``: the
+    rest pose and its rotations (:func:`.armature.skeleton_and_rest`)."""
     pbs = armature_obj.pose.bones
-    order = [pbs.find(n) for n in skeleton.bone_names]
+    position = {n: i for i, n in enumerate(pbs.keys())}
+    lacking = [n for n in skeleton.bone_names if n not in position]
+    if lacking:
+        raise CrowdError(f"armature {armature_obj.name!r} has no pose for bones {lacking}")
+    order = [position[n] for n in skeleton.bone_names]
     defaults = np.empty((len(pbs), CHANNEL_WIDTH), np.float32)
     for prop, (col, width) in (("location", (0, 3)), ("rotation_quaternion", (3, 4)),
                                ("rotation_euler", (7, 3)), ("rotation_axis_angle", (10, 4)),
@@ -170,12 +187,16 @@ def _rig_state(armature_obj, skeleton) -> dict:
         buf = np.empty(len(pbs) * width, np.float32)
         pbs.foreach_get(prop, buf)
         defaults[:, col:col + width] = buf.reshape(-1, width)
-    rest = rest_local(armature_obj, skeleton)
+    mode = np.empty(len(pbs), np.int32)
+    pbs.foreach_get("rotation_mode", mode)
+    mode_name = {e.value: e.identifier
+                 for e in pbs[0].bl_rna.properties["rotation_mode"].enum_items}
     bones = armature_obj.data.bones
-    return dict(defaults=defaults[order], modes=[pbs[i].rotation_mode for i in order],
-                connected=np.array([bones[n].use_connect for n in skeleton.bone_names], bool),
-                q0=quat.from_matrix(rest[:, :3, :3]).T.astype(np.float32),
-                r0=rest[:, :3, :].astype(np.float32))
+    connect = np.empty(len(bones), bool)
+    bones.foreach_get("use_connect", connect)
+    return dict(defaults=defaults[order], modes=[mode_name[m] for m in mode[order].tolist()],
+                connected=connect[bone_order],
+                q0=rest_rot.T.astype(np.float32), r0=rest[:, :3, :].astype(np.float32))
 
 
 def _bake_fcurves(rig, src):
@@ -187,24 +208,33 @@ def _bake_fcurves(rig, src):
     times = src.times.astype(np.float32)
     defaults, modes, r0 = rig["defaults"], rig["modes"], rig["r0"]
     chan = np.empty((CHANNEL_WIDTH, len(times), len(modes)), np.float32)
-    for col in _used_columns(modes):
-        chan[col] = defaults[:, col]
+    cols = _used_columns(modes)
+    chan[cols] = defaults[:, cols].T[:, None, :]
     fast = np.flatnonzero(src.fast)
     if fast.size:
-        vals = fcurve_eval.evaluate(src.keys, times, fast)                # (C, F)
-        chan[[src.curves[c].column for c in fast], :, [src.curves[c].bone for c in fast]] = vals
+        vals = fcurve_eval.evaluate_frames(src.keys, times, fast)         # (F, C)
+        chan[src.columns[fast], :, src.bones[fast]] = vals.T
     for c in np.flatnonzero(~src.fast):
-        bc = src.curves[c]
-        chan[bc.column, :, bc.bone] = [bc.fcurve.evaluate(float(t)) for t in times]
+        fc = src.fcurves[c]
+        chan[src.columns[c], :, src.bones[c]] = [fc.evaluate(float(t)) for t in times]
     loc = chan[0:3]
     loc[:, :, rig["connected"]] = 0                # BKE_pchan_to_mat4: chains stay closed
     keys = np.empty((len(times), len(modes), sqt.WIDTH), np.float32)
-    for i, comp in enumerate(_qmul(rig["q0"], basis_rotation(chan, modes))):
-        keys[..., 3 + i] = comp
+    # rotation = rest rotation * basis rotation, a block of frames at a time so that
+    # the temporaries stay small (long motion capture clips); the rest rotation is
+    # repeated over a block's frames (products of equal shapes run faster than ones
+    # broadcasting a (B,) row)
+    block = max(1, _BLOCK_ELEMENTS // len(modes))
+    rest_rot = np.repeat(rig["q0"][:, None, :], min(block, len(times)), axis=1)
+    for f0 in range(0, len(times), block):
+        f1 = min(len(times), f0 + block)
+        rot = _qmul(rest_rot[:, :f1 - f0], basis_rotation(chan[:, f0:f1], modes))
+        for i, comp in enumerate(rot):
+            keys[f0:f1, :, 3 + i] = comp
     # translation = rest offset + rest rotation @ location: constant per bone unless
     # the bone's location is animated
     moving = np.zeros(len(modes), bool)
-    moving[[bc.bone for bc in src.curves if bc.column < 3]] = True
+    moving[src.bones[src.columns < 3]] = True
     move, still = np.flatnonzero(moving), np.flatnonzero(~moving)
     const = r0[still, :, 3] + np.einsum("bij,bj->bi", r0[still, :, :3], loc[:, 0, still].T)
     lm = loc[:, :, move]                                                 # (3, F, m)
@@ -248,18 +278,17 @@ def basis_rotation(chan: np.ndarray, modes) -> np.ndarray:
     as ``BKE_pchan_rot_to_mat3``: normalised quaternion (a zero one is Blender's
     ``(0, 1, 0, 0)``), Euler in the bone's axis order (first letter applied first),
     axis-angle with the axis normalised (a zero axis is no rotation)."""
+    kinds = set(modes)
+    if kinds == {"QUATERNION"}:                    # the usual case: no gathers, no copy
+        return _unit_quaternions(chan[3:7])
     q = np.empty((4,) + chan.shape[1:], chan.dtype)
     modes = np.array(modes)
-    for mode in set(modes.tolist()):
+    for mode in kinds:
         sel = np.flatnonzero(modes == mode)
         if sel.size == modes.size:
             sel = slice(None)                      # all bones: views, no gathers
         if mode == "QUATERNION":
-            raw = chan[3:7, :, sel]
-            n = np.sqrt((raw * raw).sum(0))
-            unit = raw / np.where(n > 0, n, 1)
-            unit[1] = np.where(n > 0, unit[1], 1)
-            q[:, :, sel] = unit
+            q[:, :, sel] = _unit_quaternions(chan[3:7, :, sel])
         elif mode == "AXIS_ANGLE":
             angle, axis = chan[10][:, sel], chan[11:14, :, sel]
             n = np.sqrt((axis * axis).sum(0))
@@ -279,6 +308,18 @@ def basis_rotation(chan: np.ndarray, modes) -> np.ndarray:
                 j = 3 - i - k
                 q[1 + i][:, sel] = c[k] * v[i] + _eps(i, k, j) * s[k] * v[j]
     return q
+
+
+def _unit_quaternions(raw):
+    """``raw`` (4, ...) normalised; a zero quaternion is Blender's ``(0, 1, 0, 0)``.
+    (The squares are summed in order, as ``(raw * raw).sum(0)`` would, without the
+    (4, ...) temporary.)"""
+    n = np.sqrt(raw[0] * raw[0] + raw[1] * raw[1] + raw[2] * raw[2] + raw[3] * raw[3])
+    if (n > 0).all():
+        return raw / n
+    unit = raw / np.where(n > 0, n, 1)
+    unit[1] = np.where(n > 0, unit[1], 1)
+    return unit
 
 
 class _Playback:

@@ -49,7 +49,11 @@ class Clip:
         name = str(self.name)
         if not name:
             raise CrowdError("clip: empty name")
-        keys = np.asarray(self.keys, dtype=np.float64)
+        raw = self.keys
+        if isinstance(raw, np.ndarray) and raw.dtype in (np.float32, np.float64):
+            keys = raw          # checked in its own precision (float32 -> 64 is exact)
+        else:
+            keys = np.asarray(raw, dtype=np.float64)
         if keys.ndim != 3 or keys.shape[2] != sqt.WIDTH:
             raise CrowdError(f"clip {name!r}: keys must be (frames, bones, {sqt.WIDTH}), "
                              f"got {keys.shape}")
@@ -61,20 +65,24 @@ class Clip:
         if self.bone_names is not None and len(self.bone_names) != keys.shape[1]:
             raise CrowdError(f"clip {name!r}: {len(self.bone_names)} bone names for "
                              f"{keys.shape[1]} bones")
-        finite = np.isfinite(keys).all(axis=-1)
-        if not finite.all():
-            f, b = np.argwhere(~finite)[0]
+        if not np.isfinite(keys).all():
+            f, b = np.argwhere(~np.isfinite(keys).all(axis=-1))[0]
             raise CrowdError(f"clip {name!r}: non-finite key at frame {f}, "
                              f"bone {self._bone_label(b)}")
-        qn = np.linalg.norm(keys[..., sqt.ROT], axis=-1)
+        # rotation lengths as normalize_if_needed computes them (the sum of the four
+        # squares in order), one component plane at a time: a reduction over a
+        # trailing axis of 4 is slow in numpy
+        q = [keys[..., i].astype(np.float64) for i in range(sqt.ROT.start, sqt.ROT.stop)]
+        qn = np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])[..., None]
         if (qn < 1e-6).any():
-            f, b = np.argwhere(qn < 1e-6)[0]
+            f, b = np.argwhere(qn[..., 0] < 1e-6)[0]
             raise CrowdError(f"clip {name!r}: zero rotation quaternion at frame {f}, "
                              f"bone {self._bone_label(b)}")
         if not (np.isfinite(self.fps) and self.fps > 0):
             raise CrowdError(f"clip {name!r}: fps must be positive, got {self.fps}")
-        packed = np.asarray(self.keys).astype(np.float32)
-        packed[..., sqt.ROT] = normalize_if_needed(keys[..., sqt.ROT])
+        packed = (keys if keys is raw else np.asarray(raw)).astype(np.float32)
+        if (np.abs(qn - 1) > 1e-6).any():     # else they are what it would return
+            packed[..., sqt.ROT] = normalize_if_needed(keys[..., sqt.ROT])
         events = []
         for ev in self.events:
             try:
