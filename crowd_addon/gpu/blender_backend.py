@@ -30,7 +30,7 @@ import numpy as np
 from ..core.errors import CrowdError
 from .blender_gpu import (CROWD_CAPTURE, UPLOAD_INTS, float_texture, init_headless_gpu,
                           program, read_buffer, set_if_used, use_program)
-from .draw_lists import DrawLists, proxy_bounds
+from .draw_lists import DrawLists, capture_mesh, proxy_bounds
 from .instances import InstanceData
 from .moderngl_backend import FrameStats
 from .programs import (CROWD_DRAW, ROW_UPLOAD, SKIN_ROWS, SKIN_GROUP,
@@ -324,18 +324,7 @@ class BlenderGPURenderer:
         skinned by the crowd's vertex stage with LOD ``lod``, read back from an
         RGBA32F target with one pixel per (vertex, agent)."""
         gpu = self.gpu
-        agents = np.asarray(agents, np.int64).reshape(-1)
-        if agents.size == 0 or agents.min() < 0 or agents.max() >= self.crowd.N:
-            raise CrowdError(f"skinned_positions: agent ids must be in 0..{self.crowd.N - 1}")
-        skel = np.unique(self.lists.agent_skeleton[agents])
-        if skel.size != 1:
-            raise CrowdError("skinned_positions: the agents use several skeletons; ask for "
-                             "one skeleton's agents at a time")
-        key = (int(skel[0]), int(lod))
-        if key not in self.meshes:
-            raise CrowdError(f"skinned_positions: skeleton {self.crowd.skeletons[key[0]].name!r}"
-                             f" has no LOD {lod}")
-        mesh = self.meshes[key]
+        agents, mesh = capture_mesh(self.crowd, self.lists, self.meshes, agents, lod)
         size = (mesh.buffers.vertex_count, agents.size)
         if max(size) > self.limit:
             raise CrowdError(f"skinned_positions: {size[1]} agents x {size[0]} vertices exceed "

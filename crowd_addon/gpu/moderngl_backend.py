@@ -23,7 +23,7 @@ import numpy as np
 from ..core.errors import CrowdError
 from .assembler import gl_sources
 from .camera import Camera
-from .draw_lists import DrawLists, proxy_bounds
+from .draw_lists import DrawLists, capture_mesh, proxy_bounds
 from .instances import InstanceData
 from .programs import CROWD_DRAW, SKIN_ROWS, SKIN_GROUP
 from .proxies import INTERLEAVED_FORMAT, agent_skeletons, copies_per_instance, crowd_proxies
@@ -328,18 +328,7 @@ class ModernGLRenderer:
         """World positions ``(n, V, 3)`` float32 of ``agents`` (all of one skeleton)
         skinned by the draw program's vertex stage with LOD ``lod``, read back by
         transform feedback."""
-        agents = np.asarray(agents, np.int64).reshape(-1)
-        if agents.size == 0 or agents.min() < 0 or agents.max() >= self.crowd.N:
-            raise CrowdError(f"skinned_positions: agent ids must be in 0..{self.crowd.N - 1}")
-        skel = np.unique(self.lists.agent_skeleton[agents])
-        if skel.size != 1:
-            raise CrowdError("skinned_positions: the agents use several skeletons; ask for "
-                             "one skeleton's agents at a time")
-        key = (int(skel[0]), int(lod))
-        if key not in self.meshes:
-            raise CrowdError(f"skinned_positions: skeleton {self.crowd.skeletons[key[0]].name!r} "
-                             f"has no LOD {lod}")
-        mesh = self.meshes[key]
+        agents, mesh = capture_mesh(self.crowd, self.lists, self.meshes, agents, lod)
         count = mesh.buffers.vertex_count
         width = min(agents.size, self.lists.width)
         ids_image = np.zeros(-(-agents.size // width) * width, np.int32)
