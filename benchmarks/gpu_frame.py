@@ -5,9 +5,10 @@ blends), skinned and blended by the compute shader (``Crowd(config, gpu_skinning
 the CPU uploads local poses, paper s.4.5),
 82-bone ``core.synthetic`` humanoid with ``humanoid_mesh``; agents on a 0.9 m grid
 seen by the camera that frames the whole crowd (``gpu.camera.frame_crowd``).
-LODs on: the mesh (2,058 vertices), ``build_lods`` at 25 % and 6 % of its
-triangles, and a crossed-quad card (8 vertices) past 100 m; LODs off: the full
-mesh for every agent. Prints:
+LODs on: ``CrowdConfig.add_mesh``'s defaults -- the mesh (2,058 vertices), 25 % and
+6 % of its triangles and the 8-vertex card (``core.mesh.card_lod``) -- switched at the
+default ``lod_distances`` (30, 90, 150 m in the 1080-pixel reference view, so half
+that deep in a 540-pixel image); LODs off: the full mesh for every agent. Prints:
 
 * skinned vertices per second on a 2,000-agent full-mesh frame: a plain
   instanced-skinning prototype (per-instance attributes, no agent texture, no draw
@@ -42,40 +43,19 @@ import numpy as np
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
 from crowd_addon.core import ClipPlayer, Crowd, CrowdConfig  # noqa: E402
-from crowd_addon.core.mesh import ProxyMesh, build_lods  # noqa: E402
+from crowd_addon.core.mesh import CARD  # noqa: E402
 from crowd_addon.core.synthetic import humanoid, humanoid_mesh, periodic_clip  # noqa: E402
 from crowd_addon.gpu.camera import frame_crowd  # noqa: E402
 
 STREAMS, M, SLOTS, BONES = 256, 60, 800, 82
-LOD_DISTANCES = (20.0, 45.0, 100.0)
 BLEND = 30                                   # frames per transition
 PER_FRAME = SLOTS // BLEND + 1               # requests a frame: keeps every slot busy
 THROUGHPUT_AGENTS = 2_000
 
 
-def card_lod(skeleton) -> ProxyMesh:
-    """Far LOD: two crossed vertical quads (8 vertices, 4 triangles) from the feet to
-    above the head, the lower corners on the hips, the upper on the head."""
-    names = skeleton.bone_names
-    hips, head = names.index("hips"), names.index("head")
-    top = float(skeleton.bind_model[head, 2, 3]) + 0.2
-    pos, nor = [], []
-    for side in (np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])):
-        for x, z in ((-0.22, 0.0), (0.22, 0.0), (0.22, top), (-0.22, top)):
-            pos.append(side * x + (0.0, 0.0, z))
-            nor.append(np.cross(side, (0.0, 0.0, 1.0)))
-    pos = np.array(pos)
-    bones = np.where(pos[:, 2] < 0.5, hips, head)[:, None]
-    return ProxyMesh.from_influences(f"{skeleton.name}_card", skeleton.name, pos,
-                                     np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]]),
-                                     bones, np.ones((8, 1)), normals=np.array(nor),
-                                     bone_count=skeleton.bone_count)
-
-
 def build(agents: int, lods: bool) -> Crowd:
     sk = humanoid("fan", BONES)
-    cfg = CrowdConfig(max_offset=M, transition_slots=SLOTS, seed=1,
-                      lod_distances=LOD_DISTANCES)
+    cfg = CrowdConfig(max_offset=M, transition_slots=SLOTS, seed=1)
     cfg.add_skeleton(sk)
     for i in range(12):
         cfg.add_clip(periodic_clip(sk, f"clip{i}", frames=90 + 20 * i, seed=i, amplitude=0.3))
@@ -87,8 +67,7 @@ def build(agents: int, lods: bool) -> Crowd:
     cfg.add_agents(agents, positions=np.c_[grid * 0.9, np.zeros(agents)],
                    headings=rng.uniform(-0.4, 0.4, agents) - np.pi / 2)
     mesh = humanoid_mesh(sk)
-    cfg.add_mesh(mesh, lods=build_lods(mesh, (0.25, 0.06))[1:] + [card_lod(sk)] if lods
-                 else ())
+    cfg.add_mesh(mesh, lods=(0.25, 0.06, CARD) if lods else ())
     return Crowd(cfg, gpu_skinning=True)
 
 

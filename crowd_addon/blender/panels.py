@@ -226,8 +226,11 @@ class CROWD_PT_settings(_Panel, bpy.types.Panel):
         layout = self.layout
         layout.use_property_split = True
         for key in ("max_offset", "transition_slots", "when_full", "seed", "forward_axis",
-                    "lod_near", "lod_far"):
+                    "lod_near", "lod_far", "lod_cards"):
             layout.prop(s, key)
+        row = layout.row()
+        row.enabled = s.lod_cards
+        row.prop(s, "lod_card")
 
 
 CLASSES = (CROWD_UL_animations, CROWD_UL_nodes, CROWD_UL_inputs, CROWD_UL_transitions,

@@ -272,11 +272,10 @@ def on_load_post(*_):
 # -------------------------------------------------------------------------- drawing
 @dataclass(frozen=True)
 class _ViewCamera:
-    """What a renderer needs of a camera: ``eye`` (3,) and ``view_projection`` (4, 4)
-    world -> clip; fields are tuples so that equal views compare equal (renderers
-    redo per-view work only when the view changes)."""
+    """What a renderer needs of a camera: ``view_projection`` (4, 4) world -> clip, kept
+    as tuples so that equal views compare equal (renderers redo per-view work only
+    when the view changes)."""
 
-    eye: tuple
     matrix: tuple
 
     @property
@@ -313,8 +312,7 @@ def draw_scene(scene, view_matrix, projection_matrix) -> bool:
         if pv.renderer is None:
             pv.renderer = _make_renderer(pv.crowd)
         view = np.array(view_matrix, np.float64)
-        cam = _ViewCamera(tuple(np.linalg.inv(view)[:3, 3].tolist()),
-                          tuple(map(tuple, (np.array(projection_matrix, np.float64)
+        cam = _ViewCamera(tuple(map(tuple, (np.array(projection_matrix, np.float64)
                                             @ view).tolist())))
         pv.renderer.sync()
         mgl = getattr(pv.renderer, "ctx", None)

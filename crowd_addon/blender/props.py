@@ -180,8 +180,18 @@ class CROWD_PG_settings(PropertyGroup):
         ("POS_X", "+X", "The character faces +X in its rest pose"),
         ("NEG_X", "-X", "The character faces -X in its rest pose")),
         description="Used to turn agents toward a target")
-    lod_near: FloatProperty(name="LOD 1 From", default=30.0, min=0.0, unit="LENGTH")
-    lod_far: FloatProperty(name="LOD 2 From", default=90.0, min=0.0, unit="LENGTH")
+    lod_near: FloatProperty(name="LOD 1 From", default=30.0, min=0.01, unit="LENGTH",
+                            description="Camera distance from which agents use the first "
+                                        "coarser mesh (25% of the triangles)")
+    lod_far: FloatProperty(name="LOD 2 From", default=90.0, min=0.01, unit="LENGTH",
+                           description="Camera distance from which agents use the second "
+                                       "coarser mesh (6% of the triangles)")
+    lod_cards: BoolProperty(name="Far Cards", default=True,
+                            description="Draw the farthest agents as two crossed quads "
+                                        "(8 vertices) that follow the hips and head")
+    lod_card: FloatProperty(name="Cards From", default=150.0, min=0.01, unit="LENGTH",
+                            description="Camera distance from which agents are drawn as "
+                                        "cards")
     agent_sources: CollectionProperty(type=CROWD_PG_agent_source)
     active_source_index: IntProperty()
     preview_enabled: BoolProperty(

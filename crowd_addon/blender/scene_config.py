@@ -17,6 +17,7 @@ from ..core.config import CrowdConfig
 from ..core.controllers import (Blend2, BlendSpace2D, ClipPlayer, Layer, StateMachine,
                                 StateTransition)
 from ..core.errors import CrowdError
+from ..core.mesh import CARD
 
 __all__ = ["config_from_scene", "config_steps", "scene_fps", "used_actions", "build_tree"]
 
@@ -167,6 +168,19 @@ def _settings(scene):
     return s
 
 
+def lod_distances(settings) -> tuple:
+    """The LOD switch distances of the Crowd settings (with the card's when on); a
+    clear error when they do not increase."""
+    names = ["lod_near", "lod_far"] + (["lod_card"] if settings.lod_cards else [])
+    values = [float(getattr(settings, n)) for n in names]
+    for (a, va), (b, vb) in zip(zip(names, values), zip(names[1:], values[1:])):
+        if vb <= va:
+            label = {n: settings.bl_rna.properties[n].name for n in names}
+            raise CrowdError(f"Crowd settings: {label[b]} ({vb:g} m) must be farther than "
+                             f"{label[a]} ({va:g} m)")
+    return tuple(values)
+
+
 def _bake_action(scene, armature_obj, action, skeleton, fps):
     from . import bake
     return bake.bake_actions(armature_obj, [action], fps, scene=scene,
@@ -204,7 +218,7 @@ def config_steps(scene, depsgraph=None):
     cfg = CrowdConfig(max_offset=s.max_offset, transition_slots=s.transition_slots, fps=fps,
                       seed=s.seed, when_full=s.when_full.lower(),
                       start_frame=scene.frame_start,
-                      lod_distances=(s.lod_near, max(s.lod_far, s.lod_near)))
+                      lod_distances=lod_distances(s))
     cfg.add_skeleton(skeleton)
     for i, act in enumerate(actions):
         yield i, total, f"baking action {act.name!r}"
@@ -220,7 +234,8 @@ def config_steps(scene, depsgraph=None):
         cfg.add_unique(name, skeleton.name, root)
     yield len(actions), total, "reading the proxy mesh"
     if s.proxy_mesh is not None:
-        cfg.add_mesh(proxy_mesh_from_object(s.proxy_mesh, arm, skeleton))
+        cfg.add_mesh(proxy_mesh_from_object(s.proxy_mesh, arm, skeleton),
+                     lods=(0.25, 0.06, CARD) if s.lod_cards else (0.25, 0.06))
     yield len(actions) + 1, total, "placing agents"
     dg = depsgraph if depsgraph is not None else _depsgraph(scene)
     agents = agent_mod.agents_from_scene(scene, dg, [a.name for a in s.streams],

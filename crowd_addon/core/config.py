@@ -71,7 +71,7 @@ class CrowdConfig:
     agent_heading: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
     agent_color: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float32))
     meshes: dict = field(default_factory=dict)
-    lod_distances: tuple = (30.0, 90.0)
+    lod_distances: tuple = (30.0, 90.0, 150.0)
 
     # authoring helpers ---------------------------------------------------------
     def add_skeleton(self, skeleton):
@@ -86,9 +86,11 @@ class CrowdConfig:
         self.clips[clip.name] = clip
         return clip
 
-    def add_mesh(self, mesh, lods=(0.25, 0.06)):
+    def add_mesh(self, mesh, lods=(0.25, 0.06, "card")):
         """Set ``mesh`` as its skeleton's proxy, with LODs built at ``lods`` triangle
-        ratios (``()`` for none, or a list of ready :class:`~.mesh.ProxyMesh`)."""
+        ratios and, last, ``"card"`` for :func:`~.mesh.card_lod` (``()`` for none, or a
+        list of ready :class:`~.mesh.ProxyMesh`). LOD ``k`` is drawn from
+        ``lod_distances[k - 1]`` metres."""
         from .mesh import ProxyMesh, build_lods
         if mesh.skeleton not in self.skeletons:
             raise CrowdError(f"mesh {mesh.name!r}: unknown skeleton {mesh.skeleton!r} "

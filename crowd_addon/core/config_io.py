@@ -547,7 +547,8 @@ def _decode_config(m: dict, dec: Decoder) -> CrowdConfig:
                                              f"(known: {sorted(cfg.skeletons)})")
             d.skeleton = cfg.skeletons[skel]
             out.append(AnimationDef(d.get(a, "name", "str"), skel, d.controller(a, "root")))
-    cfg.lod_distances = tuple(dec.items(m, "lod_distances", "number", [30.0, 90.0]))
+    cfg.lod_distances = tuple(dec.items(m, "lod_distances", "number",
+                                         list(CrowdConfig.lod_distances)))
     for i, mesh in enumerate(dec.items(m, "meshes", "object", [])):
         d = dec.at("meshes", i)
         skel = d.get(mesh, "skeleton", "str")

@@ -159,8 +159,13 @@ def vertex_normals(positions: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     return n.astype(np.float32)
 
 
+CARD = "card"
+"""A ``build_lods`` / ``CrowdConfig.add_mesh`` level: the :func:`card_lod` of the mesh."""
+
+
 def build_lods(mesh: ProxyMesh, ratios=(0.25, 0.06)) -> list:
-    """``[mesh, lod1, lod2, ...]``: each LOD keeps about ``ratio`` of the triangles.
+    """``[mesh, lod1, lod2, ...]``: each LOD keeps about ``ratio`` of the triangles;
+    the entry :data:`CARD` (last only) adds the 8-vertex :func:`card_lod`.
 
     Vertex clustering on a uniform grid over the bind pose: the cell size is
     searched (bisection on its logarithm) until the triangle count is close to the
@@ -170,6 +175,12 @@ def build_lods(mesh: ProxyMesh, ratios=(0.25, 0.06)) -> list:
     """
     lods = [mesh]
     for k, ratio in enumerate(ratios, start=1):
+        if isinstance(ratio, str):
+            if ratio != CARD or k != len(ratios):
+                raise CrowdError(f"mesh {mesh.name!r}: LOD {ratio!r} must be a triangle ratio "
+                                 f"in (0, 1) or {CARD!r} (as the last level)")
+            lods.append(card_lod(mesh))
+            continue
         if not 0 < ratio < 1:
             raise CrowdError(f"mesh {mesh.name!r}: LOD ratio {ratio} must be in (0, 1)")
         target = max(1, int(round(mesh.triangle_count * ratio)))
@@ -193,6 +204,43 @@ def build_lods(mesh: ProxyMesh, ratios=(0.25, 0.06)) -> list:
             best = _cluster(prev, np.exp(hi), f"{mesh.name}.lod{k}") or prev
         lods.append(best)
     return lods
+
+
+def card_lod(mesh: ProxyMesh, name: str | None = None) -> ProxyMesh:
+    """The farthest LOD: two crossed vertical quads (8 vertices, 4 triangles), what a
+    character a dozen pixels tall needs.
+
+    The quads stand on the mesh's vertical axis (median x, y of the bind pose; armature
+    space is Z up) from its lowest to its highest point. Each is as wide as keeps the
+    mesh's silhouette area seen across it (half the summed |projected triangle areas|,
+    a closed mesh showing each point twice), so a card covers about the pixels the
+    body would. The lower corners take the mean influences of the vertices in the
+    lowest tenth of the height (the feet), the upper corners those of the highest
+    tenth (the head), keeping the top four: linear blend skinning is linear in the
+    weights, so a corner moves with the mean of those vertices, and the card stands,
+    sits, turns and walks with the body.
+    """
+    p = mesh.positions.astype(np.float64)
+    cx, cy = np.median(p[:, 0]), np.median(p[:, 1])
+    z0, z1 = float(p[:, 2].min()), float(p[:, 2].max())
+    height = max(z1 - z0, 1e-3)
+    t = mesh.triangles.astype(np.int64)
+    twice = np.abs(np.cross(p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]])).sum(0)
+    hx, hy = (max(twice[k] / 4 / (2 * height), 0.02 * height) for k in (1, 0))
+    pos = np.array([[cx - hx, cy, z0], [cx + hx, cy, z0], [cx + hx, cy, z1], [cx - hx, cy, z1],
+                    [cx, cy - hy, z0], [cx, cy + hy, z0], [cx, cy + hy, z1], [cx, cy - hy, z1]])
+    bones = int(mesh.bone_indices.max()) + 1
+    mean = []
+    for band in (p[:, 2] <= z0 + 0.1 * height, p[:, 2] >= z1 - 0.1 * height):
+        w = np.bincount(mesh.bone_indices[band].ravel(), mesh.bone_weights[band].ravel(),
+                        bones)
+        mean.append(w / w.sum())
+    weights = np.array([mean[int(z > z0)] for z in pos[:, 2]])
+    card = ProxyMesh.from_influences(
+        name or f"{mesh.name}.card", mesh.skeleton, pos,
+        np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]]),
+        np.broadcast_to(np.arange(bones), weights.shape), weights, None, mesh.bone_count)
+    return card
 
 
 def _cluster(mesh: ProxyMesh, cell: float, name: str):

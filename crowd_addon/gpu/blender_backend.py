@@ -233,14 +233,15 @@ class BlenderGPURenderer:
         self.gpu.compute.dispatch(shader, -(-n // SKIN_GROUP), 1, 1)
         return self.batch_image[:texel_rows].nbytes, n
 
-    def _regroup(self, camera):
-        """Rebuild the draw lists when the camera or the agents moved."""
+    def _regroup(self, camera, pixels_high):
+        """Rebuild the draw lists when the camera, the viewport height or the agents
+        moved."""
         vp = np.asarray(camera.view_projection, np.float64)
-        key = (tuple(np.asarray(camera.eye, np.float64).tolist()), vp.tobytes())
+        key = (vp.tobytes(), int(pixels_high))
         if key == self._list_key:
             return
-        for region in self.lists.rebuild(self.crowd.agent_position, camera.eye,
-                                         vp if self.culling else None):
+        for region in self.lists.rebuild(self.crowd.agent_position, vp, pixels_high,
+                                         self.culling):
             self.stats.list_bytes += self._write_ints(self.list_tex, region)
         self._list_key = key
 
@@ -257,30 +258,32 @@ class BlenderGPURenderer:
         shader.uniform_sampler("agent_list_tex", list_tex)
 
     def render(self, camera, target=None, clear=(0.62, 0.66, 0.72, 1.0)) -> FrameStats:
-        """Draw the crowd as seen by ``camera`` (``eye`` (3,) and ``view_projection``
-        (4, 4), OpenGL clip space) into ``target``: a ``GPUFrameBuffer`` or
-        ``GPUOffScreen``; None = this renderer's offscreen image when it has one
-        (read with :meth:`read_image`), else the framebuffer bound now. ``clear``:
-        RGBA to clear colour and depth to first, None to draw over what is there."""
+        """Draw the crowd as seen by ``camera`` (its ``view_projection`` (4, 4), OpenGL
+        clip space) into ``target``: a ``GPUFrameBuffer`` or ``GPUOffScreen``; None =
+        this renderer's offscreen image when it has one (read with :meth:`read_image`),
+        else the framebuffer bound now. LODs follow the target's viewport height.
+        ``clear``: RGBA to clear colour and depth to first, None to draw over what is
+        there."""
         gpu = self.gpu
-        self._regroup(camera)
         if target is None:
             target = self.framebuffer
         s = self.stats
         s.draws = s.instances = s.vertices = 0
         if target is None:
-            self._draw(camera.view_projection, gpu.state.active_framebuffer_get(), clear)
+            self._draw(camera, gpu.state.active_framebuffer_get(), clear)
         else:
             with target.bind():
-                self._draw(camera.view_projection, gpu.state.active_framebuffer_get(), clear)
+                self._draw(camera, gpu.state.active_framebuffer_get(), clear)
         return s
 
-    def _draw(self, view_projection, framebuffer, clear):
+    def _draw(self, camera, framebuffer, clear):
         gpu, s = self.gpu, self.stats
         depth, mask, blend = (gpu.state.depth_test_get(), gpu.state.depth_mask_get(),
                               gpu.state.blend_get())
         if self.framebuffer is not None and self.framebuffer.is_bound:
             gpu.state.viewport_set(0, 0, *self.size)
+        self._regroup(camera, gpu.state.viewport_get()[3])   # LOD: the viewport's height
+        view_projection = camera.view_projection
         if clear is not None:
             framebuffer.clear(color=tuple(clear), depth=1.0)
         gpu.state.depth_test_set("LESS_EQUAL")

@@ -1,9 +1,14 @@
 """Which agents each instanced draw covers: one draw per (skeleton, LOD).
 
 Agents outside the camera's view (a bounding sphere per skeleton's proxy) are left
-out. An agent's LOD follows its distance to the camera: LOD ``k`` is used from
+out. An agent's LOD follows how big it looks: LOD ``k`` is used from
 ``lod_distances[k - 1]`` metres on (``CrowdConfig.lod_distances``), clamped to the
-levels its skeleton's proxy has. The visible agents are grouped by (skeleton, LOD)
+levels its skeleton's proxy has, where the distance is the one at which the agent
+would look as big in the *reference view* -- 1080 pixels high with a 40 degree
+vertical field of view (:data:`REFERENCE_FOCAL_PX`). In that view it is the agent's
+depth in front of the camera; zooming in (a longer lens) or a taller viewport
+shrinks it, so close-ups keep their detail, and a small or wide view (or an
+orthographic one, zoomed out) gets the coarse levels sooner. The visible agents are grouped by (skeleton, LOD)
 in one flat list (an R32I texture, ``gpu_shaders/agents.glsl``); draw ``g`` reads
 its instances from ``base[g]``. The list is rebuilt only when the camera or the
 agents move.
@@ -19,7 +24,11 @@ from ..core.errors import CrowdError
 from .texture_region import TextureRegion
 
 __all__ = ["DrawGroup", "DrawLists", "capture_mesh", "lod_levels", "frustum_planes",
-           "proxy_bounds"]
+           "proxy_bounds", "view_distances", "REFERENCE_FOCAL_PX"]
+
+REFERENCE_FOCAL_PX = 540.0 / np.tan(np.radians(20.0))
+"""Focal length in pixels of the reference view of ``lod_distances``: 1080 pixels high,
+40 degrees vertical field of view (~1484 px)."""
 
 
 def lod_levels(distances: np.ndarray, lod_distances, levels: np.ndarray) -> np.ndarray:
@@ -28,6 +37,21 @@ def lod_levels(distances: np.ndarray, lod_distances, levels: np.ndarray) -> np.n
     agent's proxy has."""
     lod = np.searchsorted(np.asarray(lod_distances, np.float64), distances, side="right")
     return np.minimum(lod, np.asarray(levels) - 1)
+
+
+def view_distances(points: np.ndarray, view_projection, pixels_high) -> np.ndarray:
+    """``(N,)`` distances in metres at which ``points`` (N, 3) would look as big in the
+    reference view as they do through ``view_projection`` (4, 4, OpenGL clip space)
+    in a viewport ``pixels_high`` pixels high: clip ``w`` (the depth, or 1 for an
+    orthographic view) times the reference focal length over this view's focal length
+    in pixels (half the height times the projection's vertical scale)."""
+    m = np.asarray(view_projection, np.float64)
+    focal = 0.5 * float(pixels_high) * float(np.linalg.norm(m[1, :3]))
+    if not focal > 0:
+        raise CrowdError(f"LOD: the view has no vertical scale ({pixels_high} pixels high, "
+                         f"view-projection row 1 = {m[1].tolist()})")
+    w = np.asarray(points, np.float64) @ m[3, :3] + m[3, 3]
+    return np.maximum(w, 0.0) * (REFERENCE_FOCAL_PX / focal)
 
 
 def frustum_planes(view_projection: np.ndarray) -> np.ndarray:
@@ -94,19 +118,21 @@ class DrawLists:
         self.groups = []
         self.lod = np.full(n, -1, np.int64)
 
-    def rebuild(self, positions: np.ndarray, eye, view_projection=None) -> list:
-        """Regroup the agents at ``positions`` (N, 3) for a camera at ``eye`` (3,),
-        culling against ``view_projection`` (4, 4) when given; returns the texture
-        regions to upload. Agents whose skeleton has no proxy are never drawn."""
+    def rebuild(self, positions: np.ndarray, view_projection, pixels_high,
+                cull: bool = True) -> list:
+        """Regroup the agents at ``positions`` (N, 3) seen through ``view_projection``
+        (4, 4) in a viewport ``pixels_high`` pixels high (LOD by :func:`view_distances`),
+        leaving out those outside the view when ``cull``; returns the texture regions to
+        upload. Agents whose skeleton has no proxy are never drawn."""
         pos = np.asarray(positions, np.float64)
         centre = pos.copy()
         centre[:, 2] += self.bounds[self.agent_skeleton, 0]
         drawn = self.agent_levels > 0
-        if view_projection is not None:
+        if cull:
             planes = frustum_planes(view_projection)
             dist = centre @ planes[:, :3].T + planes[:, 3]
             drawn &= (dist >= -self.bounds[self.agent_skeleton, 1][:, None]).all(1)
-        dist = np.linalg.norm(centre - np.asarray(eye, np.float64), axis=1)
+        dist = view_distances(centre, view_projection, pixels_high)
         self.lod = np.where(drawn, lod_levels(dist, self.lod_distances, self.agent_levels), -1)
         key = (self.agent_skeleton * self.levels + self.lod)[drawn]
         key = key.astype(np.int16 if key.size and key.max() < 2 ** 15 else np.int64)

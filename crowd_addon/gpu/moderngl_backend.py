@@ -285,16 +285,17 @@ class ModernGLRenderer:
         list_tex.use(_LIST_UNIT)
 
     def render(self, camera: Camera, target=None, clear=(0.62, 0.66, 0.72, 1.0)) -> FrameStats:
-        """Draw the crowd as seen by ``camera`` into ``target`` (a moderngl framebuffer;
-        default: this renderer's offscreen image, read with :meth:`read_image`)."""
+        """Draw the crowd as seen by ``camera`` (its ``view_projection``) into ``target``
+        (a moderngl framebuffer; default: this renderer's offscreen image, read with
+        :meth:`read_image`); LODs follow the target's viewport height."""
         view_projection = camera.view_projection
-        if camera != self._list_camera:
+        fbo = target or self.fbo
+        pixels_high = fbo.viewport[3]                  # LOD: the viewport's height
+        if (camera, pixels_high) != self._list_camera:
             self.stats.list_bytes += sum(
                 _write(self.list_tex, r) for r in self.lists.rebuild(
-                    self.crowd.agent_position, camera.eye,
-                    view_projection if self.culling else None))
-            self._list_camera = camera
-        fbo = target or self.fbo
+                    self.crowd.agent_position, view_projection, pixels_high, self.culling))
+            self._list_camera = (camera, pixels_high)
         fbo.use()
         if clear is not None:
             fbo.clear(*clear, depth=1.0)

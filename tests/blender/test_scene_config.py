@@ -204,11 +204,13 @@ def test_config_carries_settings_mesh_uniques_and_agents(rig_scene):
     steps = []
     cfg = scene_config.config_from_scene(scene, progress=lambda *a: steps.append(a))
     assert (cfg.max_offset, cfg.transition_slots, cfg.when_full, cfg.seed) == (12, 5, "cut", 7)
-    assert cfg.fps == 24.0 and cfg.start_frame == 1 and cfg.lod_distances == (10.0, 40.0)
+    assert cfg.fps == 24.0 and cfg.start_frame == 1
+    assert cfg.lod_distances == (10.0, 40.0, 150.0)          # far cards on by default
     assert sorted(cfg.clips) == ["walk", "wave"]
     assert cfg.clips["walk"].events == (("step", 6.0),)       # marker at frame 7, clip 1..25
     assert [d.name for d in cfg.streams] == ["walk"] and [d.name for d in cfg.uniques] == ["wave"]
     assert list(cfg.meshes) == ["Rig"] and cfg.meshes["Rig"][0].positions.shape == (40, 3)
+    assert cfg.meshes["Rig"][-1].name.endswith(".card") and len(cfg.meshes["Rig"]) == 4
     assert cfg.agent_count == 20 and (cfg.agent_offset < 12).all()
     assert [a[:2] for a in steps] == [(0, 4), (1, 4), (2, 4), (3, 4)]
     # a unique's clip time starts at 0 when it starts, not at the scene start
@@ -238,12 +240,27 @@ def test_config_carries_settings_mesh_uniques_and_agents(rig_scene):
      r"node 'sm': state names must be unique"),
     (lambda s, a: (cs.add_stream(s, "w", a["walk"]), cs.add_stream(s, "w", a["idle"])),
      r"stream names must be unique and not empty \('w'\)"),
+    (lambda s, a: (cs.add_stream(s, "w", a["walk"]), setattr(s, "lod_far", 20.0)),
+     r"Crowd settings: LOD 2 From \(20 m\) must be farther than LOD 1 From \(30 m\)"),
+    (lambda s, a: (cs.add_stream(s, "w", a["walk"]), setattr(s, "lod_card", 90.0)),
+     r"Crowd settings: Cards From \(90 m\) must be farther than LOD 2 From \(90 m\)"),
 ])
 def test_bad_scenes_name_what_is_at_fault(rig_scene, setup, message):
     scene, _rig, acts = rig_scene
     setup(scene.crowd, acts)
     with pytest.raises(CrowdError, match=message):
         scene_config.config_from_scene(scene)
+
+
+def test_far_cards_can_be_turned_off(rig_scene):
+    scene, rig, acts = rig_scene
+    s = scene.crowd
+    s.proxy_mesh = cs.make_proxy(rig)
+    cs.add_stream(s, "walk", acts["walk"])
+    s.lod_cards, s.lod_card = False, 10.0          # ignored when off
+    cfg = scene_config.config_from_scene(scene)
+    assert cfg.lod_distances == (30.0, 90.0) and len(cfg.meshes["Rig"]) == 3
+    assert not any(lv.name.endswith(".card") for lv in cfg.meshes["Rig"])
 
 
 def _root(anim, name, add, kind, inputs, **props):

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from crowd_addon.core import CrowdConfig, CrowdError, synthetic
-from crowd_addon.core.mesh import ProxyMesh, build_lods, vertex_normals
+from crowd_addon.core.mesh import CARD, ProxyMesh, build_lods, card_lod, vertex_normals
 from crowd_addon.core.skinning import skin_vertices, skinning_matrices
 
 QUAD = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], np.float32)
@@ -102,3 +102,82 @@ def test_config_add_mesh_checks_skeleton_and_bones():
         cfg.add_mesh(wrong)
     levels = cfg.add_mesh(synthetic.humanoid_mesh(small), lods=())
     assert len(levels) == 1 and cfg.meshes["small"] is levels
+
+
+def _box(w, d, h, name="box"):
+    """A closed box ``w`` x ``d`` x ``h`` standing on z = 0 around the z axis, its
+    lower four corners on bone 1 and upper four on bone 2 (of 3)."""
+    x, y = w / 2, d / 2
+    pos = np.array([[sx * x, sy * y, z] for z in (0.0, h) for sx, sy in
+                    ((-1, -1), (1, -1), (1, 1), (-1, 1))])
+    quads = [(0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7)]
+    tri = np.array([t for a, b, c, e in quads for t in ((a, b, c), (a, c, e))])
+    bones = np.where(pos[:, 2] > 0, 2, 1)[:, None]
+    return ProxyMesh.from_influences(name, "sk", pos, tri, bones, np.ones((8, 1)),
+                                     bone_count=3)
+
+
+def test_card_keeps_the_silhouette_area_and_stands_on_the_axis():
+    card = card_lod(_box(0.4, 0.2, 1.8))
+    assert (card.vertex_count, card.triangle_count) == (8, 4)
+    assert card.name == "box.card" and card.skeleton == "sk"
+    # the quad across +Y is as wide as the box seen along Y, the one across +X as deep
+    np.testing.assert_allclose(np.ptp(card.positions[:4], 0), [0.4, 0.0, 1.8], atol=1e-6)
+    np.testing.assert_allclose(np.ptp(card.positions[4:], 0), [0.0, 0.2, 1.8], atol=1e-6)
+    np.testing.assert_allclose(card.positions.mean(0), [0.0, 0.0, 0.9], atol=1e-6)
+    # each quad faces across its plane (normals from its own triangles)
+    np.testing.assert_allclose(np.abs(card.normals[:4]), [[0, 1, 0]] * 4, atol=1e-6)
+    np.testing.assert_allclose(np.abs(card.normals[4:]), [[1, 0, 0]] * 4, atol=1e-6)
+
+
+def test_card_corners_take_the_feet_and_head_influences():
+    card = card_lod(_box(0.4, 0.2, 1.8))
+    low = card.positions[:, 2] < 0.9
+    assert (card.bone_indices[low, 0] == 1).all() and (card.bone_indices[~low, 0] == 2).all()
+    np.testing.assert_allclose(card.bone_weights[:, 0], 1.0)
+    # skinned, the lower corners move with bone 1 and the upper with bone 2
+    rows = np.zeros((1, 3, 3, 4))
+    rows[0, :, :, :3] = np.eye(3)
+    rows[0, 1, :, 3] = (0.0, 0.0, 0.5)                 # feet lifted
+    c, s = np.cos(0.3), np.sin(0.3)
+    rows[0, 2, :, :3] = [[c, -s, 0], [s, c, 0], [0, 0, 1]]   # head turned
+    out = skin_vertices(card.positions, card.bone_indices, card.bone_weights, rows)[0]
+    np.testing.assert_allclose(out[low], card.positions[low] + (0, 0, 0.5), atol=1e-6)
+    np.testing.assert_allclose(out[~low], card.positions[~low] @ rows[0, 2, :, :3].T,
+                               atol=1e-6)
+
+
+def test_card_follows_the_mean_of_a_humanoid_s_feet_and_head():
+    """Skinning is linear in the weights: a card corner moves like the mean of the
+    lowest (highest) tenth's vertices would at the corner's rest position, up to the
+    influences past the top four that the card drops."""
+    sk = synthetic.humanoid(bones=30)
+    m = synthetic.humanoid_mesh(sk)
+    card = card_lod(m)
+    rows = skinning_matrices(synthetic.periodic_clip(sk, "c").keys[7:8], sk)
+    out = skin_vertices(card.positions, card.bone_indices, card.bone_weights, rows)[0]
+    z = m.positions[:, 2]
+    tenth = 0.1 * np.ptp(z)
+    for band, corners in ((z <= z.min() + tenth, card.positions[:, 2] < z.mean()),
+                          (z >= z.max() - tenth, card.positions[:, 2] > z.mean())):
+        n = int(band.sum())
+        each = skin_vertices(np.repeat(card.positions[corners], n, 0),
+                             np.tile(m.bone_indices[band], (int(corners.sum()), 1)),
+                             np.tile(m.bone_weights[band], (int(corners.sum()), 1)), rows)[0]
+        want = each.reshape(int(corners.sum()), n, 3).mean(1)
+        np.testing.assert_allclose(out[corners], want, atol=0.03)
+    assert np.abs(out - card.positions).max() > 0.05           # the pose does move it
+
+
+def test_card_is_the_last_lod_and_the_default_far_level():
+    m = _box(0.4, 0.2, 1.8)
+    levels = build_lods(m, (0.5, CARD))
+    assert levels[-1].vertex_count == 8 and len(levels) == 3
+    for bad in (("card", 0.5), ("cards",)):
+        with pytest.raises(CrowdError, match="'card' \\(as the last level\\)"):
+            build_lods(m, bad)
+    cfg = CrowdConfig()
+    sk = cfg.add_skeleton(synthetic.humanoid("fan", bones=24))
+    levels = cfg.add_mesh(synthetic.humanoid_mesh(sk))
+    assert [lv.name.rsplit(".", 1)[-1] for lv in levels[1:]] == ["lod1", "lod2", "card"]
+    assert len(cfg.lod_distances) == len(levels) - 1

@@ -126,5 +126,6 @@ def image(make):
         r.sync()
     r.render(frame_crowd(crowd, aspect=SIZE[0] / SIZE[1]))
     out["gpu/image"] = r.read_image()
+    out["gpu/lod"] = r.lists.lod.copy()
     return out
 

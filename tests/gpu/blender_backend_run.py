@@ -29,7 +29,7 @@ def viewport(make):
     """The image scene drawn into a bound GPUOffScreen by a renderer without an image
     of its own (what a SpaceView3D draw handler does), against its own image."""
     import gpu
-    own = scenes.image(make)["gpu/image"]
+    own = scenes.image(make)
     crowd = scenes.c.Crowd(scenes.c.make_config(M=8, agents=16, spacing=0.9))
     r = make(crowd, None)
     for _ in range(5):
@@ -44,7 +44,8 @@ def viewport(make):
     buf.dimensions = w * h * 4
     image = np.frombuffer(buf, np.uint8).reshape(h, w, 4)[::-1]
     offscreen.free()
-    return {"gpu/image": image, "ref/image": own}
+    return {"gpu/image": image, "ref/image": own["gpu/image"], "gpu/lod": r.lists.lod,
+            "ref/lod": own["gpu/lod"]}
 
 
 def main(path):

@@ -28,7 +28,8 @@ def gl():
 
 
 def make_config(M=8, streams=3, agents=24, NT=4, bones=24, max_texture_size=16384,
-                spacing=1.5, lods=(0.25, 0.06), lod_distances=(30.0, 90.0), uniques=1):
+                spacing=1.5, lods=(0.25, 0.06, "card"), lod_distances=(30.0, 90.0, 150.0),
+                uniques=1):
     """A small crowd on a grid: ``streams`` streams, ``uniques`` uniques, agents at
     offsets ``0..M-1`` cycling, varied headings and colours, a proxy with LODs."""
     sk = sy.humanoid("fan", bones=bones)

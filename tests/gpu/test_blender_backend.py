@@ -70,8 +70,8 @@ def test_agents_mid_transition_match_cpu_skinning(blender, h, where):
 
 def test_every_lod_is_skinned_like_its_mesh_on_the_cpu(blender, h):
     d = blender("lods")
-    assert len([k for k in d if k.startswith("gpu/lod")]) == 3
-    for lod in range(3):
+    assert len([k for k in d if k.startswith("gpu/lod")]) == 4          # the card too
+    for lod in range(4):
         h.assert_close_relative(d[f"gpu/lod{lod}"], d[f"ref/lod{lod}"])
 
 
@@ -90,7 +90,9 @@ def _agreement(a, b, level=2):
 
 def test_same_frame_renders_like_the_moderngl_backend(blender, renderer):
     image = blender("image")["gpu/image"]
-    reference = scenes.image(lambda crowd, size: renderer(crowd, size))["gpu/image"]
+    ref = scenes.image(lambda crowd, size: renderer(crowd, size))
+    reference = ref["gpu/image"]
+    np.testing.assert_array_equal(blender("image")["gpu/lod"], ref["gpu/lod"])
     assert (reference[..., :3] != reference[0, 0, :3]).any(-1).mean() > 0.04  # agents show
     assert _agreement(image, reference) >= 0.995
     wrapped = blender("wrapped")["gpu/image"]
@@ -101,3 +103,4 @@ def test_same_frame_renders_like_the_moderngl_backend(blender, renderer):
 def test_drawing_into_the_bound_framebuffer_like_a_draw_handler(blender):
     d = blender("viewport")
     np.testing.assert_array_equal(d["gpu/image"], d["ref/image"])
+    np.testing.assert_array_equal(d["gpu/lod"], d["ref/lod"])   # LOD from the bound viewport

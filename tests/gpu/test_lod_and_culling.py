@@ -1,9 +1,10 @@
-"""LOD by camera distance (CrowdConfig.lod_distances), culling, and the draw calls."""
+"""LOD by how big agents look (CrowdConfig.lod_distances in the reference view),
+culling, and the draw calls."""
 
 import numpy as np
 
 from crowd_addon.gpu.camera import Camera, frame_crowd
-from crowd_addon.gpu.draw_lists import lod_levels
+from crowd_addon.gpu.draw_lists import REFERENCE_FOCAL_PX, lod_levels, view_distances
 
 
 def test_lod_levels_follow_thresholds_and_available_levels():
@@ -12,29 +13,79 @@ def test_lod_levels_follow_thresholds_and_available_levels():
     np.testing.assert_array_equal(lod_levels(d, (30.0, 90.0), levels), [0, 0, 1, 1, 2, 2, 1])
 
 
-def test_far_agents_are_drawn_with_the_coarse_mesh(h, renderer):
-    # a row of agents along +X, the camera at the origin looking along the row
+def _row_scene(h, renderer, size, lod_distances=(60.0, 150.0)):
+    """Twelve agents in a row along +X from 3 to 25 m, seen along the row by a camera
+    at x = -1 (depth = x + 1) in an image of ``size``."""
     n = 12
-    cfg = h.make_config(agents=n, lod_distances=(5.0, 12.0))
+    cfg = h.make_config(agents=n, lod_distances=lod_distances)
     cfg.agent_position[:] = np.c_[np.linspace(3.0, 25.0, n), np.zeros(n), np.zeros(n)]
     crowd = h.Crowd(cfg)
-    r = renderer(crowd)
+    r = renderer(crowd, size)
     crowd.step()
     r.sync()
-    camera = Camera((-1.0, 0.0, 1.0), (30.0, 0.0, 1.0), aspect=4 / 3, far=100.0)
+    return crowd, r, Camera((-1.0, 0.0, 1.0), (30.0, 0.0, 1.0), aspect=4 / 3, far=100.0)
+
+
+def _expected_lod(crowd, camera, pixels_high, lod_distances):
+    """LOD from the camera's definition: the agent looks as big as in the reference
+    view (1080 px, 40 degrees) at its depth times the ratio of the focal lengths in
+    pixels."""
+    depth = crowd.agent_position[:, 0] + 1.0
+    focal = 0.5 * pixels_high / np.tan(camera.fov_y / 2)
+    seen = depth * (540.0 / np.tan(np.radians(20.0))) / focal
+    return np.searchsorted(lod_distances, seen, side="right").clip(max=2)
+
+
+def test_far_agents_are_drawn_with_the_coarse_mesh(h, renderer):
+    crowd, r, camera = _row_scene(h, renderer, (160, 120))
     stats = r.render(camera)
-    levels = cfg.meshes["fan"]
+    levels = crowd.config.meshes["fan"]
     assert [m.vertex_count for m in levels] == sorted((m.vertex_count for m in levels),
                                                       reverse=True)
-    dist = np.linalg.norm(crowd.agent_position - np.array(camera.eye, np.float32)
-                          - [0, 0, r.lists.bounds[0, 0]], axis=1)
-    want = np.where(dist < 5, 0, np.where(dist < 12, 1, 2))
+    want = _expected_lod(crowd, camera, 120, (60.0, 150.0))
+    assert set(want.tolist()) == {0, 1, 2}
     np.testing.assert_array_equal(r.lists.lod, want)
     assert {g.lod: g.count for g in r.lists.groups} == {k: int((want == k).sum()) for k in
                                                          range(3)}
     assert stats.vertices == sum(int((want == k).sum()) * levels[k].vertex_count
                                  for k in range(3))
-    assert stats.draws == 3 and stats.instances == n
+    assert stats.draws == 3 and stats.instances == crowd.N
+
+
+def test_a_taller_image_or_a_longer_lens_keeps_detail_further(h, renderer):
+    """The same agents look twice as big in a twice as tall image, or through a lens
+    with half the field of view's tangent: they switch LOD twice as far away."""
+    crowd, small, camera = _row_scene(h, renderer, (160, 120))
+    small.render(camera)
+    big = renderer(crowd, (320, 240))
+    big.render(camera)
+    want = _expected_lod(crowd, camera, 240, (60.0, 150.0))
+    np.testing.assert_array_equal(big.lists.lod, want)
+    assert (big.lists.lod <= small.lists.lod).all() and (big.lists.lod < small.lists.lod).any()
+    zoom = Camera(camera.eye, camera.target, 2 * np.arctan(np.tan(camera.fov_y / 2) / 2),
+                  camera.aspect, far=100.0)
+    small.render(zoom)
+    np.testing.assert_array_equal(small.lists.lod, want)
+    # the lists follow the target's height even when the camera stays
+    fbo = small.ctx.simple_framebuffer((320, 240))
+    try:
+        assert small.render(camera, target=fbo).list_bytes > 0
+        np.testing.assert_array_equal(small.lists.lod, want)
+    finally:
+        fbo.release()
+
+
+def test_view_distances_in_the_reference_view_and_orthographic():
+    # the reference view itself: the distance is the depth
+    cam = Camera((0.0, 0.0, 0.0), (0.0, 10.0, 0.0), np.radians(40.0), 16 / 9, 0.1, 500.0)
+    pts = np.array([[0.0, 5.0, 0.0], [3.0, 50.0, -2.0], [0.0, 200.0, 1.0]])
+    np.testing.assert_allclose(view_distances(pts, cam.view_projection, 1080), pts[:, 1],
+                               rtol=1e-9)
+    # orthographic, 20 m high on 540 px: 27 px a metre at any depth, as big as the
+    # reference view shows things 1484 / 27 m away
+    ortho = np.diag([0.1 * 9 / 16, 0.1, -0.01, 1.0])
+    np.testing.assert_allclose(view_distances(pts, ortho, 540), REFERENCE_FOCAL_PX / 27.0,
+                               rtol=1e-9)
 
 
 def test_culling_drops_only_agents_outside_the_view(h, renderer):

@@ -76,9 +76,11 @@ def render(renderer, crowd, camera):
 
 
 def test_render_matches_cpu_skinning_and_a_wrong_offset_shows(gl, h, renderer):
-    # 15 agents: an odd count leaves a spare mesh copy in the last instance
-    cfg = h.make_config(M=8, agents=15, spacing=0.9)
-    wrong = h.make_config(M=8, agents=15, spacing=0.9)
+    # 15 agents: an odd count leaves a spare mesh copy in the last instance; the
+    # reference draws the full mesh, so keep LOD 0 in this small image
+    far = (1e3, 2e3, 3e3)
+    cfg = h.make_config(M=8, agents=15, spacing=0.9, lod_distances=far)
+    wrong = h.make_config(M=8, agents=15, spacing=0.9, lod_distances=far)
     wrong.agent_offset[:] = 0
     crowd, crowd0 = h.Crowd(cfg), h.Crowd(wrong)
     for c in (crowd, crowd0):
