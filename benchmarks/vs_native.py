@@ -369,7 +369,7 @@ def main(argv=None):
                     help="smoke run: fewer frames and smaller crowds (under a minute)")
     ap.add_argument("--native", help="native character counts (default 10,50,100,200,400,1000; "
                                      "quick 10,50,100,200)")
-    ap.add_argument("--crowd", help="crowd agent counts (default 100,1000,3000,10000,65000; "
+    ap.add_argument("--crowd", help="crowd agent counts (default 100,1000,3000,10000,30000,65000; "
                                     "quick 100,1000,5000)")
     ap.add_argument("--frames", type=int, help="timed frames per count (default 20, "
                                                 "quick 6; at most 3 above 20,000 agents)")
@@ -380,7 +380,8 @@ def main(argv=None):
     ap.add_argument("--blend", default=str(BLEND), help="the stadium .blend")
     args = ap.parse_args(argv)
     native_n = ints(args.native or ("10,50,100,200" if args.quick else "10,50,100,200,400,1000"))
-    crowd_n = ints(args.crowd or ("100,1000,5000" if args.quick else "100,1000,3000,10000,65000"))
+    crowd_n = ints(args.crowd or ("100,1000,5000" if args.quick else
+                                  "100,1000,3000,10000,30000,65000"))
     frames = args.frames if args.frames is not None else (6 if args.quick else 20)
     rounds = args.rounds if args.rounds is not None else (1 if args.quick else 3)
     if rounds < 1:
