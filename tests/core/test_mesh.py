@@ -130,43 +130,25 @@ def test_card_keeps_the_silhouette_area_and_stands_on_the_axis():
     np.testing.assert_allclose(np.abs(card.normals[4:]), [[1, 0, 0]] * 4, atol=1e-6)
 
 
-def test_card_corners_take_the_feet_and_head_influences():
+def test_card_stands_on_the_root_bone_and_follows_the_head():
     card = card_lod(_box(0.4, 0.2, 1.8))
     low = card.positions[:, 2] < 0.9
-    assert (card.bone_indices[low, 0] == 1).all() and (card.bone_indices[~low, 0] == 2).all()
-    np.testing.assert_allclose(card.bone_weights[:, 0], 1.0)
-    # skinned, the lower corners move with bone 1 and the upper with bone 2
-    rows = np.zeros((1, 3, 3, 4))
-    rows[0, :, :, :3] = np.eye(3)
-    rows[0, 1, :, 3] = (0.0, 0.0, 0.5)                 # feet lifted
-    c, s = np.cos(0.3), np.sin(0.3)
-    rows[0, 2, :, :3] = [[c, -s, 0], [s, c, 0], [0, 0, 1]]   # head turned
-    out = skin_vertices(card.positions, card.bone_indices, card.bone_weights, rows)[0]
-    np.testing.assert_allclose(out[low], card.positions[low] + (0, 0, 0.5), atol=1e-6)
-    np.testing.assert_allclose(out[~low], card.positions[~low] @ rows[0, 2, :, :3].T,
-                               atol=1e-6)
-
-
-def test_card_follows_the_mean_of_a_humanoid_s_feet_and_head():
-    """Skinning is linear in the weights: a card corner moves like the mean of the
-    lowest (highest) tenth's vertices would at the corner's rest position, up to the
-    influences past the top four that the card drops."""
+    # lower corners on bone 0 (the root), upper on bone 2 (the top of the box)
+    assert (card.bone_indices[low, 0] == 0).all() and (card.bone_indices[~low, 0] == 2).all()
+    np.testing.assert_allclose(card.bone_weights, [[1, 0, 0, 0]] * 8)
     sk = synthetic.humanoid(bones=30)
     m = synthetic.humanoid_mesh(sk)
     card = card_lod(m)
+    head = sk.bone_names.index("head")
+    low = card.positions[:, 2] < m.positions[:, 2].mean()
+    np.testing.assert_array_equal(card.bone_indices[:, 0], np.where(low, 0, head))
+    # skinned: each corner moves rigidly with its bone
     rows = skinning_matrices(synthetic.periodic_clip(sk, "c").keys[7:8], sk)
     out = skin_vertices(card.positions, card.bone_indices, card.bone_weights, rows)[0]
-    z = m.positions[:, 2]
-    tenth = 0.1 * np.ptp(z)
-    for band, corners in ((z <= z.min() + tenth, card.positions[:, 2] < z.mean()),
-                          (z >= z.max() - tenth, card.positions[:, 2] > z.mean())):
-        n = int(band.sum())
-        each = skin_vertices(np.repeat(card.positions[corners], n, 0),
-                             np.tile(m.bone_indices[band], (int(corners.sum()), 1)),
-                             np.tile(m.bone_weights[band], (int(corners.sum()), 1)), rows)[0]
-        want = each.reshape(int(corners.sum()), n, 3).mean(1)
-        np.testing.assert_allclose(out[corners], want, atol=0.03)
-    assert np.abs(out - card.positions).max() > 0.05           # the pose does move it
+    for bone, corners in ((0, low), (head, ~low)):
+        want = card.positions[corners] @ rows[0, bone, :3, :3].T + rows[0, bone, :3, 3]
+        np.testing.assert_allclose(out[corners], want, atol=1e-9)
+    assert np.abs(out[~low] - card.positions[~low]).max() > 0.01     # the head moves
 
 
 def test_card_is_the_last_lod_and_the_default_far_level():
