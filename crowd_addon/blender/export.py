@@ -1,14 +1,20 @@
 """A scene's crowd written to USD: the shared bake-and-export step and the
 *Export Crowd USD* operator (Crowd panel button, File > Export > Crowd (.usd)).
 
-:func:`export_scene` checks the output and the frame range against the scene, bakes
-the scene's Crowd settings (:func:`.scene_config.config_steps`) and writes the shot
-with :func:`crowd_addon.usd.export_crowd` (all or nothing: a failure leaves no new
-file and a previous export as it was). ``crowd export --blend`` and the operator both
-call it. The USD modules (``pxr``) are imported only when an export runs.
+:func:`export_steps` is the export, one unit of work per step: it checks the output
+and the frame range against the scene, bakes the scene's Crowd settings
+(:func:`.scene_config.config_steps`, one action per step) and writes the shot with
+:func:`crowd_addon.usd.export_crowd` (one progress report per step: a simulated frame,
+a layer...; all or nothing: a failure or a cancel leaves no new file and a previous
+export as it was). :func:`export_scene` runs it to the end in one call
+(``crowd export --blend``, the operator run from a script); the operator run from
+the UI steps it on a timer and Esc cancels it. The USD modules (``pxr``) are
+imported only when an export runs.
 """
 
 import os
+import threading
+import time
 from numbers import Integral
 
 import bpy
@@ -18,8 +24,8 @@ from bpy_extras.io_utils import ExportHelper
 from ..core.errors import CrowdError
 from . import preview, scene_config
 
-__all__ = ["CLASSES", "MENUS", "check_export", "export_scene", "menu_export",
-           "CROWD_OT_export_usd"]
+__all__ = ["CLASSES", "MENUS", "ExportJob", "check_export", "export_scene",
+           "export_steps", "menu_export", "CROWD_OT_export_usd"]
 
 #: main layer extensions the exporter writes (``crowd_addon.usd.files.FORMATS``)
 EXTENSIONS = (".usdc", ".usd", ".usda")
@@ -54,7 +60,8 @@ def check_export(scene, path, frames) -> tuple:
 
 def export_scene(scene, path, frames, agents=None, progress=None, on_bake=None,
                  depsgraph=None):
-    """Bake ``scene``'s Crowd settings and export the shot to ``path``.
+    """Bake ``scene``'s Crowd settings and export the shot to ``path`` in one call
+    (:func:`export_steps` run to the end).
 
     Parameters
     ----------
@@ -62,21 +69,161 @@ def export_scene(scene, path, frames, agents=None, progress=None, on_bake=None,
     path, frames, agents, progress : as :func:`crowd_addon.usd.export_crowd`
         (``progress(stage, done, total)`` during the export).
     on_bake : optional ``on_bake(done, total, message)`` before each bake step
-        (:func:`.scene_config.config_from_scene`).
+        (:func:`.scene_config.config_steps`).
     depsgraph : evaluated depsgraph for the agent sources (default: the scene's).
 
     Returns
     -------
     ``(config, result)``: the baked :class:`~crowd_addon.core.config.CrowdConfig` and
     the :class:`~crowd_addon.usd.export.ExportResult`. Raises CrowdError (nothing
-    written then); the scene is not changed.
+    written then); the scene is not changed. An exception raised by a callback stops
+    the export the same way.
     """
+    steps = export_steps(scene, path, frames, agents, depsgraph)
+    try:
+        while True:
+            try:
+                stage, done, total, message = next(steps)
+            except StopIteration as stop:
+                return stop.value
+            if stage == "bake":
+                if on_bake is not None:
+                    on_bake(done, total, message)
+            elif progress is not None:
+                progress(stage, done, total)
+    finally:
+        steps.close()                   # a raising callback: the export is dropped
+
+
+def export_steps(scene, path, frames, agents=None, depsgraph=None):
+    """The export of :func:`export_scene` as a generator, one unit of work per
+    ``next()``: returns ``(config, result)`` (``StopIteration.value``).
+
+    Yields ``(stage, done, total, message)``: stage ``"bake"`` before each bake step
+    (``message`` as :func:`.scene_config.config_steps`), then each progress report of
+    :func:`crowd_addon.usd.export_crowd` (``message`` is the stage). The output and the
+    frame range are checked when it is called (CrowdError); a fault found later is
+    raised by ``next()``. Blender is only used inside ``next()`` on the caller's
+    thread. The export proper (no ``bpy``) runs on a worker thread that is held at
+    each report until the next ``next()``, so the two never run at once.
+
+    Closing the generator before it is done (``close()``, or dropping it) cancels the
+    export: close returns once the export has removed its temporary files; nothing is
+    written, a previous export at ``path`` is left as it was, the scene is unchanged.
+    """
+    frames = check_export(scene, path, frames)
+    return _export_steps(scene, path, frames, agents, depsgraph)
+
+
+def _export_steps(scene, path, frames, agents, depsgraph):
     from ..usd import export_crowd
 
-    frames = check_export(scene, path, frames)
-    with preview.suspended():           # the bake's frame_set must not drive a preview
-        config = scene_config.config_from_scene(scene, on_bake, depsgraph)
-    return config, export_crowd(config, path, frames, agents=agents, progress=progress)
+    bake = scene_config.config_steps(scene, depsgraph)
+    try:
+        while True:
+            with preview.suspended():   # the bake's frame_set must not drive a preview
+                try:
+                    done, total, message = next(bake)
+                except StopIteration as stop:
+                    config = stop.value
+                    break
+            yield "bake", done, total, message
+    finally:
+        bake.close()
+    result = yield from _held_at_reports(
+        lambda report: export_crowd(config, path, frames, agents=agents, progress=report))
+    return config, result
+
+
+class _Cancelled(BaseException):
+    """Raised in the export's worker, at the progress report it is held at, when the
+    export is cancelled (a BaseException: nothing on the way catches it)."""
+
+
+def _held_at_reports(run):
+    """Generator running ``run(report)`` on a worker thread one report at a time.
+
+    Each ``next()`` lets the worker go on to its next ``report(stage, done, total)``
+    call, yields ``(stage, done, total, stage)`` and holds the worker there; the
+    generator returns what ``run`` returns and raises what it raises. Closed (or
+    interrupted) early, the held ``report`` call raises :class:`_Cancelled` in the
+    worker, and the generator ends once the worker has unwound.
+    """
+    resume, reported = threading.Semaphore(0), threading.Semaphore(0)
+    state = {"cancel": False, "finished": False}
+
+    def report(stage, done, total):
+        state["report"] = (stage, done, total, stage)
+        reported.release()
+        resume.acquire()
+        if state["cancel"]:
+            raise _Cancelled
+
+    def work():
+        try:
+            state["result"] = run(report)
+        except BaseException as e:      # noqa: BLE001 - raised again on the caller's thread
+            state["error"] = e
+        finally:
+            state["finished"] = True
+            reported.release()
+
+    worker = threading.Thread(target=work, name="crowd USD export", daemon=True)
+    worker.start()
+    try:
+        while True:
+            reported.acquire()
+            if state["finished"]:
+                break
+            yield state.pop("report")
+            resume.release()
+    finally:
+        if not state["finished"]:       # closed, or the caller was interrupted
+            state["cancel"] = True
+            resume.release()
+        worker.join()
+    if "error" in state:
+        raise state["error"]
+    return state["result"]
+
+
+class ExportJob:
+    """A scene's export (:func:`export_steps`) run a slice of time at a time, for the
+    modal operator; :meth:`cancel` drops it and nothing is written."""
+
+    def __init__(self, scene, path, frames, agents=None, depsgraph=None):
+        self.steps = export_steps(scene, path, frames, agents, depsgraph)
+        self.stage, self.done, self.total, self.message = "bake", 0, 1, "starting"
+        self.config = self.result = None
+
+    def step(self, seconds=0.0) -> bool:
+        """Do units of work for about ``seconds`` (at least one); False once
+        :attr:`result` is set. Raises CrowdError (the job is then over, nothing
+        written)."""
+        end = time.perf_counter() + seconds
+        while True:
+            try:
+                self.stage, self.done, self.total, self.message = next(self.steps)
+            except StopIteration as stop:
+                self.config, self.result = stop.value
+                return False
+            if time.perf_counter() >= end:
+                return True
+
+    @property
+    def progress(self) -> int | None:
+        """Progress bar position, 0..1000 (see ``_SPANS``); None for a stage without one."""
+        return _progress(self.stage, self.done, self.total)
+
+    @property
+    def status(self) -> str:
+        if self.stage == "bake":
+            return f"{self.message} ({self.done + 1}/{self.total})"
+        return f"{self.stage} {self.done}/{self.total}"
+
+    def cancel(self):
+        """Stop the export; returns once its temporary files are removed."""
+        self.steps.close()
 
 
 def _size(n: int) -> str:
@@ -92,9 +239,25 @@ _SPANS = {"bake": (0, 300), "simulate": (300, 700), "characters": (700, 720),
           "streams": (720, 820), "agent animations": (820, 980), "layout": (980, 1000)}
 
 
+def _progress(stage, done, total):
+    """Progress bar position (0..1000) of ``done`` out of ``total`` in ``stage``, or
+    None for a stage without a share."""
+    lo, hi = _SPANS.get(stage, (None, None))
+    if lo is None or total <= 0:
+        return None
+    return lo + (hi - lo) * min(done, total) // total
+
+
+def _event_loop(context) -> bool:
+    """Whether a modal operator gets events here: a window, and not background mode
+    (the bpy module has a window but no event loop)."""
+    return context.window is not None and not bpy.app.background
+
+
 class CROWD_OT_export_usd(bpy.types.Operator, ExportHelper):
     """Bake the scene's crowd settings and write the crowd shot as UsdSkel (a main
-    layer and a folder of layers beside it); nothing is written if anything fails"""
+    layer and a folder of layers beside it); Esc cancels; nothing is written if
+    anything fails or the export is cancelled"""
 
     bl_idname = "crowd.export_usd"
     bl_label = "Export Crowd USD"
@@ -113,6 +276,15 @@ class CROWD_OT_export_usd(bpy.types.Operator, ExportHelper):
                            description="Last frame, inclusive")
     agents: IntProperty(name="Agents", default=0, min=0,
                         description="Export only the first N agents (0: all)")
+    interactive: BoolProperty(
+        default=False, options={"HIDDEN", "SKIP_SAVE"},
+        description="Run step by step on a timer after the file browser (Esc cancels); "
+                    "set by invoke. Otherwise the export runs to the end in one call")
+
+    #: seconds of work per timer event of the modal export
+    step_seconds = 0.05
+    _timer = None
+    _job = None
 
     def check(self, _context):
         """.usdc, .usd and .usda stay as typed; any other name gets .usdc."""
@@ -130,6 +302,7 @@ class CROWD_OT_export_usd(bpy.types.Operator, ExportHelper):
             self.frame_start = scene.frame_start
         if not self.properties.is_property_set("frame_end"):
             self.frame_end = scene.frame_end
+        self.interactive = _event_loop(context)
         return ExportHelper.invoke(self, context, event)
 
     def draw(self, _context):
@@ -143,28 +316,90 @@ class CROWD_OT_export_usd(bpy.types.Operator, ExportHelper):
         layout.prop(self, "agents")
 
     def execute(self, context):
+        """From the file browser (after invoke): start the modal export. From a script:
+        export in one call."""
         scene = context.scene
         frames = ((scene.frame_start, scene.frame_end) if self.use_scene_range
                   else (self.frame_start, self.frame_end))
         path = bpy.path.abspath(self.filepath)
         wm = context.window_manager
-        wm.progress_begin(0, 1000)
+        if self.interactive and _event_loop(context):
+            try:
+                # the depsgraph is looked up when the agents are placed, as the bake does
+                self._job = ExportJob(scene, path, frames, agents=self.agents or None)
+            except CrowdError as e:
+                return self._fail(e)
+            wm.progress_begin(0, 1000)
+            self._timer = wm.event_timer_add(0.001, window=context.window)
+            wm.modal_handler_add(self)
+            return {"RUNNING_MODAL"}
 
         def update(stage, done, total):
-            lo, hi = _SPANS.get(stage, (None, None))
-            if lo is not None and total > 0:
-                wm.progress_update(lo + (hi - lo) * min(done, total) // total)
+            value = _progress(stage, done, total)
+            if value is not None:
+                wm.progress_update(value)
 
+        wm.progress_begin(0, 1000)
         try:
             _config, result = export_scene(
                 scene, path, frames, agents=self.agents or None, progress=update,
                 on_bake=lambda done, total, _what: update("bake", done, total),
                 depsgraph=context.evaluated_depsgraph_get())
         except CrowdError as e:
-            self.report({"ERROR"}, f"Crowd export: {str(e).removeprefix('export: ')}")
-            return {"CANCELLED"}
+            return self._fail(e)
         finally:
             wm.progress_end()
+        return self._finish(result)
+
+    def modal(self, context, event):
+        job = self._job
+        if event.type in {"ESC", "RIGHTMOUSE"} and event.value == "PRESS":
+            job.cancel()                # returns once the temporary files are gone
+            self._end(context)
+            self.report({"WARNING"}, "Export cancelled: nothing was written")
+            return {"CANCELLED"}
+        if event.type != "TIMER":
+            return {"PASS_THROUGH"}
+        try:
+            more = job.step(self.step_seconds)
+        except CrowdError as e:
+            self._end(context)
+            return self._fail(e)
+        except BaseException:
+            job.cancel()
+            self._end(context)
+            raise
+        if not more:
+            self._end(context)
+            return self._finish(job.result)
+        value = job.progress
+        if value is not None:
+            context.window_manager.progress_update(value)
+        context.workspace.status_text_set(f"Crowd export: {job.status}, Esc to cancel")
+        return {"RUNNING_MODAL"}
+
+    def cancel(self, context):
+        """Blender ends the operator (file browser closed, file loaded, window closed):
+        a running export is dropped, nothing is written."""
+        if self._job is not None:
+            self._job.cancel()
+            self._end(context)
+
+    def _end(self, context):
+        wm = context.window_manager
+        if self._timer is not None:
+            wm.event_timer_remove(self._timer)
+            self._timer = None
+        if self._job is not None:
+            self._job = None
+            wm.progress_end()
+            context.workspace.status_text_set(None)
+
+    def _fail(self, error):
+        self.report({"ERROR"}, f"Crowd export: {str(error).removeprefix('export: ')}")
+        return {"CANCELLED"}
+
+    def _finish(self, result):
         first, last = result.frames
         self.report({"INFO"}, f"Crowd: wrote {result.agents:,} agents, frames {first}-"
                               f"{last} to {result.path} and {len(result.files) - 1} "

@@ -6,7 +6,9 @@ vertex of the scene's agent source, each placed on its seat; the stage's time ra
 and rate are the scene's), Blender's error reports (``bpy.ops`` raises them as
 RuntimeError) and the folder listing (a failed export leaves no file, and a previous
 export as it was). Registration is checked against Blender's own menu and type
-registries.
+registries. The modal export (after the file browser) is driven with timer, Esc and
+right-click events against Blender's window manager: its files are compared with
+those of the one-call export, and a cancel at each stage with the folder listing.
 """
 
 import os
@@ -264,3 +266,275 @@ def test_register_unregister_twice_adds_and_removes_the_menu_entry_and_operator(
                 bpy.ops.crowd.export_usd.get_rna_type()
     finally:
         crowd_addon.register()
+
+
+# ------------------------------------------------------ the modal (cancellable) export
+# Background mode has no event loop: the operator's own methods run against a stand-in
+# instance (as the bake's modal tests do), with a context whose window manager is
+# Blender's, recording the calls the operator makes on it.
+
+class _WindowManager:
+    """``bpy.context.window_manager`` with its calls recorded; timers are Blender's
+    own (``event_timer_add`` works without a window)."""
+
+    def __init__(self):
+        self.wm, self.calls, self.timers = bpy.context.window_manager, [], []
+
+    def event_timer_add(self, step, window=None):
+        timer = self.wm.event_timer_add(step)          # no window in background mode
+        self.calls.append("timer_add")
+        self.timers.append(timer)
+        return timer
+
+    def event_timer_remove(self, timer):
+        self.timers.remove(timer)                      # ValueError: not one of ours
+        self.wm.event_timer_remove(timer)
+        self.calls.append("timer_remove")
+
+    def modal_handler_add(self, op):
+        self.calls.append("modal_handler_add")
+        return True
+
+    def progress_begin(self, lo, hi):
+        self.calls.append(("progress_begin", lo, hi))
+        self.wm.progress_begin(lo, hi)
+
+    def progress_update(self, value):
+        self.calls.append(("progress_update", value))
+        self.wm.progress_update(value)
+
+    def progress_end(self):
+        self.calls.append("progress_end")
+        self.wm.progress_end()
+
+    @property
+    def progress(self):
+        return [c[1] for c in self.calls if c[0] == "progress_update"]
+
+
+class _Workspace:
+    def __init__(self):
+        self.status = []
+
+    def status_text_set(self, text):
+        self.status.append(text)
+
+
+class _Context:
+    """What the operator reads from the context after the file browser: a window."""
+
+    def __init__(self):
+        self.scene, self.window = bpy.context.scene, object()
+        self.window_manager, self.workspace = _WindowManager(), _Workspace()
+        self.evaluated_depsgraph_get = bpy.context.evaluated_depsgraph_get
+
+
+@pytest.fixture
+def event_loop(monkeypatch):
+    """As in Blender's UI: the operator may go modal (background mode has no event
+    loop, so it never does there)."""
+    assert crowd_export._event_loop(bpy.context) is False
+    monkeypatch.setattr(crowd_export, "_event_loop", lambda context: True)
+
+
+class _ModalExport:
+    """Stands in for the operator instance once the file browser is confirmed
+    (``invoke`` set ``interactive``); the operator's methods run against it."""
+
+    _op = crowd_export.CROWD_OT_export_usd
+    execute, modal, cancel, _end, _fail, _finish = (
+        _op.execute, _op.modal, _op.cancel, _op._end, _op._fail, _op._finish)
+    _timer = _job = None
+    step_seconds = 0.0                   # one unit of work per timer event
+
+    def __init__(self, path, **props):
+        self.filepath, self.use_scene_range, self.agents = str(path), True, 0
+        self.frame_start, self.frame_end, self.interactive = 1, 250, True
+        for k, v in props.items():
+            setattr(self, k, v)
+        self.reports = []
+
+    def report(self, kind, message):
+        self.reports.append((set(kind), message))
+
+
+TIMER, ESC, RIGHT, MOUSE, ESC_UP = (type("Event", (), {"type": t, "value": v})()
+                                    for t, v in (("TIMER", "NOTHING"), ("ESC", "PRESS"),
+                                                 ("RIGHTMOUSE", "PRESS"),
+                                                 ("MOUSEMOVE", "NOTHING"),
+                                                 ("ESC", "RELEASE")))
+
+
+def _export_threads():
+    import threading
+    return [t for t in threading.enumerate() if t.name == "crowd USD export"]
+
+
+def _files(folder):
+    return {str(f.relative_to(folder)): f.read_bytes() for f in folder.rglob("*")
+            if f.is_file()}
+
+
+def test_modal_export_steps_on_timer_events_and_writes_what_a_script_export_writes(
+        scene, tmp_path, event_loop):
+    (tmp_path / "modal").mkdir()
+    (tmp_path / "script").mkdir()
+    path = tmp_path / "modal" / "shot.usda"
+    op, ctx = _ModalExport(path), _Context()
+    assert op.execute(ctx) == {"RUNNING_MODAL"}
+    assert ctx.window_manager.calls == [("progress_begin", 0, 1000), "timer_add",
+                                        "modal_handler_add"]
+    results, stages = [], []
+    while not results or results[-1] == {"RUNNING_MODAL"}:
+        if len(results) == 5:                          # other events pass through
+            assert op.modal(ctx, MOUSE) == {"PASS_THROUGH"}
+            assert op.modal(ctx, ESC_UP) == {"PASS_THROUGH"}
+        results.append(op.modal(ctx, TIMER))
+        if op._job is not None:
+            stages.append(op._job.stage)
+            assert not path.exists()                   # nothing in place before the end
+        assert len(results) < 200
+    assert results[-1] == {"FINISHED"}
+    # one step per action baked, per simulated frame (the scene's 1..12), per layer
+    assert stages[:3] == ["bake"] * 3 and stages.count("simulate") == 11
+    assert {"characters", "streams", "layout"} <= set(stages)
+    progress = ctx.window_manager.progress
+    assert progress == sorted(progress) and 0 <= progress[0] and progress[-1] <= 1000
+    assert ctx.window_manager.calls[-2:] == ["timer_remove", "progress_end"]
+    assert ctx.window_manager.timers == [] and ctx.workspace.status[-1] is None
+    assert "Esc to cancel" in ctx.workspace.status[0]
+    assert op.reports[-1][0] == {"INFO"} and \
+        f"wrote 30 agents, frames 1-12 to {path}" in op.reports[-1][1]
+    assert _export_threads() == []
+    # the stage: 30 agents over the scene's range ...
+    stage, agents = agents_of(path)
+    assert len(agents) == 30
+    assert (stage.GetStartTimeCode(), stage.GetEndTimeCode()) == (1, 12)
+    info = stage.GetRootLayer().customLayerData["crowd"]
+    assert (info["agents"], info["firstFrame"], info["lastFrame"]) == (30, 1, 12)
+    # ... and every file the same text as the operator run from a script writes
+    assert bpy.ops.crowd.export_usd(filepath=str(tmp_path / "script" / "shot.usda")) == \
+        {"FINISHED"}
+    modal, script = _files(tmp_path / "modal"), _files(tmp_path / "script")
+    assert sorted(modal) == sorted(script) and len(modal) >= 3
+    assert modal == script
+
+
+def _run_until(op, ctx, stage, count=1):
+    """Timer events until the job has reported ``stage`` ``count`` times."""
+    seen = 0
+    for _ in range(200):
+        assert op.modal(ctx, TIMER) == {"RUNNING_MODAL"}
+        seen += op._job.stage == stage
+        if seen == count:
+            return
+    raise AssertionError(f"stage {stage!r} not reached")
+
+
+@pytest.mark.parametrize("stage, count, event", [
+    ("bake", 2, ESC),                    # between two bake steps
+    ("simulate", 5, ESC),                # mid-simulation
+    ("streams", 1, RIGHT),               # layers already written to the temporary folder
+    ("layout", 1, ESC),                  # the last report before the files move in
+])
+def test_esc_cancels_the_modal_export_and_leaves_no_file(scene, tmp_path, event_loop,
+                                                         stage, count, event):
+    path = tmp_path / "shot.usdc"
+    op, ctx = _ModalExport(path), _Context()
+    assert op.execute(ctx) == {"RUNNING_MODAL"}
+    _run_until(op, ctx, stage, count)
+    if stage in ("streams", "layout"):   # the export's temporary folder is there now
+        (tmp,) = listing(tmp_path)
+        assert tmp.startswith(".shot.usdc.") and tmp.endswith(".tmp")
+        assert any((tmp_path / tmp).rglob("*.usdc"))
+    assert len(_export_threads()) == (stage != "bake")
+    assert op.modal(ctx, event) == {"CANCELLED"}
+    assert listing(tmp_path) == []                     # no file, no temporary left
+    assert op.reports == [({"WARNING"}, "Export cancelled: nothing was written")]
+    assert ctx.window_manager.calls[-2:] == ["timer_remove", "progress_end"]
+    assert ctx.window_manager.timers == [] and op._timer is None
+    assert ctx.workspace.status[-1] is None
+    assert _export_threads() == []
+
+
+@pytest.mark.parametrize("stage", ["bake", "simulate", "streams", "layout"])
+def test_a_cancelled_export_leaves_a_previous_export_untouched(scene, tmp_path,
+                                                               event_loop, stage):
+    path = tmp_path / "shot.usdc"
+    scene.frame_end = 6
+    assert bpy.ops.crowd.export_usd(filepath=str(path)) == {"FINISHED"}
+    before = _files(tmp_path)
+    assert "shot.usdc" in before and len(before) >= 3
+    scene.frame_end = 12                               # the new export differs
+    op, ctx = _ModalExport(path, agents=12), _Context()
+    assert op.execute(ctx) == {"RUNNING_MODAL"}
+    _run_until(op, ctx, stage)
+    assert op.modal(ctx, ESC) == {"CANCELLED"}
+    assert _files(tmp_path) == before
+    assert listing(tmp_path) == ["shot.layers", "shot.usdc"]
+    assert ctx.window_manager.timers == [] and _export_threads() == []
+
+
+def test_modal_export_errors_are_reported_and_end_the_timer(scene, tmp_path, event_loop):
+    # found when the export starts: no timer, no progress
+    op, ctx = _ModalExport(tmp_path / "bad.abc"), _Context()
+    assert op.execute(ctx) == {"CANCELLED"}
+    assert op.reports[-1][0] == {"ERROR"} and "needs a name ending in" in op.reports[-1][1]
+    assert ctx.window_manager.calls == []
+    # found after the bake, on a timer event
+    op, ctx = _ModalExport(tmp_path / "shot.usdc", agents=31), _Context()
+    assert op.execute(ctx) == {"RUNNING_MODAL"}
+    results = [op.modal(ctx, TIMER) for _ in range(4)]
+    assert results == [{"RUNNING_MODAL"}] * 3 + [{"CANCELLED"}]
+    assert op.reports[-1] == ({"ERROR"}, "Crowd export: 31 agents requested but the "
+                                         "crowd has 30")
+    assert ctx.window_manager.calls[-2:] == ["timer_remove", "progress_end"]
+    assert ctx.window_manager.timers == [] and listing(tmp_path) == []
+    assert _export_threads() == []
+
+
+def test_blender_ending_the_modal_export_drops_it(scene, tmp_path, event_loop):
+    """``cancel`` (Blender closes the operator: file loaded, window closed)."""
+    op, ctx = _ModalExport(tmp_path / "shot.usdc"), _Context()
+    op.cancel(ctx)                                     # file browser cancelled: no job
+    assert ctx.window_manager.calls == []
+    assert op.execute(ctx) == {"RUNNING_MODAL"}
+    _run_until(op, ctx, "simulate", 3)
+    op.cancel(ctx)
+    assert listing(tmp_path) == [] and ctx.window_manager.timers == []
+    assert ctx.window_manager.calls[-2:] == ["timer_remove", "progress_end"]
+    assert _export_threads() == []
+
+
+def test_without_a_window_the_export_runs_in_one_call(scene, tmp_path):
+    """``interactive`` (set by invoke) needs an event loop: a script in background
+    Blender passing it still exports in one call."""
+    path = tmp_path / "shot.usdc"
+    assert bpy.app.background and not crowd_export._event_loop(bpy.context)
+    assert bpy.ops.crowd.export_usd(filepath=str(path), interactive=True) == {"FINISHED"}
+    assert len(agents_of(path)[1]) == 30 and _export_threads() == []
+
+
+def test_export_scene_drops_the_export_when_a_callback_raises(scene, tmp_path):
+    """The one-call export drives the same steps: a raising callback stops it at
+    once and nothing is written."""
+    path = tmp_path / "shot.usdc"
+    reports = []
+
+    def progress(stage, done, total):
+        reports.append((stage, done, total))
+        if stage == "streams":
+            assert listing(tmp_path)[0].startswith(".shot.usdc.")
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        crowd_export.export_scene(scene, path, (1, 12), progress=progress)
+    assert listing(tmp_path) == [] and _export_threads() == []
+    assert [r for r in reports if r[0] == "simulate"][-1] == ("simulate", 11, 11)
+    bakes = []
+    config, result = crowd_export.export_scene(
+        scene, path, (1, 12), on_bake=lambda *a: bakes.append(a))
+    assert [b[2] for b in bakes] == ["baking action 'walk'", "reading the proxy mesh",
+                                     "placing agents"]
+    assert result.agents == 30 and config.start_frame == 1
+    assert listing(tmp_path) == ["shot.layers", "shot.usdc"]
