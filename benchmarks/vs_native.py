@@ -22,9 +22,10 @@ sides), frame after frame through ``scene.frame_set``:
   cleared first, then one pixel read back through Blender's framebuffer, which waits
   for the GPU to finish the frame. The camera frames every agent
   (``gpu.camera.frame_crowd``, so it backs off as N grows) and the crowd's own LODs
-  apply (``CrowdConfig.add_mesh`` builds them at 25 % and 6 % of the triangles: 590,
-  127 and 32 vertices, from 30 m and 90 m): the agents per LOD and the vertices
-  drawn are printed. A sanity check outside the timing makes sure the draw covered
+  apply (the Crowd settings' defaults: 25 % and 6 % of the triangles and the 8-vertex
+  card, 590, 127, 32 and 8 vertices, from 30, 90 and 150 m in the 1080-pixel reference
+  view, so at half those depths in a 540-pixel image): the agents per LOD and the
+  vertices drawn are printed. A sanity check outside the timing makes sure the draw covered
   pixels and the poses change from frame to frame.
 
 The scene's own objects (stands, FanRig playing its action, the mocap rig) are there
