@@ -155,6 +155,10 @@ class CROWD_PG_agent_source(PropertyGroup):
     color_attribute: StringProperty(name="Colour Attribute", default="Col")
 
 
+_LOD_VIEW = ("as seen in a 1080-pixel-high view with a 40° field of view (smaller views "
+             "switch sooner, zoomed-in ones later)")
+
+
 class CROWD_PG_settings(PropertyGroup):
     armature: PointerProperty(name="Armature", type=bpy.types.Object, poll=_is_armature)
     proxy_mesh: PointerProperty(name="Proxy Mesh", type=bpy.types.Object, poll=_is_mesh,
@@ -181,17 +185,17 @@ class CROWD_PG_settings(PropertyGroup):
         ("NEG_X", "-X", "The character faces -X in its rest pose")),
         description="Used to turn agents toward a target")
     lod_near: FloatProperty(name="LOD 1 From", default=30.0, min=0.01, unit="LENGTH",
-                            description="Camera distance from which agents use the first "
-                                        "coarser mesh (25% of the triangles)")
+                            description="Distance from which agents use the first coarser "
+                                        "mesh (25% of the triangles), " + _LOD_VIEW)
     lod_far: FloatProperty(name="LOD 2 From", default=90.0, min=0.01, unit="LENGTH",
-                           description="Camera distance from which agents use the second "
-                                       "coarser mesh (6% of the triangles)")
+                           description="Distance from which agents use the second coarser "
+                                       "mesh (6% of the triangles), " + _LOD_VIEW)
     lod_cards: BoolProperty(name="Far Cards", default=True,
                             description="Draw the farthest agents as two crossed quads "
-                                        "(8 vertices) that follow the hips and head")
+                                        "(8 vertices) that follow the root bone and head")
     lod_card: FloatProperty(name="Cards From", default=150.0, min=0.01, unit="LENGTH",
-                            description="Camera distance from which agents are drawn as "
-                                        "cards")
+                            description="Distance from which agents are drawn as "
+                                        "cards, " + _LOD_VIEW)
     agent_sources: CollectionProperty(type=CROWD_PG_agent_source)
     active_source_index: IntProperty()
     preview_enabled: BoolProperty(

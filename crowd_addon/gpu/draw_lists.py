@@ -8,10 +8,10 @@ would look as big in the *reference view* -- 1080 pixels high with a 40 degree
 vertical field of view (:data:`REFERENCE_FOCAL_PX`). In that view it is the agent's
 depth in front of the camera; zooming in (a longer lens) or a taller viewport
 shrinks it, so close-ups keep their detail, and a small or wide view (or an
-orthographic one, zoomed out) gets the coarse levels sooner. The visible agents are grouped by (skeleton, LOD)
-in one flat list (an R32I texture, ``gpu_shaders/agents.glsl``); draw ``g`` reads
-its instances from ``base[g]``. The list is rebuilt only when the camera or the
-agents move.
+orthographic one, zoomed out) gets the coarse levels sooner. The visible agents are
+grouped by (skeleton, LOD) in one flat list (an R32I texture,
+``gpu_shaders/agents.glsl``); draw ``g`` reads its instances from ``base[g]``. The list
+is rebuilt only when the camera, the viewport's height or the agents move.
 """
 
 from __future__ import annotations
