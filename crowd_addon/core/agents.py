@@ -13,11 +13,14 @@ Agents are arrays, never Python objects: ``kind (N,) int8``, ``ref (N,) int32``,
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from .errors import CrowdError
 
-__all__ = ["STREAM", "UNIQUE", "TRANSITION", "assign_offsets", "assign_streams", "AgentIndex"]
+__all__ = ["STREAM", "UNIQUE", "TRANSITION", "assign_offsets", "assign_streams", "AgentIndex",
+           "AgentState", "AgentChanges"]
 
 STREAM, UNIQUE, TRANSITION = 0, 1, 2
 
@@ -155,3 +158,139 @@ def _ranges(sorted_keys, queries, sorted_values, query_values):
         return sorted_values[:0], query_values[:0]
     pos = np.repeat(lo - np.cumsum(counts) + counts, counts) + np.arange(total)
     return sorted_values[pos], np.repeat(query_values, counts)
+
+
+@dataclass(frozen=True)
+class AgentChanges:
+    """Agents changed since a reader's cursor (:meth:`AgentState.changes_since`).
+
+    ``agents``: (k,) int64 ascending ids, or None when every agent must be treated as
+    changed (the first read, after a reset, or when the reader fell too far behind);
+    ``moved``: whether a position or heading may have changed; ``cursor``: pass it to
+    the next call.
+    """
+
+    agents: np.ndarray | None
+    moved: bool
+    cursor: int
+
+
+class AgentState:
+    """What each agent plays and where it stands, with a log of who changed.
+
+    Arrays (all ``(N, ...)``), read-only views for everyone else (change them with
+    :meth:`set_animation` and :meth:`place`, which log the change):
+
+    kind : (N,) int8 ``STREAM``/``UNIQUE``/``TRANSITION``; ref : (N,) int64 stream,
+    unique or slot index; offset : (N,) int64 stream offset ``O``;
+    position : (N, 3) float32 metres; heading : (N,) float32 radians about +Z;
+    color : (N, 3) float32 RGB in 0..1.
+
+    Readers (a renderer's instance texture, a recorder) keep a cursor and ask
+    :meth:`changes_since` for the agents changed since, so nobody compares N-sized
+    arrays per frame.
+    """
+
+    def __init__(self, position, heading, color):
+        self.count = int(np.asarray(heading).shape[0])
+        self._position = np.array(position, np.float32).reshape(self.count, 3)
+        self._heading = np.array(heading, np.float32).reshape(self.count)
+        self._color = np.array(color, np.float32).reshape(self.count, 3)
+        self._kind = np.zeros(self.count, np.int8)
+        self._ref = np.zeros(self.count, np.int64)
+        self._offset = np.zeros(self.count, np.int64)
+        self._serial = 1
+        self._floor = 1                   # a cursor below this reads "everything"
+        self._log = []                    # (serial, agents, moved)
+        self._logged = 0
+        self._keys = None
+        self.index = None
+
+    def index_by(self, keys):
+        """Keep :attr:`index` (an :class:`AgentIndex`) of ``keys(agents) -> (k,)`` int64,
+        the key of what each agent plays, up to date with every change."""
+        self._keys = keys
+        self.index = AgentIndex(keys(np.arange(self.count)))
+
+    kind = property(lambda self: _read_only(self._kind))
+    ref = property(lambda self: _read_only(self._ref))
+    offset = property(lambda self: _read_only(self._offset))
+    position = property(lambda self: _read_only(self._position))
+    heading = property(lambda self: _read_only(self._heading))
+    color = property(lambda self: _read_only(self._color))
+
+    def reset(self, kind, ref, offset):
+        """Every agent's animation reference at once; every agent counts as changed."""
+        self._kind[:] = kind
+        self._ref[:] = ref
+        self._offset[:] = offset
+        if self._keys is not None:
+            self.index = AgentIndex(self._keys(np.arange(self.count)))
+        self._serial += 1
+        self._floor = self._serial
+        self._log, self._logged = [], 0
+
+    def set_animation(self, agents, kind, ref, offset=None):
+        """Agents ``agents`` (k,) now play ``(kind, ref)`` (scalars or (k,) arrays), at
+        ``offset`` when given (streams); logged as changed."""
+        agents = np.asarray(agents, np.int64)
+        self._kind[agents] = kind
+        self._ref[agents] = ref
+        if offset is not None:
+            self._offset[agents] = offset
+        if self.index is not None and agents.size:
+            self.index.set(agents, self._keys(agents))
+        self._record(agents, False)
+
+    def place(self, agents, position=None, heading=None, color=None):
+        """Move, turn or recolour agents ``agents`` (k,): ``position`` (k, 3) or (3,),
+        ``heading`` (k,) or scalar radians, ``color`` (k, 3) or (3,); finite values
+        only. Logged as changed (and moved, for a position or heading)."""
+        agents = np.asarray(agents, np.int64).reshape(-1)
+        bad = np.flatnonzero((agents < 0) | (agents >= self.count))
+        if bad.size:
+            raise CrowdError(f"place agents: agent id {int(agents[bad[0]])} out of range "
+                             f"0..{self.count - 1}")
+        values = {}
+        for name, value, shape in (("position", position, (agents.size, 3)),
+                                   ("heading", heading, (agents.size,)),
+                                   ("color", color, (agents.size, 3))):
+            if value is None:
+                continue
+            try:
+                v = np.broadcast_to(np.asarray(value, np.float32), shape)
+            except ValueError:
+                raise CrowdError(f"place agents: {name} of shape {np.shape(value)} does not "
+                                 f"fit {agents.size} agents {shape}") from None
+            if not np.isfinite(v).all():
+                raise CrowdError(f"place agents: {name} must be finite")
+            values[name] = v
+        for name, v in values.items():
+            getattr(self, "_" + name)[agents] = v
+        self._record(agents, "position" in values or "heading" in values)
+
+    def changes_since(self, cursor: int) -> AgentChanges:
+        """The agents changed after ``cursor`` (0 for a new reader)."""
+        if cursor < self._floor:
+            return AgentChanges(None, True, self._serial)
+        new = [(a, m) for s, a, m in self._log if s > cursor]
+        if not new:
+            return AgentChanges(np.zeros(0, np.int64), False, self._serial)
+        agents = np.unique(np.concatenate([a for a, _ in new]))
+        return AgentChanges(agents, any(m for _, m in new), self._serial)
+
+    def _record(self, agents, moved):
+        if agents.size == 0:
+            return
+        self._serial += 1
+        self._log.append((self._serial, agents.copy(), bool(moved)))
+        self._logged += agents.size
+        if self._logged > max(self.count, 4096):        # readers far behind: read all
+            self._floor = self._serial
+            self._log, self._logged = [], 0
+
+
+def _read_only(a: np.ndarray) -> np.ndarray:
+    v = a.view()
+    v.flags.writeable = False
+    return v

@@ -1,7 +1,8 @@
 """A crowd's configuration: what the user authors (paper s.4.1 ``UserConfig``).
 
 ``CrowdConfig = (skeletons, clips, StreamPool, UniquePool, NT, M, agents, ...)``.
-It is plain data; :class:`~.crowd.Crowd` validates it and builds the runtime.
+It is plain data; :func:`validate_config` checks it (``Crowd`` calls it before
+building the runtime).
 :mod:`.config_io` saves and loads it.
 """
 
@@ -11,11 +12,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .agents import assign_offsets, assign_streams
+from .agents import assign_offsets, assign_streams, check_offsets
 from .controllers import Controller
 from .errors import CrowdError
 
-__all__ = ["AnimationDef", "CrowdConfig"]
+__all__ = ["AnimationDef", "CrowdConfig", "validate_config", "WHEN_FULL"]
+
+#: What a transition request does when every slot is busy: wait, or switch at once.
+WHEN_FULL = ("queue", "cut")
 
 
 @dataclass
@@ -163,3 +167,92 @@ class CrowdConfig:
         self.agent_heading = np.concatenate([self.agent_heading, head]).astype(np.float32)
         self.agent_color = np.concatenate([self.agent_color, col]).astype(np.float32)
         return np.arange(first, first + count)
+
+
+class _ClipLookup:
+    """What a controller may look up while it is validated."""
+
+    def __init__(self, cfg, skeleton):
+        self.cfg, self.skeleton = cfg, skeleton
+
+    def clip(self, name):
+        try:
+            return self.cfg.clips[name]
+        except KeyError:
+            raise CrowdError(f"unknown clip {name!r} (known: {sorted(self.cfg.clips)})") \
+                from None
+
+
+def validate_config(cfg: CrowdConfig) -> None:
+    """Raise :class:`CrowdError` naming the first thing wrong with ``cfg``: sizes, names,
+    every controller of every stream and unique, agent arrays and references."""
+    if not cfg.skeletons:
+        raise CrowdError("crowd: needs at least one skeleton")
+    if not cfg.streams and not cfg.uniques:
+        raise CrowdError("crowd: needs at least one stream or unique animation")
+    if int(cfg.max_offset) < 1:
+        raise CrowdError(f"crowd: max offset M must be >= 1, got {cfg.max_offset}")
+    if int(cfg.transition_slots) < 0:
+        raise CrowdError(f"crowd: transition slots NT must be >= 0, got "
+                         f"{cfg.transition_slots}")
+    if not (np.isfinite(cfg.fps) and cfg.fps > 0):
+        raise CrowdError(f"crowd: fps must be positive, got {cfg.fps}")
+    if cfg.when_full not in WHEN_FULL:
+        raise CrowdError(f"crowd: when_full must be one of {WHEN_FULL}, got "
+                         f"{cfg.when_full!r}")
+    for name, sk in cfg.skeletons.items():
+        if sk.name != name:
+            raise CrowdError(f"crowd: skeleton stored as {name!r} is named {sk.name!r}")
+    for name, clip in cfg.clips.items():
+        if clip.name != name:
+            raise CrowdError(f"crowd: clip stored as {name!r} is named {clip.name!r}")
+    _validate_animations(cfg)
+    _validate_agents(cfg)
+
+
+def _validate_animations(cfg):
+    seen = set()
+    for pool, defs in (("stream", cfg.streams), ("unique", cfg.uniques)):
+        for d in defs:
+            if d.name in seen:
+                raise CrowdError(f"crowd: duplicate animation name {d.name!r}")
+            seen.add(d.name)
+            if d.skeleton not in cfg.skeletons:
+                raise CrowdError(f"{pool} {d.name!r}: unknown skeleton {d.skeleton!r}")
+            lookup = _ClipLookup(cfg, cfg.skeletons[d.skeleton])
+            stack = [d.root]
+            while stack:
+                node = stack.pop()
+                try:
+                    node.validate(lookup)
+                except CrowdError as e:
+                    raise CrowdError(f"{pool} {d.name!r}: {e}") from None
+                stack.extend(node.children())
+
+
+def _validate_agents(cfg):
+    n = cfg.agent_offset.shape[0]
+    for field_name in ("agent_stream", "agent_unique"):
+        if getattr(cfg, field_name).shape != (n,):
+            raise CrowdError(f"crowd: {field_name} has shape "
+                             f"{getattr(cfg, field_name).shape}, expected ({n},)")
+    for field_name, shape in (("agent_position", (n, 3)), ("agent_heading", (n,)),
+                              ("agent_color", (n, 3))):
+        arr = np.asarray(getattr(cfg, field_name))
+        if arr.shape != shape or not np.isfinite(arr).all():
+            raise CrowdError(f"crowd: {field_name} must be finite {shape}, got {arr.shape}")
+    check_offsets(cfg.agent_offset, int(cfg.max_offset))
+    st, un = np.asarray(cfg.agent_stream), np.asarray(cfg.agent_unique)
+    both = (st >= 0) == (un >= 0)
+    if both.any():
+        a = int(np.flatnonzero(both)[0])
+        raise CrowdError(f"agent {a}: needs exactly one of a stream or a unique "
+                         f"(stream {st[a]}, unique {un[a]})")
+    bad = np.flatnonzero(st >= len(cfg.streams))
+    if bad.size:
+        raise CrowdError(f"agent {int(bad[0])}: unknown stream index {st[bad[0]]} "
+                         f"({len(cfg.streams)} streams)")
+    bad = np.flatnonzero(un >= len(cfg.uniques))
+    if bad.size:
+        raise CrowdError(f"agent {int(bad[0])}: unknown unique index {un[bad[0]]} "
+                         f"({len(cfg.uniques)} uniques)")

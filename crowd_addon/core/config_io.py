@@ -39,13 +39,12 @@ import numpy as np
 
 from . import pose as sqt
 from .clip import Clip
-from .config import AnimationDef, CrowdConfig
+from .config import WHEN_FULL, AnimationDef, CrowdConfig
 from .controllers import (Blend2, BlendMask, BlendSpace2D, ClipPlayer, Layer, StateMachine,
                           StateTransition)
 from .errors import CrowdError
 from .mesh import ProxyMesh
 from .skeleton import Skeleton
-from .transitions import POLICIES
 
 __all__ = ["FORMAT", "VERSION", "save_config", "load_config", "register_kind",
            "unregister_kind", "controller_kinds", "ControllerKind", "Encoder", "Decoder"]
@@ -509,8 +508,8 @@ def _decode_config(m: dict, dec: Decoder) -> CrowdConfig:
     settings = dec.get(m, "settings", "object")
     for key, kind, default in _SETTINGS:
         setattr(cfg, key, sd.get(settings, key, kind, _REQUIRED if default is None else default))
-    if cfg.when_full not in POLICIES:
-        raise sd.at("when_full").error(f"must be one of {POLICIES}, got {cfg.when_full!r}")
+    if cfg.when_full not in WHEN_FULL:
+        raise sd.at("when_full").error(f"must be one of {WHEN_FULL}, got {cfg.when_full!r}")
     for i, s in enumerate(dec.items(m, "skeletons", "object")):
         d = dec.at("skeletons", i)
         name = d.get(s, "name", "str")

@@ -1,13 +1,19 @@
-"""The crowd runtime: StreamPool with pose history, UniquePool, agents, transitions,
-events, and the pose texture, advanced one frame per :meth:`Crowd.step`.
+"""The crowd runtime: a small facade over the paper's parts, advanced one frame per
+:meth:`Crowd.step`.
 
-Frame ``F`` (paper s.4.2): every stream root is evaluated once and written to
-history slice ``F mod M``; uniques are evaluated (current pose only); transition
-slots blend (those whose target is already in history first, those that need this
-frame's target after it: the dependency graph of s.4.4-4.5); local poses become
-skinning rows for exactly the rows that changed (on the CPU, or with
-``gpu_skinning`` on the GPU from the local poses); event tags crossed by the stream
-heads ``O`` frames ago call back for the agents at offset ``O``.
+Parts (each its own module): :class:`~.pools.StreamPool` (streams and the pose
+history ring) and :class:`~.pools.UniquePool`; :class:`~.agents.AgentState` (what
+each agent plays, where it stands, who changed); :class:`~.transitions.TransitionSlots`
+(slots, queue, the request policy); :func:`~.events.deliver` and
+:class:`~.events.EventDispatcher`; the skinning mode (:mod:`.skinning_modes`);
+:class:`~.pose_storage.PoseStorage` (the pose texture mirror). Renderers and writers
+read :attr:`Crowd.view` (:class:`~.frame_view.FrameView`).
+
+Frame ``F`` (paper s.4.2): queued requests take free slots; every stream root is
+evaluated once and written to the history; uniques are evaluated (current pose
+only); transition slots blend (those whose target is already in history first,
+those that need this frame's target after it: the dependency graph of s.4.4-4.5);
+the skinning mode writes the rows that changed; event tags reach the agents.
 """
 
 from __future__ import annotations
@@ -18,40 +24,19 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import pose as sqt
-from .agents import STREAM, TRANSITION, UNIQUE, AgentIndex, check_offsets
+from .agents import STREAM, TRANSITION, UNIQUE, AgentState
 from .clip import ClipBank
-from .config import CrowdConfig
+from .config import CrowdConfig, validate_config
 from .errors import CrowdError
-from .events import EventDispatcher
+from .events import EventDispatcher, deliver
+from .frame_view import FrameView
 from .graph import DependencyGraph, TreeEvaluator
-from .pose_storage import LOCAL_IDENTITY, PoseStorage
+from .pools import StreamPool, UniquePool
 from .skinning import SkinningPlan
-from .transitions import POLICIES, TransitionResult, TransitionSlots
+from .skinning_modes import skinning_mode
+from .transitions import TransitionResult, TransitionSlots
 
-__all__ = ["Crowd", "StepReport", "GpuSkinningBatch"]
-
-
-@dataclass(frozen=True)
-class GpuSkinningBatch:
-    """Pose texture rows the GPU writes (``gpu_skinning``); all ``(n,)``.
-
-    Row ``rows[i]`` of the pose texture becomes the skinning rows of the local pose
-    ``blend(local[rows[i]], local[sources[i]], weights[i])`` (``local`` = the local-pose
-    texture, ``storage``) of skeleton ``skeletons[i]``. A stream or unique row is its
-    own source with weight 1; a transition slot row blends its StartP towards the
-    target's row by ``S`` (paper s.4.5).
-
-    ``rows``, ``sources`` int32 logical rows; ``weights`` float32; ``skeletons`` int32
-    indices into ``Crowd.skeletons``.
-    """
-
-    rows: np.ndarray
-    sources: np.ndarray
-    weights: np.ndarray
-    skeletons: np.ndarray
-
-    def __len__(self) -> int:
-        return int(self.rows.size)
+__all__ = ["Crowd", "StepReport"]
 
 
 @dataclass(frozen=True)
@@ -65,177 +50,68 @@ class StepReport:
     events: int
 
 
-class _View:
-    """What a controller may look up while it is validated."""
-
-    def __init__(self, cfg, skeleton):
-        self.cfg, self.skeleton = cfg, skeleton
-
-    def clip(self, name):
-        try:
-            return self.cfg.clips[name]
-        except KeyError:
-            raise CrowdError(f"unknown clip {name!r} (known: {sorted(self.cfg.clips)})") \
-                from None
-
-
 class Crowd:
     """A running crowd built from a :class:`CrowdConfig` (validated here).
+
+    Parameters
+    ----------
+    config : the CrowdConfig.
+    skinning : ``"cpu"`` (the CPU writes skinning rows) or ``"gpu"`` (the CPU keeps
+        local poses, a compute shader skins; also the mode for writers that need no
+        skinning), see :mod:`.skinning_modes`.
 
     Attributes
     ----------
     frame : int, the last evaluated frame.
-    history : (M, S, B, 10) float32 local-pose ring of the streams.
-    unique_poses : (U, B, 10) float32 current poses of the uniques.
-    storage : PoseStorage, the texture the CPU keeps and uploads, with its dirty rows:
-        the pose texture of skinning rows, or with ``gpu_skinning`` the local-pose
-        texture (``history`` and ``unique_poses`` are then views of it, and slot rows
-        hold each transition's StartP).
-    agent_kind, agent_ref, agent_offset : (N,) agent animation references.
-    events : EventDispatcher.
-    gpu_skinning : bool. When true the GPU turns local poses into skinning rows and
-        blends the transition slots (paper s.4.5): the CPU only evaluates the
-        streams and uniques into ``storage`` (uploading 10 of 12 floats a bone
-        instead of a 3x4 matrix) and :meth:`gpu_skinning_batch` says which rows the
-        GPU must write. Agent poses and rows asked for on the CPU (``agent_poses``,
-        ``agent_rows``, ``stream_rows``) are still exact.
+    streams, uniques, agents, slots, events, skinning, storage : the parts.
+    view : FrameView, what renderers and writers read.
     """
 
-    def __init__(self, config: CrowdConfig, gpu_skinning: bool = False):
-        cfg = config
-        self.config = cfg
-        self._validate(cfg)
-        self.M = int(cfg.max_offset)
-        self.S = len(cfg.streams)
-        self.U = len(cfg.uniques)
-        self.NT = int(cfg.transition_slots)
+    def __init__(self, config: CrowdConfig, skinning: str = "cpu"):
+        validate_config(config)
+        cfg = self.config = config
         self.fps = float(cfg.fps)
-        self.when_full = cfg.when_full
         skel_names = list(cfg.skeletons)
         self.skeletons = [cfg.skeletons[n] for n in skel_names]
-        self.B = max(s.bone_count for s in self.skeletons)
+        self.bones = max(s.bone_count for s in self.skeletons)
         defs = list(cfg.streams) + list(cfg.uniques)
-        self.names = [d.name for d in defs]
-        self.root_skeleton = np.array([skel_names.index(d.skeleton) for d in defs], np.int64)
-        self.bank = ClipBank(list(cfg.clips.values()), self.B)
+        skel = np.array([skel_names.index(d.skeleton) for d in defs], np.int64)
+        self.bank = ClipBank(list(cfg.clips.values()), self.bones)
         self.evaluator = TreeEvaluator([(d.root, cfg.skeletons[d.skeleton]) for d in defs],
-                                       self.bank, self.B)
-        self.plans = [SkinningPlan(s, self.B) for s in self.skeletons]
-        self.gpu_skinning = bool(gpu_skinning)
-        self.storage = PoseStorage(self.S, self.M, self.U, self.NT, self.B,
-                                   cfg.max_texture_size,
-                                   fill=LOCAL_IDENTITY if self.gpu_skinning else None)
-        if self.gpu_skinning:
-            local = self.storage.sqt_view()
-            self.history = local[:self.storage.unique_base].reshape(
-                self.M, self.S, self.B, sqt.WIDTH)
-            self.unique_poses = local[self.storage.unique_base:self.storage.slot_base]
-            self._slot_start_rows = local[self.storage.slot_base:]
-            rows = np.arange(self.storage.slot_base)
-            self._row_skeleton = self.root_skeleton[
-                np.where(rows < self.storage.unique_base, rows % max(self.S, 1),
-                         self.S + rows - self.storage.unique_base)].astype(np.int32)
-        else:
-            self.history = sqt.identity_pose((self.M, self.S, self.B))
-            self.unique_poses = sqt.identity_pose((self.U, self.B))
-        self._skin_pending = []
-        self.unique_start = np.zeros(self.U, np.int64)
-        self.slots = TransitionSlots(self.NT, self.B)
+                                       self.bank, self.bones)
+        self.plans = [SkinningPlan(s, self.bones) for s in self.skeletons]
+        self.skinning = skinning_mode(skinning)
+        m, s, u = int(cfg.max_offset), len(cfg.streams), len(cfg.uniques)
+        self.storage = self.skinning.storage(s, m, u, int(cfg.transition_slots), self.bones,
+                                             cfg.max_texture_size)
+        self.streams = StreamPool([d.name for d in cfg.streams], skel[:s], m,
+                                  self.skinning.history(self.storage, (m, s, self.bones,
+                                                                       sqt.WIDTH)),
+                                  self.bank.tag_names)
+        self.uniques = UniquePool([d.name for d in cfg.uniques], skel[s:],
+                                  self.skinning.unique_poses(self.storage,
+                                                             (u, self.bones, sqt.WIDTH)),
+                                  key_base=self.streams.key_count)
+        self.agents = AgentState(cfg.agent_position, cfg.agent_heading, cfg.agent_color)
+        self.slots = TransitionSlots(int(cfg.transition_slots), self.bones, self.agents,
+                                     cfg.when_full, begin=self._begin_transitions)
+        self.agents.index_by(self._agent_keys)
+        st = np.asarray(cfg.agent_stream, np.int64)
+        self.agent_skeleton = np.where(st >= 0, skel[np.clip(st, 0, None)],
+                                       skel[s + np.asarray(cfg.agent_unique, np.int64)]
+                                       if u else 0).astype(np.int64)
         self.events = EventDispatcher()
-        n = cfg.agent_count
-        self.N = n
-        # copies: a crowd may move its agents without touching the configuration
-        self.agent_position = np.array(cfg.agent_position, np.float32)
-        self.agent_heading = np.array(cfg.agent_heading, np.float32)
-        self.agent_color = np.array(cfg.agent_color, np.float32)
-        self._stream_skel_groups = self._groups(self.root_skeleton[:self.S])
-        self._unique_skel_groups = self._groups(self.root_skeleton[self.S:])
+        self.view = FrameView(self)
+        self.skinning.bind(self)
         self._build_graph()
         self.reset(cfg.start_frame)
-
-    # ------------------------------------------------------------------ validation
-    @staticmethod
-    def _validate(cfg):
-        if not cfg.skeletons:
-            raise CrowdError("crowd: needs at least one skeleton")
-        if not cfg.streams and not cfg.uniques:
-            raise CrowdError("crowd: needs at least one stream or unique animation")
-        if int(cfg.max_offset) < 1:
-            raise CrowdError(f"crowd: max offset M must be >= 1, got {cfg.max_offset}")
-        if int(cfg.transition_slots) < 0:
-            raise CrowdError(f"crowd: transition slots NT must be >= 0, got "
-                             f"{cfg.transition_slots}")
-        if not (np.isfinite(cfg.fps) and cfg.fps > 0):
-            raise CrowdError(f"crowd: fps must be positive, got {cfg.fps}")
-        if cfg.when_full not in POLICIES:
-            raise CrowdError(f"crowd: when_full must be one of {POLICIES}, got "
-                             f"{cfg.when_full!r}")
-        for name, sk in cfg.skeletons.items():
-            if sk.name != name:
-                raise CrowdError(f"crowd: skeleton stored as {name!r} is named {sk.name!r}")
-        for name, clip in cfg.clips.items():
-            if clip.name != name:
-                raise CrowdError(f"crowd: clip stored as {name!r} is named {clip.name!r}")
-        seen = set()
-        for pool, defs in (("stream", cfg.streams), ("unique", cfg.uniques)):
-            for i, d in enumerate(defs):
-                if d.name in seen:
-                    raise CrowdError(f"crowd: duplicate animation name {d.name!r}")
-                seen.add(d.name)
-                if d.skeleton not in cfg.skeletons:
-                    raise CrowdError(f"{pool} {d.name!r}: unknown skeleton {d.skeleton!r}")
-                sk = cfg.skeletons[d.skeleton]
-                view = _View(cfg, sk)
-                stack = [d.root]
-                while stack:
-                    node = stack.pop()
-                    try:
-                        node.validate(view)
-                    except CrowdError as e:
-                        raise CrowdError(f"{pool} {d.name!r}: {e}") from None
-                    stack.extend(node.children())
-        n = cfg.agent_offset.shape[0]
-        for field_name in ("agent_stream", "agent_unique"):
-            if getattr(cfg, field_name).shape != (n,):
-                raise CrowdError(f"crowd: {field_name} has shape "
-                                 f"{getattr(cfg, field_name).shape}, expected ({n},)")
-        for field_name, shape in (("agent_position", (n, 3)), ("agent_heading", (n,)),
-                                  ("agent_color", (n, 3))):
-            arr = np.asarray(getattr(cfg, field_name))
-            if arr.shape != shape or not np.isfinite(arr).all():
-                raise CrowdError(f"crowd: {field_name} must be finite {shape}, got {arr.shape}")
-        check_offsets(cfg.agent_offset, int(cfg.max_offset))
-        st, un = np.asarray(cfg.agent_stream), np.asarray(cfg.agent_unique)
-        both = (st >= 0) == (un >= 0)
-        if both.any():
-            a = int(np.flatnonzero(both)[0])
-            raise CrowdError(f"agent {a}: needs exactly one of a stream or a unique "
-                             f"(stream {st[a]}, unique {un[a]})")
-        bad = np.flatnonzero(st >= len(cfg.streams))
-        if bad.size:
-            raise CrowdError(f"agent {int(bad[0])}: unknown stream index {st[bad[0]]} "
-                             f"({len(cfg.streams)} streams)")
-        bad = np.flatnonzero(un >= len(cfg.uniques))
-        if bad.size:
-            raise CrowdError(f"agent {int(bad[0])}: unknown unique index {un[bad[0]]} "
-                             f"({len(cfg.uniques)} uniques)")
-
-    @staticmethod
-    def _groups(skel_of):
-        """(skeleton, indices, contiguous slice or None) per skeleton in ``skel_of``."""
-        out = []
-        for k in np.unique(skel_of):
-            idx = np.flatnonzero(skel_of == k)
-            contiguous = idx.size and idx[-1] - idx[0] + 1 == idx.size
-            out.append((int(k), idx, slice(int(idx[0]), int(idx[-1]) + 1) if contiguous
-                        else None))
-        return out
 
     # ---------------------------------------------------------------- dependency graph
     def _build_graph(self):
         g = DependencyGraph()
         g.add("transitions.partition", self._partition_transitions)
-        g.add("transitions.ready", self._transitions_ready, after=["transitions.partition"])
+        g.add("transitions.ready", lambda: self._blend("ready"),
+              after=["transitions.partition"])
         names = []
         for i, b in enumerate(self.evaluator.evaluate_order):
             name = f"controllers.{type(b).__qualname__.split('.')[0]}@{b.height}#{i}"
@@ -244,12 +120,14 @@ class Crowd:
             g.add(name, (lambda b=b: b.evaluate(self.evaluator.ctx)), after=lower)
             names.append(name)
         g.add("roots.store", self._store_roots, after=names)
-        g.add("transitions.waiting", self._transitions_waiting,
+        g.add("transitions.waiting", lambda: self._blend("waiting"),
               after=["transitions.partition", "roots.store"])
         g.add("transitions.finish", self._finish_transitions,
               after=["transitions.ready", "transitions.waiting"])
-        g.add("skinning", self._skin_changed_rows, after=["roots.store", "transitions.finish"])
-        g.add("events", self._dispatch_events, after=["roots.store", "transitions.finish"])
+        g.add("skinning", self.skinning.slots_blended,
+              after=["roots.store", "transitions.finish"])
+        g.add("events", lambda: self._deliver_events(True),
+              after=["roots.store", "transitions.finish"])
         self.graph = g
         self._order = [n for wave in g.waves() for n in wave]
 
@@ -261,34 +139,36 @@ class Crowd:
         cfg = self.config
         f0 = cfg.start_frame if frame is None else int(frame)
         self.evaluator.reset()
+        self.slots.release(np.arange(self.slots.count))
+        self.slots.queue.clear()
+        self.slots.served = self.slots.cuts = 0
         st = np.asarray(cfg.agent_stream)
-        self.agent_kind = np.where(st >= 0, STREAM, UNIQUE).astype(np.int8)
-        self.agent_ref = np.where(st >= 0, st, cfg.agent_unique).astype(np.int64)
-        self.agent_offset = np.asarray(cfg.agent_offset, np.int64).copy()
-        self.index = AgentIndex(self._agent_keys(np.arange(self.N)))
-        self.slots = TransitionSlots(self.NT, self.B)
-        self.unique_start[:] = f0 - self.M + 1
-        self._log_stream = np.zeros(0, np.int64)
-        self._log_name = np.zeros(0, np.int64)
-        self._log_frame = np.zeros(0, np.int64)
-        self._unique_hits = (np.zeros(0, np.int64), np.zeros(0, np.int64))
+        self.agents.reset(np.where(st >= 0, STREAM, UNIQUE),
+                          np.where(st >= 0, st, cfg.agent_unique), cfg.agent_offset)
+        self.uniques.start[:] = f0 - self.streams.max_offset + 1
+        self.streams.clear_events()
         self._events_fired = 0
-        self.stats = {"steps": 0, "ms_total": 0.0, "transitions_served": 0, "cuts": 0}
-        for f in range(f0 - self.M + 1, f0 + 1):
+        self._steps, self._ms_total = 0, 0.0
+        for f in range(f0 - self.streams.max_offset + 1, f0 + 1):
             self.frame = f
-            self._evaluate_roots(f)
+            self.evaluator.prepare(self._root_times(f))
+            self.evaluator.evaluate()
             self._store_roots()
-            self._skin_changed_rows()
-            self._collect_events(dispatch=(f == f0))
+            self._deliver_events(dispatch=(f == f0))
         self.storage.take_dirty_regions()
         self.storage.mark_dirty(0, self.storage.row_count)
-        self._skin_pending = [(0, self.storage.slot_base)]
+        self.skinning.reset()
+
+    def _agent_keys(self, agents):
+        """Event/index key of what each agent plays (a transition's target)."""
+        kind, ref, off = self._playing(agents)
+        return np.where(kind == STREAM, self.streams.key(ref, off), self.uniques.key(ref))
 
     def _playing(self, agents):
         """(kind, ref, offset) each agent plays, a transition resolved to its target."""
-        kind = self.agent_kind[agents].astype(np.int64)
-        ref = self.agent_ref[agents].copy()
-        off = self.agent_offset[agents].copy()
+        a = self.agents
+        kind, ref, off = (a.kind[agents].astype(np.int64), a.ref[agents].copy(),
+                          a.offset[agents].copy())
         tr = kind == TRANSITION
         if tr.any():
             k = ref[tr]
@@ -297,30 +177,31 @@ class Crowd:
             off[tr] = self.slots.target_offset[k]
         return kind, ref, off
 
-    def _agent_keys(self, agents):
-        """Event/index key of what each agent plays (a transition's target)."""
-        kind, ref, off = self._playing(agents)
-        return np.where(kind == STREAM, ref * self.M + off, self.S * self.M + ref)
-
     # ----------------------------------------------------------------------- step
     def step(self) -> StepReport:
         """Advance one frame and return what it cost."""
         t_start = time.perf_counter()
         mark = self.storage.mark()
-        started = self._serve_queue()
+        started = self.slots.serve_queue()
         self.frame += 1
         self._finished = 0
         self._events_fired = 0
-        self._evaluate_roots_prepare(self.frame)
+        self.evaluator.prepare(self._root_times(self.frame))
         for name in self._order:
             self.graph.tasks[name]()
         ms = (time.perf_counter() - t_start) * 1e3
-        self.stats["steps"] += 1
-        self.stats["ms_total"] += ms
-        upload = self.storage.bytes_since(mark)
-        return StepReport(self.frame, ms, upload,
+        self._steps += 1
+        self._ms_total += ms
+        return StepReport(self.frame, ms, self.storage.bytes_since(mark),
                           int(self.slots.active.sum()), started, self._finished,
                           self._events_fired)
+
+    @property
+    def stats(self) -> dict:
+        """Since the last reset: ``steps``, ``ms_total`` (step time), ``transitions_served``
+        (slots given), ``cuts`` (agents switched without a blend)."""
+        return {"steps": self._steps, "ms_total": self._ms_total,
+                "transitions_served": self.slots.served, "cuts": self.slots.cuts}
 
     def advance_to(self, frame: int):
         """Step (or reset and re-simulate when going backwards) to ``frame``."""
@@ -330,322 +211,162 @@ class Crowd:
             self.step()
 
     def _root_times(self, frame):
-        t = np.empty(self.S + self.U)
-        t[:self.S] = frame
-        t[self.S:] = frame - self.unique_start
-        return t
-
-    def _evaluate_roots_prepare(self, frame):
-        self.evaluator.prepare(self._root_times(frame))
-
-    def _evaluate_roots(self, frame):
-        self._evaluate_roots_prepare(frame)
-        self.evaluator.evaluate()
+        return np.concatenate([np.full(self.streams.count, float(frame)),
+                               self.uniques.times(frame)])
 
     def _store_roots(self):
         poses = self.evaluator.ctx.poses[self.evaluator.root_index]
-        self.history[self.frame % self.M] = poses[:self.S]
-        self.unique_poses[:] = poses[self.S:]
+        self.streams.store(self.frame, poses[:self.streams.count])
+        self.uniques.poses[:] = poses[self.streams.count:]
+        self.skinning.roots_stored(self.frame)
+
+    def _deliver_events(self, dispatch):
+        roots, names = self.evaluator.ctx.take_events()
+        if not dispatch:          # history warm-up: log the crossings, call nobody
+            is_stream = roots < self.streams.count
+            self.streams.log_events(self.frame, roots[is_stream], names[is_stream])
+            return
+        self._events_fired += deliver(self.frame, roots, names, self.streams, self.uniques,
+                                      self.agents.index, self.events, self.bank.tag_names)
 
     # ---------------------------------------------------------------- transitions
     def _partition_transitions(self):
         act = self.slots.active_slots()
         later = (self.slots.target_kind[act] != STREAM) | (self.slots.target_offset[act] == 0)
-        self._tr_ready = act[~later]
-        self._tr_waiting = act[later]
+        self._tr = {"ready": act[~later], "waiting": act[later]}
+        self._s = {}
 
-    def _transitions_ready(self):
-        self._s_ready = self._blend_slots(self._tr_ready)
-
-    def _transitions_waiting(self):
-        self._s_waiting = self._blend_slots(self._tr_waiting)
-
-    def _blend_slots(self, slots):
-        """Blend ``slots`` on the CPU, or with GPU skinning only compute ``S`` (the
-        CPU pose is then blended on demand by :meth:`_current_poses`)."""
-        if self.gpu_skinning:
-            return self.slots.weights(slots, self.frame)
-        return self.slots.evaluate(slots, self.frame, self.history, self.M, self.unique_poses)
+    def _blend(self, which):
+        self._s[which] = self.skinning.blend(self._tr[which], self.frame)
 
     def _finish_transitions(self):
-        slots = np.concatenate([self._tr_ready, self._tr_waiting])
-        s = np.concatenate([self._s_ready, self._s_waiting])
-        done = slots[s >= 1.0]
-        if done.size:
-            agents = self.slots.agent[done]
-            self.agent_kind[agents] = self.slots.target_kind[done]
-            self.agent_ref[agents] = self.slots.target_ref[done]
-            st = self.slots.target_kind[done] == STREAM
-            self.agent_offset[agents[st]] = self.slots.target_offset[done[st]]
-            self.slots.release(done)
-            self.index.set(agents, self._agent_keys(agents))
-        self._finished = int(done.size)
+        self._finished = self.slots.finish(
+            np.concatenate([self._tr["ready"], self._tr["waiting"]]),
+            np.concatenate([self._s["ready"], self._s["waiting"]]))
 
-    def _current_poses(self, agents):
-        """Local poses ``(n, B, 10)`` the agents show at ``self.frame``."""
-        out = np.empty((agents.size, self.B, sqt.WIDTH), np.float32)
-        kind, ref = self.agent_kind[agents], self.agent_ref[agents]
-        m = kind == STREAM
-        out[m] = self.history[(self.frame - self.agent_offset[agents[m]]) % self.M, ref[m]]
-        m = kind == UNIQUE
-        out[m] = self.unique_poses[ref[m]]
-        m = kind == TRANSITION
-        if m.any():
-            if self.gpu_skinning:           # slots are blended on the GPU: do these here
-                self.slots.evaluate(np.unique(ref[m]), self.frame, self.history, self.M,
-                                    self.unique_poses)
-            out[m] = self.slots.pose[ref[m]]
-        return out
-
-    def agent_rows_index(self, agents=None) -> np.ndarray:
-        """Logical pose texture row each agent reads at ``self.frame`` (the shader's rule)."""
-        agents = np.arange(self.N) if agents is None else self._check_agents(agents)
-        kind, ref = self.agent_kind[agents], self.agent_ref[agents]
-        stream_row = ((self.frame - self.agent_offset[agents]) % self.M) * self.S + ref
-        return np.where(kind == STREAM, stream_row,
-                        np.where(kind == UNIQUE, self.storage.unique_base + ref,
-                                 self.storage.slot_base + ref))
-
-    def agent_rows(self, agents=None) -> np.ndarray:
-        """Skinning rows ``(n, B, 3, 4)`` float32 the agents are drawn with now."""
-        agents = np.arange(self.N) if agents is None else self._check_agents(agents)
-        index = self.agent_rows_index(agents)
-        if not self.gpu_skinning:
-            return self.storage.rows[index]
-        # the skinning rows live on the GPU: skin each distinct row once, here
-        used, inverse = np.unique(index, return_inverse=True)
-        return self._skin_logical_rows(used)[inverse.reshape(-1)]
-
-    def _skin_logical_rows(self, rows) -> np.ndarray:
-        """Skinning rows ``(n, B, 3, 4)`` of logical pose texture ``rows`` (GPU skinning
-        mode): the local poses of stream/unique rows, blended slots."""
-        st = self.storage
-        out = np.zeros((rows.size, self.B, 3, 4), np.float32)
-        local = st.sqt_view()
-        is_slot = rows >= st.slot_base
-        poses = np.empty((rows.size, self.B, sqt.WIDTH), np.float32)
-        poses[~is_slot] = local[rows[~is_slot]]
-        skel = np.empty(rows.size, np.int64)
-        skel[~is_slot] = self._row_skeleton[rows[~is_slot]]
-        if is_slot.any():
-            slots = rows[is_slot] - st.slot_base
-            self.slots.evaluate(slots, self.frame, self.history, self.M, self.unique_poses)
-            poses[is_slot] = self.slots.pose[slots]
-            kind, ref = self.slots.target_kind[slots], self.slots.target_ref[slots]
-            skel[is_slot] = self.root_skeleton[np.where(kind == STREAM, ref, self.S + ref)]
-        for k in np.unique(skel):
-            out[skel == k] = self.plans[k].rows(poses[skel == k])
-        return out
-
-    def gpu_skinning_batch(self) -> GpuSkinningBatch:
-        """The pose texture rows the GPU must write now (``gpu_skinning``): every
-        stream and unique row whose local pose changed since the last call (the new
-        history slice and the uniques after a step; everything after a reset) and
-        every active transition slot. Call it after uploading ``take_upload_regions``."""
-        if not self.gpu_skinning:
-            raise CrowdError("gpu_skinning_batch: this crowd skins on the CPU (create it "
-                             "with Crowd(config, gpu_skinning=True))")
-        ranges = PoseStorage._merged(self._skin_pending)
-        self._skin_pending = []
-        own = np.concatenate([np.arange(a, a + n, dtype=np.int64) for a, n in ranges]) \
-            if ranges else np.zeros(0, np.int64)
-        act = self.slots.active_slots()
-        kind = self.slots.target_kind[act]
-        ref = self.slots.target_ref[act]
-        target = self.slots.target_rows(act, self.frame, self.S, self.M,
-                                        self.storage.unique_base)
-        slot_rows = self.storage.slot_base + act
-        return GpuSkinningBatch(
-            np.concatenate([own, slot_rows]).astype(np.int32),
-            np.concatenate([own, target]).astype(np.int32),
-            np.concatenate([np.ones(own.size), self.slots.weights(act, self.frame)]
-                           ).astype(np.float32),
-            np.concatenate([self._row_skeleton[own],
-                            self.root_skeleton[np.where(kind == STREAM, ref, self.S + ref)]]
-                           ).astype(np.int32))
-
-    def stream_events(self, since_frame: int):
-        """Event tags the stream heads crossed at frames ``>= since_frame`` (at most the
-        last M frames are kept): ``(stream, name, frame)`` arrays, in crossing order.
-
-        These are the crossings agents at offset ``O`` receive ``O`` frames later;
-        exporters write them as the streams' event tags.
-        """
-        keep = self._log_frame >= int(since_frame)
-        names = np.asarray(self.bank.tag_names, object)
-        return (self._log_stream[keep].copy(), names[self._log_name[keep]],
-                self._log_frame[keep].copy())
-
-    def agent_poses(self, agents=None) -> np.ndarray:
-        """Local poses ``(n, B, 10)`` float32 of the agents now."""
-        agents = np.arange(self.N) if agents is None else self._check_agents(agents)
-        return self._current_poses(agents)
-
-    def _check_agents(self, agents) -> np.ndarray:
-        """Agent ids as a flat int64 array; any shape is accepted and flattened."""
-        a = np.asarray(agents).reshape(-1)
-        if a.size and not np.issubdtype(a.dtype, np.integer):
-            raise CrowdError(f"agent ids must be integers, got {a.dtype}")
-        a = a.astype(np.int64)
-        bad = np.flatnonzero((a < 0) | (a >= self.N))
-        if bad.size:
-            raise CrowdError(f"agent id {int(a[bad[0]])} out of range 0..{self.N - 1}")
-        return a
-
-    def _resolve(self, target, pool):
-        names = self.names[:self.S] if pool == "stream" else self.names[self.S:]
-        count = self.S if pool == "stream" else self.U
-        if isinstance(target, str):
-            if target not in names:
-                raise CrowdError(f"unknown {pool} {target!r} (known: {names})")
-            return names.index(target)
-        if isinstance(target, (int, np.integer)) and 0 <= int(target) < count:
-            return int(target)
-        raise CrowdError(f"unknown {pool} index {target!r} ({count} {pool}s)")
+    def _begin_transitions(self, slots, agents, kind, ref, offsets, length):
+        """``agents`` enter ``slots`` now: StartP is the pose they show."""
+        start = self._current_poses(agents)
+        self.skinning.slot_starting(slots, agents, start)
+        self.slots.start(slots, agents, kind, ref, offsets, length, start, self.frame)
 
     def transition_to_streamed(self, agents, stream, duration, offset=None,
                                when_full=None) -> TransitionResult:
         """Blend agents to ``stream`` at ``offset`` (default: each agent's own offset)
         over ``duration`` frames (0 switches at once)."""
         agents = self._check_agents(agents)
-        length, policy = self._check_request(duration, when_full)
-        s = self._resolve(stream, "stream")
+        length, policy = self.slots.check_request(duration, when_full)
+        s = self.streams.index(stream)
         if offset is None:
-            off = self.agent_offset[agents].copy()
+            off = self.agents.offset[agents].copy()
         else:
             off = np.asarray(offset).reshape(-1)
             if off.size not in (1, agents.size):
                 raise CrowdError(f"transition: {off.size} offsets for {agents.size} agents")
-            check_offsets(off, self.M, "transition")
+            self.streams.check_offsets(off, "transition")
             off = np.broadcast_to(off, agents.shape).astype(np.int64)
-        self._check_skeleton(agents, s)
-        return self._request(agents, STREAM, s, off, length, policy)
+        self._check_skeleton(agents, self.streams.skeleton[s], self.streams.names[s])
+        return self.slots.request(agents, STREAM, s, off, length, policy)
 
     def transition_to_unique(self, agents, unique, duration, restart=True,
                              when_full=None) -> TransitionResult:
         """Blend agents to unique animation ``unique`` over ``duration`` frames; with
         ``restart`` its clock restarts so it plays from its beginning next frame."""
         agents = self._check_agents(agents)
-        length, policy = self._check_request(duration, when_full)
-        u = self._resolve(unique, "unique")
-        self._check_skeleton(agents, self.S + u)
+        length, policy = self.slots.check_request(duration, when_full)
+        u = self.uniques.index(unique)
+        self._check_skeleton(agents, self.uniques.skeleton[u], self.uniques.names[u])
         if restart:
-            self.unique_start[u] = self.frame + 1
-        return self._request(agents, UNIQUE, u, self.agent_offset[agents].copy(), length,
-                             policy)
+            self.uniques.restart(u, self.frame + 1)
+        return self.slots.request(agents, UNIQUE, u, self.agents.offset[agents].copy(),
+                                  length, policy)
 
-    def _check_skeleton(self, agents, root):
-        skel = self.root_skeleton[self._agent_root(agents)]
-        bad = np.flatnonzero(skel != self.root_skeleton[root])
+    def _check_skeleton(self, agents, skeleton, name):
+        bad = np.flatnonzero(self.agent_skeleton[agents] != skeleton)
         if bad.size:
             raise CrowdError(f"agent {int(agents[bad[0]])}: cannot transition to "
-                             f"{self.names[root]!r}, it uses another skeleton")
+                             f"{name!r}, it uses another skeleton")
 
-    def _agent_root(self, agents):
-        kind, ref, _ = self._playing(agents)
-        return np.where(kind == STREAM, ref, self.S + ref)
+    def transition_of(self, agents) -> dict:
+        """The slot state of ``agents`` (k,) blending now (see FrameView.transitions)."""
+        agents = self._check_agents(agents)
+        if (self.agents.kind[agents] != TRANSITION).any():
+            a = int(agents[self.agents.kind[agents] != TRANSITION][0])
+            raise CrowdError(f"agent {a} is not in a transition")
+        k, sl = self.agents.ref[agents], self.slots
+        return {"start_pose": sl.start_pose[k].copy(), "t0": sl.t0[k].copy(),
+                "length": sl.length[k].copy(), "target_kind": sl.target_kind[k].copy(),
+                "target_ref": sl.target_ref[k].copy(),
+                "target_offset": sl.target_offset[k].copy()}
 
-    def _check_request(self, duration, when_full):
-        """(length in whole frames, policy) of a request, validated."""
-        policy = self.when_full if when_full is None else when_full
-        if policy not in POLICIES:
-            raise CrowdError(f"transition: when_full must be one of {POLICIES}, got "
-                             f"{policy!r}")
-        try:
-            d = float(duration)
-        except (TypeError, ValueError):
-            raise CrowdError(f"transition: duration must be a number of frames, got "
-                             f"{duration!r}") from None
-        if not (np.isfinite(d) and d >= 0):
-            raise CrowdError(f"transition: duration must be >= 0 frames, got {duration!r}")
-        return int(round(d)), policy
+    # ------------------------------------------------------------------ agents
+    def _check_agents(self, agents) -> np.ndarray:
+        """Agent ids as a flat int64 array; any shape is accepted and flattened."""
+        a = np.asarray(agents).reshape(-1)
+        if a.size and not np.issubdtype(a.dtype, np.integer):
+            raise CrowdError(f"agent ids must be integers, got {a.dtype}")
+        a = a.astype(np.int64)
+        bad = np.flatnonzero((a < 0) | (a >= self.agents.count))
+        if bad.size:
+            raise CrowdError(f"agent id {int(a[bad[0]])} out of range "
+                             f"0..{self.agents.count - 1}")
+        return a
 
-    def _request(self, agents, kind, ref, offsets, length, policy):
-        agents, first = np.unique(agents, return_index=True)
-        offsets = offsets[first]
-        for a in agents.tolist():
-            self.slots.queue.pop(a, None)
-        if length == 0:
-            self._cut(agents, kind, ref, offsets)
-            empty = np.zeros(0, np.int64)
-            return TransitionResult(empty, empty, empty, agents)
-        # agents already blending reuse their slot
-        in_slot = self.agent_kind[agents] == TRANSITION
-        reuse_agents = agents[in_slot]
-        reuse_slots = self.agent_ref[reuse_agents]
-        rest = agents[~in_slot]
-        free = self.slots.free_slots()
-        take = min(free.size, rest.size)
-        new_agents, new_slots = rest[:take], free[:take]
-        overflow = rest[take:]
-        all_agents = np.concatenate([reuse_agents, new_agents])
-        all_slots = np.concatenate([reuse_slots, new_slots]).astype(np.int64)
-        order = np.searchsorted(agents, all_agents)
-        self._start_slots(all_slots, all_agents, kind, ref, offsets[order], length,
-                          self.frame)
-        queued = cut = np.zeros(0, np.int64)
-        if overflow.size:
-            ov_off = offsets[np.searchsorted(agents, overflow)]
-            if policy == "queue":
-                for a, o in zip(overflow.tolist(), ov_off.tolist()):
-                    self.slots.queue[a] = (kind, ref, o, length)
-                queued = overflow
-            else:
-                self._cut(overflow, kind, ref, ov_off)
-                cut = overflow
-        return TransitionResult(all_agents, all_slots, queued, cut)
+    def place_agents(self, agents, position=None, heading=None, color=None):
+        """Move, turn or recolour agents (see :meth:`AgentState.place`)."""
+        self.agents.place(self._check_agents(agents), position, heading, color)
 
-    def _start_slots(self, slots, agents, kind, ref, offsets, length, frame):
-        if slots.size == 0:
-            return
-        start = self._current_poses(agents)
-        if self.gpu_skinning:
-            self._slot_start_rows[slots] = start        # StartP, blended on the GPU
-        else:
-            # the slot shows exactly the agent's current pose until the next step
-            self.storage.rows[self.storage.slot_base + slots] = self.agent_rows(agents)
-        self.slots.start(slots, agents, kind, ref, offsets, length, start, frame)
-        self.agent_kind[agents] = TRANSITION
-        self.agent_ref[agents] = slots
-        self.storage.mark_rows_dirty(self.storage.slot_base + slots)
-        self.index.set(agents, self._agent_keys(agents))
-        self.stats["transitions_served"] += int(slots.size)
+    def _current_poses(self, agents):
+        """Local poses ``(n, B, 10)`` the agents show at ``self.frame``."""
+        out = np.empty((agents.size, self.bones, sqt.WIDTH), np.float32)
+        kind, ref, off = (self.agents.kind[agents], self.agents.ref[agents],
+                          self.agents.offset[agents])
+        m = kind == STREAM
+        out[m] = self.streams.poses(self.frame, ref[m], off[m])
+        m = kind == UNIQUE
+        out[m] = self.uniques.poses[ref[m]]
+        m = kind == TRANSITION
+        if m.any():
+            out[m] = self.skinning.slot_poses(ref[m])[ref[m]]
+        return out
 
-    def _cut(self, agents, kind, ref, offsets):
-        in_slot = self.agent_kind[agents] == TRANSITION
-        if in_slot.any():
-            self.slots.release(self.agent_ref[agents[in_slot]])
-        self.agent_kind[agents] = kind
-        self.agent_ref[agents] = ref
-        if kind == STREAM:
-            self.agent_offset[agents] = offsets
-        self.index.set(agents, self._agent_keys(agents))
-        self.slots.cuts += int(agents.size)
-        self.stats["cuts"] += int(agents.size)
+    def agent_poses(self, agents=None) -> np.ndarray:
+        """Local poses ``(n, B, 10)`` float32 of the agents now."""
+        agents = np.arange(self.agents.count) if agents is None else self._check_agents(agents)
+        return self._current_poses(agents)
 
-    def _serve_queue(self) -> int:
-        """Give free slots to queued requests (FIFO); their blend starts at the pose
-        shown now, before the frame advances."""
-        q = self.slots.queue
-        if not q:
-            return 0
-        free = self.slots.free_slots()
-        n = min(free.size, len(q))
-        served = 0
-        for slot in free[:n].tolist():
-            a, (kind, ref, off, length) = q.popitem(last=False)
-            self._start_slots(np.array([slot]), np.array([a]), kind, ref, np.array([off]),
-                              length, self.frame)
-            served += 1
-        return served
+    def agent_rows_index(self, agents=None) -> np.ndarray:
+        """Logical pose texture row each agent reads at ``self.frame`` (the shader's rule)."""
+        agents = np.arange(self.agents.count) if agents is None else self._check_agents(agents)
+        kind, ref = self.agents.kind[agents], self.agents.ref[agents]
+        return np.where(kind == STREAM,
+                        self.streams.row(self.frame, ref, self.agents.offset[agents]),
+                        np.where(kind == UNIQUE, self.storage.unique_base + ref,
+                                 self.storage.slot_base + ref))
+
+    def agent_rows(self, agents=None) -> np.ndarray:
+        """Skinning rows ``(n, B, 3, 4)`` float32 the agents are drawn with now."""
+        return self.skinning.rows(self.agent_rows_index(agents))
+
+    def pose(self, stream, offset: int = 0) -> np.ndarray:
+        """``PH_stream(offset)``: the local pose ``(B, 10)`` the head had ``offset`` frames ago."""
+        s = self.streams.index(stream)
+        self.streams.check_offsets(np.array([offset]), "pose")
+        return self.streams.poses(self.frame, s, int(offset)).copy()
+
+    def stream_rows(self, stream, offset: int = 0) -> np.ndarray:
+        """Pose texture rows ``(B, 3, 4)`` of ``PH_stream(offset)``."""
+        s = self.streams.index(stream)
+        self.streams.check_offsets(np.array([offset]), "pose")
+        return self.skinning.rows(np.array([self.streams.row(self.frame, s, int(offset))]))[0]
 
     # --------------------------------------------------------------- parameters
     def _root(self, target) -> int:
-        if isinstance(target, str):
-            if target not in self.names:
-                raise CrowdError(f"unknown stream or unique {target!r}")
-            return self.names.index(target)
-        return self._resolve(target, "stream")
+        if isinstance(target, str) and target in self.uniques.names:
+            return self.streams.count + self.uniques.index(target)
+        if isinstance(target, str) and target not in self.streams.names:
+            raise CrowdError(f"unknown stream or unique {target!r}")
+        return self.streams.index(target)
 
     def set_parameter(self, target, name: str, value: float):
         """Set a controller parameter on a stream (name or index) or unique (name)."""
@@ -670,93 +391,3 @@ class Crowd:
     def on_event(self, name, fn) -> int:
         """Register ``fn(name, frame, agent_ids)`` for event tag ``name`` (``"*"``: all)."""
         return self.events.on(name, fn)
-
-    # ----------------------------------------------------------------- skinning
-    def _skin_changed_rows(self):
-        st = self.storage
-        sl = self.frame % self.M
-        if self.gpu_skinning:   # history and uniques are views of the local texture
-            for start, count in ((sl * self.S, self.S), (st.unique_base, self.U)):
-                st.mark_dirty(start, count)
-                if count:
-                    self._skin_pending.append((start, count))
-            return
-        hist = self.history[sl]
-        for k, idx, cont in self._stream_skel_groups:
-            if cont is not None:
-                out = st.stream_slice(sl)[cont]
-                self.plans[k].rows(hist[cont], out=out)
-            else:
-                st.rows[sl * self.S + idx] = self.plans[k].rows(hist[idx])
-        st.mark_dirty(sl * self.S, self.S)
-        for k, idx, cont in self._unique_skel_groups:
-            if cont is not None:
-                self.plans[k].rows(self.unique_poses[cont], out=st.unique_rows()[cont])
-            else:
-                st.unique_rows()[idx] = self.plans[k].rows(self.unique_poses[idx])
-        st.mark_dirty(st.unique_base, self.U)
-        act = self.slots.active_slots()
-        if act.size:
-            skel = self.root_skeleton[np.where(self.slots.target_kind[act] == STREAM,
-                                               self.slots.target_ref[act],
-                                               self.S + self.slots.target_ref[act])]
-            for k in np.unique(skel):
-                s = act[skel == k]
-                lo, hi = int(s[0]), int(s[-1]) + 1
-                if hi - lo == s.size:
-                    self.plans[k].rows(self.slots.pose[lo:hi], out=st.slot_rows()[lo:hi])
-                else:
-                    st.slot_rows()[s] = self.plans[k].rows(self.slots.pose[s])
-            st.mark_rows_dirty(st.slot_base + act)
-
-    # ------------------------------------------------------------------- events
-    def _collect_events(self, dispatch=True):
-        roots, names = self.evaluator.ctx.take_events()
-        f = self.frame
-        is_stream = roots < self.S
-        self._log_stream = np.concatenate([self._log_stream, roots[is_stream]])
-        self._log_name = np.concatenate([self._log_name, names[is_stream]])
-        self._log_frame = np.concatenate([self._log_frame,
-                                          np.full(int(is_stream.sum()), f, np.int64)])
-        live = f - self._log_frame < self.M
-        self._log_stream = self._log_stream[live]
-        self._log_name = self._log_name[live]
-        self._log_frame = self._log_frame[live]
-        if not dispatch:
-            return
-        keys = np.concatenate([self._log_stream * self.M + (f - self._log_frame),
-                               self.S * self.M + (roots[~is_stream] - self.S)])
-        key_names = np.concatenate([self._log_name, names[~is_stream]])
-        if keys.size == 0:
-            return
-        ids, which = self.index.lookup(keys)
-        if ids.size == 0:
-            return
-        ev_names = key_names[which]
-        for n in np.unique(ev_names):
-            agents = np.unique(ids[ev_names == n])
-            self._events_fired += 1
-            self.events.dispatch(f, self.bank.tag_names[n], agents)
-
-    def _dispatch_events(self):
-        self._collect_events(dispatch=True)
-
-    # ------------------------------------------------------------------- reports
-    def take_upload_regions(self):
-        """Texture rectangles written since the last call (PoseStorage.take_dirty_regions)."""
-        return self.storage.take_dirty_regions()
-
-    def pose(self, stream, offset: int = 0) -> np.ndarray:
-        """``PH_stream(offset)``: the local pose ``(B, 10)`` the head had ``offset`` frames ago."""
-        s = self._resolve(stream, "stream")
-        check_offsets(np.array([offset]), self.M, "pose")
-        return self.history[(self.frame - int(offset)) % self.M, s].copy()
-
-    def stream_rows(self, stream, offset: int = 0) -> np.ndarray:
-        """Pose texture rows ``(B, 3, 4)`` of ``PH_stream(offset)``."""
-        s = self._resolve(stream, "stream")
-        check_offsets(np.array([offset]), self.M, "pose")
-        row = ((self.frame - int(offset)) % self.M) * self.S + s
-        if self.gpu_skinning:
-            return self._skin_logical_rows(np.array([row]))[0]
-        return self.storage.rows[row].copy()

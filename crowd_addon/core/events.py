@@ -1,4 +1,9 @@
-"""Event tag callbacks into the simulation (paper s.3.3, requirement 3).
+"""Event tags delivered as callbacks into the simulation (paper s.3.3, requirement 3).
+
+:func:`deliver` finds who receives the tags crossed this frame: a stream head's
+crossing at frame ``f`` reaches the agents at offset ``frame - f`` (for the next M
+frames), a unique's crossing reaches the agents playing it, an agent blending in a
+transition slot receives its target's tags. :class:`EventDispatcher` calls back.
 
 ``on(name, fn)`` registers ``fn(name, frame, agent_ids)``; ``"*"`` receives every
 event. The crowd calls each callback once per (event, frame) with all agent ids
@@ -14,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["EventDispatcher", "CallbackError"]
+__all__ = ["EventDispatcher", "CallbackError", "deliver"]
 
 log = logging.getLogger("crowd_addon.events")
 
@@ -61,3 +66,30 @@ class EventDispatcher:
                 self.errors.append(CallbackError(name, frame, fn, exc))
                 log.error("event callback %r for %r at frame %d raised %s: %s",
                           getattr(fn, "__name__", fn), name, frame, type(exc).__name__, exc)
+
+
+def deliver(frame, roots, names, streams, uniques, index, dispatcher, tag_names) -> int:
+    """Log this frame's crossings and call back for every (tag, frame).
+
+    ``roots`` (k,) int64 animation roots (streams ``0 .. S-1``, then uniques) whose
+    clips crossed tags ``names`` (k,) (indices into ``tag_names``) at ``frame``;
+    ``streams``/``uniques`` the pools (stream crossings are logged for M frames),
+    ``index`` the agents' :class:`~.agents.AgentIndex`. Returns the callbacks' count
+    of (tag, frame) deliveries.
+    """
+    is_stream = roots < streams.count
+    streams.log_events(frame, roots[is_stream], names[is_stream])
+    stream_keys, stream_names = streams.crossings_reaching(frame)
+    keys = np.concatenate([stream_keys, uniques.key(roots[~is_stream] - streams.count)])
+    key_names = np.concatenate([stream_names, names[~is_stream]])
+    if keys.size == 0:
+        return 0
+    ids, which = index.lookup(keys)
+    if ids.size == 0:
+        return 0
+    ev_names = key_names[which]
+    fired = 0
+    for n in np.unique(ev_names):
+        dispatcher.dispatch(frame, tag_names[n], np.unique(ids[ev_names == n]))
+        fired += 1
+    return fired

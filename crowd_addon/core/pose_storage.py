@@ -25,7 +25,7 @@ import numpy as np
 
 from .errors import CrowdError
 
-__all__ = ["PoseStorage", "UploadRegion", "LOCAL_IDENTITY", "LOCAL_FLOATS"]
+__all__ = ["PoseStorage", "PoseLayout", "TextureRegion", "LOCAL_IDENTITY", "LOCAL_FLOATS"]
 
 #: A local-pose texture keeps a bone's SQT in the first ten of its twelve texel floats.
 LOCAL_FLOATS = 10
@@ -36,11 +36,12 @@ LOCAL_IDENTITY = np.array([[1, 1, 1, 1], [0, 0, 0, 0], [0, 0, 0, 0]], np.float32
 
 
 @dataclass(frozen=True)
-class UploadRegion:
-    """A rectangle of the pose texture to write this frame.
+class TextureRegion:
+    """Texels ``x .. x + width``, ``y .. y + height`` of a texture to write.
 
-    ``data`` is a C-contiguous float32 view ``(height, width, 4)`` of the mirror,
-    ``x, y`` the texel offset, ``rows`` the logical row range it holds.
+    ``data`` is a C-contiguous ``(height, width, channels)`` array (float32 or int32;
+    for the pose texture a view of the mirror); ``rows`` the logical row range
+    ``(first, end)`` it holds in a block-laid texture (``(0, 0)`` otherwise).
     """
 
     x: int
@@ -48,11 +49,40 @@ class UploadRegion:
     width: int
     height: int
     data: np.ndarray
-    rows: tuple
+    rows: tuple = (0, 0)
 
     @property
     def nbytes(self) -> int:
         return int(self.data.nbytes)
+
+
+@dataclass(frozen=True)
+class PoseLayout:
+    """The pose texture's geometry, in logical rows (see the module docstring).
+
+    streams S, max_offset M, uniques U, slots NT, bones B_max; row_texels = 3 * B_max;
+    row_count = M * S + U + NT; height (rows a column block holds), blocks, width in
+    texels; unique_base = M * S and slot_base = M * S + U, the first unique and slot
+    rows.
+    """
+
+    streams: int
+    max_offset: int
+    uniques: int
+    slots: int
+    bones: int
+    row_texels: int
+    row_count: int
+    height: int
+    blocks: int
+    width: int
+    unique_base: int
+    slot_base: int
+
+    def texel_of_row(self, row):
+        """Texel ``(x, y)`` of the first texel of logical ``row`` (arrays allowed)."""
+        row = np.asarray(row)
+        return (row // self.height) * self.row_texels, row % self.height
 
 
 class PoseStorage:
@@ -99,6 +129,72 @@ class PoseStorage:
             self.rows[:] = fill
         self.unique_base = self.M * self.S
         self.slot_base = self.M * self.S + self.U
+        self.layout = PoseLayout(self.S, self.M, self.U, self.NT, self.bones, self.row_texels,
+                                 n, self.height, self.blocks, self.width, self.unique_base,
+                                 self.slot_base)
+        self._dirty = []
+
+    @property
+    def nbytes(self) -> int:
+        return int(self.rows.nbytes)
+
+    @property
+    def row_bytes(self) -> int:
+        return self.row_texels * 16
+
+    def texel_of_row(self, row):
+        """Texel ``(x, y)`` of the first texel of logical ``row`` (arrays allowed)."""
+        row = np.asarray(row)
+        return (row // self.height) * self.row_texels, row % self.height
+
+
+class PoseStorage:
+    """CPU mirror of the pose texture with per-frame dirty row ranges.
+
+    Parameters
+    ----------
+    streams, max_offset, uniques, slots : S, M, U, NT.
+    bones : B_max, bones per row.
+    max_texture_size : the GPU's largest texture side in texels (GL_MAX_TEXTURE_SIZE).
+    fill : (3, 4) initial value of every bone's entry; default the identity matrix rows
+        (a skinning-matrix texture). :data:`LOCAL_IDENTITY` for a local-pose texture.
+
+    Attributes
+    ----------
+    rows : (R, B_max, 3, 4) float32 logical rows (identity matrices initially).
+    width, height : texture size in texels.
+    """
+
+    def __init__(self, streams, max_offset, uniques, slots, bones, max_texture_size=16384,
+                 fill=None):
+        self.S, self.M, self.U, self.NT = int(streams), int(max_offset), int(uniques), int(slots)
+        self.bones = int(bones)
+        self.row_texels = 3 * self.bones
+        self.max_texture_size = int(max_texture_size)
+        n = self.M * self.S + self.U + self.NT
+        self.row_count = n
+        if self.row_texels > self.max_texture_size:
+            raise CrowdError(f"pose texture cannot fit: a row of {self.bones} bones needs "
+                             f"{self.row_texels} texels, max texture size is "
+                             f"{self.max_texture_size}")
+        self.height = max(1, min(n, self.max_texture_size))
+        self.blocks = max(1, -(-n // self.height))
+        self.width = self.blocks * self.row_texels
+        if self.width > self.max_texture_size:
+            raise CrowdError(f"pose texture cannot fit: {n} rows of {self.row_texels} texels "
+                             f"need {self.blocks} column blocks ({self.width} texels wide), "
+                             f"max texture size is {self.max_texture_size}; lower M, streams "
+                             "or transition slots")
+        self.rows = np.zeros((n, self.bones, 3, 4), np.float32)
+        if fill is None:
+            self.rows[:, :, 0, 0] = self.rows[:, :, 1, 1] = self.rows[:, :, 2, 2] = 1
+        else:
+            self.rows[:] = fill
+        self.unique_base = self.M * self.S
+        self.slot_base = self.M * self.S + self.U
+        self.layout = PoseLayout(self.S, self.M, self.U, self.NT, self.bones, self.row_texels,
+                                 n, self.height, self.blocks, self.width, self.unique_base,
+                                 self.slot_base)
         self._dirty = []
 
     @property
@@ -114,8 +210,7 @@ class PoseStorage:
 
     def texel_of_row(self, row):
         """Texel ``(x, y)`` of the first texel of logical ``row`` (arrays allowed)."""
-        row = np.asarray(row)
-        return (row // self.height) * self.row_texels, row % self.height
+        return self.layout.texel_of_row(row)
 
     def stream_slice(self, slice_) -> np.ndarray:
         """View ``(S, B_max, 3, 4)`` of one history slice's rows."""
@@ -155,14 +250,14 @@ class PoseStorage:
 
     def bytes_since(self, mark: int) -> int:
         """Bytes of the rows marked dirty after ``mark`` (overlaps counted once)."""
-        return sum(c for _, c in self._merged(self._dirty[mark:])) * self.row_bytes
+        return sum(c for _, c in self.merged(self._dirty[mark:])) * self.row_bytes
 
     def dirty_ranges(self) -> list:
         """Changed ``(start, count)`` row ranges since the last take, merged and sorted."""
-        return self._merged(self._dirty)
+        return self.merged(self._dirty)
 
     @staticmethod
-    def _merged(ranges) -> list:
+    def merged(ranges) -> list:
         out = []
         for start, count in sorted(ranges):
             if out and start <= out[-1][0] + out[-1][1]:
@@ -185,7 +280,7 @@ class PoseStorage:
             while r < end:
                 block, y = divmod(r, self.height)
                 n = min(end - r, self.height - y)
-                out.append(UploadRegion(block * self.row_texels, y, self.row_texels, n,
+                out.append(TextureRegion(block * self.row_texels, y, self.row_texels, n,
                                         flat[r:r + n], (r, r + n)))
                 r += n
         self._dirty = []

@@ -20,12 +20,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import pose as sqt
-from .agents import STREAM, UNIQUE
+from .agents import STREAM, TRANSITION, UNIQUE
+from .config import WHEN_FULL
+from .errors import CrowdError
 
-__all__ = ["TransitionSlots", "TransitionResult", "POLICIES"]
-
-POLICIES = ("queue", "cut")
-
+__all__ = ["TransitionSlots", "TransitionResult"]
 
 @dataclass(frozen=True)
 class TransitionResult:
@@ -42,7 +41,7 @@ class TransitionResult:
 
 
 class TransitionSlots:
-    """Slot arrays (all ``(NT, ...)``) and the request queue.
+    """Slot arrays (all ``(NT, ...)``), the request queue and the request policy.
 
     Attributes
     ----------
@@ -52,11 +51,19 @@ class TransitionSlots:
     t0, length : (NT,) start frame and length L in frames.
     start_pose : (NT, B, 10) float32 StartP.
     pose : (NT, B, 10) float32 the slot's current pose P.
+    queue : agent id -> (kind, ref, offset, length) of waiting requests, FIFO.
+    when_full : the default policy, ``"queue"`` or ``"cut"``.
+
+    ``begin(slots, agents, kind, ref, offsets, length)`` is the crowd's: it takes the
+    agents' current poses as StartP and calls :meth:`start`.
     """
 
-    def __init__(self, count, bones):
+    def __init__(self, count, bones, agents, when_full="queue", begin=None):
         self.count = int(count)
         n = self.count
+        self.agents = agents
+        self.when_full = when_full
+        self._begin = begin
         self.active = np.zeros(n, bool)
         self.agent = np.full(n, -1, np.int64)
         self.target_kind = np.zeros(n, np.int8)
@@ -66,7 +73,6 @@ class TransitionSlots:
         self.length = np.ones(n, np.int64)
         self.start_pose = sqt.identity_pose((n, bones))
         self.pose = sqt.identity_pose((n, bones))
-        # agent id -> (kind, ref, offset, length); FIFO order
         self.queue = OrderedDict()
         self.served = 0
         self.cuts = 0
@@ -80,8 +86,81 @@ class TransitionSlots:
     def queued_agents(self) -> np.ndarray:
         return np.fromiter(self.queue.keys(), np.int64, len(self.queue))
 
+    # ------------------------------------------------------------------ policy
+    def check_request(self, duration, when_full) -> tuple:
+        """(length in whole frames, policy) of a request, validated."""
+        policy = self.when_full if when_full is None else when_full
+        if policy not in WHEN_FULL:
+            raise CrowdError(f"transition: when_full must be one of {WHEN_FULL}, got "
+                             f"{policy!r}")
+        try:
+            d = float(duration)
+        except (TypeError, ValueError):
+            raise CrowdError(f"transition: duration must be a number of frames, got "
+                             f"{duration!r}") from None
+        if not (np.isfinite(d) and d >= 0):
+            raise CrowdError(f"transition: duration must be >= 0 frames, got {duration!r}")
+        return int(round(d)), policy
+
+    def request(self, agents, kind, ref, offsets, length, policy) -> TransitionResult:
+        """Blend ``agents`` (k,) to ``(kind, ref)`` at ``offsets`` (k,) over ``length``
+        frames: agents already blending reuse their slot, others take free slots, the
+        rest wait (``"queue"``) or switch at once (``"cut"``); ``length`` 0 cuts."""
+        agents, first = np.unique(agents, return_index=True)
+        offsets = offsets[first]
+        for a in agents.tolist():
+            self.queue.pop(a, None)
+        if length == 0:
+            self.cut(agents, kind, ref, offsets)
+            empty = np.zeros(0, np.int64)
+            return TransitionResult(empty, empty, empty, agents)
+        in_slot = self.agents.kind[agents] == TRANSITION
+        reuse_agents = agents[in_slot]
+        reuse_slots = self.agents.ref[reuse_agents]
+        rest = agents[~in_slot]
+        free = self.free_slots()
+        take = min(free.size, rest.size)
+        all_agents = np.concatenate([reuse_agents, rest[:take]])
+        all_slots = np.concatenate([reuse_slots, free[:take]]).astype(np.int64)
+        overflow = rest[take:]
+        if all_slots.size:
+            self._begin(all_slots, all_agents, kind, ref,
+                        offsets[np.searchsorted(agents, all_agents)], length)
+        queued = cut = np.zeros(0, np.int64)
+        if overflow.size:
+            ov_off = offsets[np.searchsorted(agents, overflow)]
+            if policy == "queue":
+                for a, o in zip(overflow.tolist(), ov_off.tolist()):
+                    self.queue[a] = (kind, ref, o, length)
+                queued = overflow
+            else:
+                self.cut(overflow, kind, ref, ov_off)
+                cut = overflow
+        return TransitionResult(all_agents, all_slots, queued, cut)
+
+    def cut(self, agents, kind, ref, offsets):
+        """Switch ``agents`` to ``(kind, ref)`` now, without a blend."""
+        in_slot = self.agents.kind[agents] == TRANSITION
+        if in_slot.any():
+            self.release(self.agents.ref[agents[in_slot]])
+        self.agents.set_animation(agents, kind, ref, offsets if kind == STREAM else None)
+        self.cuts += int(agents.size)
+
+    def serve_queue(self) -> int:
+        """Give free slots to queued requests (FIFO); their blend starts at the pose
+        shown now, before the frame advances."""
+        if not self.queue:
+            return 0
+        free = self.free_slots()
+        n = min(free.size, len(self.queue))
+        for slot in free[:n].tolist():
+            a, (kind, ref, off, length) = self.queue.popitem(last=False)
+            self._begin(np.array([slot]), np.array([a]), kind, ref, np.array([off]), length)
+        return n
+
     def start(self, slots, agents, kind, ref, offset, length, start_pose, frame):
-        """Fill ``slots`` (arrays of equal length) starting at ``frame``."""
+        """Fill ``slots`` (arrays of equal length) starting at ``frame``; the agents now
+        play their slot."""
         self.active[slots] = True
         self.agent[slots] = agents
         self.target_kind[slots] = kind
@@ -92,13 +171,25 @@ class TransitionSlots:
         self.start_pose[slots] = start_pose
         self.pose[slots] = start_pose
         self.served += len(slots)
+        self.agents.set_animation(agents, TRANSITION, slots)
 
-    def evaluate(self, slots, frame, stream_history, max_offset, unique_poses):
-        """Blend ``slots`` for ``frame``; returns their ``S`` values.
+    def finish(self, slots, s) -> int:
+        """Agents of ``slots`` whose ``S`` reached 1 become their target; slots freed.
+        Returns how many finished."""
+        done = slots[s >= 1.0]
+        if done.size:
+            agents = self.agent[done]
+            st = self.target_kind[done] == STREAM
+            self.agents.set_animation(agents[st], STREAM, self.target_ref[done[st]],
+                                      self.target_offset[done[st]])
+            self.agents.set_animation(agents[~st], UNIQUE, self.target_ref[done[~st]])
+            self.release(done)
+        return int(done.size)
 
-        ``stream_history`` is the (M, S, B, 10) local-pose ring; the target of a
-        streamed slot is ``history[(frame - O_B) mod M, B]``.
-        """
+    # -------------------------------------------------------------------- blend
+    def evaluate(self, slots, frame, streams, uniques):
+        """Blend ``slots`` for ``frame`` (targets from the :class:`~.pools.StreamPool`
+        history and the :class:`~.pools.UniquePool`); returns their ``S`` values."""
         if slots.size == 0:
             return np.zeros(0)
         kind = self.target_kind[slots]
@@ -106,11 +197,10 @@ class TransitionSlots:
         target = np.empty((slots.size,) + self.pose.shape[1:], np.float32)
         st = kind == STREAM
         if st.any():
-            sl = (frame - self.target_offset[slots[st]]) % max_offset
-            target[st] = stream_history[sl, ref[st]]
+            target[st] = streams.poses(frame, ref[st], self.target_offset[slots[st]])
         un = kind == UNIQUE
         if un.any():
-            target[un] = unique_poses[ref[un]]
+            target[un] = uniques.poses[ref[un]]
         s = self.weights(slots, frame)
         self.pose[slots] = sqt.blend2(self.start_pose[slots], target, s.astype(np.float32))
         return s
@@ -119,11 +209,20 @@ class TransitionSlots:
         """``S = clip((frame - T0) / L, 0, 1)`` of ``slots`` (float64)."""
         return np.clip((frame - self.t0[slots]) / self.length[slots], 0.0, 1.0)
 
-    def target_rows(self, slots, frame, streams, max_offset, unique_base) -> np.ndarray:
+    def target_rows(self, slots, frame, streams, unique_base) -> np.ndarray:
         """Logical pose-texture row of each slot's target at ``frame``."""
         ref = self.target_ref[slots]
-        stream_row = ((frame - self.target_offset[slots]) % max_offset) * streams + ref
-        return np.where(self.target_kind[slots] == STREAM, stream_row, unique_base + ref)
+        return np.where(self.target_kind[slots] == STREAM,
+                        streams.row(frame, ref, self.target_offset[slots]), unique_base + ref)
+
+    def target_skeleton(self, slots, streams, uniques) -> np.ndarray:
+        """(k,) int64 skeleton index of each slot's target."""
+        ref = self.target_ref[slots]
+        kind = self.target_kind[slots]
+        out = np.zeros(slots.size, np.int64)
+        out[kind == STREAM] = streams.skeleton[ref[kind == STREAM]]
+        out[kind == UNIQUE] = uniques.skeleton[ref[kind == UNIQUE]]
+        return out
 
     def release(self, slots):
         self.active[slots] = False

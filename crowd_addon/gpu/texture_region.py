@@ -8,30 +8,11 @@ with ``H`` the texture height. Core's pose textures use it
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
+from ..core.pose_storage import TextureRegion
+
 __all__ = ["TextureRegion", "block_regions", "block_image", "stage_rows"]
-
-
-@dataclass(frozen=True)
-class TextureRegion:
-    """Texels ``x .. x + width``, ``y .. y + height`` of a texture; ``data`` is a
-    C-contiguous ``(height, width, channels)`` array (float32 or int32); ``rows`` the
-    logical row range it holds (block-laid textures) -- the same fields as
-    :class:`crowd_addon.core.pose_storage.UploadRegion`."""
-
-    x: int
-    y: int
-    width: int
-    height: int
-    data: np.ndarray
-    rows: tuple = (0, 0)
-
-    @property
-    def nbytes(self) -> int:
-        return int(self.data.nbytes)
 
 
 def block_regions(rows: np.ndarray, changed: np.ndarray, block_rows: int,

@@ -41,15 +41,15 @@ def state(crowd):
     sl = crowd.slots
     return {
         "frame": crowd.frame,
-        "agent_kind": crowd.agent_kind.copy(), "agent_ref": crowd.agent_ref.copy(),
-        "agent_offset": crowd.agent_offset.copy(),
+        "agent_kind": crowd.agents.kind.copy(), "agent_ref": crowd.agents.ref.copy(),
+        "agent_offset": crowd.agents.offset.copy(),
         "slots": [a.copy() for a in (sl.active, sl.agent, sl.target_kind, sl.target_ref,
                                      sl.target_offset, sl.t0, sl.length, sl.start_pose,
                                      sl.pose)],
         "queue": list(sl.queue.items()),
-        "unique_start": crowd.unique_start.copy(),
+        "unique_start": crowd.uniques.start.copy(),
         "params": [dict(p) for p in crowd.evaluator.ctx.params],
-        "index": crowd.index.keys.copy(),
+        "index": crowd.agents.index.keys.copy(),
         "dirty": list(crowd.storage._dirty),
     }
 
@@ -211,7 +211,7 @@ def test_failed_build_leaves_config_usable():
     for _ in range(3):
         good.step()
         again.step()
-    np.testing.assert_array_equal(good.history, again.history)
+    np.testing.assert_array_equal(good.streams.history, again.streams.history)
 
 
 # regressions: these raised numpy/builtin errors that named nothing
@@ -230,7 +230,7 @@ def test_two_dimensional_agent_ids(busy):
     except CrowdError:
         assert_unchanged(before, state(busy))
         return
-    assert busy.agent_ref[4] == 0 and busy.agent_ref[5] == 0
+    assert busy.agents.ref[4] == 0 and busy.agents.ref[5] == 0
 
 
 def test_non_numeric_duration(busy):

@@ -159,7 +159,7 @@ def test_agents_in_transition_get_target_events():
     for k in range(steps):
         crowd.step()
         if k < 7:
-            assert crowd.agent_kind[a] == TRANSITION
+            assert crowd.agents.kind[a] == TRANSITION
     mine = defaultdict(list)
     for n, f, ids in rec.calls:
         if f > t0 and a in ids:
@@ -181,8 +181,8 @@ def test_unique_events_fire_for_agents_on_unique():
     t0 = crowd.frame
     crowd.transition_to_unique(on_u, "u0", 0, restart=True)
     crowd.transition_to_unique(blending, "u0", 9, restart=True)
-    assert (crowd.agent_kind[on_u] == UNIQUE).all()
-    assert crowd.agent_kind[20] == TRANSITION
+    assert (crowd.agents.kind[on_u] == UNIQUE).all()
+    assert crowd.agents.kind[20] == TRANSITION
     steps = 45
     for _ in range(steps):
         crowd.step()
@@ -240,7 +240,7 @@ def test_events_follow_agents_after_many_reassignments():
         crowd.transition_to_streamed(agents, int(rng.integers(2)), 0,
                                      offset=rng.integers(0, M, 400))
         crowd.step()
-    stream, offset = crowd.agent_ref.copy(), crowd.agent_offset.copy()
+    stream, offset = crowd.agents.ref.copy(), crowd.agents.offset.copy()
     count = {name: np.zeros(n, np.int64) for name in ("clap", "stomp", "wave")}
 
     def rec(name, frame, ids):
@@ -289,7 +289,7 @@ def test_shared_tag_name_on_two_streams_gives_one_sorted_call():
     f0 = crowd.frame
     for _ in range(30):
         crowd.step()
-    stream, offset = crowd.agent_ref, crowd.agent_offset
+    stream, offset = crowd.agents.ref, crowd.agents.offset
     frames = [f for _, f, _ in rec.calls]
     assert len(frames) == len(set(frames))
     for f in range(f0 + 1, f0 + 31):
@@ -304,7 +304,7 @@ def test_stream_events_are_the_head_crossings_of_the_last_m_frames():
     crowd, cfg = build()
     for _ in range(30):
         crowd.step()
-    stream, name, frame = crowd.stream_events(crowd.frame - M + 1)
+    stream, name, frame = crowd.view.stream_events(crowd.frame - M + 1)
     expected = []
     for tag in ("clap", "stomp", "wave"):
         s, tau, period = tag_info(tag)
@@ -313,5 +313,5 @@ def test_stream_events_are_the_head_crossings_of_the_last_m_frames():
     assert sorted(zip(stream.tolist(), name.tolist(), frame.tolist())) == sorted(expected)
     assert len(expected) >= 1
     since = crowd.frame - 1
-    later = crowd.stream_events(since)[2]
+    later = crowd.view.stream_events(since)[2]
     assert sorted(later.tolist()) == sorted(f for f in frame.tolist() if f >= since)

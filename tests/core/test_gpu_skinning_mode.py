@@ -1,4 +1,4 @@
-"""Crowd(gpu_skinning=True): the CPU uploads local poses, the GPU writes skinning rows.
+"""Crowd(skinning="gpu"): the CPU uploads local poses, the GPU writes skinning rows.
 
 The oracle is the same crowd skinning and blending on the CPU: the local-pose
 texture plus the batch, put through what the compute shader does (in numpy here),
@@ -55,12 +55,12 @@ class GpuModel:
 
     def __init__(self, crowd):
         self.crowd = crowd
-        self.texture = np.full((crowd.storage.row_count, crowd.B, 3, 4), np.nan, np.float32)
+        self.texture = np.full((crowd.storage.row_count, crowd.bones, 3, 4), np.nan, np.float32)
         self.apply()
 
     def apply(self):
         c = self.crowd
-        b = c.gpu_skinning_batch()
+        b = c.view.take_skinning_batch()
         local = c.storage.sqt_view()
         blended = sqt.blend2(local[b.rows], local[b.sources], b.weights)
         for k in np.unique(b.skeletons):
@@ -70,19 +70,19 @@ class GpuModel:
 
 
 def test_gpu_mode_matches_cpu_poses_rows_texture_and_events():
-    cpu, gpu = Crowd(make_config()), Crowd(make_config(), gpu_skinning=True)
+    cpu, gpu = Crowd(make_config()), Crowd(make_config(), skinning="gpu")
     model = GpuModel(gpu)
     ev_cpu, ev_gpu = [], []
     slots_checked = 0
     for _ in zip(drive(cpu, ev_cpu), drive(gpu, ev_gpu)):
-        assert np.array_equal(cpu.agent_kind, gpu.agent_kind)
-        assert np.array_equal(cpu.agent_ref, gpu.agent_ref)
+        assert np.array_equal(cpu.agents.kind, gpu.agents.kind)
+        assert np.array_equal(cpu.agents.ref, gpu.agents.ref)
         np.testing.assert_array_equal(gpu.agent_poses(), cpu.agent_poses())
         np.testing.assert_allclose(gpu.agent_rows(), cpu.agent_rows(), atol=1e-6)
         b = model.apply()
         # each step writes the new history slice, the uniques and the active slots
-        sl = gpu.frame % gpu.M
-        own = set(range(sl * gpu.S, (sl + 1) * gpu.S)) | set(
+        sl = gpu.frame % gpu.streams.max_offset
+        own = set(range(sl * gpu.streams.count, (sl + 1) * gpu.streams.count)) | set(
             range(gpu.storage.unique_base, gpu.storage.slot_base))
         slots = set((gpu.storage.slot_base + cpu.slots.active_slots()).tolist())
         assert set(b.rows.tolist()) == own | slots
@@ -98,7 +98,7 @@ def test_gpu_mode_matches_cpu_poses_rows_texture_and_events():
 
 
 def test_stream_rows_are_exact_on_demand():
-    cpu, gpu = Crowd(make_config()), Crowd(make_config(), gpu_skinning=True)
+    cpu, gpu = Crowd(make_config()), Crowd(make_config(), skinning="gpu")
     for _ in zip(drive(cpu, []), drive(gpu, [])):
         pass
     for stream in ("walk", "idle", "run"):
@@ -108,17 +108,17 @@ def test_stream_rows_are_exact_on_demand():
 
 
 def test_history_uniques_and_start_poses_live_in_the_local_texture():
-    crowd = Crowd(make_config(), gpu_skinning=True)
+    crowd = Crowd(make_config(), skinning="gpu")
     st = crowd.storage
-    local = st.rows.reshape(st.row_count, crowd.B, 12)
-    assert np.shares_memory(crowd.history, st.rows)
-    assert np.shares_memory(crowd.unique_poses, st.rows)
+    local = st.rows.reshape(st.row_count, crowd.bones, 12)
+    assert np.shares_memory(crowd.streams.history, st.rows)
+    assert np.shares_memory(crowd.uniques.poses, st.rows)
     for i, _ in enumerate(drive(crowd, [])):
-        sl = crowd.frame % crowd.M
-        np.testing.assert_array_equal(local[sl * crowd.S:(sl + 1) * crowd.S, :, :10],
-                                      crowd.history[sl])
+        sl = crowd.frame % crowd.streams.max_offset
+        np.testing.assert_array_equal(local[sl * crowd.streams.count:(sl + 1) * crowd.streams.count, :, :10],
+                                      crowd.streams.history[sl])
         np.testing.assert_array_equal(local[st.unique_base:st.slot_base, :, :10],
-                                      crowd.unique_poses)
+                                      crowd.uniques.poses)
         act = crowd.slots.active_slots()
         np.testing.assert_array_equal(local[st.slot_base + act, :, :10],
                                       crowd.slots.start_pose[act])
@@ -126,17 +126,17 @@ def test_history_uniques_and_start_poses_live_in_the_local_texture():
         if i == 2:      # the request at i == 2 started three slots at the pose shown then
             assert act.size == 3
     # bones past a skeleton's last bone keep the identity SQT
-    fan_rows = local[:crowd.storage.unique_base].reshape(crowd.M, crowd.S, crowd.B, 12)[:, 0]
+    fan_rows = local[:crowd.storage.unique_base].reshape(crowd.streams.max_offset, crowd.streams.count, crowd.bones, 12)[:, 0]
     np.testing.assert_array_equal(fan_rows[:, 24:], np.broadcast_to(LOCAL_IDENTITY.reshape(12),
-                                                                     (crowd.M, 2, 12)))
+                                                                     (crowd.streams.max_offset, 2, 12)))
 
 
 def test_uploads_are_local_rows_and_the_batch_covers_them():
-    crowd = Crowd(make_config(), gpu_skinning=True)
-    crowd.take_upload_regions()
-    first = crowd.gpu_skinning_batch()           # after a reset: every history/unique row
+    crowd = Crowd(make_config(), skinning="gpu")
+    crowd.view.take_upload_regions()
+    first = crowd.view.take_skinning_batch()           # after a reset: every history/unique row
     assert len(first) == crowd.storage.slot_base
-    assert len(crowd.gpu_skinning_batch()) == 0  # nothing changed, no slot active
+    assert len(crowd.view.take_skinning_batch()) == 0  # nothing changed, no slot active
     row = crowd.storage.row_bytes
     crowd.on_event("*", lambda *a: None)
     for i in range(30):
@@ -145,23 +145,23 @@ def test_uploads_are_local_rows_and_the_batch_covers_them():
             started = crowd.transition_to_streamed([0, 2, 4], "idle", 6, offset=3).started.size
         report = crowd.step()
         started += report.transitions_started
-        regs = crowd.take_upload_regions()
+        regs = crowd.view.take_upload_regions()
         # the new slice, the uniques, and a slot's StartP once when it starts
-        assert sum(r.nbytes for r in regs) == (crowd.S + crowd.U + started) * row
-        assert report.upload_bytes == (crowd.S + crowd.U + report.transitions_started) * row
-        b = crowd.gpu_skinning_batch()
-        assert len(b) == crowd.S + crowd.U + crowd.slots.active_slots().size
+        assert sum(r.nbytes for r in regs) == (crowd.streams.count + crowd.uniques.count + started) * row
+        assert report.upload_bytes == (crowd.streams.count + crowd.uniques.count + report.transitions_started) * row
+        b = crowd.view.take_skinning_batch()
+        assert len(b) == crowd.streams.count + crowd.uniques.count + crowd.slots.active_slots().size
         own = b.rows < crowd.storage.slot_base
         np.testing.assert_array_equal(b.sources[own], b.rows[own])
         assert (b.weights[own] == 1).all()
         assert ((b.weights[~own] >= 0) & (b.weights[~own] <= 1)).all()
     assert crowd.slots.served == 3
     crowd.reset()
-    assert len(crowd.gpu_skinning_batch()) == crowd.storage.slot_base
+    assert len(crowd.view.take_skinning_batch()) == crowd.storage.slot_base
 
 
 def test_batch_needs_gpu_mode():
     crowd = Crowd(make_config())
-    with pytest.raises(CrowdError, match="gpu_skinning=True"):
-        crowd.gpu_skinning_batch()
-    assert not (crowd.agent_kind == TRANSITION).any()
+    with pytest.raises(CrowdError, match="skinning='gpu'"):
+        crowd.view.take_skinning_batch()
+    assert not (crowd.agents.kind == TRANSITION).any()

@@ -52,7 +52,7 @@ def test_layout_rows_and_row_width():
     crowd, _ = build()
     st = crowd.storage
     S, U, NT = 4, 2, 5
-    assert (crowd.S, crowd.U, crowd.NT, crowd.B) == (S, U, NT, 30)
+    assert (crowd.streams.count, crowd.uniques.count, crowd.slots.count, crowd.bones) == (S, U, NT, 30)
     assert st.row_count == M * S + U + NT
     assert st.row_texels == 3 * 30
     assert st.row_bytes == 3 * 30 * 16
@@ -72,13 +72,13 @@ def test_row_texels_hold_bone_major_matrix_rows():
         stream = 0 if s == 0 else 3
         ref = skinning_matrices(cfg.clips[clip].sample(float(F))[None].astype(np.float64),
                                 sk)[0]
-        x, y = st.texel_of_row((F % M) * crowd.S + stream)
+        x, y = st.texel_of_row((F % M) * crowd.streams.count + stream)
         for b in range(sk.bone_count):
             for r in range(3):
                 np.testing.assert_allclose(img[y, x + 3 * b + r], ref[b, r], rtol=1e-5,
                                            atol=1e-5)
         # bones beyond a smaller skeleton stay identity rows
-        for b in range(sk.bone_count, crowd.B):
+        for b in range(sk.bone_count, crowd.bones):
             np.testing.assert_array_equal(img[y, x + 3 * b:x + 3 * b + 3],
                                           np.eye(4, dtype=np.float32)[:3])
 
@@ -89,7 +89,7 @@ def test_row_texels_hold_bone_major_matrix_rows():
 def test_upload_bytes_per_step_is_exact():
     crowd, _ = build(NT=3)
     rb = crowd.storage.row_bytes
-    S, U = crowd.S, crowd.U
+    S, U = crowd.streams.count, crowd.uniques.count
     assert crowd.step().upload_bytes == (S + U) * rb
     crowd.transition_to_streamed([0, 3], 0, 3)
     rep = crowd.step()
@@ -112,22 +112,22 @@ def test_upload_bytes_per_step_is_exact():
 
 def test_take_dirty_regions_returns_exactly_changed_rows():
     crowd, _ = build(NT=4)
-    st, S, U = crowd.storage, crowd.S, crowd.U
-    full = crowd.take_upload_regions()                # after reset: everything
+    st, S, U = crowd.storage, crowd.streams.count, crowd.uniques.count
+    full = crowd.view.take_upload_regions()                # after reset: everything
     assert region_rows(full) == list(range(st.row_count))
-    assert crowd.take_upload_regions() == []
+    assert crowd.view.take_upload_regions() == []
     crowd.step()
     F = crowd.frame
     want = list(range((F % M) * S, (F % M) * S + S)) + list(range(M * S, M * S + U))
-    assert sorted(region_rows(crowd.take_upload_regions())) == want
+    assert sorted(region_rows(crowd.view.take_upload_regions())) == want
     res = crowd.transition_to_streamed([2, 9], 1, 4)
-    between = crowd.take_upload_regions()             # the slots' start rows
+    between = crowd.view.take_upload_regions()             # the slots' start rows
     assert sorted(region_rows(between)) == sorted((st.slot_base + res.slots).tolist())
     crowd.step()
     F = crowd.frame
     want = sorted(list(range((F % M) * S, (F % M) * S + S)) + list(range(M * S, M * S + U))
                   + (st.slot_base + res.slots).tolist())
-    regions = crowd.take_upload_regions()
+    regions = crowd.view.take_upload_regions()
     rows = region_rows(regions)
     assert sorted(rows) == want and len(rows) == len(set(rows))
     for r in regions:
@@ -194,7 +194,7 @@ def test_wrapped_crowd_texture_holds_same_rows_as_unwrapped():
         xb, yb = wrapped.storage.texel_of_row(r)
         np.testing.assert_array_equal(a[ya, xa:xa + texels], b[yb, xb:xb + texels])
     assert not np.all(a == 0)
-    for reg in wrapped.take_upload_regions():
+    for reg in wrapped.view.take_upload_regions():
         assert reg.y + reg.height <= 16
         np.testing.assert_array_equal(reg.data, b[reg.y:reg.y + reg.height,
                                                   reg.x:reg.x + reg.width])
@@ -251,15 +251,15 @@ def test_rows_with_interleaved_skeletons_and_slots():
     def check(row, local, sk):
         np.testing.assert_allclose(row[:sk.bone_count], ref(local, sk), rtol=1e-5, atol=1e-5)
         np.testing.assert_array_equal(row[sk.bone_count:], np.broadcast_to(
-            np.eye(4, dtype=np.float32)[:3], (crowd.B - sk.bone_count, 3, 4)))
+            np.eye(4, dtype=np.float32)[:3], (crowd.bones - sk.bone_count, 3, 4)))
 
     F, st = crowd.frame, crowd.storage
     for s in range(4):
         for o in range(6):
             k = (F - o) % 6
-            check(st.rows[k * 4 + s], crowd.history[k, s], skels[s % 2])
+            check(st.rows[k * 4 + s], crowd.streams.history[k, s], skels[s % 2])
     for u in range(3):
-        check(st.unique_rows()[u], crowd.unique_poses[u], skels[u % 2])
+        check(st.unique_rows()[u], crowd.uniques.poses[u], skels[u % 2])
     for ag in range(5):
-        assert crowd.agent_kind[ag] == 2
+        assert crowd.agents.kind[ag] == 2
         check(crowd.agent_rows([ag])[0], crowd.agent_poses([ag])[0], skels[ag % 2])

@@ -41,9 +41,9 @@ def expected_root(cfg, stream, t):
 
 
 def snapshot(crowd):
-    return (crowd.frame, crowd.history.copy(), crowd.unique_poses.copy(),
-            crowd.storage.rows.copy(), crowd.agent_kind.copy(), crowd.agent_ref.copy(),
-            crowd.agent_offset.copy())
+    return (crowd.frame, crowd.streams.history.copy(), crowd.uniques.poses.copy(),
+            crowd.storage.rows.copy(), crowd.agents.kind.copy(), crowd.agents.ref.copy(),
+            crowd.agents.offset.copy())
 
 
 def assert_same(a, b):
@@ -95,7 +95,7 @@ def test_history_valid_for_all_offsets_right_after_reset():
                                        atol=2e-6)
     # every agent's pose is its stream at its delay, nothing is left at identity
     poses = crowd.agent_poses()
-    for a in range(crowd.N):
+    for a in range(crowd.agents.count):
         s, o = int(cfg.agent_stream[a]), int(cfg.agent_offset[a])
         np.testing.assert_allclose(poses[a], expected_root(cfg, s, 40 - o), atol=2e-6)
 
@@ -105,8 +105,8 @@ def test_agent_poses_follow_their_stream_and_offset_while_stepping():
     for _ in range(M + 2):
         crowd.step()
     poses = crowd.agent_poses()
-    assert (crowd.agent_kind == STREAM).all()
-    for a in range(crowd.N):
+    assert (crowd.agents.kind == STREAM).all()
+    for a in range(crowd.agents.count):
         s, o = int(cfg.agent_stream[a]), int(cfg.agent_offset[a])
         np.testing.assert_allclose(poses[a], expected_root(cfg, s, crowd.frame - o),
                                    atol=2e-6)
@@ -131,9 +131,9 @@ def test_reset_restores_agents_after_transitions():
     crowd.transition_to_unique([5], "solo", 0)
     crowd.step()
     crowd.reset()
-    np.testing.assert_array_equal(crowd.agent_kind, np.full(crowd.N, STREAM))
-    np.testing.assert_array_equal(crowd.agent_ref, cfg.agent_stream)
-    np.testing.assert_array_equal(crowd.agent_offset, cfg.agent_offset)
+    np.testing.assert_array_equal(crowd.agents.kind, np.full(crowd.agents.count, STREAM))
+    np.testing.assert_array_equal(crowd.agents.ref, cfg.agent_stream)
+    np.testing.assert_array_equal(crowd.agents.offset, cfg.agent_offset)
     assert not crowd.slots.active.any()
     assert len(crowd.slots.queue) == 0
 
@@ -176,9 +176,9 @@ def test_texture_rows_of_current_slice_match_reference_skinning(steps):
     crowd, cfg, sk = build()
     for _ in range(steps):
         crowd.step()
-    F, S = crowd.frame, crowd.S
+    F, S = crowd.frame, crowd.streams.count
     st = crowd.storage
-    plan = SkinningPlan(sk, crowd.B)
+    plan = SkinningPlan(sk, crowd.bones)
     for s in range(S):
         row = st.rows[(F % M) * S + s]
         local = expected_root(cfg, s, F)
@@ -192,7 +192,7 @@ def test_texture_rows_for_every_offset_match_history():
     crowd, cfg, sk = build()
     for _ in range(M + 4):
         crowd.step()
-    F, S = crowd.frame, crowd.S
+    F, S = crowd.frame, crowd.streams.count
     for o in range(M):
         for s in range(S):
             row = crowd.storage.rows[((F - o) % M) * S + s]
@@ -200,7 +200,7 @@ def test_texture_rows_for_every_offset_match_history():
             np.testing.assert_allclose(row, ref, rtol=1e-5, atol=1e-5)
     # agents read exactly their stream's delayed row
     rows = crowd.agent_rows()
-    for a in range(crowd.N):
+    for a in range(crowd.agents.count):
         s, o = int(cfg.agent_stream[a]), int(cfg.agent_offset[a])
         np.testing.assert_allclose(rows[a], reference_rows(expected_root(cfg, s, F - o), sk),
                                    rtol=1e-5, atol=1e-5)
@@ -211,20 +211,20 @@ def test_texture_rows_for_every_offset_match_history():
 
 def test_unique_pool_holds_current_pose_only():
     crowd, cfg, sk = build()
-    assert crowd.unique_poses.shape == (1, crowd.B, sqt.WIDTH)
-    assert crowd.storage.row_count == M * crowd.S + crowd.U + crowd.NT
+    assert crowd.uniques.poses.shape == (1, crowd.bones, sqt.WIDTH)
+    assert crowd.storage.row_count == M * crowd.streams.count + crowd.uniques.count + crowd.slots.count
     clip = cfg.clips["c3"]
     # whatever its phase, the unique advances one clip frame per crowd frame
-    p0 = crowd.unique_poses[0].copy()
+    p0 = crowd.uniques.poses[0].copy()
     cand = [t for t in range(clip.frame_count - 1)
             if np.allclose(clip.sample(float(t)), p0, atol=2e-6)]
     assert cand, "unique pose is not a sample of its clip"
     for k in range(1, 8):
         crowd.step()
-        assert any(np.allclose(crowd.unique_poses[0], clip.sample(float(t + k)), atol=2e-6)
+        assert any(np.allclose(crowd.uniques.poses[0], clip.sample(float(t + k)), atol=2e-6)
                    for t in cand)
         np.testing.assert_allclose(crowd.storage.unique_rows()[0],
-                                   reference_rows(crowd.unique_poses[0], sk),
+                                   reference_rows(crowd.uniques.poses[0], sk),
                                    rtol=1e-5, atol=1e-5)
 
 
@@ -236,21 +236,21 @@ def test_transition_to_unique_restarts_it():
     crowd.transition_to_unique([0], "solo", 3, restart=True)
     for k in range(1, 6):
         crowd.step()
-        np.testing.assert_allclose(crowd.unique_poses[0], clip.sample(float(k - 1)),
+        np.testing.assert_allclose(crowd.uniques.poses[0], clip.sample(float(k - 1)),
                                    atol=2e-6, err_msg=f"{k} frames after restart")
-    assert crowd.agent_kind[0] == UNIQUE
-    np.testing.assert_allclose(crowd.agent_poses([0])[0], crowd.unique_poses[0])
+    assert crowd.agents.kind[0] == UNIQUE
+    np.testing.assert_allclose(crowd.agent_poses([0])[0], crowd.uniques.poses[0])
 
 
 def test_transition_to_unique_without_restart_keeps_clock():
     crowd, cfg, _ = build()
     for _ in range(7):
         crowd.step()
-    before = crowd.unique_poses[0].copy()
+    before = crowd.uniques.poses[0].copy()
     crowd.transition_to_unique([0], "solo", 2, restart=False)
     crowd.step()
     crowd2, _, _ = build()
     for _ in range(8):
         crowd2.step()
-    np.testing.assert_array_equal(crowd.unique_poses[0], crowd2.unique_poses[0])
-    assert not np.array_equal(before, crowd.unique_poses[0])
+    np.testing.assert_array_equal(crowd.uniques.poses[0], crowd2.uniques.poses[0])
+    assert not np.array_equal(before, crowd.uniques.poses[0])

@@ -44,7 +44,7 @@ def test_transition_starts_at_exact_current_pose_and_row():
     res = crowd.transition_to_streamed(agents, 2, 5, offset=3)
     np.testing.assert_array_equal(np.sort(res.started), agents)
     assert res.queued.size == 0 and res.cut.size == 0
-    assert (crowd.agent_kind[agents] == TRANSITION).all()
+    assert (crowd.agents.kind[agents] == TRANSITION).all()
     np.testing.assert_array_equal(crowd.agent_poses(agents), poses0)
     np.testing.assert_array_equal(crowd.agent_rows(agents), rows0)
     slot_rows = crowd.storage.rows[crowd.storage.slot_base + res.slots]
@@ -65,16 +65,16 @@ def test_blend_follows_listing_2_and_ends_on_target(L, target_off):
         assert F == t0 + k
         target = head(cfg, 1, F - target_off)
         if k < L:
-            assert (crowd.agent_kind[agents] == TRANSITION).all()
+            assert (crowd.agents.kind[agents] == TRANSITION).all()
             s = np.float32((F - t0) / L)
             want = sqt.blend2(start, np.broadcast_to(target, start.shape), s)
             np.testing.assert_allclose(crowd.agent_poses(agents), want, atol=1e-5)
             assert rep.transitions_active == 3
         else:
             assert rep.transitions_finished == 3
-    assert (crowd.agent_kind[agents] == STREAM).all()
-    assert (crowd.agent_ref[agents] == 1).all()
-    assert (crowd.agent_offset[agents] == target_off).all()
+    assert (crowd.agents.kind[agents] == STREAM).all()
+    assert (crowd.agents.ref[agents] == 1).all()
+    assert (crowd.agents.offset[agents] == target_off).all()
     assert not crowd.slots.active.any()
     for a in agents:
         np.testing.assert_array_equal(crowd.agent_poses([a])[0], crowd.pose(1, target_off))
@@ -85,12 +85,12 @@ def test_blend_follows_listing_2_and_ends_on_target(L, target_off):
 def test_default_offset_is_agents_own_offset():
     crowd, _ = build()
     agents = np.array([3, 5])
-    offs = crowd.agent_offset[agents].copy()
+    offs = crowd.agents.offset[agents].copy()
     crowd.transition_to_streamed(agents, 0, 2)
     crowd.step()
     crowd.step()
-    np.testing.assert_array_equal(crowd.agent_offset[agents], offs)
-    assert (crowd.agent_ref[agents] == 0).all()
+    np.testing.assert_array_equal(crowd.agents.offset[agents], offs)
+    assert (crowd.agents.ref[agents] == 0).all()
 
 
 def test_transition_to_unique_blends_to_unique_pose():
@@ -103,12 +103,12 @@ def test_transition_to_unique_blends_to_unique_pose():
     for k in range(1, 5):
         crowd.step()
         target = cfg.clips["c4"].sample(float(k - 1))     # restarted: time 0 next frame
-        np.testing.assert_allclose(crowd.unique_poses[1], target, atol=2e-6)
+        np.testing.assert_allclose(crowd.uniques.poses[1], target, atol=2e-6)
         if k < 4:
             want = sqt.blend2(start, target[None], np.float32((crowd.frame - t0) / 4))
             np.testing.assert_allclose(crowd.agent_poses(a), want, atol=1e-5)
-    assert crowd.agent_kind[6] == UNIQUE and crowd.agent_ref[6] == 1
-    np.testing.assert_array_equal(crowd.agent_poses(a)[0], crowd.unique_poses[1])
+    assert crowd.agents.kind[6] == UNIQUE and crowd.agents.ref[6] == 1
+    np.testing.assert_array_equal(crowd.agent_poses(a)[0], crowd.uniques.poses[1])
 
 
 def test_transition_from_transition_reuses_slot():
@@ -129,8 +129,8 @@ def test_transition_from_transition_reuses_slot():
     crowd.step()
     crowd.step()
     assert crowd.frame == t0 + 3
-    assert crowd.agent_kind[2] == STREAM and crowd.agent_ref[2] == 2
-    assert crowd.agent_offset[2] == 4
+    assert crowd.agents.kind[2] == STREAM and crowd.agents.ref[2] == 2
+    assert crowd.agents.offset[2] == 4
 
 
 def test_queue_policy_fifo_as_slots_free():
@@ -142,21 +142,21 @@ def test_queue_policy_fifo_as_slots_free():
     assert r2.queued.tolist() == [13] and r2.started.size == 0 and r2.cut.size == 0
     assert r3.queued.tolist() == [12]
     assert crowd.slots.queued_agents().tolist() == [13, 12]
-    assert crowd.agent_kind[13] == STREAM and crowd.agent_kind[12] == STREAM
+    assert crowd.agents.kind[13] == STREAM and crowd.agents.kind[12] == STREAM
     crowd.step()
-    assert crowd.agent_kind[13] == STREAM          # slots still busy
+    assert crowd.agents.kind[13] == STREAM          # slots still busy
     crowd.step()                                   # 10, 11 finish
-    assert crowd.agent_kind[10] == STREAM and crowd.agent_kind[11] == STREAM
+    assert crowd.agents.kind[10] == STREAM and crowd.agents.kind[11] == STREAM
     pose13 = crowd.agent_poses([13]).copy()
     rep = crowd.step()                             # queue served before the frame
     assert rep.transitions_started == 2
-    assert crowd.agent_kind[13] == TRANSITION and crowd.agent_kind[12] == TRANSITION
-    assert crowd.agent_ref[13] < crowd.agent_ref[12]   # FIFO: 13 took the first free slot
-    np.testing.assert_array_equal(crowd.slots.start_pose[crowd.agent_ref[13]], pose13[0])
+    assert crowd.agents.kind[13] == TRANSITION and crowd.agents.kind[12] == TRANSITION
+    assert crowd.agents.ref[13] < crowd.agents.ref[12]   # FIFO: 13 took the first free slot
+    np.testing.assert_array_equal(crowd.slots.start_pose[crowd.agents.ref[13]], pose13[0])
     crowd.step()
     crowd.step()
-    assert crowd.agent_ref[13] == 1 and crowd.agent_offset[13] == 2
-    assert crowd.agent_ref[12] == 2 and crowd.agent_offset[12] == 5
+    assert crowd.agents.ref[13] == 1 and crowd.agents.offset[13] == 2
+    assert crowd.agents.ref[12] == 2 and crowd.agents.offset[12] == 5
 
 
 def test_queue_serves_one_slot_to_first_in_line():
@@ -166,11 +166,11 @@ def test_queue_serves_one_slot_to_first_in_line():
     crowd.transition_to_streamed([4], 2, 1)        # agent 4 plays stream 1
     crowd.step()                                   # 0 finishes
     crowd.step()                                   # 5 served, finishes (L=1)
-    assert crowd.agent_kind[5] == STREAM and crowd.agent_ref[5] == 2
+    assert crowd.agents.kind[5] == STREAM and crowd.agents.ref[5] == 2
     assert crowd.slots.queued_agents().tolist() == [4]
-    assert crowd.agent_kind[4] == STREAM and crowd.agent_ref[4] == 1
+    assert crowd.agents.kind[4] == STREAM and crowd.agents.ref[4] == 1
     crowd.step()                                   # 4 served and done
-    assert crowd.agent_ref[4] == 2 and crowd.slots.queued_agents().size == 0
+    assert crowd.agents.ref[4] == 2 and crowd.slots.queued_agents().size == 0
 
 
 def test_cut_policy_switches_immediately_without_slot():
@@ -179,8 +179,8 @@ def test_cut_policy_switches_immediately_without_slot():
     assert r1.started.tolist() == [0] and r1.cut.tolist() == [1, 2]
     assert r1.queued.size == 0
     for a in (1, 2):
-        assert crowd.agent_kind[a] == STREAM
-        assert crowd.agent_ref[a] == 2 and crowd.agent_offset[a] == 6
+        assert crowd.agents.kind[a] == STREAM
+        assert crowd.agents.ref[a] == 2 and crowd.agents.offset[a] == 6
         np.testing.assert_array_equal(crowd.agent_poses([a])[0], crowd.pose(2, 6))
     assert crowd.slots.active.sum() == 1
     # per request override
@@ -194,7 +194,7 @@ def test_zero_duration_cuts():
     assert r.cut.tolist() == [4, 8]
     assert r.started.size == 0 and r.queued.size == 0 and r.slots.size == 0
     assert not crowd.slots.active.any()
-    np.testing.assert_array_equal(crowd.agent_offset[[4, 8]], [2, 2])
+    np.testing.assert_array_equal(crowd.agents.offset[[4, 8]], [2, 2])
     np.testing.assert_array_equal(crowd.agent_poses([4, 8]),
                                   np.stack([crowd.pose(1, 2)] * 2))
 
@@ -205,7 +205,7 @@ def test_cut_agent_in_slot_frees_it():
     assert crowd.slots.active.sum() == 1
     crowd.transition_to_streamed([0], 2, 0, offset=1)
     assert not crowd.slots.active.any()
-    assert crowd.agent_kind[0] == STREAM and crowd.agent_ref[0] == 2
+    assert crowd.agents.kind[0] == STREAM and crowd.agents.ref[0] == 2
 
 
 # ------------------------------------------------------------ dependency graph
@@ -269,18 +269,18 @@ def test_agent_rows_index_layout():
     crowd.transition_to_unique([3], "u0", 4)
     crowd.step()
     crowd.step()
-    st, S, F = crowd.storage, crowd.S, crowd.frame
-    assert st.unique_base == M * S and st.slot_base == M * S + crowd.U
+    st, S, F = crowd.storage, crowd.streams.count, crowd.frame
+    assert st.unique_base == M * S and st.slot_base == M * S + crowd.uniques.count
     idx = crowd.agent_rows_index()
-    for a in range(crowd.N):
-        k, r = int(crowd.agent_kind[a]), int(crowd.agent_ref[a])
+    for a in range(crowd.agents.count):
+        k, r = int(crowd.agents.kind[a]), int(crowd.agents.ref[a])
         if k == STREAM:
-            want = ((F - int(crowd.agent_offset[a])) % M) * S + r
+            want = ((F - int(crowd.agents.offset[a])) % M) * S + r
         elif k == UNIQUE:
             want = M * S + r
         else:
-            want = M * S + crowd.U + r
+            want = M * S + crowd.uniques.count + r
         assert idx[a] == want, a
-    assert crowd.agent_kind[2] == UNIQUE and idx[2] == M * S + 1
-    assert crowd.agent_kind[0] == TRANSITION
+    assert crowd.agents.kind[2] == UNIQUE and idx[2] == M * S + 1
+    assert crowd.agents.kind[0] == TRANSITION
     np.testing.assert_array_equal(crowd.agent_rows([0, 2]), st.rows[idx[[0, 2]]])

@@ -1,0 +1,154 @@
+"""The read-only view of a crowd's current frame that renderers and writers use.
+
+``crowd.view`` (a :class:`FrameView`) is everything ``gpu/``, ``usd/`` and the demo
+read from a running :class:`~crowd_addon.core.crowd.Crowd`: sizes, the pose texture's
+layout and changes, the skinning mode, agents and what changed about them, poses on
+demand and the event tags the streams crossed. Arrays it returns are read-only views
+or fresh copies; nothing here changes the simulation except the two ``take_*`` calls,
+which hand over (and so clear) what changed since the last take: a crowd has one GPU
+reader.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["FrameView"]
+
+
+class FrameView:
+    """Read-only access to a crowd's current frame (see the module docstring)."""
+
+    def __init__(self, crowd):
+        self._crowd = crowd
+
+    # ------------------------------------------------------------------- sizes
+    @property
+    def frame(self) -> int:
+        """The last evaluated frame (int)."""
+        return self._crowd.frame
+
+    @property
+    def fps(self) -> float:
+        return self._crowd.fps
+
+    @property
+    def config(self):
+        """The :class:`~crowd_addon.core.config.CrowdConfig` the crowd was built from
+        (meshes, LOD distances, start frame); treat it as read-only."""
+        return self._crowd.config
+
+    @property
+    def layout(self):
+        """The pose texture's geometry (:class:`~.pose_storage.PoseLayout`): streams,
+        max offset, uniques, slots, bones, rows, texture size, region bases."""
+        return self._crowd.storage.layout
+
+    @property
+    def skinning(self):
+        """The skinning mode (:class:`~.skinning_modes.CpuSkinning` or
+        :class:`~.skinning_modes.GpuSkinning`): its ``on_gpu`` says whether the
+        uploads are local poses the GPU must skin (with :meth:`take_skinning_batch`)
+        or finished skinning rows."""
+        return self._crowd.skinning
+
+    @property
+    def skeletons(self) -> tuple:
+        """The crowd's skeletons, in ``config.skeletons`` order."""
+        return tuple(self._crowd.skeletons)
+
+    @property
+    def stream_names(self) -> tuple:
+        return tuple(self._crowd.streams.names)
+
+    @property
+    def unique_names(self) -> tuple:
+        return tuple(self._crowd.uniques.names)
+
+    @property
+    def stream_skeleton(self) -> np.ndarray:
+        """(S,) int64 skeleton index of each stream."""
+        return self._crowd.streams.skeleton.copy()
+
+    @property
+    def unique_skeleton(self) -> np.ndarray:
+        """(U,) int64 skeleton index of each unique animation."""
+        return self._crowd.uniques.skeleton.copy()
+
+    @property
+    def ring_slice(self) -> int:
+        """History slice the current frame was written to (``frame mod M``)."""
+        return self._crowd.streams.slice(self._crowd.frame)
+
+    # ------------------------------------------------------------------ agents
+    @property
+    def agent_count(self) -> int:
+        return self._crowd.agents.count
+
+    @property
+    def agents(self):
+        """The :class:`~.agents.AgentState`; its arrays (kind, ref, offset, position,
+        heading, color) are read-only views."""
+        return self._crowd.agents
+
+    @property
+    def agent_skeleton(self) -> np.ndarray:
+        """(N,) int64 skeleton index of each agent (that of the animation it was
+        configured with; transitions never change it)."""
+        return self._crowd.agent_skeleton.copy()
+
+    def agent_changes(self, cursor: int):
+        """Agents changed since ``cursor`` (:class:`~.agents.AgentChanges`; start with 0)."""
+        return self._crowd.agents.changes_since(cursor)
+
+    # -------------------------------------------------------------------- poses
+    def stream_poses(self, frame: int | None = None) -> np.ndarray:
+        """``(S, B, 10)`` float32 local poses of every stream head at ``frame`` (default
+        the current one; one of the last M frames), a copy."""
+        f = self._crowd.frame if frame is None else int(frame)
+        return self._crowd.streams.head_poses(f, self._crowd.frame)
+
+    def unique_poses(self) -> np.ndarray:
+        """``(U, B, 10)`` float32 current poses of the unique animations, a copy."""
+        return self._crowd.uniques.poses.copy()
+
+    def agent_poses(self, agents=None) -> np.ndarray:
+        """``(n, B, 10)`` float32 local poses the agents show now."""
+        return self._crowd.agent_poses(agents)
+
+    def agent_rows(self, agents=None) -> np.ndarray:
+        """``(n, B, 3, 4)`` float32 skinning rows the agents are drawn with now."""
+        return self._crowd.agent_rows(agents)
+
+    def agent_rows_index(self, agents=None) -> np.ndarray:
+        """``(n,)`` int64 logical pose texture row each agent reads now."""
+        return self._crowd.agent_rows_index(agents)
+
+    def transitions(self, agents) -> dict:
+        """The transition of each of ``agents`` (k,) that is blending now, as arrays
+        (k,): ``start_pose`` (k, B, 10) float32 StartP, ``t0`` int64 start frame,
+        ``length`` int64 L in frames, ``target_kind`` int8, ``target_ref`` int64,
+        ``target_offset`` int64. An agent not in a transition is an error."""
+        return self._crowd.transition_of(agents)
+
+    def stream_events(self, since_frame: int):
+        """Event tags the stream heads crossed at frames ``>= since_frame`` (at most the
+        last M frames are kept): ``(stream (k,) int64, name (k,) object, frame (k,)
+        int64)`` in crossing order."""
+        return self._crowd.streams.events_since(since_frame)
+
+    # -------------------------------------------------------------- GPU uploads
+    def texture_image(self) -> np.ndarray:
+        """The whole CPU-side texture ``(height, width, 4)`` float32 (pose rows, or local
+        poses when the GPU skins), for a renderer's first upload."""
+        return self._crowd.storage.texture_image()
+
+    def take_upload_regions(self) -> list:
+        """:class:`~.pose_storage.TextureRegion` rectangles of the CPU-side texture
+        written since the last take (which they clear)."""
+        return self._crowd.storage.take_dirty_regions()
+
+    def take_skinning_batch(self):
+        """The pose rows the GPU must write now (:class:`~.skinning_modes.SkinningBatch`)
+        with GPU skinning; rows pending since the last take. An error on the CPU mode."""
+        return self._crowd.skinning.take_batch(self._crowd)
