@@ -31,12 +31,13 @@ from crowd_addon.core.synthetic import paper_config  # noqa: E402
 STREAMS, M, SLOTS, BONES = 256, 60, 800, 82
 
 
-def build(agents: int, gpu_skinning: bool = False) -> Crowd:
-    return Crowd(paper_config(agents, STREAMS, M, SLOTS, BONES), gpu_skinning=gpu_skinning)
+def build(agents: int, skinning: str = "cpu") -> Crowd:
+    return Crowd(paper_config(agents, STREAMS, M, SLOTS, BONES), skinning=skinning)
 
 
-def run(agents: int, steps: int, rng, gpu_skinning=False) -> dict:
-    crowd = build(agents, gpu_skinning)
+def run(agents: int, steps: int, rng, skinning="cpu") -> dict:
+    crowd = build(agents, skinning)
+    on_gpu = crowd.view.skinning.on_gpu
     claps = []
     crowd.on_event("clap", lambda name, frame, ids: claps.append(ids.size))
     per_frame = max(1, SLOTS // 30 + 1)
@@ -47,9 +48,9 @@ def run(agents: int, steps: int, rng, gpu_skinning=False) -> dict:
         if crowd.frame % 40 == 0:
             for s in range(4, STREAMS, 5):
                 crowd.set_trigger(s, "goal" if crowd.frame % 80 else "calm")
-        crowd.take_upload_regions()
-        if gpu_skinning:
-            crowd.gpu_skinning_batch()
+        crowd.view.take_upload_regions()
+        if on_gpu:
+            crowd.view.take_skinning_batch()
         return crowd.step()
 
     for _ in range(45):          # reach the steady state: slots busy, queue in use
@@ -64,7 +65,7 @@ def run(agents: int, steps: int, rng, gpu_skinning=False) -> dict:
         # what a step must write: the new slice and the uniques, then with CPU skinning
         # every active slot's row, with GPU skinning the StartP of each slot it started
         "bytes_minimum": int(statistics.median(
-            (STREAMS + crowd.U + (r.transitions_started if gpu_skinning
+            (STREAMS + crowd.uniques.count + (r.transitions_started if on_gpu
                                   else r.transitions_active)) * crowd.storage.row_bytes
             for r in reports)),
         "active_transitions": int(statistics.median(r.transitions_active for r in reports)),
@@ -82,9 +83,9 @@ def naive_streams(crowd: Crowd, repeats: int) -> tuple:
     cfg = crowd.config
     sk = cfg.skeletons["fan"]
     plan = SkinningPlan(sk)
-    singles = [TreeEvaluator([(d.root, sk)], crowd.bank, crowd.B) for d in cfg.streams]
-    batched = TreeEvaluator([(d.root, sk) for d in cfg.streams], crowd.bank, crowd.B)
-    rows = np.zeros((STREAMS, crowd.B, 3, 4), np.float32)
+    singles = [TreeEvaluator([(d.root, sk)], crowd.bank, crowd.bones) for d in cfg.streams]
+    batched = TreeEvaluator([(d.root, sk) for d in cfg.streams], crowd.bank, crowd.bones)
+    rows = np.zeros((STREAMS, crowd.bones, 3, 4), np.float32)
 
     def batched_frame(f):
         batched.prepare(np.full(STREAMS, float(f)))
@@ -117,11 +118,11 @@ def main(argv=None):
     print(f"core_frame: {STREAMS} streams, M={M}, {SLOTS} transition slots, {BONES} bones, "
           f"numpy {np.__version__}, {steps} steps per size", flush=True)
     results = {}
-    for mode, gpu in (("CPU skinning (export path)", False),
-                      ("GPU skinning (viewport path, paper s.4.5)", True)):
+    for mode, gpu in (("CPU skinning", False),
+                      ("GPU skinning (viewport and export path, paper s.4.5)", True)):
         print(f"  {mode}:")
         for agents in (1_000, 8_000, 65_000):
-            r = run(agents, steps, rng, gpu_skinning=gpu)
+            r = run(agents, steps, rng, skinning="gpu" if gpu else "cpu")
             results[gpu, agents] = r
             print(f"    {agents:>6} agents: {r['ms_median']:6.2f} ms/step median "
                   f"(p90 {r['ms_p90']:.2f}), {r['bytes_per_frame']:,} B uploaded/frame, "

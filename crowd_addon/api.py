@@ -19,7 +19,9 @@ The same :class:`CrowdHandle` works in two places:
 
 Callbacks receive ``(event name, frame, agent ids)``: one call per (event, frame) with
 all agents that crossed the tag on that frame (``int64`` array, ascending). A callback
-that raises is logged and kept in :attr:`CrowdHandle.errors`; the crowd goes on.
+that raises is logged and kept in :attr:`CrowdHandle.errors` (``CallbackError`` records);
+the crowd goes on. The handle's callbacks live in one core ``EventDispatcher``, the same
+class every crowd delivers its tags through.
 Frames re-simulated only to rebuild history after a backwards jump
 (:meth:`CrowdHandle.advance_to`) are not reported again.
 """
@@ -31,6 +33,7 @@ import logging
 import numpy as np
 
 from .core.errors import CrowdError
+from .core.events import EventDispatcher
 
 __all__ = ["CrowdHandle", "wrap", "scene_crowd", "on_event", "off", "transition_to_streamed",
            "transition_to_unique", "set_trigger", "set_parameter", "detach_all"]
@@ -48,11 +51,9 @@ class CrowdHandle:
     def __init__(self, label="crowd"):
         self.label = label
         self.crowd = None
-        self._callbacks = {}
-        self._next = 0
+        self._callbacks = EventDispatcher(label)
         self._params = {}
         self._mute_before = None
-        self.errors = []
 
     # ------------------------------------------------------------------- crowds
     def attach(self, crowd):
@@ -87,27 +88,20 @@ class CrowdHandle:
         every tag). Returns a handle for :meth:`off`."""
         if not callable(fn):
             raise CrowdError(f"{self.label}: callback for event {name!r} is not callable")
-        self._next += 1
-        self._callbacks[self._next] = (str(name), fn)
-        return self._next
+        return self._callbacks.on(name, fn)
 
     def off(self, handle: int) -> None:
         """Remove a callback registered with :meth:`on_event`."""
-        self._callbacks.pop(handle, None)
+        self._callbacks.off(handle)
+
+    @property
+    def errors(self) -> list:
+        """``CallbackError`` records of callbacks that raised."""
+        return self._callbacks.errors
 
     def _dispatch(self, name, frame, agents):
-        if self._mute_before is not None and frame < self._mute_before:
-            return
-        for want, fn in list(self._callbacks.values()):
-            if want not in (name, "*"):
-                continue
-            try:
-                fn(name, frame, agents)
-            except Exception as exc:  # noqa: BLE001 - reported, never fatal
-                self.errors.append((name, frame, fn, exc))
-                log.error("%s: callback %r for event %r at frame %d raised %s: %s",
-                          self.label, getattr(fn, "__name__", fn), name, frame,
-                          type(exc).__name__, exc)
+        if self._mute_before is None or frame >= self._mute_before:
+            self._callbacks.dispatch(frame, name, agents)
 
     # ---------------------------------------------------------------- stepping
     def advance_to(self, frame: int):

@@ -33,7 +33,10 @@ class CallbackError:
 
 
 class EventDispatcher:
-    def __init__(self):
+    """Callbacks by event name; ``label`` names the owner in logged errors."""
+
+    def __init__(self, label: str = "crowd"):
+        self.label = label
         self._handlers = {}
         self._next = 0
         self.errors = []
@@ -64,8 +67,9 @@ class EventDispatcher:
                 fn(name, frame, agents)
             except Exception as exc:  # noqa: BLE001 - reported, never fatal
                 self.errors.append(CallbackError(name, frame, fn, exc))
-                log.error("event callback %r for %r at frame %d raised %s: %s",
-                          getattr(fn, "__name__", fn), name, frame, type(exc).__name__, exc)
+                log.error("%s: event callback %r for %r at frame %d raised %s: %s",
+                          self.label, getattr(fn, "__name__", fn), name, frame,
+                          type(exc).__name__, exc)
 
 
 def deliver(frame, roots, names, streams, uniques, index, dispatcher, tag_names) -> int:

@@ -68,7 +68,7 @@ def test_a_raising_callback_is_reported_and_the_crowd_goes_on():
     h = sim.on_event("step", lambda n, f, ids: got.append(f))
     sim.advance_to(sim.frame + PERIOD)
     assert len(got) >= 1 and len(sim.errors) == len(got)
-    assert isinstance(sim.errors[0][3], ValueError)
+    assert isinstance(sim.errors[0].error, ValueError)
     sim.off(h)
     before = len(got)
     sim.advance_to(sim.frame + PERIOD)
