@@ -246,11 +246,7 @@ class AgentState:
         """Move, turn or recolour agents ``agents`` (k,): ``position`` (k, 3) or (3,),
         ``heading`` (k,) or scalar radians, ``color`` (k, 3) or (3,); finite values
         only. Logged as changed (and moved, for a position or heading)."""
-        agents = np.asarray(agents, np.int64).reshape(-1)
-        bad = np.flatnonzero((agents < 0) | (agents >= self.count))
-        if bad.size:
-            raise CrowdError(f"place agents: agent id {int(agents[bad[0]])} out of range "
-                             f"0..{self.count - 1}")
+        agents = self.ids(agents)
         values = {}
         for name, value, shape in (("position", position, (agents.size, 3)),
                                    ("heading", heading, (agents.size,)),
@@ -268,6 +264,17 @@ class AgentState:
         for name, v in values.items():
             getattr(self, "_" + name)[agents] = v
         self._record(agents, "position" in values or "heading" in values)
+
+    def ids(self, agents) -> np.ndarray:
+        """Agent ids as a flat int64 array (any shape is flattened), checked."""
+        a = np.asarray(agents).reshape(-1)
+        if a.size and not np.issubdtype(a.dtype, np.integer):
+            raise CrowdError(f"agent ids must be integers, got {a.dtype}")
+        a = a.astype(np.int64)
+        bad = np.flatnonzero((a < 0) | (a >= self.count))
+        if bad.size:
+            raise CrowdError(f"agent id {int(a[bad[0]])} out of range 0..{self.count - 1}")
+        return a
 
     def changes_since(self, cursor: int) -> AgentChanges:
         """The agents changed after ``cursor`` (0 for a new reader)."""

@@ -221,20 +221,15 @@ class Crowd:
         self.skinning.roots_stored(self.frame)
 
     def _deliver_events(self, dispatch):
+        """Deliver this frame's tags (during the history warm-up: only log them)."""
         roots, names = self.evaluator.ctx.take_events()
-        if not dispatch:          # history warm-up: log the crossings, call nobody
-            is_stream = roots < self.streams.count
-            self.streams.log_events(self.frame, roots[is_stream], names[is_stream])
-            return
         self._events_fired += deliver(self.frame, roots, names, self.streams, self.uniques,
-                                      self.agents.index, self.events, self.bank.tag_names)
+                                      self.agents.index, self.events if dispatch else None,
+                                      self.bank.tag_names)
 
     # ---------------------------------------------------------------- transitions
     def _partition_transitions(self):
-        act = self.slots.active_slots()
-        later = (self.slots.target_kind[act] != STREAM) | (self.slots.target_offset[act] == 0)
-        self._tr = {"ready": act[~later], "waiting": act[later]}
-        self._s = {}
+        self._tr, self._s = self.slots.partition(), {}
 
     def _blend(self, which):
         self._s[which] = self.skinning.blend(self._tr[which], self.frame)
@@ -254,17 +249,11 @@ class Crowd:
                                when_full=None) -> TransitionResult:
         """Blend agents to ``stream`` at ``offset`` (default: each agent's own offset)
         over ``duration`` frames (0 switches at once)."""
-        agents = self._check_agents(agents)
+        agents = self.agents.ids(agents)
         length, policy = self.slots.check_request(duration, when_full)
         s = self.streams.index(stream)
-        if offset is None:
-            off = self.agents.offset[agents].copy()
-        else:
-            off = np.asarray(offset).reshape(-1)
-            if off.size not in (1, agents.size):
-                raise CrowdError(f"transition: {off.size} offsets for {agents.size} agents")
-            self.streams.check_offsets(off, "transition")
-            off = np.broadcast_to(off, agents.shape).astype(np.int64)
+        off = self.agents.offset[agents].copy() if offset is None else \
+            self.streams.offsets_for(offset, agents.size)
         self._check_skeleton(agents, self.streams.skeleton[s], self.streams.names[s])
         return self.slots.request(agents, STREAM, s, off, length, policy)
 
@@ -272,7 +261,7 @@ class Crowd:
                              when_full=None) -> TransitionResult:
         """Blend agents to unique animation ``unique`` over ``duration`` frames; with
         ``restart`` its clock restarts so it plays from its beginning next frame."""
-        agents = self._check_agents(agents)
+        agents = self.agents.ids(agents)
         length, policy = self.slots.check_request(duration, when_full)
         u = self.uniques.index(unique)
         self._check_skeleton(agents, self.uniques.skeleton[u], self.uniques.names[u])
@@ -289,32 +278,16 @@ class Crowd:
 
     def transition_of(self, agents) -> dict:
         """The slot state of ``agents`` (k,) blending now (see FrameView.transitions)."""
-        agents = self._check_agents(agents)
-        if (self.agents.kind[agents] != TRANSITION).any():
-            a = int(agents[self.agents.kind[agents] != TRANSITION][0])
-            raise CrowdError(f"agent {a} is not in a transition")
-        k, sl = self.agents.ref[agents], self.slots
-        return {"start_pose": sl.start_pose[k].copy(), "t0": sl.t0[k].copy(),
-                "length": sl.length[k].copy(), "target_kind": sl.target_kind[k].copy(),
-                "target_ref": sl.target_ref[k].copy(),
-                "target_offset": sl.target_offset[k].copy()}
+        agents = self.agents.ids(agents)
+        other = agents[self.agents.kind[agents] != TRANSITION]
+        if other.size:
+            raise CrowdError(f"agent {int(other[0])} is not in a transition")
+        return self.slots.describe(self.agents.ref[agents])
 
     # ------------------------------------------------------------------ agents
-    def _check_agents(self, agents) -> np.ndarray:
-        """Agent ids as a flat int64 array; any shape is accepted and flattened."""
-        a = np.asarray(agents).reshape(-1)
-        if a.size and not np.issubdtype(a.dtype, np.integer):
-            raise CrowdError(f"agent ids must be integers, got {a.dtype}")
-        a = a.astype(np.int64)
-        bad = np.flatnonzero((a < 0) | (a >= self.agents.count))
-        if bad.size:
-            raise CrowdError(f"agent id {int(a[bad[0]])} out of range "
-                             f"0..{self.agents.count - 1}")
-        return a
-
     def place_agents(self, agents, position=None, heading=None, color=None):
         """Move, turn or recolour agents (see :meth:`AgentState.place`)."""
-        self.agents.place(self._check_agents(agents), position, heading, color)
+        self.agents.place(self.agents.ids(agents), position, heading, color)
 
     def _current_poses(self, agents):
         """Local poses ``(n, B, 10)`` the agents show at ``self.frame``."""
@@ -332,12 +305,12 @@ class Crowd:
 
     def agent_poses(self, agents=None) -> np.ndarray:
         """Local poses ``(n, B, 10)`` float32 of the agents now."""
-        agents = np.arange(self.agents.count) if agents is None else self._check_agents(agents)
+        agents = np.arange(self.agents.count) if agents is None else self.agents.ids(agents)
         return self._current_poses(agents)
 
     def agent_rows_index(self, agents=None) -> np.ndarray:
         """Logical pose texture row each agent reads at ``self.frame`` (the shader's rule)."""
-        agents = np.arange(self.agents.count) if agents is None else self._check_agents(agents)
+        agents = np.arange(self.agents.count) if agents is None else self.agents.ids(agents)
         kind, ref = self.agents.kind[agents], self.agents.ref[agents]
         return np.where(kind == STREAM,
                         self.streams.row(self.frame, ref, self.agents.offset[agents]),
@@ -370,23 +343,15 @@ class Crowd:
 
     def set_parameter(self, target, name: str, value: float):
         """Set a controller parameter on a stream (name or index) or unique (name)."""
-        v = float(value)
-        if not np.isfinite(v):
-            raise CrowdError(f"parameter {name!r}: value must be finite, got {value!r}")
-        self.evaluator.ctx.params[self._root(target)][str(name)] = v
+        self.evaluator.set_parameter(self._root(target), name, value)
 
     def set_trigger(self, target, name: str):
         """Set a trigger on a stream or unique; the next frame's state machines consume it."""
-        self.evaluator.ctx.triggers[self._root(target)].add(str(name))
+        self.evaluator.set_trigger(self._root(target), name)
 
     def state_of(self, target) -> list:
         """Current state names of the state machines in a stream's or unique's tree."""
-        r = self._root(target)
-        out = []
-        for b in self.evaluator.batches:
-            if hasattr(b, "state"):
-                out += [b.state(i) for i in np.flatnonzero(b.roots == r)]
-        return out
+        return self.evaluator.states(self._root(target))
 
     def on_event(self, name, fn) -> int:
         """Register ``fn(name, frame, agent_ids)`` for event tag ``name`` (``"*"``: all)."""

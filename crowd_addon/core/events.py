@@ -78,11 +78,13 @@ def deliver(frame, roots, names, streams, uniques, index, dispatcher, tag_names)
     ``roots`` (k,) int64 animation roots (streams ``0 .. S-1``, then uniques) whose
     clips crossed tags ``names`` (k,) (indices into ``tag_names``) at ``frame``;
     ``streams``/``uniques`` the pools (stream crossings are logged for M frames),
-    ``index`` the agents' :class:`~.agents.AgentIndex`. Returns the callbacks' count
-    of (tag, frame) deliveries.
+    ``index`` the agents' :class:`~.agents.AgentIndex`; ``dispatcher`` None only logs
+    (the history warm-up). Returns the count of (tag, frame) deliveries.
     """
     is_stream = roots < streams.count
     streams.log_events(frame, roots[is_stream], names[is_stream])
+    if dispatcher is None:
+        return 0
     stream_keys, stream_names = streams.crossings_reaching(frame)
     keys = np.concatenate([stream_keys, uniques.key(roots[~is_stream] - streams.count)])
     key_names = np.concatenate([stream_names, names[~is_stream]])

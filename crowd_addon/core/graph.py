@@ -18,6 +18,7 @@ import numpy as np
 
 from . import pose as sqt
 from .controllers import Batch
+from .errors import CrowdError
 
 __all__ = ["TreeEvaluator", "FrameContext", "DependencyGraph"]
 
@@ -169,6 +170,25 @@ class TreeEvaluator:
     def root_poses(self) -> np.ndarray:
         """(R, B, 10) float32 poses of the roots (a copy)."""
         return self.ctx.poses[self.root_index]
+
+    def set_parameter(self, root: int, name: str, value: float):
+        """Set controller parameter ``name`` of tree ``root`` (finite values only)."""
+        v = float(value)
+        if not np.isfinite(v):
+            raise CrowdError(f"parameter {name!r}: value must be finite, got {value!r}")
+        self.ctx.params[root][str(name)] = v
+
+    def set_trigger(self, root: int, name: str):
+        """Set trigger ``name`` on tree ``root``; the next prepare consumes it."""
+        self.ctx.triggers[root].add(str(name))
+
+    def states(self, root: int) -> list:
+        """Current state names of the state machines in tree ``root``."""
+        out = []
+        for b in self.batches:
+            if hasattr(b, "state"):
+                out += [b.state(i) for i in np.flatnonzero(b.roots == root)]
+        return out
 
 
 class DependencyGraph:

@@ -91,6 +91,15 @@ class StreamPool:
     def check_offsets(self, offsets, what="agent"):
         check_offsets(offsets, self.max_offset, what)
 
+    def offsets_for(self, offset, count: int) -> np.ndarray:
+        """``offset`` (a scalar or ``count`` values) as ``(count,)`` int64 offsets of a
+        transition request, checked against 0..M-1."""
+        off = np.asarray(offset).reshape(-1)
+        if off.size not in (1, count):
+            raise CrowdError(f"transition: {off.size} offsets for {count} agents")
+        check_offsets(off, self.max_offset, "transition")
+        return np.broadcast_to(off, (count,)).astype(np.int64)
+
     # ------------------------------------------------------------------ events
     def clear_events(self):
         self._log_stream = np.zeros(0, np.int64)

@@ -187,6 +187,14 @@ class TransitionSlots:
         return int(done.size)
 
     # -------------------------------------------------------------------- blend
+    def partition(self) -> dict:
+        """Active slots by when they can blend (paper s.4.4): ``"ready"`` ones read a
+        target already in history (a stream at offset > 0); ``"waiting"`` ones need
+        this frame's evaluation (offset 0 or a unique)."""
+        act = self.active_slots()
+        later = (self.target_kind[act] != STREAM) | (self.target_offset[act] == 0)
+        return {"ready": act[~later], "waiting": act[later]}
+
     def evaluate(self, slots, frame, streams, uniques):
         """Blend ``slots`` for ``frame`` (targets from the :class:`~.pools.StreamPool`
         history and the :class:`~.pools.UniquePool`); returns their ``S`` values."""
@@ -223,6 +231,15 @@ class TransitionSlots:
         out[kind == STREAM] = streams.skeleton[ref[kind == STREAM]]
         out[kind == UNIQUE] = uniques.skeleton[ref[kind == UNIQUE]]
         return out
+
+    def describe(self, slots) -> dict:
+        """Copies of the state of ``slots`` (k,): ``start_pose`` (k, B, 10), ``t0``,
+        ``length``, ``target_kind``, ``target_ref``, ``target_offset`` (k,)."""
+        return {"start_pose": self.start_pose[slots].copy(), "t0": self.t0[slots].copy(),
+                "length": self.length[slots].copy(),
+                "target_kind": self.target_kind[slots].copy(),
+                "target_ref": self.target_ref[slots].copy(),
+                "target_offset": self.target_offset[slots].copy()}
 
     def release(self, slots):
         self.active[slots] = False
