@@ -1,4 +1,4 @@
-/* Per-agent instance data (DESIGN.md s.3): a row of two RGBA32F texels per agent
+/* Per-agent instance data (docs/architecture.md: a row of two RGBA32F texels per agent
  * in `agent_tex`, in column blocks of the texture's height (block_layout.glsl,
  * crowd_addon/gpu/instances.py):
  *   texel 0 = (position x, y, z in metres, heading in radians about +Z)

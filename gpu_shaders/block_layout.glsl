@@ -1,4 +1,4 @@
-/* Textures of fixed-size rows laid out in column blocks (DESIGN.md s.3), and
+/* Textures of fixed-size rows laid out in column blocks (docs/architecture.md, Conventions), and
  * textures used as flat arrays. No uniforms: the callers pass the geometry.
  *
  * A block-laid texture holds logical rows of `row_texels` texels; row r starts at

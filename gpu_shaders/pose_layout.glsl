@@ -1,4 +1,4 @@
-/* Pose texture layout (DESIGN.md s.3, paper Fig. 2): the only GLSL that knows it.
+/* Pose texture layout (docs/architecture.md; paper Fig. 2): the only GLSL that knows it.
  * Needs block_layout.glsl before it.
  *
  * Mirrors crowd_addon/core/pose_storage.py (PoseStorage.texel_of_row). Logical rows: stream rows `slice * S + stream` with

@@ -1,4 +1,4 @@
-/* Which logical pose row an agent reads this frame (DESIGN.md s.3, paper Fig. 2).
+/* Which logical pose row an agent reads this frame (docs/architecture.md; paper Fig. 2).
  * Needs pose_layout.glsl before it (u_pose_layout). Mirrors Crowd.agent_rows_index.
  *
  * Push constant: ivec4 u_pose_regions = (unique_base, slot_base, F mod M, unused)

@@ -1,4 +1,4 @@
-/* Local SQT poses on the GPU (DESIGN.md s.3), matching crowd_addon/core/pose.py:
+/* Local SQT poses on the GPU (docs/architecture.md, matching crowd_addon/core/pose.py:
  * scale and translation lerp, quaternion (w, x, y, z) nlerp on the shortest arc,
  * then normalised; an SQT's matrix is T @ R @ S.
  */

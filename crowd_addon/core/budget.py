@@ -32,7 +32,7 @@ i.e. 10 bytes per bone, MotionLength 300, MemBudget 520 MB, M = 60):
   substitutes the printed 216. ``PAPER_NUM_CLIPS_OLD`` keeps the printed value only so
   the NEW-from-OLD step can be checked against the paper.
 
-The planner (:func:`plan`) works in the GPU layout of DESIGN.md section 3: a pose row is
+The planner (:func:`plan`) works in the GPU layout of docs/architecture.md: a pose row is
 ``bones x 3`` RGBA32F texels (48 bytes per bone); the pose history holds ``M x S`` rows
 (S streams, M offsets), followed by one row per unique-pool agent and per transition slot.
 Its heuristic is documented on :func:`plan` and in ``docs/performance_budget.md``.
@@ -70,7 +70,7 @@ __all__ = [
     "plan",
 ]
 
-#: Bytes per bone in the GPU pose texture: three RGBA32F texels (DESIGN.md s.3).
+#: Bytes per bone in the GPU pose texture: three RGBA32F texels (docs/architecture.md.
 GPU_BYTES_PER_BONE = 3 * 4 * 4
 
 # The paper's stated inputs (section 5) and the two clip counts it prints.

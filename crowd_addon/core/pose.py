@@ -5,7 +5,7 @@ rotation quaternion ``(w, x, y, z)`` ``[3:7]``, translation ``[7:10]``, each
 relative to the parent bone (Blender's ``pose_bone`` matrix_basis composed with
 the rest pose, see ``skeleton``). Batches are ``(n, B, 10)``.
 
-Blending is done on local SQT (DESIGN.md s.3): scale and translation lerp,
+Blending is done on local SQT (docs/architecture.md, Conventions): scale and translation lerp,
 rotation nlerp on the shortest arc.
 """
 

@@ -1,6 +1,6 @@
 """The pose texture (paper Fig. 2) as a CPU mirror, and the blocks to upload per frame.
 
-Layout (DESIGN.md s.3), in *logical rows*: stream rows ``slice * S + stream`` for
+Layout (docs/architecture.md, in *logical rows*: stream rows ``slice * S + stream`` for
 ``slice = F mod M``, then ``U`` unique rows, then ``NT`` transition-slot rows. A row
 is one pose: ``B_max`` bones x 3 texels (RGBA32F), the top three rows of each
 bone's skinning matrix, bone-major (texel ``3 * bone + r``).

@@ -1,4 +1,4 @@
-"""Bad input (DESIGN.md s.4): a CrowdError naming the culprit, and nothing changed."""
+"""Bad input (docs/architecture.md: a CrowdError naming the culprit, and nothing changed."""
 
 import math
 

@@ -1,4 +1,4 @@
-"""Event tags (paper s.3.3, DESIGN.md s.4): delayed per offset, once per crossing,
+"""Event tags (paper s.3.3; docs/architecture.md: delayed per offset, once per crossing,
 one callback per (event, frame) with all agent ids.
 
 Expected firings are computed independently from the clip period and tag time:

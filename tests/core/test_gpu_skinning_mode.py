@@ -113,9 +113,10 @@ def test_history_uniques_and_start_poses_live_in_the_local_texture():
     local = st.rows.reshape(st.row_count, crowd.bones, 12)
     assert np.shares_memory(crowd.streams.history, st.rows)
     assert np.shares_memory(crowd.uniques.poses, st.rows)
+    m, s = crowd.streams.max_offset, crowd.streams.count
     for i, _ in enumerate(drive(crowd, [])):
-        sl = crowd.frame % crowd.streams.max_offset
-        np.testing.assert_array_equal(local[sl * crowd.streams.count:(sl + 1) * crowd.streams.count, :, :10],
+        sl = crowd.frame % m
+        np.testing.assert_array_equal(local[sl * s:(sl + 1) * s, :, :10],
                                       crowd.streams.history[sl])
         np.testing.assert_array_equal(local[st.unique_base:st.slot_base, :, :10],
                                       crowd.uniques.poses)
@@ -126,9 +127,9 @@ def test_history_uniques_and_start_poses_live_in_the_local_texture():
         if i == 2:      # the request at i == 2 started three slots at the pose shown then
             assert act.size == 3
     # bones past a skeleton's last bone keep the identity SQT
-    fan_rows = local[:crowd.storage.unique_base].reshape(crowd.streams.max_offset, crowd.streams.count, crowd.bones, 12)[:, 0]
+    fan_rows = local[:crowd.storage.unique_base].reshape(m, s, crowd.bones, 12)[:, 0]
     np.testing.assert_array_equal(fan_rows[:, 24:], np.broadcast_to(LOCAL_IDENTITY.reshape(12),
-                                                                     (crowd.streams.max_offset, 2, 12)))
+                                                                     (m, 2, 12)))
 
 
 def test_uploads_are_local_rows_and_the_batch_covers_them():
@@ -138,6 +139,7 @@ def test_uploads_are_local_rows_and_the_batch_covers_them():
     assert len(first) == crowd.storage.slot_base
     assert len(crowd.view.take_skinning_batch()) == 0  # nothing changed, no slot active
     row = crowd.storage.row_bytes
+    heads = crowd.streams.count + crowd.uniques.count     # rows every step writes
     crowd.on_event("*", lambda *a: None)
     for i in range(30):
         started = 0
@@ -147,10 +149,10 @@ def test_uploads_are_local_rows_and_the_batch_covers_them():
         started += report.transitions_started
         regs = crowd.view.take_upload_regions()
         # the new slice, the uniques, and a slot's StartP once when it starts
-        assert sum(r.nbytes for r in regs) == (crowd.streams.count + crowd.uniques.count + started) * row
-        assert report.upload_bytes == (crowd.streams.count + crowd.uniques.count + report.transitions_started) * row
+        assert sum(r.nbytes for r in regs) == (heads + started) * row
+        assert report.upload_bytes == (heads + report.transitions_started) * row
         b = crowd.view.take_skinning_batch()
-        assert len(b) == crowd.streams.count + crowd.uniques.count + crowd.slots.active_slots().size
+        assert len(b) == heads + crowd.slots.active_slots().size
         own = b.rows < crowd.storage.slot_base
         np.testing.assert_array_equal(b.sources[own], b.rows[own])
         assert (b.weights[own] == 1).all()

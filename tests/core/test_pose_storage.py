@@ -1,4 +1,4 @@
-"""Pose texture layout, per-frame dirty rows and column-block wrapping (DESIGN.md s.3)."""
+"""Pose texture layout, per-frame dirty rows and column-block wrapping (docs/architecture.md."""
 
 import numpy as np
 import pytest
@@ -52,7 +52,8 @@ def test_layout_rows_and_row_width():
     crowd, _ = build()
     st = crowd.storage
     S, U, NT = 4, 2, 5
-    assert (crowd.streams.count, crowd.uniques.count, crowd.slots.count, crowd.bones) == (S, U, NT, 30)
+    assert (crowd.streams.count, crowd.uniques.count, crowd.slots.count,
+            crowd.bones) == (S, U, NT, 30)
     assert st.row_count == M * S + U + NT
     assert st.row_texels == 3 * 30
     assert st.row_bytes == 3 * 30 * 16

@@ -1,4 +1,4 @@
-"""StreamPool pose history and UniquePool (paper s.4.1-4.2, DESIGN.md s.3-4).
+"""StreamPool pose history and UniquePool (paper s.4.1-4.2; docs/architecture.md, Behaviour).
 
 Every expected value is computed independently of the crowd runtime: clip
 sampling (``Clip.sample``), ``pose.blend2`` and the float64 reference skinning.
@@ -212,7 +212,8 @@ def test_texture_rows_for_every_offset_match_history():
 def test_unique_pool_holds_current_pose_only():
     crowd, cfg, sk = build()
     assert crowd.uniques.poses.shape == (1, crowd.bones, sqt.WIDTH)
-    assert crowd.storage.row_count == M * crowd.streams.count + crowd.uniques.count + crowd.slots.count
+    assert crowd.storage.row_count == (M * crowd.streams.count + crowd.uniques.count
+                                       + crowd.slots.count)
     clip = cfg.clips["c3"]
     # whatever its phase, the unique advances one clip frame per crowd frame
     p0 = crowd.uniques.poses[0].copy()

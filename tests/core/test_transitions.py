@@ -1,4 +1,4 @@
-"""Transition slots (paper s.4.3 Listing 2, DESIGN.md s.4) and the frame's graph.
+"""Transition slots (paper s.4.3 Listing 2; docs/architecture.md, Behaviour) and the frame's graph.
 
 Expected poses are computed independently: clip sampling for stream targets and
 ``pose.blend2`` for the blend ``StartP -> TargetP`` with ``S = (F - T0) / L``.
