@@ -4,31 +4,25 @@ Handles slotted actions (Blender 4.4+: ``action.slots``,
 ``action.layers[0].strips[0].channelbag(slot)``) and legacy actions (4.2-4.3:
 ``action.fcurves``). :func:`read_action` names the action and the bone at fault for
 bones the armature lacks, NaN keys, empty or one-frame actions, and works out the
-frames to sample, the pose markers in clip frames and the loop flag.
+frames to sample, the pose markers in clip frames and the loop flag. What it reads
+is handed to core as arrays: keys packed into a :class:`~crowd_addon.core.fcurve.CurveSet`,
+data paths mapped by :func:`~crowd_addon.core.pose_channels.channel_targets`, key
+times and events from :mod:`crowd_addon.core.clip_sampling`.
 """
 
 from __future__ import annotations
 
 import functools
-import math
-import re
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..core.clip_sampling import marker_events, sample_times
 from ..core.errors import CrowdError
-from .fcurve_eval import BEZIER, LINEAR, CurveSet
+from ..core.fcurve import BEZIER, LINEAR, CurveSet, check_finite
+from ..core.pose_channels import CHANNELS, channel_targets
 
-__all__ = ["CHANNELS", "CHANNEL_WIDTH", "BoneCurve", "ActionSource", "resolve_slot",
-           "action_fcurves", "read_action"]
-
-# column of each pose-bone property in the per-bone channel block (17 floats)
-CHANNELS = {"location": (0, 3), "rotation_quaternion": (3, 4), "rotation_euler": (7, 3),
-            "rotation_axis_angle": (10, 4), "scale": (14, 3)}
-CHANNEL_WIDTH = 17
-_PATH = re.compile(r'^pose\.bones\["((?:[^"\\]|\\.)*)"\](.*)$')
-# the rest of a pose-bone data path -> (first column, width) of its channel block
-_PROPS = {"." + prop: cols for prop, cols in CHANNELS.items()}
+__all__ = ["BoneCurve", "ActionSource", "resolve_slot", "action_fcurves", "read_action"]
 
 
 @dataclass(eq=False)
@@ -131,69 +125,6 @@ def _fcurve_owner(action, slot):
     return None
 
 
-@functools.lru_cache(maxsize=4096)
-def _bone_path(data_path):
-    """(bone name, rest of the path) of a ``pose.bones["..."]`` data path, else Nones
-    (cached: a rig's actions share their paths)."""
-    m = _PATH.match(data_path)
-    if m is None:
-        return None, None
-    name = m.group(1)
-    return (re.sub(r"\\(.)", r"\1", name) if "\\" in name else name), m.group(2)
-
-
-@functools.lru_cache(maxsize=4096)
-def _curve_target(data_path):
-    """(bone name, rest of the path, (first column, width) of the channel or None) of
-    a ``pose.bones["..."]`` data path, else Nones."""
-    bone, rest = _bone_path(data_path)
-    return bone, rest, None if bone is None else _PROPS.get(rest)
-
-
-@functools.lru_cache(maxsize=64)
-def _targets(paths: tuple, bone_names: tuple):
-    """What F-curves with data paths ``paths`` animate on a skeleton of ``bone_names``
-    (cached: an action's paths seldom change between bakes).
-
-    Returns read-only arrays per curve: bone index (-1: not a pose-bone path or a
-    bone the skeleton lacks), first column and width of the channel (width 0: not
-    a bone channel), whether it is a ``rotation_mode`` curve; and the names of the
-    bones the skeleton lacks, in curve order."""
-    index = {n: i for i, n in enumerate(bone_names)}
-    bone = np.full(len(paths), -1, np.int64)
-    first_column = np.zeros(len(paths), np.int64)
-    width = np.zeros(len(paths), np.int64)
-    rotation_mode = np.zeros(len(paths), bool)
-    missing = []
-    for c, path in enumerate(paths):
-        name, rest, prop = _curve_target(path)
-        if name is None:
-            continue
-        b = index.get(name)
-        if b is None:
-            missing.append(name)
-            continue
-        bone[c] = b
-        rotation_mode[c] = rest == ".rotation_mode"
-        if prop is not None:
-            first_column[c], width[c] = prop
-    for a in (bone, first_column, width, rotation_mode):
-        a.flags.writeable = False
-    return bone, first_column, width, rotation_mode, tuple(missing)
-
-
-def _check_finite(arr, start, what, part, action):
-    """Raise naming the curve and key of the first non-finite row of packed ``arr``
-    (``what(c)``: bone, property and array index of curve ``c``)."""
-    if not np.isfinite(arr).all():
-        row = int(np.argmax(~np.isfinite(arr).all(1)))
-        c = int(np.searchsorted(start, row, side="right") - 1)
-        bone, prop, i = what(c)
-        raise CrowdError(f"action {action!r}, bone {bone!r}, {prop}[{i}]: {part} "
-                         f"{row - start[c]} is not finite "
-                         f"({arr[row].tolist()})")
-
-
 def _is_cyclic(fc) -> bool:
     """Blender's BKE_fcurve_is_cyclic: a first, unrestricted, infinite Cycles modifier."""
     if len(fc.modifiers) == 0:
@@ -292,7 +223,7 @@ def read_action(armature_obj, skeleton, action, fps: float, scene_fps: float,
     selected, reason = [], None
     if fcs:
         coll = owner.fcurves
-        bone, first_column, width, rotation_mode, missing = _targets(
+        bone, first_column, width, rotation_mode, missing = channel_targets(
             tuple([fc.data_path for fc in fcs]), skeleton.bone_names)
         if missing:
             raise CrowdError(f"action {name!r} animates bones that armature "
@@ -331,15 +262,17 @@ def read_action(armature_obj, skeleton, action, fps: float, scene_fps: float,
     extrapolation = extrapolation[which]
 
     def what(c):
+        """Curve ``c`` in messages: the action, bone, property and array index."""
         prop = next(p for p, (col, w) in CHANNELS.items() if col <= columns[c] < col + w)
-        return skeleton.bone_names[bones[c]], prop, columns[c] - CHANNELS[prop][0]
+        return (f"action {name!r}, bone {skeleton.bone_names[bones[c]]!r}, "
+                f"{prop}[{columns[c] - CHANNELS[prop][0]}]")
 
     start = np.zeros(len(counts) + 1, np.int64)
     np.cumsum(counts, out=start[1:])
     bounds = start.tolist()
     co = np.empty((bounds[-1], 2), np.float32)
     _read_keys((("co", co),), kps, bounds)
-    _check_finite(co, start, what, "key", name)
+    check_finite(co, start, what, "key")
     keyed = np.flatnonzero(np.array(counts) > 0)
     first, last = co[start[keyed], 0], co[start[keyed + 1] - 1, 0]
 
@@ -359,21 +292,15 @@ def read_action(armature_obj, skeleton, action, fps: float, scene_fps: float,
         raise CrowdError(f"action {name!r} is one frame long (frame {begin:g}); a clip needs "
                          "at least two frames")
     loop = auto_loop if loop is None else bool(loop)
-    times, notes = _sample_times(name, begin, end, scene_fps / fps, loop)
-    keys, fast = _read_interpolation(name, mods, kps, what, co, start, keyed,
+    times, notes = sample_times(name, begin, end, scene_fps / fps, loop)
+    keys, fast = _read_interpolation(mods, kps, what, co, start, keyed,
                                      times.astype(np.float32),
                                      extrapolation == linear_value)
 
-    step = (times[-1] - times[0]) / (len(times) - 1)
-    events = []
-    for m in action.pose_markers:
-        f = (m.frame - times[0]) / step
-        if not -1e-6 <= f <= len(times) - 1 + 1e-6:
-            raise CrowdError(f"action {name!r}: pose marker {m.name!r} at frame {m.frame} is "
-                             f"outside the action's frames {begin:g}..{end:g}")
-        events.append((m.name, float(min(max(f, 0.0), len(times) - 1))))
+    events = marker_events(name, [(m.name, m.frame) for m in action.pose_markers], times,
+                           begin, end)
     return ActionSource(action, slot, name, fcurves, np.array(bones, np.int64),
-                        np.array(columns, np.int64), keys, fast, times, loop, tuple(events),
+                        np.array(columns, np.int64), keys, fast, times, loop, events,
                         reason, notes)
 
 
@@ -384,7 +311,7 @@ def _modifiers_allow(mods, inside) -> bool:
     return not kinds or (inside and kinds == {"CYCLES"})
 
 
-def _read_interpolation(name, mods, kps, what, co, start, keyed, times32, extrap_linear):
+def _read_interpolation(mods, kps, what, co, start, keyed, times32, extrap_linear):
     """Complete the packed keys with interpolation and handles where they matter,
     and decide which curves the numpy evaluator takes.
 
@@ -430,28 +357,6 @@ def _read_interpolation(name, mods, kps, what, co, start, keyed, times32, extrap
                        bezier)
     if left is None:
         return keys, fast
-    _check_finite(left, start, what, "left handle of key", name)
-    _check_finite(right, start, what, "right handle of key", name)
+    check_finite(left, start, what, "left handle of key")
+    check_finite(right, start, what, "right handle of key")
     return CurveSet(co, ipo, left, right, start, linear), fast
-
-
-def _sample_times(name, start, end, step, loop):
-    """Blender frames of the clip keys: every ``step`` frames from ``start``; a range
-    that is not a whole number of steps is stretched (loops, so the period is exact)
-    or extended past ``end`` (clamped clips, so no key is lost)."""
-    span = end - start
-    steps = span / step
-    notes = []
-    if abs(steps - round(steps)) < 1e-6:
-        count = int(round(steps))
-    elif loop:
-        count = max(1, int(round(steps)))
-        notes.append(f"action {name!r}: {span:g} frames is not a whole number of crowd "
-                     f"frames; the loop is resampled to {count} steps of "
-                     f"{span / count:g} frames so that it still closes")
-        step = span / count
-    else:
-        count = math.ceil(steps)
-        notes.append(f"action {name!r}: the last key is sampled at frame "
-                     f"{start + count * step:g}, after the end of the action ({end:g})")
-    return start + np.arange(count + 1) * step, notes

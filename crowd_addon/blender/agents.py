@@ -1,65 +1,28 @@
 """Agents from scene geometry: one agent per vertex, vertex-group member or instance.
 
 Each agent source (``scene.crowd.agent_sources``, :class:`.props.CROWD_PG_agent_source`)
-gives world positions (metres), headings (radians about +Z: the rotation applied to
-the character's rest pose), a stream per agent, an offset in ``0 .. M-1`` frames and
-a colour. Geometry is read from the depsgraph-evaluated object (modifiers and
-geometry nodes applied) with ``foreach_get`` into numpy; only the vertex-group
-filter walks the vertices, because Blender exposes no array access to group
-weights. Random choices are seeded from ``scene.crowd.seed`` and the source's
-index, so the same scene gives the same agents.
+gives world positions (metres) and base headings (radians about +Z) of its points,
+read from the depsgraph-evaluated object (modifiers and geometry nodes applied) with
+``foreach_get`` into numpy; only the vertex-group filter walks the vertices, because
+Blender exposes no array access to group weights. The placement policy (headings,
+a stream per agent, an offset in ``0 .. M-1`` frames, a colour) is
+:func:`crowd_addon.core.placement.place_agents`, with the source's settings as a
+:class:`~crowd_addon.core.placement.PlacementPolicy` and its point attributes read
+here. Random choices are seeded from ``scene.crowd.seed`` and the source's index, so
+the same scene gives the same agents.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
-from ..core.agents import assign_offsets, assign_streams, check_offsets
 from ..core.errors import CrowdError
+from ..core.placement import SOURCE_SEED, AgentSet, PlacementPolicy, place_agents, z_angle
 
-__all__ = ["AgentSet", "agents_from_source", "agents_from_scene", "FORWARD", "SOURCE_SEED"]
-
-#: the character's rest-pose facing per ``forward_axis`` setting (x, y)
-FORWARD = {"NEG_Y": (0.0, -1.0), "POS_Y": (0.0, 1.0), "POS_X": (1.0, 0.0),
-           "NEG_X": (-1.0, 0.0)}
-#: seed stride between agent sources
-SOURCE_SEED = 7919
-
-
-@dataclass(frozen=True)
-class AgentSet:
-    """Agents as arrays: positions (n, 3) float32 metres, headings (n,) float32
-    radians, streams (n,) int32 stream indices, offsets (n,) int32 frames, colors
-    (n, 3) float32 0..1."""
-
-    positions: np.ndarray
-    headings: np.ndarray
-    streams: np.ndarray
-    offsets: np.ndarray
-    colors: np.ndarray
-
-    @property
-    def count(self) -> int:
-        return int(self.offsets.shape[0])
-
-    @staticmethod
-    def concatenate(sets):
-        if not sets:
-            return AgentSet(np.zeros((0, 3), np.float32), np.zeros(0, np.float32),
-                            np.zeros(0, np.int32), np.zeros(0, np.int32),
-                            np.zeros((0, 3), np.float32))
-        return AgentSet(*(np.concatenate([getattr(s, f) for s in sets])
-                          for f in ("positions", "headings", "streams", "offsets", "colors")))
+__all__ = ["agents_from_source", "agents_from_scene", "placement_policy"]
 
 
 # ----------------------------------------------------------------------- geometry
-def _z_angle(matrix) -> np.ndarray:
-    """Rotation about +Z (radians) of 4x4 world matrices ``(..., 4, 4)``."""
-    return np.arctan2(matrix[..., 1, 0], matrix[..., 0, 0])
-
-
 def _mesh_points(obj, depsgraph, what):
     """(evaluated mesh, local positions (V, 3) float64, world matrix (4, 4))."""
     if obj.type != "MESH":
@@ -90,6 +53,9 @@ def _group_members(obj, mesh, name, what) -> np.ndarray:
 _ATTR_FIELDS = {"FLOAT": ("value", 1), "INT": ("value", 1), "INT8": ("value", 1),
                 "FLOAT_VECTOR": ("vector", 3), "FLOAT_COLOR": ("color", 4),
                 "BYTE_COLOR": ("color", 4)}
+#: attribute data types accepted per kind of per-point value the placement asks for
+_ATTR_KINDS = {"float": ("FLOAT",), "int": ("INT", "INT8"),
+               "color": ("FLOAT_COLOR", "BYTE_COLOR", "FLOAT_VECTOR")}
 
 
 def _attribute(mesh, name, kinds, what, obj) -> np.ndarray:
@@ -117,6 +83,21 @@ def _instances(obj, depsgraph) -> np.ndarray:
 
 
 # -------------------------------------------------------------------------- agents
+def placement_policy(source) -> PlacementPolicy:
+    """The placement settings of a ``CROWD_PG_agent_source`` as plain values."""
+    target = source.heading_target
+    return PlacementPolicy(
+        heading_mode=source.heading_mode, heading=source.heading,
+        heading_attribute=source.heading_attribute,
+        target=None if target is None else tuple(target.matrix_world.translation),
+        stream_mode=source.stream_mode, stream_attribute=source.stream_attribute,
+        stream_name=source.stream_name, offset_mode=source.offset_mode,
+        offset_mean=source.offset_mean, offset_std=source.offset_std,
+        offset_attribute=source.offset_attribute, color_mode=source.color_mode,
+        color=tuple(source.color), color_variation=source.color_variation,
+        color_attribute=source.color_attribute)
+
+
 def agents_from_source(source, depsgraph, *, streams, stream_weights, max_offset, seed,
                        forward_axis="NEG_Y") -> AgentSet:
     """The agents of one source.
@@ -126,7 +107,8 @@ def agents_from_source(source, depsgraph, *, streams, stream_weights, max_offset
     source : a ``CROWD_PG_agent_source``.
     depsgraph : the evaluated depsgraph to read geometry from.
     streams : stream names (index = stream id); stream_weights : (S,) weights.
-    max_offset : M. seed : int. forward_axis : key of :data:`FORWARD`.
+    max_offset : M. seed : int. forward_axis : key of
+        :data:`crowd_addon.core.placement.FORWARD`.
     """
     what = f"agent source {source.name!r}"
     obj = source.object
@@ -138,7 +120,7 @@ def agents_from_source(source, depsgraph, *, streams, stream_weights, max_offset
         if mats.shape[0] == 0:
             raise CrowdError(f"{what}: object {obj.name!r} generates no instances")
         pos = mats[:, :3, 3]
-        base_heading = _z_angle(mats)
+        base_heading = z_angle(mats)
         rows = None
     else:
         mesh, local, world = _mesh_points(obj, depsgraph, what)
@@ -147,68 +129,17 @@ def agents_from_source(source, depsgraph, *, streams, stream_weights, max_offset
         if rows.size == 0:
             raise CrowdError(f"{what}: mesh {obj.name!r} has no vertices")
         pos = local[rows] @ world[:3, :3].T + world[:3, 3]
-        base_heading = np.full(rows.size, _z_angle(world))
-    n = pos.shape[0]
+        base_heading = np.full(rows.size, z_angle(world))
 
-    def attribute(name, kinds):
+    def attribute(name, kind):
         if mesh is None:
             raise CrowdError(f"{what}: attributes are read from mesh vertices; with "
                              "'Instances' use fixed, random or target settings")
-        return _attribute(mesh, name, kinds, what, obj)[rows]
+        return _attribute(mesh, name, _ATTR_KINDS[kind], what, obj)[rows]
 
-    if source.heading_mode == "TARGET":
-        if source.heading_target is None:
-            raise CrowdError(f"{what}: heading faces a target but none is chosen")
-        tgt = np.array(source.heading_target.matrix_world.translation, np.float64)
-        d = tgt[None, :2] - pos[:, :2]
-        fx, fy = FORWARD[forward_axis]
-        heading = np.arctan2(d[:, 1], d[:, 0]) - np.arctan2(fy, fx)
-    elif source.heading_mode == "ATTRIBUTE":
-        heading = base_heading + attribute(source.heading_attribute, ("FLOAT",))
-    else:
-        heading = base_heading + source.heading
-    heading = np.mod(heading + np.pi, 2 * np.pi) - np.pi
-
-    if source.stream_mode == "ATTRIBUTE":
-        st = attribute(source.stream_attribute, ("INT", "INT8")).astype(np.int64)
-        bad = np.flatnonzero((st < 0) | (st >= len(streams)))
-        if bad.size:
-            raise CrowdError(f"{what}: attribute {source.stream_attribute!r} gives stream "
-                             f"{int(st[bad[0]])} at point {int(bad[0])}; streams are "
-                             f"0..{len(streams) - 1} ({list(streams)})")
-    elif source.stream_mode == "FIXED":
-        if source.stream_name not in streams:
-            raise CrowdError(f"{what}: unknown stream {source.stream_name!r} "
-                             f"(streams: {list(streams)})")
-        st = np.full(n, list(streams).index(source.stream_name))
-    else:
-        try:
-            st = assign_streams(n, len(streams), stream_weights, seed)
-        except CrowdError as e:
-            raise CrowdError(f"{what}: {e}") from None
-
-    if source.offset_mode == "ATTRIBUTE":
-        off = attribute(source.offset_attribute, ("INT", "INT8"))
-        try:
-            check_offsets(off, max_offset, f"{what}: point")
-        except CrowdError as e:
-            raise CrowdError(f"{e} (attribute {source.offset_attribute!r})") from None
-    else:
-        mean = None if source.offset_mean < 0 else source.offset_mean
-        std = None if source.offset_std < 0 else source.offset_std
-        off = assign_offsets(n, max_offset, source.offset_mode.lower(), seed + 1, mean, std)
-
-    if source.color_mode == "ATTRIBUTE":
-        col = attribute(source.color_attribute,
-                        ("FLOAT_COLOR", "BYTE_COLOR", "FLOAT_VECTOR"))[:, :3]
-    else:
-        rnd = np.random.default_rng(seed + 2).uniform(0.0, 1.0, (n, 3))
-        base = np.asarray(source.color, np.float64)
-        col = base + source.color_variation * (rnd - base)
-    col = np.clip(col, 0.0, 1.0)
-    return AgentSet(pos.astype(np.float32), heading.astype(np.float32),
-                    np.asarray(st, np.int32), np.asarray(off, np.int32),
-                    np.asarray(col, np.float32))
+    return place_agents(what, pos, base_heading, placement_policy(source), streams=streams,
+                        stream_weights=stream_weights, max_offset=max_offset, seed=seed,
+                        forward_axis=forward_axis, attribute=attribute)
 
 
 def agents_from_scene(scene, depsgraph, streams, stream_weights) -> AgentSet:

@@ -1,8 +1,10 @@
 """Armature objects -> core :class:`Skeleton`; skinned mesh objects -> core :class:`ProxyMesh`.
 
-Conventions (DESIGN.md s.3): every bone of the armature becomes a skeleton bone,
-ordered parents first (:meth:`Skeleton.from_parent_names`); ``skeleton.bone_names``
-is the name -> index mapping. The local SQT of bone ``i`` is its transform relative
+This module reads the Blender data (bones, rest matrices, vertices, vertex groups)
+into arrays; the math on them is :mod:`crowd_addon.core.armature_math`. Every bone
+of the armature becomes a skeleton bone, ordered parents first
+(:meth:`Skeleton.from_parent_names`); ``skeleton.bone_names`` is the name -> index
+mapping. The local SQT of bone ``i`` is its transform relative
 to its parent bone in the pose::
 
     local_i = inv(parent.bone.matrix_local) @ bone.matrix_local @ pose_bone.matrix_basis
@@ -17,15 +19,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core import pose as sqt
 from ..core import quaternion as quat
+from ..core.armature_math import (check_hierarchy, relative_to_parent, rest_skeleton,
+                                  vertex_influences)
 from ..core.errors import CrowdError
 from ..core.mesh import ProxyMesh
 from ..core.skeleton import Skeleton
 
-__all__ = ["skeleton_from_armature", "rest_local", "check_skeleton", "skeleton_and_rest",
-           "matrices", "relative_to_parent", "sqt_from_matrices", "object_to_armature",
-           "proxy_mesh_from_object"]
+__all__ = ["skeleton_from_armature", "check_skeleton", "skeleton_and_rest", "matrices",
+           "object_to_armature", "proxy_mesh_from_object"]
 
 
 def _checked(obj, kind: str, noun: str):
@@ -62,74 +64,19 @@ def _bones(armature_obj):
     return names, parents, matrices(bones, "matrix_local")
 
 
-def relative_to_parent(model: np.ndarray, parents: np.ndarray) -> np.ndarray:
-    """Local matrices ``inv(model[parent]) @ model`` (roots keep their model matrix)."""
-    out = model.copy()
-    has = parents >= 0
-    out[..., has, :, :] = np.linalg.inv(model[..., parents[has], :, :]) @ model[..., has, :, :]
-    return out
-
-
-def _skeleton(armature_obj, name, names, parent_names, ml):
-    """The skeleton of bones read by :func:`_bones`, with the rest pose relative to the
-    parent ``(B, 4, 4)`` and its rotations ``(B, 4)`` float64 in Blender's order."""
-    index = {n: i for i, n in enumerate(names)}
-    parents = np.array([-1 if p is None else index[p] for p in parent_names])
-    inverse = np.linalg.inv(ml)
-    rel = _relative_rest(ml, parents, inverse)
-    rot = quat.from_matrix(rel[:, :3, :3])
-    bind = sqt.identity_pose(len(names)).astype(np.float64)
-    bind[:, sqt.ROT] = rot
-    bind[:, sqt.TRANS] = rel[:, :3, 3]
-    skeleton = Skeleton.from_parent_names(name or armature_obj.name, names, parent_names,
-                                          bind, inverse_bind=inverse)
-    return skeleton, rel, rot
-
-
-def _relative_rest(ml, parents, inverse):
-    """:func:`relative_to_parent` of rest matrices ``ml`` (B, 4, 4) given their
-    inverses (the same numbers: LAPACK inverts each matrix on its own)."""
-    rel = ml.copy()
-    has = parents >= 0
-    rel[has] = inverse[parents[has]] @ ml[has]
-    return rel
-
-
 def skeleton_from_armature(armature_obj, name: str | None = None) -> Skeleton:
     """The armature's bones as a core :class:`Skeleton` named after the object.
 
     Bind pose: the rest pose relative to the parent bone; ``inverse_bind``:
     ``inv(bone.matrix_local)`` in float64.
     """
-    return _skeleton(armature_obj, name, *_bones(armature_obj))[0]
-
-
-def _check_skeleton(armature_obj, skeleton, names, parent_names):
-    parent_of = dict(zip(names, parent_names))
-    if set(names) != set(skeleton.bone_names):
-        extra = sorted(set(skeleton.bone_names) - set(names))
-        missing = sorted(set(names) - set(skeleton.bone_names))
-        raise CrowdError(f"skeleton {skeleton.name!r} does not match armature "
-                         f"{armature_obj.name!r}: bones only in the skeleton {extra}, "
-                         f"only in the armature {missing}")
-    for i, n in enumerate(skeleton.bone_names):
-        p = skeleton.parents[i]
-        if (skeleton.bone_names[p] if p >= 0 else None) != parent_of[n]:
-            raise CrowdError(f"skeleton {skeleton.name!r}: bone {n!r} has a different parent "
-                             f"than in armature {armature_obj.name!r} ({parent_of[n]!r})")
+    return rest_skeleton(name or armature_obj.name, *_bones(armature_obj))[0]
 
 
 def check_skeleton(armature_obj, skeleton: Skeleton) -> None:
     """Raise unless ``skeleton`` has exactly the armature's bones and hierarchy."""
     names, parent_names, _ = _bones(armature_obj)
-    _check_skeleton(armature_obj, skeleton, names, parent_names)
-
-
-def rest_local(armature_obj, skeleton: Skeleton) -> np.ndarray:
-    """``(B, 4, 4)`` float64 rest matrices relative to the parent bone, skeleton order."""
-    names, _, ml = _bones(armature_obj)
-    order = [names.index(n) for n in skeleton.bone_names]
-    return relative_to_parent(ml[order], skeleton.parents.astype(np.int64))
+    check_hierarchy(skeleton, armature_obj.name, names, parent_names)
 
 
 def skeleton_and_rest(armature_obj, skeleton: Skeleton | None = None):
@@ -137,50 +84,20 @@ def skeleton_and_rest(armature_obj, skeleton: Skeleton | None = None):
 
     Returns ``(skeleton, order, rest, rest_rot)``: ``skeleton`` as
     :func:`skeleton_from_armature` makes it (or the one given, checked with
-    :func:`check_skeleton`), ``order`` the Blender index of each skeleton bone,
-    ``rest`` :func:`rest_local` and ``rest_rot`` its rotations ``(B, 4)`` float64.
+    :func:`check_skeleton`), ``order`` (B,) int64 the Blender index of each skeleton
+    bone, ``rest`` (B, 4, 4) float64 the rest matrices relative to the parent bone in
+    skeleton order and ``rest_rot`` their rotations ``(B, 4)`` float64.
     """
     names, parent_names, ml = _bones(armature_obj)
     index = {n: i for i, n in enumerate(names)}
     if skeleton is None:
-        skeleton, rel, rot = _skeleton(armature_obj, None, names, parent_names, ml)
+        skeleton, rel, rot = rest_skeleton(armature_obj.name, names, parent_names, ml)
         order = np.array([index[n] for n in skeleton.bone_names], np.int64)
         return skeleton, order, rel[order], rot[order]
-    _check_skeleton(armature_obj, skeleton, names, parent_names)
+    check_hierarchy(skeleton, armature_obj.name, names, parent_names)
     order = np.array([index[n] for n in skeleton.bone_names], np.int64)
     rest = relative_to_parent(ml[order], skeleton.parents.astype(np.int64))
     return skeleton, order, rest, quat.from_matrix(rest[:, :3, :3])
-
-
-def sqt_from_matrices(local: np.ndarray, bone_names, what: str,
-                      frame_labels=None) -> np.ndarray:
-    """SQT ``(..., B, 10)`` float64 of local affine matrices ``(..., B, 4, 4)``.
-
-    A matrix must be rotation x axis scale (no shear, non-zero scale); a negative
-    determinant flips the x scale. Anything else raises a :class:`CrowdError` naming
-    ``what``, the bone and the frame (``frame_labels[i]`` for leading index ``i``).
-    """
-    m3 = local[..., :3, :3]
-    s = np.linalg.norm(m3, axis=-2)                                   # column norms
-    flip = np.linalg.det(m3) < 0
-    s[..., 0] = np.where(flip, -s[..., 0], s[..., 0])
-    tiny = (np.abs(s) < 1e-9).any(-1)
-    r = m3 / np.where(np.abs(s) < 1e-9, 1, s)[..., None, :]
-    err = np.abs(np.swapaxes(r, -1, -2) @ r - np.eye(3)).max((-1, -2))
-    bad = tiny | (err > 1e-4)
-    if bad.any():
-        at = np.argwhere(bad)[0]
-        frame = "" if len(at) < 2 else \
-            f" at frame {frame_labels[at[0]] if frame_labels is not None else at[0]}"
-        kind = "zero scale" if tiny[tuple(at)] else "shear (non-uniform scale inherited " \
-                                                    "through a rotated child)"
-        raise CrowdError(f"{what}: bone {bone_names[at[-1]]!r}{frame} has {kind}; a crowd "
-                         "bone stores scale, rotation and translation only")
-    out = np.empty(local.shape[:-2] + (sqt.WIDTH,))
-    out[..., sqt.SCALE] = s
-    out[..., sqt.ROT] = quat.from_matrix(r)
-    out[..., sqt.TRANS] = local[..., :3, 3]
-    return out
 
 
 def object_to_armature(obj, armature_obj) -> np.ndarray:
@@ -254,17 +171,8 @@ def proxy_mesh_from_object(mesh_obj, armature_obj, skeleton: Skeleton | None = N
         for g in gs:
             groups.append(g.group)
             weights.append(g.weight)
-    groups = np.array(groups, np.int64)
-    bone = bone_of_group[np.where((groups >= 0) & (groups < len(bone_of_group) - 1),
-                                  groups, -1)]
-    w = np.where(bone >= 0, np.array(weights, np.float64), 0.0)
-    k = max(int(counts.max()), 1)
-    row = np.repeat(np.arange(v), counts)
-    col = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
-    idx = np.zeros((v, k), np.int64)
-    wt = np.zeros((v, k))
-    idx[row, col] = np.maximum(bone, 0)
-    wt[row, col] = w
+    idx, wt = vertex_influences(counts, np.array(groups, np.int64),
+                                np.array(weights, np.float64), bone_of_group)
     return ProxyMesh.from_influences(name or mesh_obj.name, skeleton.name, pos,
                                      tris.reshape(-1, 3), idx, wt,
                                      bone_count=skeleton.bone_count)

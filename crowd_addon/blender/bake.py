@@ -2,11 +2,12 @@
 
 Two ways, one result:
 
-- **F-curves** (the fast path): every bone F-curve is read in bulk and evaluated in
-  numpy at all sample times at once (:mod:`.fcurve_eval`, Blender's own algorithm),
-  channels are composed into ``matrix_basis`` per bone as Blender's
-  ``BKE_pchan_to_mat4`` does (quaternions normalised, Euler orders, axis-angle,
-  connected bones ignore location), then into local SQT with the rest pose.
+- **F-curves** (the fast path): every bone F-curve is read in bulk
+  (:mod:`.action_data`) and the armature's pose channels and rest pose once; core
+  evaluates the curves in numpy at all sample times at once
+  (:mod:`crowd_addon.core.fcurve`, Blender's own algorithm) and composes the
+  channels into local SQT as Blender's ``BKE_pchan_to_mat4`` does
+  (:mod:`crowd_addon.core.pose_channels`).
 - **frame_set** (exact by definition, slower): the action is played on the armature,
   ``scene.frame_set`` per key, ``pose.bones[].matrix`` read and made local. Used
   where the fast path cannot be exact: constraints, drivers on the pose, bones that
@@ -24,18 +25,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core import pose as sqt
+from ..core.armature_math import relative_to_parent, sqt_from_matrices
 from ..core.clip import Clip
 from ..core.errors import CrowdError
+from ..core.pose_channels import CHANNEL_WIDTH, CHANNELS, RigChannels, local_sqt
 from ..core.skeleton import Skeleton
-from . import fcurve_eval
-from .action_data import CHANNEL_WIDTH, read_action
-from .armature import matrices, relative_to_parent, skeleton_and_rest, sqt_from_matrices
+from .action_data import read_action
+from .armature import matrices, skeleton_and_rest
 
 __all__ = ["BakeResult", "bake_actions", "fast_path_blocker"]
 
 FCURVES, FRAME_SET = "fcurves", "frame_set"
-_BLOCK_ELEMENTS = 16384       # frames x bones per block of the rotation composition
 
 
 @dataclass(frozen=True, eq=False)
@@ -146,7 +146,8 @@ def bake_actions(armature_obj, actions, fps: float, progress=None, *, loop=None,
         for src in sources:
             reason = "requested" if method == FRAME_SET else rig_reason or src.frame_set_reason
             if reason is None:
-                keys = _bake_fcurves(rig, src)
+                keys = local_sqt(rig, src.keys, src.columns, src.bones, src.times,
+                                 src.fast, _evaluator(src))
                 methods[src.name] = FCURVES
                 done += len(src.times)
                 if progress is not None and progress(done, total) is False:
@@ -166,11 +167,10 @@ def bake_actions(armature_obj, actions, fps: float, progress=None, *, loop=None,
     return BakeResult(skeleton, tuple(clips), methods, tuple(notes))
 
 
-def _rig_state(armature_obj, skeleton, bone_order, rest, rest_rot) -> dict:
-    """What every action's F-curve bake needs of the armature, in skeleton order:
-    current pose channels ``defaults`` (B, 17) float32 (unanimated channels keep
-    them), ``modes`` (rotation modes), ``connected`` (B,) bool, and the rest pose
-    relative to the parent as quaternions ``q0`` (4, B) and matrices ``r0`` (B, 3, 4).
+def _rig_state(armature_obj, skeleton, bone_order, rest, rest_rot) -> RigChannels:
+    """What every action's F-curve bake needs of the armature, in skeleton order: the
+    current pose channels (unanimated channels keep them), rotation modes, connected
+    bones and the rest pose.
 
     ``bone_order``: Blender index of each skeleton bone; ``rest``, ``rest_rot``: the
     rest pose and its rotations (:func:`.armature.skeleton_and_rest`)."""
@@ -181,9 +181,7 @@ def _rig_state(armature_obj, skeleton, bone_order, rest, rest_rot) -> dict:
         raise CrowdError(f"armature {armature_obj.name!r} has no pose for bones {lacking}")
     order = [position[n] for n in skeleton.bone_names]
     defaults = np.empty((len(pbs), CHANNEL_WIDTH), np.float32)
-    for prop, (col, width) in (("location", (0, 3)), ("rotation_quaternion", (3, 4)),
-                               ("rotation_euler", (7, 3)), ("rotation_axis_angle", (10, 4)),
-                               ("scale", (14, 3))):
+    for prop, (col, width) in CHANNELS.items():
         buf = np.empty(len(pbs) * width, np.float32)
         pbs.foreach_get(prop, buf)
         defaults[:, col:col + width] = buf.reshape(-1, width)
@@ -194,132 +192,17 @@ def _rig_state(armature_obj, skeleton, bone_order, rest, rest_rot) -> dict:
     bones = armature_obj.data.bones
     connect = np.empty(len(bones), bool)
     bones.foreach_get("use_connect", connect)
-    return dict(defaults=defaults[order], modes=[mode_name[m] for m in mode[order].tolist()],
-                connected=connect[bone_order],
-                q0=rest_rot.T.astype(np.float32), r0=rest[:, :3, :].astype(np.float32))
+    return RigChannels(defaults[order], tuple(mode_name[m] for m in mode[order].tolist()),
+                       connect[bone_order], rest, rest_rot)
 
 
-def _bake_fcurves(rig, src):
-    """Local SQT keys ``(F, B, 10)`` float32 from the action's F-curves.
-
-    Works component-major (``(17, F, B)`` channels) so that every quaternion product
-    is a few whole-array operations, in float32 like Blender's pose evaluation.
-    """
-    times = src.times.astype(np.float32)
-    defaults, modes, r0 = rig["defaults"], rig["modes"], rig["r0"]
-    chan = np.empty((CHANNEL_WIDTH, len(times), len(modes)), np.float32)
-    cols = _used_columns(modes)
-    chan[cols] = defaults[:, cols].T[:, None, :]
-    fast = np.flatnonzero(src.fast)
-    if fast.size:
-        vals = fcurve_eval.evaluate_frames(src.keys, times, fast)         # (F, C)
-        chan[src.columns[fast], :, src.bones[fast]] = vals.T
-    for c in np.flatnonzero(~src.fast):
+def _evaluator(src):
+    """``evaluate(c, times)``: Blender's own evaluation of curve ``c`` of ``src``, for
+    the curves the numpy evaluator does not reproduce."""
+    def evaluate(c, times):
         fc = src.fcurves[c]
-        chan[src.columns[c], :, src.bones[c]] = [fc.evaluate(float(t)) for t in times]
-    loc = chan[0:3]
-    loc[:, :, rig["connected"]] = 0                # BKE_pchan_to_mat4: chains stay closed
-    keys = np.empty((len(times), len(modes), sqt.WIDTH), np.float32)
-    # rotation = rest rotation * basis rotation, a block of frames at a time so that
-    # the temporaries stay small (long motion capture clips); the rest rotation is
-    # repeated over a block's frames (products of equal shapes run faster than ones
-    # broadcasting a (B,) row)
-    block = max(1, _BLOCK_ELEMENTS // len(modes))
-    rest_rot = np.repeat(rig["q0"][:, None, :], min(block, len(times)), axis=1)
-    for f0 in range(0, len(times), block):
-        f1 = min(len(times), f0 + block)
-        rot = _qmul(rest_rot[:, :f1 - f0], basis_rotation(chan[:, f0:f1], modes))
-        for i, comp in enumerate(rot):
-            keys[f0:f1, :, 3 + i] = comp
-    # translation = rest offset + rest rotation @ location: constant per bone unless
-    # the bone's location is animated
-    moving = np.zeros(len(modes), bool)
-    moving[src.bones[src.columns < 3]] = True
-    move, still = np.flatnonzero(moving), np.flatnonzero(~moving)
-    const = r0[still, :, 3] + np.einsum("bij,bj->bi", r0[still, :, :3], loc[:, 0, still].T)
-    lm = loc[:, :, move]                                                 # (3, F, m)
-    for i in range(3):
-        keys[..., i] = chan[14 + i]
-        keys[:, still, 7 + i] = const[:, i]
-        keys[:, move, 7 + i] = r0[move, i, 3] + r0[move, i, 0] * lm[0] \
-            + r0[move, i, 1] * lm[1] + r0[move, i, 2] * lm[2]
-    return keys
-
-
-def _used_columns(modes):
-    """Channel columns that the bones' rotation modes read (location, scale and the
-    rotation channels of the modes in use)."""
-    cols = [0, 1, 2, 14, 15, 16]
-    present = set(modes)
-    if "QUATERNION" in present:
-        cols += [3, 4, 5, 6]
-    if "AXIS_ANGLE" in present:
-        cols += [10, 11, 12, 13]
-    if present - {"QUATERNION", "AXIS_ANGLE"}:
-        cols += [7, 8, 9]
-    return cols
-
-
-def _qmul(a, b):
-    """Hamilton product ``a * b`` of quaternions given as 4 component arrays."""
-    aw, ax, ay, az = a
-    bw, bx, by, bz = b
-    return (aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw)
-
-
-def _eps(i, j, k):
-    """Levi-Civita symbol of three distinct axes."""
-    return 1 if (i, j, k) in ((0, 1, 2), (1, 2, 0), (2, 0, 1)) else -1
-
-
-def basis_rotation(chan: np.ndarray, modes) -> np.ndarray:
-    """Unit quaternions ``(4, F, B)`` of pose channels ``(17, F, B)`` by rotation mode,
-    as ``BKE_pchan_rot_to_mat3``: normalised quaternion (a zero one is Blender's
-    ``(0, 1, 0, 0)``), Euler in the bone's axis order (first letter applied first),
-    axis-angle with the axis normalised (a zero axis is no rotation)."""
-    kinds = set(modes)
-    if kinds == {"QUATERNION"}:                    # the usual case: no gathers, no copy
-        return _unit_quaternions(chan[3:7])
-    q = np.empty((4,) + chan.shape[1:], chan.dtype)
-    modes = np.array(modes)
-    for mode in kinds:
-        sel = np.flatnonzero(modes == mode)
-        if sel.size == modes.size:
-            sel = slice(None)                      # all bones: views, no gathers
-        if mode == "QUATERNION":
-            q[:, :, sel] = _unit_quaternions(chan[3:7, :, sel])
-        elif mode == "AXIS_ANGLE":
-            angle, axis = chan[10][:, sel], chan[11:14, :, sel]
-            n = np.sqrt((axis * axis).sum(0))
-            half = np.where(n > 0, angle / 2, 0)
-            k = np.sin(half) / np.where(n > 0, n, 1)
-            q[:, :, sel] = np.stack([np.cos(half), axis[0] * k, axis[1] * k, axis[2] * k])
-        else:
-            half = chan[7:10, :, sel] * np.float32(0.5)
-            c, s = np.cos(half), np.sin(half)
-            a, b, k = ("XYZ".index(ch) for ch in mode)       # q = q_k * q_b * q_a
-            v = [None] * 3                                   # q_b * q_a
-            w = c[b] * c[a]
-            v[a], v[b], v[k] = c[b] * s[a], s[b] * c[a], _eps(b, a, k) * s[b] * s[a]
-            q[0][:, sel] = c[k] * w - s[k] * v[k]
-            q[1 + k][:, sel] = c[k] * v[k] + s[k] * w        # then q_k * (q_b * q_a)
-            for i in (a, b):
-                j = 3 - i - k
-                q[1 + i][:, sel] = c[k] * v[i] + _eps(i, k, j) * s[k] * v[j]
-    return q
-
-
-def _unit_quaternions(raw):
-    """``raw`` (4, ...) normalised; a zero quaternion is Blender's ``(0, 1, 0, 0)``.
-    (The squares are summed in order, as ``(raw * raw).sum(0)`` would, without the
-    (4, ...) temporary.)"""
-    n = np.sqrt(raw[0] * raw[0] + raw[1] * raw[1] + raw[2] * raw[2] + raw[3] * raw[3])
-    if (n > 0).all():
-        return raw / n
-    unit = raw / np.where(n > 0, n, 1)
-    unit[1] = np.where(n > 0, unit[1], 1)
-    return unit
+        return [fc.evaluate(float(t)) for t in times]
+    return evaluate
 
 
 class _Playback:
@@ -342,8 +225,7 @@ class _Playback:
         if ad is not None and ad.use_tweak_mode:
             raise CrowdError(f"armature {obj.name!r} is in NLA tweak mode; leave it to bake")
         pose = {}
-        for prop, width in (("location", 3), ("rotation_quaternion", 4),
-                            ("rotation_euler", 3), ("rotation_axis_angle", 4), ("scale", 3)):
+        for prop, (_, width) in CHANNELS.items():
             buf = np.empty(len(pbs) * width, np.float32)
             pbs.foreach_get(prop, buf)
             pose[prop] = buf

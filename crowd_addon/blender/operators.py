@@ -123,8 +123,9 @@ class CROWD_OT_bake(bpy.types.Operator):
 
     def _finish(self, context, config):
         pv = preview.start(context.scene, config)
-        self.report({"INFO"}, f"Crowd: {len(config.clips)} clips, {pv.crowd.S} streams, "
-                              f"{pv.crowd.U} uniques, {pv.crowd.N} agents")
+        c = pv.crowd
+        self.report({"INFO"}, f"Crowd: {len(config.clips)} clips, {c.streams.count} streams, "
+                              f"{c.uniques.count} uniques, {c.agents.count} agents")
         return {"FINISHED"}
 
 

@@ -94,7 +94,8 @@ class CROWD_PT_main(_Panel, bpy.types.Panel):
             return
         box = layout.box()
         c = pv.crowd
-        box.label(text=f"{c.N:,} agents, {c.S} streams, {c.U} uniques, "
+        box.label(text=f"{c.agents.count:,} agents, {c.streams.count} streams, "
+                       f"{c.uniques.count} uniques, "
                        f"{len(c.config.clips)} clips")
         box.label(text=f"frame {c.frame}: step {pv.step_ms:.2f} ms, draw {pv.draw_ms:.2f} ms")
         for text in (pv.status(), pv.draw_error):

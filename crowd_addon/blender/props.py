@@ -2,8 +2,9 @@
 
 A stream (or unique animation) is a controller tree written as a flat list of named
 nodes; a node's inputs name other nodes of the same animation, and the root is the
-node named by ``root`` (default: the first node). Node kinds mirror the core
-controllers (``crowd_addon.core.controllers``): an action clip, a 2-way blend, a
+node named by ``root`` (default: the first node); core validates and builds it
+(:mod:`crowd_addon.core.controller_graph`). Node kinds mirror the core controllers
+(``crowd_addon.core.controllers``): an action clip, a 2-way blend, a
 layer (override or additive, masked by bone names or a bone collection), a 2-D
 blend space (inputs placed at (x, y) points) and a state machine (inputs are its
 states; transitions fire on triggers and parameter conditions with a fade).
@@ -18,16 +19,20 @@ from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProp
                        FloatVectorProperty, IntProperty, PointerProperty, StringProperty)
 from bpy.types import PropertyGroup
 
+from ..core import controller_graph
+
 __all__ = ["CLASSES", "NODE_KINDS", "settings_fingerprint"]
 
-NODE_KINDS = (
-    ("CLIP", "Action", "Play an action (baked into a clip) at a speed from a start frame"),
-    ("BLEND2", "Blend", "Blend two inputs by a weight or a parameter"),
-    ("LAYER", "Layer", "Override or add a second input on top of the first, on masked bones"),
-    ("BLEND_SPACE", "Blend Space", "Inputs at (x, y) points weighted by two parameters"),
-    ("STATE_MACHINE", "State Machine", "Inputs are states; triggers and conditions switch "
+_NODE_LABELS = {
+    "CLIP": ("Action", "Play an action (baked into a clip) at a speed from a start frame"),
+    "BLEND2": ("Blend", "Blend two inputs by a weight or a parameter"),
+    "LAYER": ("Layer", "Override or add a second input on top of the first, on masked bones"),
+    "BLEND_SPACE": ("Blend Space", "Inputs at (x, y) points weighted by two parameters"),
+    "STATE_MACHINE": ("State Machine", "Inputs are states; triggers and conditions switch "
                                        "between them with a fade"),
-)
+}
+#: enum items of a node's kind, one per core node kind
+NODE_KINDS = tuple((kind, *_NODE_LABELS[kind]) for kind in controller_graph.NODE_KINDS)
 _OPS = tuple((op, op, f"parameter {op} value") for op in ("<", "<=", ">", ">=", "==", "!="))
 
 

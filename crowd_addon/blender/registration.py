@@ -1,11 +1,11 @@
 """Register and unregister everything the extension adds to Blender.
 
 :func:`register` adds the property groups (``Scene.crowd``), operators, UI lists and
-panels, the File > Export menu entry, and the app handlers the preview needs (file
-load, frame change, depsgraph update, undo/redo; all persistent so they survive file
-loads). The viewport draw
-handler exists only while a preview runs; the bake's modal timer only while it
-bakes. :func:`unregister` stops every preview (removing the draw handler) and takes
+panels, the File > Export menu entry, the ``crowd`` command of Blender's ``-c`` option
+(:mod:`.cli_commands`), and the app handlers the preview needs (file load, frame
+change, depsgraph update, undo/redo; all persistent so they survive file loads). The
+viewport draw handler exists only while a preview runs; the bake's modal timer only
+while it bakes. :func:`unregister` stops every preview (removing the draw handler) and takes
 all of it away again, so register/unregister can alternate any number of times.
 :func:`leftovers` lists anything of ours still registered (tests use it).
 """
@@ -15,7 +15,7 @@ from __future__ import annotations
 import bpy
 
 from .. import api
-from . import export, operators, panels, preview, props
+from . import cli_commands, export, operators, panels, preview, props
 
 __all__ = ["CLASSES", "HANDLERS", "MENUS", "register", "unregister", "leftovers"]
 
@@ -34,9 +34,6 @@ def _ours(fn, wanted) -> bool:
                             and getattr(fn, "__qualname__", None) == wanted.__qualname__)
 
 
-_cli = None            # handle of the "crowd" command of Blender's -c option
-
-
 def register():
     for cls in CLASSES:
         bpy.utils.register_class(cls)
@@ -49,23 +46,11 @@ def register():
     for menu, fn in MENUS:
         _remove_menu_entries(menu, fn)
         getattr(bpy.types, menu).append(fn)
-    global _cli
-    if _cli is None and hasattr(bpy.utils, "register_cli_command"):   # Blender 4.2+
-        _cli = bpy.utils.register_cli_command("crowd", _crowd_cli)
-
-
-def _crowd_cli(argv):
-    """``blender -b scene.blend -c crowd <command> ...``: the headless command line with
-    the open file's scene (``export`` reads its Crowd settings)."""
-    from ..cli import main
-    return main(list(argv))
+    cli_commands.register_command()
 
 
 def unregister():
-    global _cli
-    if _cli is not None:
-        bpy.utils.unregister_cli_command(_cli)
-        _cli = None
+    cli_commands.unregister_command()
     preview.stop_all()
     api.detach_all()
     for menu, fn in MENUS:
@@ -96,7 +81,7 @@ def _remove_menu_entries(menu, fn):
 
 def leftovers() -> list:
     """Descriptions of anything of ours still registered: classes, ``Scene.crowd``,
-    app handlers, menu entries, the draw handler."""
+    app handlers, menu entries, the draw handler, the ``crowd`` CLI command."""
     out = [f"class {c.__name__}" for c in CLASSES if c.is_registered]
     out += [f"bpy.types.{c.__name__}" for c in CLASSES if hasattr(bpy.types, c.__name__)]
     if hasattr(bpy.types.Scene, "crowd"):
@@ -108,4 +93,6 @@ def leftovers() -> list:
         out += [f"menu {menu}: {f.__qualname__}" for f in _menu_entries(menu, fn)]
     if preview.draw_handle() is not None:
         out.append("SpaceView3D draw handler")
+    if cli_commands.command_registered():
+        out.append("CLI command crowd")
     return out

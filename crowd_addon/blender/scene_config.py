@@ -2,8 +2,10 @@
 
 The armature becomes the skeleton and the proxy mesh its ``ProxyMesh``
 (:mod:`.armature`), every action a node tree uses is baked into a clip named after
-the action (:mod:`.bake`), node trees become controller trees, and the agent
-sources become agents (:mod:`.agents`). Errors are :class:`CrowdError` messages that
+the action (:mod:`.bake`), node lists are read into plain
+:class:`~crowd_addon.core.controller_graph.NodeSpec` values that core validates and
+builds into controller trees (:func:`crowd_addon.core.controller_graph.build_tree`),
+and the agent sources become agents (:mod:`.agents`). Errors are :class:`CrowdError` messages that
 name the stream, node, action or object at fault; nothing in the scene changes.
 
 :func:`config_steps` does the work as a generator, one action per step, so a modal
@@ -14,12 +16,12 @@ it to the end (batch export, scripts, tests).
 from __future__ import annotations
 
 from ..core.config import CrowdConfig
-from ..core.controllers import (Blend2, BlendSpace2D, ClipPlayer, Layer, StateMachine,
-                                StateTransition)
+from ..core.controller_graph import InputSpec, NodeSpec, TransitionSpec, build_tree
 from ..core.errors import CrowdError
 from ..core.mesh import CARD
 
-__all__ = ["config_from_scene", "config_steps", "scene_fps", "used_actions", "build_tree"]
+__all__ = ["config_from_scene", "config_steps", "scene_fps", "used_actions", "node_specs",
+           "bone_collections", "lod_distances"]
 
 
 def scene_fps(scene) -> float:
@@ -47,117 +49,31 @@ def used_actions(settings) -> list:
 
 
 # ------------------------------------------------------------------ controller trees
-def _mask(node, skeleton, armature_data, what):
-    if node.mask_source == "ALL":
-        return None
-    if node.mask_source == "BONES":
-        names = [n.strip() for n in node.mask_bones.split(",") if n.strip()]
-        if not names:
-            raise CrowdError(f"{what}: the bone mask lists no bones")
-    else:
-        coll = armature_data.collections_all.get(node.mask_collection)
-        if coll is None:
-            raise CrowdError(f"{what}: armature {armature_data.name!r} has no bone collection "
-                             f"{node.mask_collection!r}")
-        names = [b.name for b in coll.bones]
-        if not names:
-            raise CrowdError(f"{what}: bone collection {node.mask_collection!r} is empty")
-    missing = [n for n in names if n not in skeleton.bone_names]
-    if missing:
-        raise CrowdError(f"{what}: skeleton {skeleton.name!r} has no bone {missing[0]!r}")
-    return {n: 1.0 for n in names}
+def _name(id_block):
+    return None if id_block is None else id_block.name
 
 
-def _weight(node):
-    return node.weight_parameter if node.weight_parameter else node.weight
+def node_specs(anim) -> tuple:
+    """The nodes of one ``CROWD_PG_animation`` as plain
+    :class:`~crowd_addon.core.controller_graph.NodeSpec` values (actions by name)."""
+    return tuple(NodeSpec(
+        name=n.name, kind=n.kind,
+        inputs=tuple(InputSpec(i.node, i.name, i.x, i.y) for i in n.inputs),
+        action=_name(n.action), speed=n.speed, start=n.start, weight=n.weight,
+        weight_parameter=n.weight_parameter, layer_mode=n.layer_mode,
+        mask_source=n.mask_source, mask_bones=n.mask_bones,
+        mask_collection=n.mask_collection, reference_action=_name(n.reference_action),
+        reference_frame=n.reference_frame, x_parameter=n.x_parameter,
+        y_parameter=n.y_parameter, initial_state=n.initial_state,
+        transitions=tuple(TransitionSpec(t.source, t.target, t.duration, t.trigger,
+                                         t.condition_parameter, t.condition_op,
+                                         t.condition_value) for t in n.transitions))
+        for n in anim.nodes)
 
 
-def build_tree(anim, pool, skeleton, armature_data, frame_start=0):
-    """The controller tree of one ``CROWD_PG_animation``; raises CrowdError naming the
-    stream/unique, node and input at fault.
-
-    Time: an action node shows clip frame ``start + speed * (F - frame_start)`` at
-    scene frame ``F`` (clip frame 0 is the action's first frame, so with speed 1 and
-    start 0 the crowd shows what the armature playing the action shows when the
-    action begins at the scene start); inside a state machine ``F - frame_start`` is
-    replaced by the frames since the state was entered.
-    """
-    label = f"{pool} {anim.name!r}"
-    if len(anim.nodes) == 0:
-        raise CrowdError(f"{label}: has no nodes (add an action)")
-    nodes = {}
-    for n in anim.nodes:
-        if n.name in nodes:
-            raise CrowdError(f"{label}: two nodes are named {n.name!r}")
-        nodes[n.name] = n
-    for n in anim.nodes:
-        for k, inp in enumerate(n.inputs):
-            if inp.node not in nodes:
-                raise CrowdError(f"{label}: node {n.name!r}: input {k} ({inp.name!r}) names "
-                                 f"unknown node {inp.node!r}")
-    root = anim.root or anim.nodes[0].name
-    if root not in nodes:
-        raise CrowdError(f"{label}: root node {root!r} does not exist")
-
-    def build(name, path, origin):
-        node = nodes[name]
-        what = f"{label}: node {name!r}"
-        if name in path:
-            raise CrowdError(f"{what}: cycle " + " -> ".join(path + (name,)))
-        kids = []
-        if node.kind != "CLIP":
-            inner = 0.0 if node.kind == "STATE_MACHINE" else origin
-            kids = [build(inp.node, path + (name,), inner) for inp in node.inputs]
-        try:
-            return _controller(node, kids, skeleton, armature_data, what, origin)
-        except CrowdError as e:
-            msg = str(e)
-            raise CrowdError(msg if msg.startswith(label) else f"{what}: {msg}") from None
-
-    return build(root, (), float(frame_start))
-
-
-def _need_inputs(node, kids, lo, hi, what):
-    if not lo <= len(kids) <= hi:
-        want = str(lo) if lo == hi else f"{lo} or more"
-        raise CrowdError(f"{what}: a {node.kind.lower().replace('_', ' ')} needs {want} "
-                         f"inputs, it has {len(kids)}")
-
-
-def _controller(node, kids, skeleton, armature_data, what, origin):
-    if node.kind == "CLIP":
-        if node.action is None:
-            raise CrowdError(f"{what}: no action chosen")
-        return ClipPlayer(node.action.name, node.speed, node.start - node.speed * origin)
-    if node.kind == "BLEND2":
-        _need_inputs(node, kids, 2, 2, what)
-        return Blend2(kids[0], kids[1], _weight(node))
-    if node.kind == "LAYER":
-        _need_inputs(node, kids, 2, 2, what)
-        mode = node.layer_mode.lower()
-        ref = None
-        if mode == "additive" and node.reference_action is not None:
-            ref = (node.reference_action.name, node.reference_frame)
-        return Layer(kids[0], kids[1], mode, _mask(node, skeleton, armature_data, what),
-                     _weight(node), ref)
-    if node.kind == "BLEND_SPACE":
-        _need_inputs(node, kids, 1, 1 << 30, what)
-        if not node.x_parameter or not node.y_parameter:
-            raise CrowdError(f"{what}: a blend space needs x and y parameter names")
-        return BlendSpace2D(kids, [(i.x, i.y) for i in node.inputs], node.x_parameter,
-                            node.y_parameter)
-    _need_inputs(node, kids, 1, 1 << 30, what)
-    states = {}
-    for inp, kid in zip(node.inputs, kids):
-        if not inp.name or inp.name in states:
-            raise CrowdError(f"{what}: state names must be unique and not empty "
-                             f"({inp.name!r})")
-        states[inp.name] = kid
-    transitions = [StateTransition(
-        t.source or "*", t.target, t.duration, t.trigger or None,
-        (t.condition_parameter, t.condition_op, t.condition_value)
-        if t.condition_parameter else None) for t in node.transitions]
-    return StateMachine(states, transitions, node.initial_state or None)
+def bone_collections(armature_data) -> dict:
+    """Bone collection name -> names of its bones, of an armature (data block)."""
+    return {c.name: tuple(b.name for b in c.bones) for c in armature_data.collections_all}
 
 
 # --------------------------------------------------------------------------- config
@@ -208,10 +124,14 @@ def config_steps(scene, depsgraph=None):
             if not a.name or names.count(a.name) > 1:
                 raise CrowdError(f"{pool} names must be unique and not empty ({a.name!r})")
     skeleton = skeleton_from_armature(arm)
-    # stream time is the scene frame; a unique's time starts at 0 when it is started
-    trees = {pool: [(a.name, build_tree(a, pool, skeleton, arm.data,
-                                        scene.frame_start if pool == "stream" else 0))
-                    for a in anims] for pool, anims in _pools(s)}
+    collections = bone_collections(arm.data)
+
+    def tree(pool, anim):       # stream time is the scene frame; a unique's starts at 0
+        return build_tree(f"{pool} {anim.name!r}", node_specs(anim), anim.root, skeleton,
+                          scene.frame_start if pool == "stream" else 0,
+                          bone_collections=collections, armature=arm.data.name)
+
+    trees = {pool: [(a.name, tree(pool, a)) for a in anims] for pool, anims in _pools(s)}
     actions = used_actions(s)
     fps = scene_fps(scene)
     total = len(actions) + 2

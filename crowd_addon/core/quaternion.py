@@ -3,6 +3,9 @@
 Every function takes arrays shaped ``(..., 4)`` (and ``(..., 3)`` for vectors,
 ``(..., 3, 3)`` for matrices) and broadcasts over the leading axes. The dtype of
 the inputs is kept (float32 in the runtime, float64 in tests and baking).
+:func:`multiply_parts` is the one Hamilton product: it works on the four components
+as separate arrays (component-major layouts such as ``(4, F, B)`` or strided views
+of packed poses), and :func:`multiply` is it on ``(..., 4)`` arrays.
 """
 
 from __future__ import annotations
@@ -10,8 +13,8 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = [
-    "identity", "normalize", "normalize_if_needed", "multiply", "conjugate", "rotate", "nlerp", "slerp",
-    "to_matrix", "from_matrix",
+    "identity", "normalize", "normalize_if_needed", "multiply", "multiply_parts", "conjugate",
+    "rotate", "nlerp", "slerp", "to_matrix", "from_matrix",
 ]
 
 
@@ -38,15 +41,39 @@ def normalize(q: np.ndarray) -> np.ndarray:
 
 
 def multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton product ``a * b`` (apply ``b`` first, then ``a``)."""
-    aw, ax, ay, az = np.moveaxis(a, -1, 0)
-    bw, bx, by, bz = np.moveaxis(b, -1, 0)
-    return np.stack([
-        aw * bw - ax * bx - ay * by - az * bz,
-        aw * bx + ax * bw + ay * bz - az * by,
-        aw * by - ax * bz + ay * bw + az * bx,
-        aw * bz + ax * by - ay * bx + az * bw,
-    ], axis=-1)
+    """Hamilton product ``a * b`` (apply ``b`` first, then ``a``) of ``(..., 4)``
+    arrays: :func:`multiply_parts` on their components."""
+    return np.stack(multiply_parts(np.moveaxis(a, -1, 0), np.moveaxis(b, -1, 0)), axis=-1)
+
+
+def multiply_parts(a, b, out=None) -> tuple:
+    """Hamilton product ``a * b`` (apply ``b`` first, then ``a``) of quaternions given
+    as their four components ``(w, x, y, z)``.
+
+    Parameters
+    ----------
+    a, b : sequences of 4 arrays (or an array whose first axis has length 4, e.g.
+        ``(4, F, B)``) that broadcast against each other; any float dtype, kept.
+    out : optional sequence of 4 writable arrays (e.g. the strided ``[..., c]`` views
+        of packed poses) that receive the components.
+
+    Returns
+    -------
+    The 4 component arrays of the product (``out``'s when given), as a tuple.
+    Component-wise, the inner loops run over the leading axes instead of over 4
+    components, which is several times faster than on ``(..., 4)`` arrays.
+    """
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    parts = (aw * bw - ax * bx - ay * by - az * bz,
+             aw * bx + ax * bw + ay * bz - az * by,
+             aw * by - ax * bz + ay * bw + az * bx,
+             aw * bz + ax * by - ay * bx + az * bw)
+    if out is None:
+        return parts
+    for dst, part in zip(out, parts):
+        dst[...] = part
+    return tuple(out)
 
 
 def conjugate(q: np.ndarray) -> np.ndarray:

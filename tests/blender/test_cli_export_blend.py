@@ -25,9 +25,9 @@ from crowd_addon.demo.stadium import setup_crowd
 setup_crowd(bpy.context.scene, hits=2, slots=16)
 bpy.context.preferences.filepaths.save_version = 0
 bpy.ops.wm.save_as_mainfile(filepath=sys.argv[2])
-from crowd_addon.blender import registration
+from crowd_addon.blender.cli_commands import crowd_command
 # what `blender -b scene.blend -c crowd export ...` runs
-rc = registration._crowd_cli(["export", "--out", sys.argv[3], "--frames", "1-12"])
+rc = crowd_command(["export", "--out", sys.argv[3], "--frames", "1-12"])
 print("RC", rc)
 """
 

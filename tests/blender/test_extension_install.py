@@ -58,7 +58,7 @@ SCRIPT = textwrap.dedent("""
         baked = sorted(bpy.ops.crowd.bake())
         preview = sys.modules[name + ".crowd_addon.blender.preview"]
         handle = preview.draw_handle()
-        agents = preview.get(scene).crowd.N
+        agents = preview.get(scene).crowd.agents.count
         bpy.ops.preferences.addon_disable(module=name)
         try:
             bpy.types.SpaceView3D.draw_handler_remove(handle, "WINDOW")

@@ -1,15 +1,16 @@
-"""The numpy F-curve evaluator against Blender's own ``FCurve.evaluate``."""
+"""The numpy F-curve evaluator (crowd_addon.core.fcurve) against Blender's own
+``FCurve.evaluate``: Blender is the oracle, so these tests need bpy."""
 
 import numpy as np
 
-from crowd_addon.blender import fcurve_eval
 from crowd_addon.blender.action_data import read_action
 from crowd_addon.blender.armature import skeleton_from_armature
+from crowd_addon.core import fcurve
 
 HANDLE_TYPES = ("FREE", "AUTO_CLAMPED", "AUTO", "VECTOR", "ALIGNED")
 
 
-def pack(fcurves) -> fcurve_eval.CurveSet:
+def pack(fcurves) -> fcurve.CurveSet:
     """Every key, interpolation and handle of ``fcurves`` packed as the bake packs them."""
     counts = [len(fc.keyframe_points) for fc in fcurves]
     start = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
@@ -22,7 +23,7 @@ def pack(fcurves) -> fcurve_eval.CurveSet:
         kp.foreach_get("handle_left", left[a:b].reshape(-1))
         kp.foreach_get("handle_right", right[a:b].reshape(-1))
     linear = np.array([fc.extrapolation == "LINEAR" for fc in fcurves])
-    return fcurve_eval.CurveSet(co, ipo, left, right, start, linear)
+    return fcurve.CurveSet(co, ipo, left, right, start, linear)
 
 
 def random_curve(bag, rng, index):
@@ -55,7 +56,7 @@ def test_random_curves_match_blender(scene, blend):
         x = packed.co[packed.start[c]:packed.start[c + 1], 0]
         t = np.concatenate([rng.uniform(x[0] - 6, x[-1] + 6, 60), x, x + 0.5,
                             np.round(rng.uniform(x[0] - 2, x[-1] + 2, 10))]).astype(np.float32)
-        got = fcurve_eval.evaluate(packed, t, [c])[0]
+        got = fcurve.evaluate(packed, t, [c])[0]
         want = np.array([fc.evaluate(float(v)) for v in t], np.float32)
         np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-6, err_msg=f"curve {c}")
 
@@ -72,8 +73,8 @@ def test_curves_keyed_alike_are_evaluated_together(scene, blend):
     packed = pack(fcs)
     assert sorted(len(g) for g in packed.groups(range(5))) == [1, 4]
     t = np.linspace(-2, 16, 97, dtype=np.float32)
-    together = fcurve_eval.evaluate(packed, t)
-    alone = np.concatenate([fcurve_eval.evaluate(packed, t, [c]) for c in range(5)])
+    together = fcurve.evaluate(packed, t)
+    alone = np.concatenate([fcurve.evaluate(packed, t, [c]) for c in range(5)])
     np.testing.assert_array_equal(together, alone)
     want = np.array([[fc.evaluate(float(v)) for v in t] for fc in fcs], np.float32)
     np.testing.assert_allclose(together, want, atol=2e-6)
@@ -96,10 +97,10 @@ def test_only_curves_it_reproduces_take_the_numpy_path(scene, blend):
     src = read_action(obj, sk, action, fps=24, scene_fps=24, slot=slot)
     fast = {bc.fcurve: f for bc, f in zip(src.curves, src.fast)}
     assert fast == {plain: True, eased: True, noisy: False, cycled: True}
-    assert (src.keys.ipo == fcurve_eval.LINEAR).all()        # on keys: nothing more read
+    assert (src.keys.ipo == fcurve.LINEAR).all()        # on keys: nothing more read
     action.use_frame_range = True
     action.frame_start, action.frame_end = 1, 15                     # Cycles now repeats
     src = read_action(obj, sk, action, fps=48, scene_fps=24, slot=slot)
     fast = {bc.fcurve: f for bc, f in zip(src.curves, src.fast)}
     assert fast == {plain: True, eased: False, noisy: False, cycled: False}
-    assert (src.keys.ipo[:10] == fcurve_eval.BEZIER).all()
+    assert (src.keys.ipo[:10] == fcurve.BEZIER).all()

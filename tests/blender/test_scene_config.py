@@ -221,23 +221,9 @@ def test_config_carries_settings_mesh_uniques_and_agents(rig_scene):
 @pytest.mark.parametrize("setup, message", [
     (lambda s, a: setattr(s, "armature", None), r"scene '.*': no armature chosen"),
     (lambda s, a: cs.add_stream(s, "walk", None), r"stream 'walk': node 'clip': no action"),
-    (lambda s, a: cs.add_node(cs.add_stream(s, "w", a["walk"]), "mix", "BLEND2",
-                              ["clip", "nope"]),
-     r"stream 'w': node 'mix': input 1 \('nope'\) names unknown node 'nope'"),
-    (lambda s, a: _root(cs.add_stream(s, "w", a["walk"]), "mix",
-                        cs.add_node, "BLEND2", ["clip"]),
-     r"stream 'w': node 'mix': a blend2 needs 2 inputs, it has 1"),
-    (lambda s, a: _root(cs.add_stream(s, "w", a["walk"]), "loop", cs.add_node, "BLEND2",
-                        ["clip", "loop"]), r"stream 'w': node 'loop': cycle loop -> loop"),
-    (lambda s, a: _root(cs.add_stream(s, "w", a["walk"]), "l", cs.add_node, "LAYER",
-                        ["clip", "clip"], mask_source="BONES", mask_bones="arm.L, tail"),
-     r"stream 'w': node 'l': skeleton 'Rig' has no bone 'tail'"),
     (lambda s, a: _root(cs.add_stream(s, "w", a["walk"]), "l", cs.add_node, "LAYER",
                         ["clip", "clip"], mask_source="COLLECTION", mask_collection="Legs"),
      r"armature 'Rig' has no bone collection 'Legs'"),
-    (lambda s, a: _root(cs.add_stream(s, "w", a["walk"]), "sm", cs.add_node,
-                        "STATE_MACHINE", [("a", "clip"), ("a", "clip")]),
-     r"node 'sm': state names must be unique"),
     (lambda s, a: (cs.add_stream(s, "w", a["walk"]), cs.add_stream(s, "w", a["idle"])),
      r"stream names must be unique and not empty \('w'\)"),
     (lambda s, a: (cs.add_stream(s, "w", a["walk"]), setattr(s, "lod_far", 20.0)),
@@ -246,6 +232,8 @@ def test_config_carries_settings_mesh_uniques_and_agents(rig_scene):
      r"Crowd settings: Cards From \(90 m\) must be farther than LOD 2 From \(90 m\)"),
 ])
 def test_bad_scenes_name_what_is_at_fault(rig_scene, setup, message):
+    """Scene-level faults; the graph's own (unknown inputs, input counts, cycles, masks
+    of unknown bones, state names) are tested in tests/core/test_controller_graph.py."""
     scene, _rig, acts = rig_scene
     setup(scene.crowd, acts)
     with pytest.raises(CrowdError, match=message):
@@ -334,7 +322,7 @@ def test_the_modal_bake_steps_on_timer_events_and_cancels_on_esc(rig_scene):
     op = _FakeOperator(scene)
     results = [op.modal(bpy.context, timer) for _ in range(5)]
     assert results == [{"RUNNING_MODAL"}] * 4 + [{"FINISHED"}]
-    assert preview.get(scene).crowd.S == 2 and "2 clips" in op.reports[-1][1]
+    assert preview.get(scene).crowd.streams.count == 2 and "2 clips" in op.reports[-1][1]
     scene.crowd.streams[1].nodes[0].action = None
     op = _FakeOperator(scene)
     assert op.modal(bpy.context, timer) == {"CANCELLED"}

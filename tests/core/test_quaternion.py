@@ -107,6 +107,19 @@ def test_multiply_broadcasts():
             np.testing.assert_allclose(out[i, j], hamilton_ref(a[i, 0], b[0, j]), atol=1e-15)
 
 
+def test_multiply_parts_on_components_and_into_views():
+    """The component-major product (used on (4, F, B) channels and on the strided
+    rotation views of packed poses) is the same product, written into ``out``."""
+    a, b = random_quats(12, 7).astype(np.float32), random_quats(12, 8).astype(np.float32)
+    parts = quat.multiply_parts(a.T, b.T)
+    assert len(parts) == 4 and parts[0].dtype == np.float32
+    np.testing.assert_array_equal(np.stack(parts, -1), quat.multiply(a, b))
+    packed = np.zeros((12, 10), np.float32)                    # SQT rows, rotation 3:7
+    out = quat.multiply_parts(a.T, b.T, out=[packed[:, c] for c in range(3, 7)])
+    np.testing.assert_array_equal(packed[:, 3:7], np.stack(parts, -1))
+    assert np.shares_memory(out[0], packed) and not packed[:, :3].any()
+
+
 def test_conjugate_is_inverse():
     q = random_quats(20, 7)
     np.testing.assert_allclose(quat.multiply(q, quat.conjugate(q)),

@@ -1,6 +1,7 @@
 """Blender's keyframe F-curve evaluation, vectorised over curves and sample times.
 
-Pure numpy (no bpy): the arrays come from ``keyframe_points.foreach_get``. The
+Pure numpy: the Blender side (``crowd_addon.blender.action_data``) reads the arrays
+with ``keyframe_points.foreach_get`` and packs them into a :class:`CurveSet`. The
 arithmetic follows Blender's ``fcurve.cc`` (``fcurve_eval_keyframes``,
 ``BKE_fcurve_correct_bezpart``, ``findzero``/``solve_cubic``, ``berekeny``) step
 by step, in float32 where Blender uses ``float`` and float64 where it uses
@@ -23,7 +24,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["CurveSet", "CONSTANT", "LINEAR", "BEZIER", "evaluate", "evaluate_frames"]
+from .errors import CrowdError
+
+__all__ = ["CurveSet", "CONSTANT", "LINEAR", "BEZIER", "evaluate", "evaluate_frames",
+           "check_finite"]
 
 CONSTANT, LINEAR, BEZIER = 0, 1, 2      # Keyframe.interpolation enum values
 _SNAP = np.float32(1e-4)                # BKE_fcurve_bezt_binarysearch_index_ex threshold
@@ -109,6 +113,25 @@ class CurveSet:
                 found.setdefault(b"".join(p[i].tobytes() for p in parts), []).append(r)
             out.extend(np.array(g, np.int64) for g in found.values())
         return out
+
+
+def check_finite(values: np.ndarray, start: np.ndarray, curve_label, part: str) -> None:
+    """Raise a :class:`CrowdError` at the first key of packed ``values`` that is not
+    finite.
+
+    values : (N, 2) float32 packed per key (``co`` or a handle), rows
+        ``start[c]:start[c + 1]`` belonging to curve ``c``; start : (C + 1,) int64.
+    curve_label : ``curve_label(c)`` -> str naming curve ``c`` in the message
+        (e.g. ``"action 'Walk', bone 'leg', location[1]"``).
+    part : what a row is, e.g. ``"key"`` or ``"left handle of key"``.
+    """
+    finite = np.isfinite(values).all(1)
+    if finite.all():
+        return
+    row = int(np.argmax(~finite))
+    c = int(np.searchsorted(start, row, side="right") - 1)
+    raise CrowdError(f"{curve_label(c)}: {part} {row - start[c]} is not finite "
+                     f"({values[row].tolist()})")
 
 
 def evaluate(curves: CurveSet, times, which=None) -> np.ndarray:
