@@ -130,16 +130,13 @@ def blend_weighted(poses: np.ndarray, weights: np.ndarray) -> np.ndarray:
 
 
 def _qmul(a, b, out, conj_a=False):
-    """Hamilton product of the rotations of SQT poses into ``out[..., ROT]``,
-    component by component (inner loops run over bones, not over 4 components)."""
+    """Hamilton product of the rotations of SQT poses into ``out[..., ROT]`` (of ``a``'s
+    conjugate with ``conj_a``), component by component."""
     aw, ax, ay, az = (a[..., c] for c in (3, 4, 5, 6))
     if conj_a:
         ax, ay, az = -ax, -ay, -az
-    bw, bx, by, bz = (b[..., c] for c in (3, 4, 5, 6))
-    out[..., 3] = aw * bw - ax * bx - ay * by - az * bz
-    out[..., 4] = aw * bx + ax * bw + ay * bz - az * by
-    out[..., 5] = aw * by - ax * bz + ay * bw + az * bx
-    out[..., 6] = aw * bz + ax * by - ay * bx + az * bw
+    quat.multiply_parts((aw, ax, ay, az), [b[..., c] for c in (3, 4, 5, 6)],
+                        out=[out[..., c] for c in (3, 4, 5, 6)])
     return out
 
 
