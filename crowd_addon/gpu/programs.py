@@ -11,13 +11,15 @@ into the create-info calls for Blender's ``gpu`` module.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
+from importlib import resources
 
 __all__ = ["SHADER_DIR", "Interface", "ProgramSpec", "CROWD_DRAW", "SKIN_ROWS",
            "ROW_UPLOAD", "AGENT_TEXELS", "SKIN_GROUP", "UPLOAD_GROUP"]
 
-#: gpu_shaders/ at the repository (and extension) root.
-SHADER_DIR = Path(__file__).resolve().parents[2] / "gpu_shaders"
+#: gpu_shaders/ (importlib.resources): the resource package beside crowd_addon, at the
+#: top of the repository, of a wheel and of the Blender extension (there it is
+#: ``bl_ext.<repo>.crowd_animation.gpu_shaders``, as crowd_addon is ``...crowd_addon``).
+SHADER_DIR = resources.files(".".join(__name__.split(".")[:-3] + ["gpu_shaders"]))
 
 #: RGBA32F texels per agent in the instance texture (gpu_shaders/agents.glsl).
 AGENT_TEXELS = 2
