@@ -171,21 +171,30 @@ def wrap(crowd) -> CrowdHandle:
 
 # ------------------------------------------------------------------- in Blender
 _SCENES: dict = {}
+#: ``() -> scene name`` of the context scene; the extension installs it when it registers
+#: (:func:`set_context_scene`), so this module needs no ``bpy``.
+_context_scene = None
+
+
+def set_context_scene(fn) -> None:
+    """Install ``fn() -> str | None`` (the context scene's name) used when a call names
+    no scene; None removes it."""
+    global _context_scene
+    _context_scene = fn
 
 
 def _scene_name(scene) -> str:
     if isinstance(scene, str):
         return scene
-    if scene is None:
-        try:
-            import bpy
-        except ImportError:
-            raise CrowdError("no scene given and bpy is not available; use api.wrap(crowd) "
-                             "outside Blender") from None
-        scene = bpy.context.scene
-        if scene is None:
-            raise CrowdError("no scene given and the context has none")
-    return scene.name
+    if scene is not None:
+        return scene.name
+    if _context_scene is None:
+        raise CrowdError("no scene given and no Blender context (the extension is not "
+                         "registered); use api.wrap(crowd) outside Blender")
+    name = _context_scene()
+    if name is None:
+        raise CrowdError("no scene given and the context has none")
+    return name
 
 
 def scene_crowd(scene=None) -> CrowdHandle:

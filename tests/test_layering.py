@@ -31,7 +31,6 @@ TEMPORARY_ALLOWED_EDGES = set()
 # moves behind a function of crowd_addon.blender or becomes a stated exception in
 # tests/layering.py. A new Blender-API import anywhere else fails now.
 TEMPORARY_ALLOWED_BLENDER_API = {
-    "crowd_addon.api -> bpy",                   # api._scene_name: bpy.context.scene
     "crowd_addon.demo.run -> bpy",              # run_demo: opens the built stadium
     "crowd_addon.demo.stadium -> bpy",          # setup_crowd / stadium_config
     "crowd_addon.gpu.blender_gpu -> bpy",       # init_headless_gpu (background mode)

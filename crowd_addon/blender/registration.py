@@ -47,12 +47,14 @@ def register():
         _remove_menu_entries(menu, fn)
         getattr(bpy.types, menu).append(fn)
     cli_commands.register_command()
+    api.set_context_scene(_context_scene_name)
 
 
 def unregister():
     cli_commands.unregister_command()
     preview.stop_all()
     api.detach_all()
+    api.set_context_scene(None)
     for menu, fn in MENUS:
         _remove_menu_entries(menu, fn)
     for name, fn in HANDLERS:
@@ -64,6 +66,12 @@ def unregister():
     for cls in reversed(CLASSES):
         if cls.is_registered:
             bpy.utils.unregister_class(cls)
+
+
+def _context_scene_name():
+    """The context scene's name (for :mod:`crowd_addon.api` calls that name none)."""
+    scene = bpy.context.scene
+    return None if scene is None else scene.name
 
 
 def _menu_entries(menu, fn) -> list:
