@@ -1,7 +1,7 @@
 """GPU frame cost at the paper's configuration (Paduraru s.5), on whatever GL is here.
 
 256 streams, M = 60, 800 transition slots kept busy (27 requests a frame, 30-frame
-blends), skinned and blended by the compute shader (``Crowd(config, gpu_skinning=True)``:
+blends), skinned and blended by the compute shader (``Crowd(config, skinning="gpu")``:
 the CPU uploads local poses, paper s.4.5),
 82-bone ``core.synthetic`` humanoid with ``humanoid_mesh``; agents on a 0.9 m grid
 seen by the camera that frames the whole crowd (``gpu.camera.frame_crowd``).
@@ -45,6 +45,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 from crowd_addon.core import ClipPlayer, Crowd, CrowdConfig  # noqa: E402
 from crowd_addon.core.mesh import CARD  # noqa: E402
 from crowd_addon.core.synthetic import humanoid, humanoid_mesh, periodic_clip  # noqa: E402
+from crowd_addon.gpu.backends import BACKENDS, make_renderer  # noqa: E402
 from crowd_addon.gpu.camera import frame_crowd  # noqa: E402
 
 STREAMS, M, SLOTS, BONES = 256, 60, 800, 82
@@ -68,55 +69,18 @@ def build(agents: int, lods: bool) -> Crowd:
                    headings=rng.uniform(-0.4, 0.4, agents) - np.pi / 2)
     mesh = humanoid_mesh(sk)
     cfg.add_mesh(mesh, lods=(0.25, 0.06, CARD) if lods else ())
-    return Crowd(cfg, gpu_skinning=True)
-
-
-# ------------------------------------------------------------------- backends
-class ModernGL:
-    name = "moderngl"
-
-    def __init__(self):
-        import moderngl
-        self.ctx = moderngl.create_standalone_context(backend="egl", require=430)
-        self.device = self.ctx.info["GL_RENDERER"]
-
-    def renderer(self, crowd, size):
-        from crowd_addon.gpu.moderngl_backend import ModernGLRenderer
-        return ModernGLRenderer(crowd, self.ctx, size)
-
-    def finish(self, renderer):
-        self.ctx.finish()
-
-
-class Blender:
-    name = "blender"
-
-    def __init__(self):
-        import bpy  # noqa: F401
-        import gpu
-
-        from crowd_addon.gpu.blender_backend import init_headless_gpu
-        init_headless_gpu()
-        self.device = gpu.platform.renderer_get()
-
-    def renderer(self, crowd, size):
-        from crowd_addon.gpu.blender_backend import BlenderGPURenderer
-        return BlenderGPURenderer(crowd, size)
-
-    def finish(self, renderer):
-        with renderer.framebuffer.bind():          # a read waits for the GPU
-            renderer.framebuffer.read_color(0, 0, 1, 1, 4, 0, "UBYTE")
+    return Crowd(cfg, skinning="gpu")
 
 
 # -------------------------------------------------------------------- measuring
 def request(crowd, rng):
     """Keep the slots busy; returns how many transitions started now."""
-    r = crowd.transition_to_streamed(rng.integers(0, crowd.N, PER_FRAME),
+    r = crowd.transition_to_streamed(rng.integers(0, crowd.agents.count, PER_FRAME),
                                      int(rng.integers(STREAMS)), BLEND)
     return int(r.started.size)
 
 
-def frames(backend, crowd, renderer, camera, count, rng, warm=40) -> dict:
+def frames(crowd, renderer, camera, count, rng, warm=40) -> dict:
     """``warm`` frames to fill the slots (no draw, then one draw), then ``count``
     measured frames."""
     if warm:
@@ -125,9 +89,9 @@ def frames(backend, crowd, renderer, camera, count, rng, warm=40) -> dict:
             crowd.step()
             renderer.sync()
         renderer.render(camera)
-        backend.finish(renderer)
+        renderer.finish()
     step, gpu, sent, minimum, vertices = [], [], [], [], 0
-    st = crowd.storage
+    row_bytes = crowd.view.layout.row_texels * 16
     for _ in range(count):
         started = request(crowd, rng)
         t0 = time.perf_counter()
@@ -135,20 +99,20 @@ def frames(backend, crowd, renderer, camera, count, rng, warm=40) -> dict:
         t1 = time.perf_counter()
         stats = renderer.sync()
         renderer.render(camera)
-        backend.finish(renderer)
+        renderer.finish()
         t2 = time.perf_counter()
         step.append((t1 - t0) * 1e3)
         gpu.append((t2 - t1) * 1e3)
         sent.append(stats.upload_bytes)
         started += report.transitions_started
-        minimum.append((crowd.S + crowd.U + started) * st.row_bytes
-                       + 16 * (crowd.S + crowd.U + report.transitions_active)
+        own = crowd.streams.count + crowd.uniques.count
+        minimum.append((own + started) * row_bytes + 16 * (own + report.transitions_active)
                        + 32 * (started + report.transitions_finished))
         vertices = renderer.stats.vertices
     return {"step_ms": statistics.median(step), "gpu_ms": statistics.median(gpu),
             "bytes": int(statistics.median(sent)), "minimum": int(statistics.median(minimum)),
             "vertices": vertices, "active": report.transitions_active,
-            "lods": {g.lod: g.count for g in renderer.lists.groups}}
+            "lods": {g.lod: g.count for g in renderer.plan.lists.groups}}
 
 
 PROTOTYPE_VS = """#version 430 core
@@ -199,13 +163,14 @@ class Prototype:
     def __init__(self, ctx, crowd, camera, size):
         from crowd_addon.gpu.proxies import proxy_buffers
         buf = proxy_buffers(crowd.config.meshes["fan"][0])
-        st = crowd.storage
-        self.ctx, self.count = ctx, crowd.N
-        self.vertices = crowd.N * buf.vertex_count
-        self.pose = ctx.texture((st.width, st.height), 4, st.texture_image().tobytes(),
+        view = crowd.view
+        lay = view.layout
+        self.ctx, self.count = ctx, view.agent_count
+        self.vertices = view.agent_count * buf.vertex_count
+        self.pose = ctx.texture((lay.width, lay.height), 4, view.texture_image().tobytes(),
                                 dtype="f4")
-        rows = crowd.agent_rows_index() % st.height
-        inst = np.c_[crowd.agent_position[:, :2], crowd.agent_heading, rows].astype("f4")
+        rows = view.agent_rows_index() % lay.height
+        inst = np.c_[crowd.agents.position[:, :2], crowd.agents.heading, rows].astype("f4")
         self.prog = ctx.program(vertex_shader=PROTOTYPE_VS.replace(
             "INFLUENCES", str(buf.influences)), fragment_shader=PROTOTYPE_FS)
         self.prog["u_view_proj"].write(np.asarray(camera.view_projection, "f4").T.tobytes())
@@ -240,36 +205,39 @@ def throughput(backend, size, rounds, rng) -> dict:
     figures under the same load): the plain prototype, this renderer's draw alone,
     and one real frame (request, step, sync, draw; the rate counts sync + draw)."""
     crowd = build(THROUGHPUT_AGENTS, lods=False)
-    r = backend.renderer(crowd, size)
+    r = make_renderer(crowd.view, backend, size)
+    print(f"gpu_frame: {backend} on {r.device}, {size[0]}x{size[1]}, {STREAMS} streams, "
+          f"M={M}, {SLOTS} slots busy, {BONES} bones, GPU skinning", flush=True)
     camera = frame_crowd(crowd, aspect=size[0] / size[1])
-    frames(backend, crowd, r, camera, 1, rng)                  # fill the slots, warm up
-    proto = Prototype(backend.ctx, crowd, camera, size) if isinstance(backend, ModernGL) \
-        else None
+    frames(crowd, r, camera, 1, rng)                           # fill the slots, warm up
+    ctx = getattr(r, "ctx", None)                 # a moderngl context: the prototype too
+    proto = Prototype(ctx, crowd, camera, size) if ctx is not None else None
     best = dict.fromkeys(("prototype", "draw_only", "real_work", "prototype_vertex_stage",
                           "draw_vertex_stage"), 0.0)
 
     def draw_rate():
         t = time.perf_counter()
         r.render(camera)
-        backend.finish(r)
+        r.finish()
         return r.stats.vertices / (time.perf_counter() - t)
 
     for _ in range(rounds):
         if proto is not None:
             best["prototype"] = max(best["prototype"], proto.vertices / proto.seconds())
         best["draw_only"] = max(best["draw_only"], draw_rate())
-        real = frames(backend, crowd, r, camera, 1, rng, warm=0)
+        real = frames(crowd, r, camera, 1, rng, warm=0)
         best["real_work"] = max(best["real_work"], real["vertices"] / real["gpu_ms"] * 1e3)
         if proto is not None:          # the vertex stage alone: rasterizer discard
-            backend.ctx.enable(backend.ctx.RASTERIZER_DISCARD)
+            ctx.enable(ctx.RASTERIZER_DISCARD)
             best["prototype_vertex_stage"] = max(best["prototype_vertex_stage"],
                                                  proto.vertices / proto.seconds())
             best["draw_vertex_stage"] = max(best["draw_vertex_stage"], draw_rate())
-            backend.ctx.disable(backend.ctx.RASTERIZER_DISCARD)
+            ctx.disable(ctx.RASTERIZER_DISCARD)
     if proto is not None:
         proto.release()
+    device = r.device
     r.release()
-    return best
+    return best, device
 
 
 def sizes(backend, size, quick, rng) -> dict:
@@ -281,10 +249,9 @@ def sizes(backend, size, quick, rng) -> dict:
             if agents == 65_000 and not lods and quick:
                 continue
             crowd = build(agents, lods)
-            r = backend.renderer(crowd, size)
+            r = make_renderer(crowd.view, backend, size)
             count = n_on if lods else max(1, n_off - (agents == 65_000))
-            res = frames(backend, crowd, r, frame_crowd(crowd, aspect=size[0] / size[1]),
-                         count, rng)
+            res = frames(crowd, r, frame_crowd(crowd, aspect=size[0] / size[1]), count, rng)
             r.release()
             table[agents, lods] = res
             print(f"  {agents:>6} agents, LODs {'on ' if lods else 'off'}: "
@@ -299,15 +266,13 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true",
                     help="smoke run: fewer frames, no 65k full-mesh frame")
-    ap.add_argument("--backend", choices=("moderngl", "blender"), default="moderngl")
+    ap.add_argument("--backend", choices=BACKENDS, default="moderngl")
     ap.add_argument("--size", default="960x540", help="image WIDTHxHEIGHT (default 960x540)")
     args = ap.parse_args(argv)
     size = tuple(int(v) for v in args.size.lower().split("x"))
-    backend = ModernGL() if args.backend == "moderngl" else Blender()
+    backend = args.backend
     rng = np.random.default_rng(7)
-    print(f"gpu_frame: {backend.name} on {backend.device}, {size[0]}x{size[1]}, {STREAMS} "
-          f"streams, M={M}, {SLOTS} slots busy, {BONES} bones, GPU skinning", flush=True)
-    best = throughput(backend, size, 3 if args.quick else 5, rng)
+    best, device = throughput(backend, size, 3 if args.quick else 5, rng)
     proto, raw, real = best["prototype"] or None, best["draw_only"], best["real_work"]
     limit = proto or raw
     print(f"  skinned vertices/s, {THROUGHPUT_AGENTS:,} agents x 2,058 vertices, best of "
@@ -328,7 +293,7 @@ def main(argv=None):
     print(f"  65,000 agents with LODs: {fps:.1f} fps GPU side, {fps_all:.1f} fps with "
           f"Crowd.step: {'met' if fps >= 10 else 'NOT met'} (target >= 10 fps)")
     print(json.dumps({
-        "backend": backend.name, "device": backend.device, "size": list(size),
+        "backend": backend, "device": device, "size": list(size),
         "prototype_vertices_per_s": proto, "draw_only_vertices_per_s": raw,
         "real_work_vertices_per_s": real, "real_work_fraction": real / limit,
         "vertex_stage_prototype_per_s": best["prototype_vertex_stage"] or None,

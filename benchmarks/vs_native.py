@@ -15,7 +15,7 @@ sides), frame after frame through ``scene.frame_set``:
 * crowd: the extension registered, the scene's Crowd settings authored as an animator
   would (FanRig, FanBody, one stream playing the action, an agent-source mesh of N
   vertices with an INT ``offset`` attribute), the preview started
-  (``preview.start``: bake, ``Crowd(config, gpu_skinning=True)``). A frame is ``scene.frame_set(f)``
+  (``preview.start``: bake, ``Crowd(config, skinning="gpu")``). A frame is ``scene.frame_set(f)``
   (the preview's frame-change handler steps the crowd) and ``preview.draw_scene``
   (the viewport draw handler's own function: renderer sync + draw with whatever
   renderer the viewport would use here) into a bound ``gpu.types.GPUOffScreen``
@@ -224,8 +224,8 @@ def crowd_scene(blend, action, n):
     src.stream_mode, src.stream_name = "FIXED", "play"
     src.offset_mode, src.offset_attribute = "ATTRIBUTE", "offset"
     pv = preview.start(scene)
-    if pv.crowd.N != n:
-        fail(f"crowd: {pv.crowd.N} agents built from {n} points")
+    if pv.crowd.agents.count != n:
+        fail(f"crowd: {pv.crowd.agents.count} agents built from {n} points")
     if not np.array_equal(np.asarray(pv.crowd.config.agent_offset), offsets(n)):
         fail("crowd: the agents' offsets are not the ones written on the points")
     return scene, pv
@@ -289,7 +289,8 @@ def run_crowd(blend, action, n, frames, size):
             draw.append(b)
         r = pv.renderer
         renderer = type(r).__name__
-        stats, lists = getattr(r, "stats", None), getattr(r, "lists", None)
+        stats = getattr(r, "stats", None)
+        lists = getattr(getattr(r, "plan", None), "lists", None)
         vertices = getattr(stats, "vertices", None)
         lods = {int(g.lod): int(g.count) for g in lists.groups} if lists is not None else None
     finally:

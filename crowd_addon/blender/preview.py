@@ -2,14 +2,13 @@
 
 One :class:`Preview` per scene (by name) holds the core ``Crowd`` built from the
 scene (:mod:`.scene_config`) and, once a viewport has drawn, a renderer in Blender's
-GPU context:
+GPU context (``crowd_addon.gpu.backends.make_renderer(view, "viewport")`` chooses):
 
-* OpenGL backend: the moderngl renderer attached to Blender's context
-  (``crowd_addon.gpu.moderngl_backend.ModernGLRenderer.attach``), drawing into the
-  framebuffer the viewport has bound;
-* another backend (Metal, Vulkan): the ``gpu``-module renderer when the GPU package
-  provides one (``crowd_addon.gpu.blender_backend.BlenderGPURenderer``);
-* neither: nothing is drawn, and :attr:`Preview.draw_error` says why (the panel shows it).
+* OpenGL backend: the moderngl renderer attached to Blender's context, drawing into
+  the framebuffer the viewport has bound;
+* another backend (Metal, Vulkan): the ``gpu``-module renderer;
+* when it cannot be made or draw, nothing is drawn, and :attr:`Preview.draw_error`
+  says why (the panel shows it).
 
 The crowd follows ``scene.frame_current``; going backwards re-simulates from the start
 (deterministic, ``Crowd.advance_to``) without reporting the replayed frames' events
@@ -102,11 +101,11 @@ def start(scene, config=None) -> Preview:
             config = scene_config.config_from_scene(scene)
     if s.armature is None:
         raise CrowdError(f"scene {scene.name!r}: no armature chosen")
-    crowd = Crowd(config, gpu_skinning=True)
+    crowd = Crowd(config, skinning="gpu")
     pv = Preview(scene.name, crowd, s.armature.name,
                  tuple(a.name for a in scene_config.used_actions(s)),
                  settings_fingerprint(s))
-    if crowd.N and not config.meshes:
+    if crowd.agents.count and not config.meshes:
         pv.draw_error = "no proxy mesh chosen: agents run but are not drawn"
     old = _PREVIEWS.pop(scene.name, None)
     if old is not None:
@@ -283,34 +282,18 @@ class _ViewCamera:
         return np.array(self.matrix, np.float64)
 
 
-def _make_renderer(crowd):
-    import gpu
-    backend = gpu.platform.backend_type_get()
-    if backend == "OPENGL":
-        try:
-            from ..gpu.moderngl_backend import ModernGLRenderer
-        except ImportError as e:
-            raise CrowdError(f"the moderngl renderer is not available ({e})") from None
-        return ModernGLRenderer.attach(crowd, size=(4, 4))
-    try:
-        from ..gpu.blender_backend import BlenderGPURenderer
-    except ImportError:
-        raise CrowdError(f"the viewport uses the {backend} GPU backend: moderngl needs "
-                         "OpenGL and no gpu-module renderer is installed") from None
-    return BlenderGPURenderer(crowd)
-
-
 def draw_scene(scene, view_matrix, projection_matrix) -> bool:
     """Draw the scene's crowd into the framebuffer bound now, seen through the 4x4
     world->view and view->clip matrices; returns whether anything was drawn. Errors
     are kept in :attr:`Preview.draw_error` and stop further drawing (never raised)."""
     pv = _PREVIEWS.get(scene.name)
-    if pv is None or pv.draw_error or pv.crowd.N == 0:
+    if pv is None or pv.draw_error or pv.crowd.agents.count == 0:
         return False
     t0 = time.perf_counter()
     try:
         if pv.renderer is None:
-            pv.renderer = _make_renderer(pv.crowd)
+            from ..gpu.backends import make_renderer
+            pv.renderer = make_renderer(pv.crowd.view, "viewport")
         view = np.array(view_matrix, np.float64)
         cam = _ViewCamera(tuple(map(tuple, (np.array(projection_matrix, np.float64)
                                             @ view).tolist())))

@@ -188,7 +188,8 @@ class AgentState:
 
     Readers (a renderer's instance texture, a recorder) keep a cursor and ask
     :meth:`changes_since` for the agents changed since, so nobody compares N-sized
-    arrays per frame.
+    arrays per frame. The log keeps the newest ``max(N, 4096)`` logged ids; a reader
+    whose cursor is older than what was forgotten is told to read every agent.
     """
 
     def __init__(self, position, heading, color):
@@ -201,7 +202,8 @@ class AgentState:
         self._offset = np.zeros(self.count, np.int64)
         self._serial = 1
         self._floor = 1                   # a cursor below this reads "everything"
-        self._log = []                    # (serial, agents, moved)
+        self._log = []                    # (serial, agents, moved); serials consecutive
+        self._head = 0                    # the oldest entry still kept
         self._logged = 0
         self._keys = None
         self.index = None
@@ -228,7 +230,7 @@ class AgentState:
             self.index = AgentIndex(self._keys(np.arange(self.count)))
         self._serial += 1
         self._floor = self._serial
-        self._log, self._logged = [], 0
+        self._log, self._head, self._logged = [], 0, 0
 
     def set_animation(self, agents, kind, ref, offset=None):
         """Agents ``agents`` (k,) now play ``(kind, ref)`` (scalars or (k,) arrays), at
@@ -280,7 +282,9 @@ class AgentState:
         """The agents changed after ``cursor`` (0 for a new reader)."""
         if cursor < self._floor:
             return AgentChanges(None, True, self._serial)
-        new = [(a, m) for s, a, m in self._log if s > cursor]
+        kept = len(self._log) - self._head
+        start = self._head + max(0, cursor - (self._serial - kept))
+        new = [(a, m) for _, a, m in self._log[start:]]
         if not new:
             return AgentChanges(np.zeros(0, np.int64), False, self._serial)
         agents = np.unique(np.concatenate([a for a, _ in new]))
@@ -292,9 +296,15 @@ class AgentState:
         self._serial += 1
         self._log.append((self._serial, agents.copy(), bool(moved)))
         self._logged += agents.size
-        if self._logged > max(self.count, 4096):        # readers far behind: read all
-            self._floor = self._serial
-            self._log, self._logged = [], 0
+        limit = max(self.count, 4096)
+        while self._logged > limit:          # forget the oldest: their readers read all
+            serial, dropped, _ = self._log[self._head]
+            self._head += 1
+            self._logged -= dropped.size
+            self._floor = serial
+        if self._head > 1024 and 2 * self._head > len(self._log):
+            del self._log[:self._head]
+            self._head = 0
 
 
 def _read_only(a: np.ndarray) -> np.ndarray:

@@ -1,13 +1,15 @@
-"""Crowd renderers (DESIGN.md s.2): instanced skinning from the pose texture.
+"""Crowd renderers: instanced skinning from the pose texture.
 
-One shader source (``gpu_shaders/``), two backends: :mod:`.moderngl_backend`
-(headless EGL, or attached to a current GL context) and Blender's ``gpu`` module,
-both fed by :mod:`.assembler` from the declarations in :mod:`.programs`. The data
-the backends upload is prepared here without any GL: :mod:`.instances` (per-agent
-texture), :mod:`.draw_lists` (culling and LOD per agent, one draw per skeleton and
-LOD), :mod:`.proxies` (proxy meshes as vertex arrays), :mod:`.skeleton_data`
-(transition shader inputs); :mod:`.camera` frames a crowd and :mod:`.png` writes
-images. Importing this package imports neither moderngl nor bpy.
+One shader source (``gpu_shaders/``, declared in :mod:`.programs`, assembled by
+:mod:`.assembler`), one frame sequence, two backends. A renderer reads a crowd only
+through its ``FrameView`` (``crowd.view``). :mod:`.frame_plan` works out, without
+any GPU API, what each frame needs -- textures, upload regions, the agent rows that
+changed (:mod:`.instances`), draw lists and LODs (:mod:`.draw_lists`), proxy meshes
+(:mod:`.proxies`), the skinning batch (:mod:`.skeleton_data`), uniforms, statistics;
+:class:`.renderer.CrowdRenderer` runs it over a backend's primitives
+(:mod:`.moderngl_backend`, :mod:`.blender_backend`); :func:`.backends.make_renderer`
+picks the backend. :mod:`.camera` frames a crowd and :mod:`.png` writes images.
+Importing this package imports neither moderngl nor bpy.
 """
 
 from .camera import Camera, frame_crowd, frame_points, look_at, perspective

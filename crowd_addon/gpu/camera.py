@@ -101,7 +101,7 @@ def frame_points(lo, hi, aspect=16 / 9, fov_y=np.radians(40.0), azimuth=np.radia
 def frame_crowd(crowd, **kwargs) -> Camera:
     """:func:`frame_points` around every agent's bind-pose proxy (or a 2 m box per agent
     when the crowd has no proxies)."""
-    pos = np.asarray(crowd.agent_position, np.float64)
+    pos = np.asarray(crowd.agents.position, np.float64)
     meshes = [levels[0] for levels in crowd.config.meshes.values() if levels]
     if meshes:
         ext = np.concatenate([m.extent for m in meshes]).astype(np.float64)

@@ -23,7 +23,7 @@ import numpy as np
 from ..core.errors import CrowdError
 from .texture_region import TextureRegion
 
-__all__ = ["DrawGroup", "DrawLists", "capture_mesh", "lod_levels", "frustum_planes",
+__all__ = ["DrawGroup", "DrawLists", "lod_levels", "frustum_planes",
            "proxy_bounds", "view_distances", "REFERENCE_FOCAL_PX"]
 
 REFERENCE_FOCAL_PX = 540.0 / np.tan(np.radians(20.0))
@@ -145,20 +145,3 @@ class DrawLists:
         rows = max(1, -(-order.size // self.width))
         return [TextureRegion(0, 0, self.width, rows, self.image[:rows])]
 
-
-def capture_mesh(crowd, lists, meshes, agents, lod):
-    """Check a vertex read-back request (``skinned_positions`` of either backend):
-    ``agents`` (ids of one skeleton) and ``lod``; returns ``(agent ids as int64,
-    meshes[(skeleton, lod)])``. Raises CrowdError naming what is wrong."""
-    agents = np.asarray(agents, np.int64).reshape(-1)
-    if agents.size == 0 or agents.min() < 0 or agents.max() >= crowd.N:
-        raise CrowdError(f"skinned_positions: agent ids must be in 0..{crowd.N - 1}")
-    skel = np.unique(lists.agent_skeleton[agents])
-    if skel.size != 1:
-        raise CrowdError("skinned_positions: the agents use several skeletons; ask for "
-                         "one skeleton's agents at a time")
-    key = (int(skel[0]), int(lod))
-    if key not in meshes:
-        raise CrowdError(f"skinned_positions: skeleton {crowd.skeletons[key[0]].name!r} "
-                         f"has no LOD {lod}")
-    return agents, meshes[key]

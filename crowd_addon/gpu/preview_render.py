@@ -1,8 +1,8 @@
 """Offline preview: a saved crowd rendered headless to a PNG sequence and an MP4.
 
 :func:`render_preview` steps a core ``Crowd`` frame by frame, draws it with one of
-the two backends (moderngl on EGL, or Blender's ``gpu`` module after
-:func:`~.blender_gpu.init_headless_gpu`) through a fixed camera that frames the
+the two headless backends (:func:`~.backends.make_renderer`: moderngl on EGL, or
+Blender's ``gpu`` module) through a fixed camera that frames the
 whole crowd (:func:`~.camera.frame_crowd`), writes ``frame_<F>.png`` per frame
 (``F`` the crowd frame, at least four digits) and, when asked, ``preview.mp4``
 (H.264 through ``imageio-ffmpeg``, at the crowd's fps). The ``crowd preview``
@@ -20,13 +20,12 @@ import numpy as np
 
 from ..core.crowd import Crowd
 from ..core.errors import CrowdError
+from .backends import BACKENDS, make_renderer
 from .camera import frame_crowd
 from .png import write_png
 
 __all__ = ["PreviewResult", "render_preview", "output_dir", "BACKENDS", "MAX_SIZE"]
 
-#: Renderers ``render_preview`` can use.
-BACKENDS = ("moderngl", "blender")
 #: Largest image side accepted, in pixels (the usual GL_MAX_TEXTURE_SIZE).
 MAX_SIZE = 16384
 _PNG_LEVEL = 3                       # zlib level: near level 6 in size, much faster
@@ -86,25 +85,6 @@ def output_dir(path) -> Path:
     return out
 
 
-def _renderer(backend, crowd, size):
-    """(renderer, device name) of ``backend``."""
-    if backend == "moderngl":
-        try:
-            from .moderngl_backend import ModernGLRenderer
-        except ImportError as e:
-            raise CrowdError(f"backend moderngl needs the moderngl package ({e})") from None
-        r = ModernGLRenderer.standalone(crowd, size)
-        return r, r.ctx.info["GL_RENDERER"]
-    try:
-        import bpy  # noqa: F401  (Blender as a module brings the gpu module)
-    except ImportError:
-        raise CrowdError("backend blender needs the bpy module (pip install bpy)") from None
-    import gpu
-    from .blender_backend import BlenderGPURenderer, init_headless_gpu
-    init_headless_gpu()
-    return BlenderGPURenderer(crowd, size), gpu.platform.renderer_get()
-
-
 def _mp4_writer(path, size, fps):
     try:
         import imageio_ffmpeg
@@ -135,11 +115,12 @@ def render_preview(config, out_dir, frames: int, start: int | None = None,
     out = _check(config, out_dir, int(frames), (w, h), mp4, backend)
     t0 = time.perf_counter()
     seconds = dict.fromkeys(("simulate", "sync", "render", "write"), 0.0)
-    crowd = crowd or Crowd(config, gpu_skinning=True)
+    crowd = crowd or Crowd(config, skinning="gpu")
     if start is not None:
         crowd.reset(int(start))
     seconds["simulate"] += time.perf_counter() - t0
-    renderer, device = _renderer(backend, crowd, (w, h))
+    renderer = make_renderer(crowd.view, backend, (w, h))
+    device = renderer.device
     camera = camera or frame_crowd(crowd, aspect=w / h)
     mp4_path = out / "preview.mp4" if mp4 else None
     partial = out / ".preview.partial.mp4"
@@ -182,5 +163,5 @@ def render_preview(config, out_dir, frames: int, start: int | None = None,
         renderer.release()
     seconds["total"] = time.perf_counter() - t0
     return PreviewResult((first, crowd.frame), pngs, None if mp4_path is None else
-                         str(mp4_path), (w, h), crowd.N, backend, device,
+                         str(mp4_path), (w, h), crowd.agents.count, backend, device,
                          int(np.median(uploads)), seconds)

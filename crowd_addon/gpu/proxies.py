@@ -16,8 +16,8 @@ import numpy as np
 
 from ..core.errors import CrowdError
 
-__all__ = ["ProxyBuffers", "proxy_buffers", "crowd_proxies", "agent_skeletons",
-           "copies_per_instance", "INTERLEAVED_FORMAT"]
+__all__ = ["ProxyBuffers", "proxy_buffers", "crowd_proxies", "copies_per_instance",
+           "INTERLEAVED_FORMAT"]
 
 #: (attribute, moderngl format, bytes) of :meth:`ProxyBuffers.interleaved`, in order.
 INTERLEAVED_FORMAT = (("pos", "3f", 12), ("nor", "3f", 12), ("bone_idx", "4u2", 8),
@@ -87,22 +87,14 @@ def proxy_buffers(mesh) -> ProxyBuffers:
                         .reshape(-1))
 
 
-def agent_skeletons(crowd) -> np.ndarray:
-    """(N,) skeleton index (into ``crowd.skeletons``) of each agent; fixed for an agent's
-    life, since transitions stay within a skeleton."""
-    cfg = crowd.config
-    st, un = np.asarray(cfg.agent_stream), np.asarray(cfg.agent_unique)
-    return np.asarray(crowd.root_skeleton)[np.where(st >= 0, st, crowd.S + un)]
-
-
-def crowd_proxies(crowd) -> list:
-    """Per skeleton of ``crowd.skeletons``, its LOD list of :class:`ProxyBuffers` (empty
-    for a skeleton no agent uses). A skeleton that agents use but that has no proxy
-    mesh (``CrowdConfig.add_mesh``) is an error naming it."""
-    used = np.unique(agent_skeletons(crowd))
+def crowd_proxies(view) -> list:
+    """Per skeleton of ``view.skeletons`` (a crowd's ``FrameView``), its LOD list of
+    :class:`ProxyBuffers` (empty for a skeleton no agent uses). A skeleton that agents
+    use but that has no proxy mesh (``CrowdConfig.add_mesh``) is an error naming it."""
+    used = np.unique(view.agent_skeleton)
     out = []
-    for k, sk in enumerate(crowd.skeletons):
-        levels = crowd.config.meshes.get(sk.name, [])
+    for k, sk in enumerate(view.skeletons):
+        levels = view.config.meshes.get(sk.name, [])
         if k in used and not levels:
             raise CrowdError(f"skeleton {sk.name!r}: its agents need a proxy mesh to be "
                              "drawn (CrowdConfig.add_mesh)")

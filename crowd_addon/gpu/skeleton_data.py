@@ -33,7 +33,7 @@ def batch_image(rows: int) -> np.ndarray:
 
 
 def fill_batch(image: np.ndarray, batch) -> tuple:
-    """Write a ``Crowd.gpu_skinning_batch()`` into ``image`` as (row, source, S,
+    """Write a ``FrameView.take_skinning_batch()`` into ``image`` as (row, source, S,
     skeleton) texels; returns (entries, texel rows used). Row indices stay exact in
     float32 (a pose texture has far fewer than 2**24 rows)."""
     n = len(batch)

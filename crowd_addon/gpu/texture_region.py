@@ -16,12 +16,13 @@ __all__ = ["TextureRegion", "block_regions", "block_image", "stage_rows"]
 
 
 def block_regions(rows: np.ndarray, changed: np.ndarray, block_rows: int,
-                  max_regions: int = 16) -> list:
+                  max_regions: int | None = 16) -> list:
     """Regions of a block-laid texture covering the logical rows ``changed``.
 
     ``rows`` is the ``(R, row_texels, 4)`` row array. Runs of consecutive rows, split
-    at block boundaries, one region each; past ``max_regions`` runs, one region per
-    block from its first to its last changed row (fewer, larger writes).
+    at block boundaries, one region each; past ``max_regions`` runs (None: never),
+    one region per block from its first to its last changed row (fewer, larger
+    writes).
     """
     changed = np.unique(np.asarray(changed, np.int64))
     if changed.size == 0:
@@ -29,7 +30,7 @@ def block_regions(rows: np.ndarray, changed: np.ndarray, block_rows: int,
     block = changed // block_rows
     new_block = np.r_[True, block[1:] != block[:-1]]
     starts = np.flatnonzero(new_block | np.r_[True, np.diff(changed) != 1])
-    if starts.size > max_regions:
+    if max_regions is not None and starts.size > max_regions:
         starts = np.flatnonzero(new_block)
     ends = np.r_[starts[1:], changed.size] - 1
     texels = rows.shape[1]
@@ -54,7 +55,7 @@ def block_image(rows: np.ndarray, block_rows: int, blocks: int) -> np.ndarray:
 
 def stage_rows(regions) -> tuple:
     """``(staging (n, row_texels, 4) float32, rows (n,) int32)``: the rows of ``regions``
-    (block-laid, whole rows, e.g. ``Crowd.take_upload_regions()``) stacked for the
+    (block-laid, whole rows, e.g. ``FrameView.take_upload_regions()``) stacked for the
     row upload shader (``gpu_shaders/row_upload_comp.glsl``)."""
     regions = list(regions)
     if not regions:

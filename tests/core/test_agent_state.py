@@ -149,3 +149,18 @@ def test_the_log_covers_every_change_a_diff_would_find():
         moved = ((now[3] != last[3]).any(1) | (now[4] != last[4])).any()
         assert ch.moved or not moved
         last = [x.copy() for x in now]
+
+
+def test_an_up_to_date_reader_never_rereads_everything():
+    """The log forgets its oldest entries, not the newest: a reader that keeps up gets
+    only what changed however long the session (a regression: the whole log was
+    dropped past N ids and every reader re-sent every agent)."""
+    a = state(100)
+    fast = slow = a.changes_since(0).cursor
+    for i in range(20_000):
+        a.set_animation([i % 100, (i * 7) % 100], STREAM, i % 3)
+        ch = a.changes_since(fast)
+        assert ch.agents is not None and ch.agents.size in (1, 2)
+        fast = ch.cursor
+    assert a.changes_since(slow).agents is None           # fell behind: read everything
+    assert len(a._log) < 10_000                           # the forgotten are freed

@@ -46,8 +46,9 @@ def streamed(make):
     st = crowd.storage
     for f in range(3):
         if f == 1:
-            crowd.agent_position[[0, 5]] += np.float32([0.5, -0.25, 0.1])
-            crowd.agent_heading[7] += 1.0
+            crowd.place_agents([0, 5], position=crowd.agents.position[[0, 5]]
+                               + np.float32([0.5, -0.25, 0.1]))
+            crowd.place_agents([7], heading=crowd.agents.heading[[7]] + 1.0)
         crowd.step()
         dirty = st.dirty_ranges()
         stats = r.sync()
@@ -56,7 +57,7 @@ def streamed(make):
         out[f"ref/rows{f}"] = np.array(sum(n for _, n in dirty))
         out[f"gpu/texture{f}"] = r.read_pose_texture()
         out[f"ref/texture{f}"] = st.texture_image()
-        _positions(out, f"frame{f}", r, crowd, np.arange(crowd.N))
+        _positions(out, f"frame{f}", r, crowd, np.arange(crowd.agents.count))
     out["ref/row_bytes"] = np.array(st.row_bytes)
     return out
 
@@ -74,9 +75,9 @@ def unique(make):
     return out
 
 
-def transitions(make, gpu_skinning):
+def transitions(make, skinning):
     """Agents blending towards a stream and a unique, three frames."""
-    crowd = c.Crowd(c.make_config(NT=4), gpu_skinning=gpu_skinning)
+    crowd = c.Crowd(c.make_config(NT=4), skinning=skinning)
     r, out = make(crowd, None), {}
     crowd.step()
     r.sync()
@@ -96,7 +97,7 @@ def lods(make):
     crowd.step()
     r.sync()
     for lod in range(len(crowd.config.meshes["fan"])):
-        _positions(out, f"lod{lod}", r, crowd, np.arange(0, crowd.N, 3), lod)
+        _positions(out, f"lod{lod}", r, crowd, np.arange(0, crowd.agents.count, 3), lod)
     return out
 
 
@@ -113,7 +114,7 @@ def wrapped(make, max_texture_size):
     out["gpu/blocks"] = np.array(crowd.storage.blocks)
     r.render(frame_crowd(crowd, aspect=SIZE[0] / SIZE[1]))
     out["gpu/image"] = r.read_image()
-    _positions(out, "all", r, crowd, np.arange(crowd.N))
+    _positions(out, "all", r, crowd, np.arange(crowd.agents.count))
     return out
 
 
@@ -126,6 +127,6 @@ def image(make):
         r.sync()
     r.render(frame_crowd(crowd, aspect=SIZE[0] / SIZE[1]))
     out["gpu/image"] = r.read_image()
-    out["gpu/lod"] = r.lists.lod.copy()
+    out["gpu/lod"] = r.plan.lists.lod.copy()
     return out
 

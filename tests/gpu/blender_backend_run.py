@@ -44,14 +44,15 @@ def viewport(make):
     buf.dimensions = w * h * 4
     image = np.frombuffer(buf, np.uint8).reshape(h, w, 4)[::-1]
     offscreen.free()
-    return {"gpu/image": image, "ref/image": own["gpu/image"], "gpu/lod": r.lists.lod,
+    return {"gpu/image": image, "ref/image": own["gpu/image"], "gpu/lod": r.plan.lists.lod,
             "ref/lod": own["gpu/lod"]}
 
 
 def main(path):
     import bpy  # noqa: F401  (Blender as a module; its gpu module comes with it)
     from crowd_addon.core import CrowdError
-    from crowd_addon.gpu.blender_backend import BlenderGPURenderer, init_headless_gpu
+    from crowd_addon.gpu.blender_backend import BlenderGPURenderer
+    from crowd_addon.gpu.blender_gpu import init_headless_gpu
     try:
         init_headless_gpu()
     except CrowdError as e:
@@ -59,12 +60,12 @@ def main(path):
         sys.exit(NO_GPU)
 
     def make(crowd, size):
-        return BlenderGPURenderer(crowd, size=size)
+        return BlenderGPURenderer(crowd.view, size=size)
 
     runs = {"streamed": lambda: scenes.streamed(make),
             "unique": lambda: scenes.unique(make),
-            "transitions_cpu": lambda: scenes.transitions(make, False),
-            "transitions_gpu": lambda: scenes.transitions(make, True),
+            "transitions_cpu": lambda: scenes.transitions(make, "cpu"),
+            "transitions_gpu": lambda: scenes.transitions(make, "gpu"),
             "lods": lambda: scenes.lods(make),
             "flat": lambda: scenes.wrapped(make, 16384),
             "wrapped": lambda: scenes.wrapped(make, 256),

@@ -64,11 +64,11 @@ def world_reference(crowd, agents, mesh):
     agents = np.asarray(agents)
     local = skin_vertices(mesh.positions, mesh.bone_indices, mesh.bone_weights,
                           crowd.agent_rows(agents))
-    h = crowd.agent_heading[agents].astype(np.float64)[:, None]
+    h = crowd.agents.heading[agents].astype(np.float64)[:, None]
     c, s = np.cos(h), np.sin(h)
     x, y = local[..., 0], local[..., 1]
     world = np.stack([c * x - s * y, s * x + c * y, local[..., 2]], -1)
-    return world + crowd.agent_position[agents].astype(np.float64)[:, None]
+    return world + crowd.agents.position[agents].astype(np.float64)[:, None]
 
 
 def assert_close_relative(actual, expected, rtol=1e-4):
@@ -95,7 +95,7 @@ def renderer(gl):
     made = []
 
     def build(crowd, size=(160, 120), **kw):
-        made.append(ModernGLRenderer(crowd, gl, size, **kw))
+        made.append(ModernGLRenderer(crowd.view, gl, size, **kw))
         return made[-1]
     yield build
     for r in made:

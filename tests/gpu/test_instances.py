@@ -10,16 +10,16 @@ from crowd_addon.gpu.texture_region import block_regions
 
 def test_records_hold_each_agents_placement_reference_and_colour(h):
     crowd = h.Crowd(h.make_config(agents=40))
-    inst = InstanceData(crowd, max_texture_size=16)
+    inst = InstanceData(crowd.view, max_texture_size=16)
     assert (inst.width, inst.height) == (6, 16)           # three column blocks
     rec = inst.records
-    np.testing.assert_array_equal(rec[:, 0, :3], crowd.agent_position)
-    np.testing.assert_array_equal(rec[:, 0, 3], crowd.agent_heading)
-    np.testing.assert_array_equal(rec[:, 1, :3], np.c_[crowd.agent_kind, crowd.agent_ref,
-                                                       crowd.agent_offset])
+    np.testing.assert_array_equal(rec[:, 0, :3], crowd.agents.position)
+    np.testing.assert_array_equal(rec[:, 0, 3], crowd.agents.heading)
+    np.testing.assert_array_equal(rec[:, 1, :3], np.c_[crowd.agents.kind, crowd.agents.ref,
+                                                       crowd.agents.offset])
     rgb = rec[:, 1, 3].astype(np.int64)
     decoded = np.stack([rgb >> 16, (rgb >> 8) & 255, rgb & 255], 1) / 255
-    np.testing.assert_allclose(decoded, crowd.agent_color, atol=0.5 / 255 + 1e-7)
+    np.testing.assert_allclose(decoded, crowd.agents.color, atol=0.5 / 255 + 1e-7)
     image = inst.texture_image()
     np.testing.assert_array_equal(image[37 % 16, 2 * (37 // 16):2 * (37 // 16) + 2], rec[37])
 
@@ -35,12 +35,13 @@ def test_updates_cover_only_changed_agents(h, renderer):
     crowd.step()
     assert r.sync().instance_bytes == 0
     res = crowd.transition_to_streamed([5, 17], "s1", 4)
-    assert (crowd.agent_kind[res.started] == TRANSITION).all()
+    assert (crowd.agents.kind[res.started] == TRANSITION).all()
     crowd.step()
     stats = r.sync()
     assert stats.instance_bytes == 2 * 2 * 16          # two agents, two RGBA32F texels
-    inst = r.instances
-    texture = np.frombuffer(r.agent_tex.read(), np.float32).reshape(inst.height, inst.width, 4)
+    inst = r.plan.instances
+    texture = np.frombuffer(r.textures["agents"].read(), np.float32).reshape(inst.height,
+                                                                           inst.width, 4)
     np.testing.assert_array_equal(texture, inst.texture_image())
     np.testing.assert_array_equal(inst.records[[5, 17], 1, 0], TRANSITION)
 

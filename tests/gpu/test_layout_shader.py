@@ -93,17 +93,18 @@ def test_row_upload_shader_keeps_pose_and_agent_textures_equal_to_core(gl, h):
     assert st.blocks == 3
     program = gl.compute_shader(gl_sources(ROW_UPLOAD)["compute_shader"])
     pose = gl.texture((st.width, st.height), 4, dtype="f4")
-    agents = InstanceData(crowd, max_texture_size=16)
+    agents = InstanceData(crowd.view, max_texture_size=16)
     agent_tex = gl.texture((agents.width, agents.height), 4, agents.texture_image().tobytes(),
                            dtype="f4")                      # created whole, updated by rows
-    upload_rows(gl, program, pose, st.height, crowd.take_upload_regions())    # all rows
+    upload_rows(gl, program, pose, st.height, crowd.view.take_upload_regions())    # all rows
     for i in range(5):
         if i == 2:
             crowd.transition_to_unique([3, 30], "u0", 4)
         crowd.step()
-        sent = upload_rows(gl, program, pose, st.height, crowd.take_upload_regions())
-        assert sent == (crowd.S + crowd.U + int(crowd.slots.active.sum())) * st.row_bytes
-        sent = upload_rows(gl, program, agent_tex, agents.block_rows, agents.update(crowd))
+        sent = upload_rows(gl, program, pose, st.height, crowd.view.take_upload_regions())
+        rows = crowd.streams.count + crowd.uniques.count + int(crowd.slots.active.sum())
+        assert sent == rows * st.row_bytes
+        sent = upload_rows(gl, program, agent_tex, agents.block_rows, agents.update(crowd.view))
         assert sent == (2 * 32 if i == 2 else 0)        # the two agents that changed
     np.testing.assert_array_equal(np.frombuffer(pose.read(), np.float32).reshape(
         st.height, st.width, 4), st.texture_image())

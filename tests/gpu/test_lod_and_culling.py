@@ -30,7 +30,7 @@ def _expected_lod(crowd, camera, pixels_high, lod_distances):
     """LOD from the camera's definition: the agent looks as big as in the reference
     view (1080 px, 40 degrees) at its depth times the ratio of the focal lengths in
     pixels."""
-    depth = crowd.agent_position[:, 0] + 1.0
+    depth = crowd.agents.position[:, 0] + 1.0
     focal = 0.5 * pixels_high / np.tan(camera.fov_y / 2)
     seen = depth * (540.0 / np.tan(np.radians(20.0))) / focal
     return np.searchsorted(lod_distances, seen, side="right").clip(max=2)
@@ -44,12 +44,12 @@ def test_far_agents_are_drawn_with_the_coarse_mesh(h, renderer):
                                                       reverse=True)
     want = _expected_lod(crowd, camera, 120, (60.0, 150.0))
     assert set(want.tolist()) == {0, 1, 2}
-    np.testing.assert_array_equal(r.lists.lod, want)
-    assert {g.lod: g.count for g in r.lists.groups} == {k: int((want == k).sum()) for k in
+    np.testing.assert_array_equal(r.plan.lists.lod, want)
+    assert {g.lod: g.count for g in r.plan.lists.groups} == {k: int((want == k).sum()) for k in
                                                          range(3)}
     assert stats.vertices == sum(int((want == k).sum()) * levels[k].vertex_count
                                  for k in range(3))
-    assert stats.draws == 3 and stats.instances == crowd.N
+    assert stats.draws == 3 and stats.instances == crowd.agents.count
 
 
 def test_a_taller_image_or_a_longer_lens_keeps_detail_further(h, renderer):
@@ -60,17 +60,18 @@ def test_a_taller_image_or_a_longer_lens_keeps_detail_further(h, renderer):
     big = renderer(crowd, (320, 240))
     big.render(camera)
     want = _expected_lod(crowd, camera, 240, (60.0, 150.0))
-    np.testing.assert_array_equal(big.lists.lod, want)
-    assert (big.lists.lod <= small.lists.lod).all() and (big.lists.lod < small.lists.lod).any()
+    np.testing.assert_array_equal(big.plan.lists.lod, want)
+    coarse, fine = small.plan.lists.lod, big.plan.lists.lod
+    assert (fine <= coarse).all() and (fine < coarse).any()
     zoom = Camera(camera.eye, camera.target, 2 * np.arctan(np.tan(camera.fov_y / 2) / 2),
                   camera.aspect, far=100.0)
     small.render(zoom)
-    np.testing.assert_array_equal(small.lists.lod, want)
+    np.testing.assert_array_equal(small.plan.lists.lod, want)
     # the lists follow the target's height even when the camera stays
     fbo = small.ctx.simple_framebuffer((320, 240))
     try:
         assert small.render(camera, target=fbo).list_bytes > 0
-        np.testing.assert_array_equal(small.lists.lod, want)
+        np.testing.assert_array_equal(small.plan.lists.lod, want)
     finally:
         fbo.release()
 
@@ -96,10 +97,10 @@ def test_culling_drops_only_agents_outside_the_view(h, renderer):
     camera = Camera((5.0, 4.5, 1.5), (5.0, 30.0, 1.0), aspect=4 / 3)
     culled, full = renderer(crowd), renderer(crowd, culling=False)
     s_culled, s_full = culled.render(camera), full.render(camera)
-    behind = crowd.agent_position[:, 1] < 2.0
+    behind = crowd.agents.position[:, 1] < 2.0
     assert behind.any()
-    assert (culled.lists.lod[behind] == -1).all()
-    assert s_culled.instances < s_full.instances == crowd.N
+    assert (culled.plan.lists.lod[behind] == -1).all()
+    assert s_culled.instances < s_full.instances == crowd.agents.count
     np.testing.assert_array_equal(culled.read_image(), full.read_image())
 
 
@@ -113,7 +114,7 @@ def test_lists_are_rebuilt_only_when_the_camera_or_agents_move(h, renderer):
     crowd.step()
     r.sync()
     assert r.render(camera).list_bytes == 0
-    crowd.agent_position[3] += (0.5, 0.0, 0.0)
+    crowd.place_agents([3], position=crowd.agents.position[[3]] + (0.5, 0.0, 0.0))
     crowd.step()
     r.sync()
     assert r.render(camera).list_bytes > 0

@@ -51,7 +51,7 @@ def test_frame_crowd_keeps_every_agent_in_view(h):
     cam = frame_crowd(crowd, aspect=2.0)
     ext = crowd.config.meshes["fan"][0].extent
     corners = np.array(np.meshgrid(*ext.T)).reshape(3, -1).T
-    pts = (crowd.agent_position[:, None] + corners[None]).reshape(-1, 3)
+    pts = (crowd.agents.position[:, None] + corners[None]).reshape(-1, 3)
     ndc = project(cam.view_projection, pts)
     assert (np.abs(ndc) <= 1).all()
     assert np.abs(ndc[:, :2]).max() > 0.5            # and it is framed, not tiny

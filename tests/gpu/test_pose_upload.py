@@ -18,7 +18,7 @@ def test_upload_counter_equals_core_dirty_bytes_and_minimum(h, renderer):
         active = int(crowd.slots.active.sum())
         stats = r.sync()
         assert stats.pose_bytes == expected
-        assert stats.pose_bytes == (crowd.S + crowd.U + active) * row
+        assert stats.pose_bytes == (crowd.streams.count + crowd.uniques.count + active) * row
         assert stats.pose_bytes < st.nbytes / 4
 
 
@@ -38,7 +38,7 @@ def test_gpu_texture_equals_core_mirror_with_wrapped_rows(h, renderer):
 
 def test_gpu_skinning_uploads_local_rows_and_writes_the_pose_texture(h, renderer):
     crowd = h.Crowd(h.make_config(M=24, streams=24, NT=4, max_texture_size=256),
-                    gpu_skinning=True)
+                    skinning="gpu")
     cpu = h.Crowd(h.make_config(M=24, streams=24, NT=4, max_texture_size=256))
     assert crowd.storage.blocks > 1                     # wrapped rows on both textures
     r = renderer(crowd)
@@ -53,8 +53,9 @@ def test_gpu_skinning_uploads_local_rows_and_writes_the_pose_texture(h, renderer
         expected = st.dirty_bytes()
         stats = r.sync()
         assert (stats.pose_bytes, stats.local_bytes) == (0, expected)
-        assert stats.local_bytes == (crowd.S + crowd.U + started) * st.row_bytes
-        assert stats.skinned_rows == crowd.S + crowd.U + crowd.slots.active.sum()
+        own = crowd.streams.count + crowd.uniques.count
+        assert stats.local_bytes == (own + started) * st.row_bytes
+        assert stats.skinned_rows == own + crowd.slots.active.sum()
         # the rows the GPU wrote are the CPU crowd's pose texture rows
         gpu_rows = r.read_pose_texture()
         used = np.unique(cpu.agent_rows_index())

@@ -30,20 +30,20 @@ def cpu_reference_image(gl, h, crowd, camera, light):
     """Every agent skinned on the CPU (core.skin_vertices), uploaded as one static
     mesh and drawn with the crowd's own fragment shader."""
     mesh = crowd.config.meshes["fan"][0]
-    agents = np.arange(crowd.N)
+    agents = np.arange(crowd.agents.count)
     world = h.world_reference(crowd, agents, mesh)
     rows = crowd.agent_rows(agents)
     normals = skin_vertices(mesh.normals, mesh.bone_indices, mesh.bone_weights, rows) - \
         skin_vertices(np.zeros_like(mesh.normals), mesh.bone_indices, mesh.bone_weights, rows)
-    hd = crowd.agent_heading.astype(np.float64)[:, None]
+    hd = crowd.agents.heading.astype(np.float64)[:, None]
     c, s = np.cos(hd), np.sin(hd)
     normals = np.stack([c * normals[..., 0] - s * normals[..., 1],
                         s * normals[..., 0] + c * normals[..., 1], normals[..., 2]], -1)
-    color = np.rint(np.clip(crowd.agent_color, 0, 1) * 255) / 255
+    color = np.rint(np.clip(crowd.agents.color, 0, 1) * 255) / 255
     color = np.broadcast_to(color[:, None], world.shape)
     verts = np.concatenate([world, normals, color], -1).astype("f4").reshape(-1, 9)
     tris = (mesh.triangles[None].astype(np.int64)
-            + (np.arange(crowd.N) * mesh.vertex_count)[:, None, None]).astype("u4")
+            + (np.arange(crowd.agents.count) * mesh.vertex_count)[:, None, None]).astype("u4")
     prog = gl.program(vertex_shader=REFERENCE_VS,
                       fragment_shader=gl_sources(CROWD_DRAW, {"INFLUENCES": 4})
                       ["fragment_shader"])
@@ -110,7 +110,7 @@ def test_wrapped_pose_texture_renders_identically(h, renderer):
             r.sync()
         r.render(frame_crowd(crowd, aspect=SIZE[0] / SIZE[1]))
         images.append(r.read_image())
-        positions.append(r.skinned_positions(np.arange(crowd.N)))
+        positions.append(r.skinned_positions(np.arange(crowd.agents.count)))
     np.testing.assert_array_equal(images[0], images[1])
     np.testing.assert_array_equal(positions[0], positions[1])
 
@@ -124,9 +124,10 @@ def test_attached_context_renders_the_same_image(gl, h, renderer):
     target = gl.framebuffer(color_attachments=[gl.renderbuffer(SIZE, 4)],
                             depth_attachment=gl.depth_renderbuffer(SIZE))
     target.use()                          # what a viewport draw handler finds bound
-    attached = ModernGLRenderer.attach(h.Crowd(h.make_config()), SIZE)
+    other = h.Crowd(h.make_config())
+    attached = ModernGLRenderer.attach(other.view, SIZE)
     try:
-        attached.crowd.step()
+        other.step()
         attached.sync()
         attached.render(camera, target=attached.ctx.detect_framebuffer())
         image = np.frombuffer(target.read(components=4, alignment=1), np.uint8)

@@ -1,7 +1,7 @@
 """The skinning-rows compute shader (paper s.4.5) against core's CPU skinning.
 
 Two crowds from one configuration get the same requests; one skins and blends on
-the CPU, the other (``gpu_skinning=True``) uploads local poses and hands the rest to
+the CPU, the other (``skinning="gpu"``) uploads local poses and hands the rest to
 the GPU. Every frame the rows the shader wrote into the pose texture (the new
 history slice, the unique, the transition slots) must equal the CPU crowd's rows.
 Two skeletons of different sizes exercise the per-row skeleton and the end of a
@@ -48,6 +48,14 @@ def requests(crowd, i):
         crowd.transition_to_streamed([2], "walk", 3)            # re-target mid-blend
 
 
+def row_skeleton(crowd, row):
+    """Skeleton of a history or unique row (slice-major stream rows, then uniques)."""
+    lay = crowd.view.layout
+    if row < lay.unique_base:
+        return crowd.view.stream_skeleton[row % lay.streams]
+    return crowd.view.unique_skeleton[row - lay.unique_base]
+
+
 def _row(texture, st, row, bones):
     x, y = st.texel_of_row(row)
     return texture[y, x:x + 3 * bones].reshape(bones, 3, 4)
@@ -58,13 +66,13 @@ def _close(got, want):
 
 
 def test_gpu_rows_match_cpu_slice_unique_and_transition_rows(renderer):
-    cpu, gpu = Crowd(config()), Crowd(config(), gpu_skinning=True)
+    cpu, gpu = Crowd(config()), Crowd(config(), skinning="gpu")
     assert gpu.storage.blocks > 1
     r = renderer(gpu)
     st = cpu.storage
     texture = r.read_pose_texture()             # after the renderer's first batch
     for row in range(st.slot_base):             # the whole history and the unique
-        b = gpu.skeletons[gpu._row_skeleton[row]].bone_count
+        b = gpu.skeletons[row_skeleton(gpu, row)].bone_count
         assert _close(_row(texture, st, row, b), st.rows[row, :b]), row
     checked = 0
     for i in range(16):
@@ -74,15 +82,16 @@ def test_gpu_rows_match_cpu_slice_unique_and_transition_rows(renderer):
         stats = r.sync()
         active = cpu.slots.active_slots()
         np.testing.assert_array_equal(gpu.slots.active_slots(), active)
-        assert stats.skinned_rows == gpu.S + gpu.U + active.size
+        S = gpu.streams.count
+        assert stats.skinned_rows == S + gpu.uniques.count + active.size
         texture = r.read_pose_texture()
-        sl = gpu.frame % gpu.M
-        for row in [*range(sl * gpu.S, (sl + 1) * gpu.S), st.unique_base]:
-            b = gpu.skeletons[gpu._row_skeleton[row]].bone_count
+        sl = gpu.view.ring_slice
+        for row in [*range(sl * S, (sl + 1) * S), st.unique_base]:
+            b = gpu.skeletons[row_skeleton(gpu, row)].bone_count
             assert _close(_row(texture, st, row, b), st.rows[row, :b]), (i, row)
         for slot in active:
             kind, ref = gpu.slots.target_kind[slot], gpu.slots.target_ref[slot]
-            k = gpu.root_skeleton[ref if kind == 0 else gpu.S + ref]
+            k = (gpu.view.stream_skeleton if kind == 0 else gpu.view.unique_skeleton)[ref]
             b = gpu.skeletons[k].bone_count
             got = _row(texture, st, st.slot_base + slot, b)
             assert _close(got, st.rows[st.slot_base + slot, :b]), (i, slot)
@@ -92,7 +101,7 @@ def test_gpu_rows_match_cpu_slice_unique_and_transition_rows(renderer):
 
 def test_gpu_skinned_agents_render_like_the_cpu_crowd(renderer):
     """What is drawn (transform feedback) agrees too, for agents mid-transition."""
-    cpu, gpu = Crowd(config()), Crowd(config(), gpu_skinning=True)
+    cpu, gpu = Crowd(config()), Crowd(config(), skinning="gpu")
     rc, rg = renderer(cpu), renderer(gpu)
     agents = np.array([0, 2, 4, 20, 21, 25])
     for i in range(5):

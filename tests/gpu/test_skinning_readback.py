@@ -15,8 +15,8 @@ def test_streamed_agents_at_every_offset_match_cpu_skinning(h, renderer):
     for _ in range(3):
         crowd.step()
         r.sync()
-        agents = np.arange(crowd.N)
-        assert set(crowd.agent_offset[agents].tolist()) == set(range(crowd.M))
+        agents = np.arange(crowd.agents.count)
+        assert set(crowd.agents.offset[agents].tolist()) == set(range(crowd.streams.max_offset))
         gpu = r.skinned_positions(agents)
         h.assert_close_relative(gpu, h.world_reference(crowd, agents, mesh))
 
@@ -31,15 +31,15 @@ def test_unique_agents_match_cpu_skinning(h, renderer):
         crowd.step()
     r.sync()
     agents = np.array([1, 2, 5, 7, 9])
-    assert (crowd.agent_kind[agents] == UNIQUE).all()
+    assert (crowd.agents.kind[agents] == UNIQUE).all()
     mesh = cfg.meshes["fan"][0]
     h.assert_close_relative(r.skinned_positions(agents), h.world_reference(crowd, agents, mesh))
 
 
-@pytest.mark.parametrize("gpu_skinning", [False, True])
-def test_agents_mid_transition_match_cpu_skinning(h, renderer, gpu_skinning):
+@pytest.mark.parametrize("skinning", ["cpu", "gpu"])
+def test_agents_mid_transition_match_cpu_skinning(h, renderer, skinning):
     cfg = h.make_config(NT=4)
-    crowd = h.Crowd(cfg, gpu_skinning=gpu_skinning)
+    crowd = h.Crowd(cfg, skinning=skinning)
     r = renderer(crowd)
     crowd.step()
     r.sync()
@@ -50,7 +50,7 @@ def test_agents_mid_transition_match_cpu_skinning(h, renderer, gpu_skinning):
     for _ in range(3):
         crowd.step()
         r.sync()
-        assert (crowd.agent_kind[agents] == TRANSITION).all()
+        assert (crowd.agents.kind[agents] == TRANSITION).all()
         h.assert_close_relative(r.skinned_positions(agents),
                                 h.world_reference(crowd, agents, mesh))
 
@@ -61,7 +61,7 @@ def test_every_lod_is_skinned_like_its_mesh_on_the_cpu(h, renderer):
     r = renderer(crowd)
     crowd.step()
     r.sync()
-    agents = np.arange(0, crowd.N, 3)
+    agents = np.arange(0, crowd.agents.count, 3)
     for lod, mesh in enumerate(cfg.meshes["fan"]):
         gpu = r.skinned_positions(agents, lod=lod)
         assert gpu.shape == (agents.size, mesh.vertex_count, 3)

@@ -1,0 +1,180 @@
+"""The frame sequence every backend shares: :class:`CrowdRenderer`.
+
+A backend (:mod:`.moderngl_backend`, :mod:`.blender_backend`) subclasses
+:class:`CrowdRenderer` and implements only its primitives, all in its own GPU API:
+
+* ``_create_texture(spec)`` -- a texture from a :class:`~.frame_plan.TextureSpec`;
+* ``_write_rows(texture, block_rows, regions)`` -- whole rows of a block-laid
+  RGBA32F texture; returns the bytes sent;
+* ``_write_ints(texture, region)`` -- a rectangle of an R32I texture; returns bytes;
+* ``_create_mesh(buffers, copies)`` -- the GPU form of one proxy level;
+* ``_skin(work)`` -- the skinning-rows compute pass (:class:`~.frame_plan.SkinningWork`);
+  returns the batch bytes sent;
+* ``_bind_target(target, clear)`` -- a context manager: bind and clear a draw
+  target, set the draw state, yield the viewport's height in pixels, restore;
+* ``_draw(mesh, draw)`` -- one instanced call (:class:`~.frame_plan.Draw`);
+* ``_capture(mesh, capture)`` -- world positions of the crowd's vertex stage
+  (:class:`~.frame_plan.Capture`) as ``(n, V, 3)`` float32;
+* ``_read_texture(texture)`` -- a float texture's texels, flat float32;
+* ``read_image()``, ``finish()``, ``device``, ``_release()``.
+
+Everything else -- sizes, which texture gets which upload, the agent rows that
+changed, LOD groups, uniform values, statistics -- comes from the
+:class:`~.frame_plan.FramePlan`, in the order :meth:`CrowdRenderer.sync` and
+:meth:`CrowdRenderer.render` give here.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .frame_plan import FramePlan, FrameStats
+
+__all__ = ["CrowdRenderer", "BACKGROUND"]
+
+#: The default clear colour of :meth:`CrowdRenderer.render`.
+BACKGROUND = (0.62, 0.66, 0.72, 1.0)
+
+
+class CrowdRenderer:
+    """Draws one crowd by instanced skinning from the pose texture (subclasses supply
+    the GPU API, see the module docstring).
+
+    Parameters
+    ----------
+    view : the crowd's :class:`~crowd_addon.core.frame_view.FrameView` (``crowd.view``);
+        call :meth:`sync` after each ``crowd.step()``. The renderer consumes the
+        crowd's upload regions and skinning batches: one renderer per crowd.
+    max_texture_size : the GPU's largest texture side in texels.
+    light : (x, y, z, ambient): direction towards the light and ambient level.
+    culling : leave out agents outside the camera's view.
+    max_int : integers the backend's int texture writes keep exact (None: all int32).
+
+    Attributes
+    ----------
+    plan : the :class:`~.frame_plan.FramePlan` (draw lists, instance data, layout).
+    textures : ``{name: texture}`` of the plan's textures (``pose``, ``agents``,
+        ``lists``; with GPU skinning ``local`` and ``skeletons``).
+    meshes : ``{(skeleton, lod): mesh}``.
+    stats : :class:`~.frame_plan.FrameStats` of the last sync and render.
+    """
+
+    #: Most regions of agent rows written a frame (None: one per run of changed agents).
+    MAX_ROW_WRITES = None
+
+    def __init__(self, view, max_texture_size, light=(0.4, -0.6, 0.8, 0.35), culling=True,
+                 max_int=None):
+        self.view = view
+        self.culling = bool(culling)
+        self.light = tuple(float(v) for v in light)
+        self.stats = FrameStats()
+        self.plan = FramePlan(view, max_texture_size, max_int)
+        self.textures = {s.name: self._create_texture(s)
+                         for s in self.plan.take_initial_textures()}
+        self.meshes = {key: self._create_mesh(buf, copies)
+                       for key, (buf, copies) in self.plan.meshes().items()}
+        work = self.plan.take_skinning()          # GPU skinning: fill the pose texture
+        if work is not None:
+            self._skin(work)
+
+    # -------------------------------------------------------------------- frame
+    def sync(self) -> FrameStats:
+        """Bring the GPU up to the crowd's current frame: core's upload regions (pose
+        rows, or with GPU skinning local-pose rows), the rows of agents the crowd
+        changed, and with GPU skinning the skinning-rows pass; returns the bytes
+        sent (:attr:`stats`)."""
+        plan, s = self.plan, FrameStats()
+        written = self._write_rows(self.textures[plan.upload_target], plan.layout.height,
+                                   plan.take_pose_regions())
+        if plan.on_gpu:
+            s.local_bytes = written
+        else:
+            s.pose_bytes = written
+        s.instance_bytes = self._write_rows(self.textures["agents"],
+                                            plan.instances.block_rows,
+                                            plan.take_instance_regions(self.MAX_ROW_WRITES))
+        work = plan.take_skinning()
+        if work is not None:
+            s.batch_bytes, s.skinned_rows = self._skin(work), work.count
+        self.stats = s
+        return s
+
+    def render(self, camera, target=None, clear=BACKGROUND) -> FrameStats:
+        """Draw the crowd as seen by ``camera`` (anything with ``view_projection``
+        (4, 4), OpenGL clip space) into ``target`` (the backend's framebuffer type;
+        None: this renderer's offscreen image, or for a renderer without one the
+        framebuffer bound now). LODs follow the target's viewport height. ``clear``:
+        RGBA to clear colour and depth to first, None to draw over what is there."""
+        vp = np.asarray(camera.view_projection, np.float64)
+        s = self.stats
+        s.draws = s.instances = s.vertices = 0
+        with self._bind_target(target, clear) as pixels_high:
+            for region in self.plan.regroup(vp, pixels_high, self.culling):
+                s.list_bytes += self._write_ints(self.textures["lists"], region)
+            for draw in self.plan.draws(vp, self.light):
+                self._draw(self.meshes[draw.key], draw)
+                s.draws += 1
+                s.instances += draw.agents
+                s.vertices += draw.vertices
+        return s
+
+    # ---------------------------------------------------------------- read-back
+    def read_pose_texture(self) -> np.ndarray:
+        """The pose texture ``(height, width, 4)`` float32 as the GPU holds it."""
+        lay = self.plan.layout
+        return self._read_texture(self.textures["pose"]).reshape(lay.height, lay.width, 4)
+
+    def skinned_positions(self, agents, lod: int = 0) -> np.ndarray:
+        """World positions ``(n, V, 3)`` float32 of ``agents`` (all of one skeleton)
+        skinned by the draw program's vertex stage with LOD ``lod``."""
+        capture = self.plan.capture(agents, lod)
+        return self._capture(self.meshes[capture.key], capture)
+
+    def release(self):
+        """Free this renderer's GPU objects."""
+        self._release()
+        self.textures, self.meshes = {}, {}
+
+    # --------------------------------------------------------------- primitives
+    def _create_texture(self, spec):
+        raise NotImplementedError
+
+    def _write_rows(self, texture, block_rows, regions) -> int:
+        raise NotImplementedError
+
+    def _write_ints(self, texture, region) -> int:
+        raise NotImplementedError
+
+    def _create_mesh(self, buffers, copies):
+        raise NotImplementedError
+
+    def _skin(self, work) -> int:
+        raise NotImplementedError
+
+    def _bind_target(self, target, clear):
+        raise NotImplementedError
+
+    def _draw(self, mesh, draw):
+        raise NotImplementedError
+
+    def _capture(self, mesh, capture) -> np.ndarray:
+        raise NotImplementedError
+
+    def _read_texture(self, texture) -> np.ndarray:
+        raise NotImplementedError
+
+    def read_image(self) -> np.ndarray:
+        """The offscreen image ``(H, W, 4)`` uint8 RGBA, first row at the top."""
+        raise NotImplementedError
+
+    def finish(self):
+        """Wait until the GPU has done everything asked of it (for timing)."""
+        raise NotImplementedError
+
+    @property
+    def device(self) -> str:
+        """The GPU (or software renderer) the backend reports."""
+        raise NotImplementedError
+
+    def _release(self):
+        raise NotImplementedError
