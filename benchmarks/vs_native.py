@@ -403,7 +403,7 @@ def main(argv=None):
     except ImportError as e:
         fail(f"Blender's bpy module is needed ({e}); run with .venv/bin/python")
     from crowd_addon.core.errors import CrowdError
-    from crowd_addon.gpu.blender_gpu import init_headless_gpu
+    from crowd_addon.blender.headless_gpu import init_headless_gpu
 
     import crowd_addon
     if not hasattr(bpy.types.Scene, "crowd"):

@@ -33,7 +33,6 @@ TEMPORARY_ALLOWED_EDGES = set()
 TEMPORARY_ALLOWED_BLENDER_API = {
     "crowd_addon.demo.run -> bpy",              # run_demo: opens the built stadium
     "crowd_addon.demo.stadium -> bpy",          # setup_crowd / stadium_config
-    "crowd_addon.gpu.blender_gpu -> bpy",       # init_headless_gpu (background mode)
 }
 
 

@@ -24,10 +24,10 @@ def make_renderer(view, backend: str = "moderngl", size=(640, 360), **kwargs):
 
     * ``"moderngl"``: moderngl in a headless EGL context of its own (Mesa llvmpipe
       needs no GPU), drawing into an offscreen image of ``size`` (width, height);
-    * ``"blender"``: Blender's ``gpu`` module (through the ``bpy`` module, its GPU
-      initialised first when Blender runs in the background), with an offscreen
-      image of ``size``, or None to draw only into the framebuffer bound at render
-      time;
+    * ``"blender"``: Blender's ``gpu`` module, with an offscreen image of ``size``, or
+      None to draw only into the framebuffer bound at render time; in background mode
+      (the ``bpy`` module, ``blender -b``) call
+      ``crowd_addon.blender.headless_gpu.init_headless_gpu()`` first;
     * ``"viewport"``: inside the GPU context of Blender's viewport drawing now: the
       moderngl renderer attached to it when Blender draws with OpenGL (draw into
       ``renderer.ctx.detect_framebuffer()``), else the ``gpu``-module renderer
@@ -40,10 +40,9 @@ def make_renderer(view, backend: str = "moderngl", size=(640, 360), **kwargs):
         return _moderngl().standalone(view, size, **kwargs)
     if backend == "blender":
         try:
-            from .blender_gpu import init_headless_gpu
-            init_headless_gpu()
+            import gpu  # noqa: F401  (Blender's module: bpy or a Blender process)
         except ImportError:
-            raise CrowdError("backend blender needs the bpy module (pip install bpy)") \
+            raise CrowdError("backend blender needs Blender's gpu module (pip install bpy)") \
                 from None
         from .blender_backend import BlenderGPURenderer
         return BlenderGPURenderer(view, size, **kwargs)

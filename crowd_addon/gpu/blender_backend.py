@@ -3,7 +3,7 @@ in Blender's GPU API.
 
 It runs wherever Blender draws (OpenGL, Metal, Vulkan): from a ``SpaceView3D`` draw
 handler, into the framebuffer bound there, or into its own offscreen image (headless
-after :func:`.blender_gpu.init_headless_gpu`). Programs come from
+after ``crowd_addon.blender.headless_gpu.init_headless_gpu``). Programs come from
 :func:`.assembler.blender_create_info` through :func:`.blender_gpu.program`.
 
 What Blender's Python API lacks is worked around on the GPU:
@@ -81,6 +81,12 @@ class BlenderGPURenderer(CrowdRenderer):
     def __init__(self, view, size=None, light=(0.4, -0.6, 0.8, 0.35), culling=True):
         import gpu
         self.gpu = gpu
+        try:
+            gpu.types.GPUTexture((1, 1), format="RGBA8")
+        except Exception as e:       # noqa: BLE001 - Blender raises plain errors here
+            raise CrowdError(f"Blender gpu backend: the GPU cannot draw ({e}); in background "
+                             "mode call crowd_addon.blender.headless_gpu.init_headless_gpu() "
+                             "first") from None
         self.limit = gpu.capabilities.max_texture_size_get()
         self.size = None if size is None else (int(size[0]), int(size[1]))
         self.framebuffer = None

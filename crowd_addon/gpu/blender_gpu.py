@@ -17,11 +17,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.errors import CrowdError
 from .assembler import blender_create_info
 from .programs import CROWD_DRAW, UPLOAD_GROUP, ProgramSpec
 
-__all__ = ["UPLOAD_INTS", "CROWD_CAPTURE", "init_headless_gpu", "program", "use_program",
+__all__ = ["UPLOAD_INTS", "CROWD_CAPTURE", "program", "use_program",
            "float_texture", "read_buffer", "set_if_used"]
 
 #: An R32F block (exact integers below 2**24) written into an R32I texture at
@@ -50,33 +49,7 @@ CROWD_CAPTURE = ProgramSpec(
     defines=CROWD_DRAW.defines,
 )
 
-_READY = {"gpu": False}
 _PROGRAMS = {}          # (program, defines) -> GPUShader, compiled once a process
-
-
-def init_headless_gpu() -> None:
-    """Make Blender's ``gpu`` module usable in background mode (DESIGN.md s.6): one
-    8 x 8 Workbench render of a temporary scene, removed afterwards. Does nothing in
-    a Blender with a UI, or when already done in this process."""
-    import bpy
-    if _READY["gpu"] or not bpy.app.background:
-        return
-    scene = bpy.data.scenes.new("crowd_gpu_init")
-    cam = bpy.data.objects.new("crowd_gpu_init", bpy.data.cameras.new("crowd_gpu_init"))
-    try:
-        scene.collection.objects.link(cam)
-        scene.camera = cam
-        scene.render.engine = "BLENDER_WORKBENCH"
-        scene.render.resolution_x = scene.render.resolution_y = 8
-        bpy.ops.render.render(scene=scene.name)
-    except RuntimeError as e:
-        raise CrowdError(f"Blender gpu backend: the initialising render failed ({e})") from None
-    finally:
-        data = cam.data
-        bpy.data.objects.remove(cam)
-        bpy.data.cameras.remove(data)
-        bpy.data.scenes.remove(scene)
-    _READY["gpu"] = True
 
 
 def program(gpu, spec: ProgramSpec, defines: dict | None = None):

@@ -52,7 +52,7 @@ def main(path):
     import bpy  # noqa: F401  (Blender as a module; its gpu module comes with it)
     from crowd_addon.core import CrowdError
     from crowd_addon.gpu.blender_backend import BlenderGPURenderer
-    from crowd_addon.gpu.blender_gpu import init_headless_gpu
+    from crowd_addon.blender.headless_gpu import init_headless_gpu
     try:
         init_headless_gpu()
     except CrowdError as e:
