@@ -5,16 +5,16 @@ triggers), M = 60, 82 bones, 300 frames, synthetic clips and proxy mesh; a
 simulation makes a small share of the crowd react three times in the shot (30-frame
 blends to another stream), so those agents get their own baked animation.
 
-Prints, for 2,000 and 65,000 agents: export time (split into simulate / author /
-write) and bytes, and bytes relative to per-agent baked animation (each agent's own
-SkelAnimation over the shot, at this exporter's bytes per animation-frame; target
-< 5 %). Then the per-agent baseline: Blender's own ``bpy.ops.wm.usd_export`` of N
+Prints, for 2,000 and 65,000 agents (``--agents``): export time (the shot recorded
+once, then written: simulate / author / write), peak memory, bytes, and bytes
+relative to per-agent baked animation (each agent's own SkelAnimation over the
+shot, at this exporter's bytes per animation-frame; target < 5 %). Then the per-agent baseline: Blender's own ``bpy.ops.wm.usd_export`` of N
 armatures sharing one skinned mesh, each playing its stream's baked action through
 an NLA strip shifted by its offset (run in a child process; scaled per agent-frame),
 and the ratios of time and bytes per agent. Ends with one JSON line.
 
-    .venv/bin/python benchmarks/usd_export.py [--quick] [--blender-agents 24]
-        [--blender-frames 60] [--react 0.005] [--keep DIR]
+    .venv/bin/python benchmarks/usd_export.py [--quick] [--agents N ...] [--frames F]
+        [--blender-agents 24] [--blender-frames 60] [--react 0.005] [--keep DIR]
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import shutil
 import subprocess
 import sys
@@ -60,22 +61,27 @@ def reactions(share: float, seed: int = 7):
 
     def on_frame(crowd, frame):
         rel = frame - FIRST
+        n, streams = crowd.view.agent_count, len(crowd.view.stream_names)
         if rel in REACT_AT and share > 0:
-            who = rng.choice(crowd.N, max(1, int(crowd.N * share)), replace=False)
-            crowd.transition_to_streamed(who, int(rng.integers(crowd.S)), 30)
+            who = rng.choice(n, max(1, int(n * share)), replace=False)
+            crowd.transition_to_streamed(who, int(rng.integers(streams)), 30)
         if rel in (100, 200):
-            for s in range(3, crowd.S, 4):
+            for s in range(3, streams, 4):
                 crowd.set_trigger(s, "goal" if rel == 100 else "calm")
     return on_frame
 
 
 def run_export(agents: int, frames: int, react: float, directory: str) -> dict:
+    """Record the shot once (a crowd that skins nothing) and write it."""
+    from crowd_addon.core import Crowd
+    from crowd_addon.core.recording import record
     from crowd_addon.usd import export_crowd
 
     cfg = build(agents)
     t = time.perf_counter()
-    r = export_crowd(cfg, os.path.join(directory, "shot.usdc"), (FIRST, FIRST + frames - 1),
-                     on_frame=reactions(react))
+    shot = record(Crowd(cfg, skinning="gpu"), FIRST, FIRST + frames - 1,
+                  on_frame=reactions(react))
+    r = export_crowd(shot, os.path.join(directory, "shot.usdc"))
     seconds = time.perf_counter() - t
     stream_bytes = sum(v for k, v in r.files.items() if "/streams/" in k)
     per_anim_frame = stream_bytes / (r.stream_animations * (frames + M - 1))
@@ -88,7 +94,8 @@ def run_export(agents: int, frames: int, react: float, directory: str) -> dict:
             "stream_animations": r.stream_animations,
             "bytes_per_animation_frame": per_anim_frame,
             "per_agent_baked_bytes": per_agent_baked,
-            "bytes_vs_per_agent_baked": r.bytes / per_agent_baked}
+            "bytes_vs_per_agent_baked": r.bytes / per_agent_baked,
+            "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
 
 
 # ---------------------------------------------------------------- Blender baseline
@@ -96,16 +103,16 @@ def blender_baseline(agents: int, frames: int, directory: str) -> dict:
     """Bake the streams the first ``agents`` agents play (core, this process), then
     time Blender's exporter on them in a child process (bpy's own pxr)."""
     from crowd_addon.core import Crowd
-    from crowd_addon.usd.recorder import record_shot
+    from crowd_addon.core.recording import record
 
     cfg = build(agents, streams=agents)          # one stream each: no sharing to help it
-    crowd = Crowd(cfg)
     last = FIRST + frames - 1
-    shot = record_shot(crowd, np.arange(agents), FIRST, last)
+    shot = record(Crowd(cfg, skinning="gpu"), FIRST, last)
+    _, stream, offset = shot.playing(FIRST)
     sk = cfg.skeletons["fan"]
     mesh = cfg.meshes["fan"][0]
     npz = os.path.join(directory, "baseline.npz")
-    np.savez(npz, stream_poses=shot.stream_poses, stream=shot.stream, offset=shot.offset,
+    np.savez(npz, stream_poses=shot.stream_poses, stream=stream, offset=offset,
              position=shot.position, heading=shot.heading, parents=sk.parents,
              bind_model=sk.bind_model, bind_pose=sk.bind_pose,
              names=np.array(sk.bone_names), positions=mesh.positions,
@@ -203,6 +210,10 @@ def blender_worker(npz_path: str, out: str) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="smoke run: 2k agents, 30 frames")
+    ap.add_argument("--agents", type=int, nargs="+", default=[2000, 65000], metavar="N",
+                    help="crowd sizes to export (default: 2000 65000)")
+    ap.add_argument("--frames", type=int, default=FRAMES,
+                    help=f"shot length (default {FRAMES})")
     ap.add_argument("--react", type=float, default=0.005,
                     help="share of agents reacting at each of 3 moments (default 0.5%%)")
     ap.add_argument("--blender-agents", type=int, default=24)
@@ -213,7 +224,7 @@ def main() -> None:
     if args.blender_worker:
         blender_worker(*args.blender_worker)
         return
-    sizes = [(2000, 30)] if args.quick else [(2000, FRAMES), (65000, FRAMES)]
+    sizes = [(2000, 30)] if args.quick else [(n, args.frames) for n in args.agents]
     base = args.keep or tempfile.mkdtemp(prefix="usd_bench_")
     exports = []
     try:
@@ -226,7 +237,8 @@ def main() -> None:
                   f"(simulate {r['simulate_s']:.1f}, author {r['author_s']:.1f}, write "
                   f"{r['write_s']:.1f}), {r['bytes'] / 1e6:8.1f} MB, "
                   f"{r['baked_agents']:,} baked agents, "
-                  f"{r['offset_animations']:,} offset animations; "
+                  f"{r['offset_animations']:,} offset animations, peak RSS "
+                  f"{r['peak_rss_mb'] / 1e3:.1f} GB; "
                   f"{100 * r['bytes_vs_per_agent_baked']:.2f} % of per-agent baked "
                   f"({r['per_agent_baked_bytes'] / 1e9:.1f} GB)", flush=True)
             if not args.keep:

@@ -1,25 +1,18 @@
 """Headless command line: ``crowd <command> ...`` or ``python -m crowd_addon <command> ...``.
 
-Commands
---------
-budget
-    The paper's GPU memory model (NumClips_OLD / NumClips_NEW) and a proposed stream
-    count and max offset for a crowd. See ``docs/performance_budget.md``.
-export
-    A saved crowd configuration over a frame range, written as UsdSkel (progress on
-    stderr, summary on stdout). See ``docs/usd_export.md``.
-preview
-    A saved crowd configuration rendered headless to a PNG sequence (and an MP4),
-    with a camera that frames the crowd. See ``docs/preview.md``.
-demo
-    The stadium demo, end to end: build, bake, simulate the show, render preview
-    frames, export USD. See ``docs/pipeline.md``.
-build-extension
-    The Blender extension zip with its bundled wheels (``crowd_addon/packaging.py``).
+Commands: ``budget`` (the paper's GPU memory model and a proposed stream count and
+max offset, docs/performance_budget.md), ``export`` (a crowd shot over a frame range
+as UsdSkel, docs/usd_export.md), ``preview`` (a crowd rendered headless to PNG frames
+and an MP4, docs/preview.md), ``demo`` (the stadium demo end to end,
+docs/pipeline.md) and ``build-extension`` (the Blender extension zip with its bundled
+wheels, ``crowd_addon/packaging.py``).
 
 Each command is one ``_add_<name>`` function that builds its subparser and one
 ``_run_<name>`` function that does the work; heavy modules are imported inside the
-latter so ``crowd --help`` stays fast. Exit codes: 0 success, 2 bad input (usage
+latter so ``crowd --help`` stays fast. What needs Blender (``export --blend``: open a
+.blend, register the extension) is :mod:`crowd_addon.blender.cli_commands`, imported
+only for it; that package never imports this module (inside Blender, ``blender -c
+crowd export`` is its own command). Exit codes: 0 success, 2 bad input (usage
 errors and :class:`~crowd_addon.core.errors.CrowdError`, reported on stderr as
 ``crowd <command>: error: <message>``).
 
@@ -128,10 +121,10 @@ def _add_budget(subparsers) -> None:
 
 
 def _run_budget(args) -> int:
-    import dataclasses
     import json
 
     from .core import budget as b
+    from .core.budget_report import report, report_dict
 
     unit = MIB if args.mib else MB
     budget_bytes = args.budget_mb * unit
@@ -147,60 +140,17 @@ def _run_budget(args) -> int:
         bones=args.bones, bytes_per_bone=args.bytes_per_bone)
 
     if args.json:
-        out = {
-            "units": {"size": "bytes", "length": "frames",
-                      "budget_unit_bytes": unit, "budget_mb": args.budget_mb},
-            "max_offset_source": "--max-offset" if args.max_offset else "planner",
-            "memory_model": dataclasses.asdict(model),
-            "plan": dataclasses.asdict(proposal),
-        }
-        print(json.dumps(out))
+        source = "--max-offset" if args.max_offset else "planner"
+        print(json.dumps(report_dict(model, proposal, budget_mb=args.budget_mb,
+                                     unit_bytes=unit, max_offset_source=source)))
         return 0
-
-    unit_name = "MiB" if args.mib else "MB"
-    pose_src = ("--pose-bytes" if args.pose_bytes is not None
-                else f"{args.bones} bones x {args.bytes_per_bone:g} B")
-    m_src = "--max-offset" if args.max_offset else "from the plan"
-    n_clips = len(args.clip_frames)
-    lines = [
-        f"Paper memory model (Paduraru s.5), MemBudget {args.budget_mb:g} {unit_name} "
-        f"= {model.budget_bytes:,.0f} B",
-        f"  PoseSize                {model.pose_bytes:,.6g} B ({pose_src})",
-        f"  MotionLength            {model.motion_length:,.6g} frames "
-        f"(mean of {n_clips} clip{'s' if n_clips != 1 else ''})",
-        f"  M                       {model.max_offset} frames ({m_src})",
-        f"  ClipSize_OLD            {model.clip_size_old:,.6g} B",
-        f"  ClipSize_NEW            {model.clip_size_new:,.6g} B",
-        f"  NumClips_OLD            {model.num_clips_old:,}  floor(MemBudget / ClipSize_OLD)",
-        f"  NumClips_NEW            {model.num_clips_new:,}  "
-        "floor(MotionLength / M x NumClips_OLD), the paper's formula",
-        f"  MemBudget/ClipSize_NEW  {model.num_clips_new_direct:,}  "
-        "floor(MemBudget / ClipSize_NEW), direct",
-        f"  (the paper prints NumClips_OLD {b.PAPER_NUM_CLIPS_OLD} and NumClips_NEW "
-        f"{b.PAPER_NUM_CLIPS_NEW:,} for its inputs; its 216 does not follow from them, "
-        "see docs/performance_budget.md)",
-        "",
-        f"Plan for {proposal.agents:,} agents (GPU pose row: {args.bones} bones x "
-        f"{args.gpu_bytes_per_bone:g} B = {proposal.row_bytes:,} B)",
-        f"  streams S               {proposal.streams:,} (budget allows up to "
-        f"{proposal.max_streams:,} at this M)",
-        f"  max offset M            {proposal.max_offset} frames = "
-        f"{proposal.offset_seconds:.2f} s at {args.fps:g} fps",
-        f"  agents per stream       {proposal.agents_per_stream:,.1f}",
-        f"  agents per key          {proposal.agents_per_key:.2f} per (stream, offset), "
-        f"target <= {proposal.target_agents_per_key:g}: "
-        f"{'met' if proposal.meets_target else 'NOT met'}",
-        f"  rows                    {proposal.history_rows:,} history + "
-        f"{proposal.unique_agents:,} unique + {proposal.transition_slots:,} transition "
-        f"= {proposal.total_rows:,}",
-        f"  bytes used              {proposal.bytes_used:,} B of "
-        f"{proposal.budget_bytes:,.0f} B "
-        f"({100.0 * proposal.bytes_used / proposal.budget_bytes:.1f} %)",
-        f"  upload per frame        {proposal.stream_upload_bytes:,} B (S rows); "
-        f"{proposal.peak_upload_bytes:,} B with every unique and transition row",
-    ]
-    lines += [f"  note: {note}" for note in proposal.notes]
-    print("\n".join(lines))
+    pose = ("--pose-bytes" if args.pose_bytes is not None
+            else f"{args.bones} bones x {args.bytes_per_bone:g} B")
+    print(report(model, proposal, budget_mb=args.budget_mb,
+                 unit_name="MiB" if args.mib else "MB", pose_source=pose,
+                 max_offset_source="--max-offset" if args.max_offset else "from the plan",
+                 clip_count=len(args.clip_frames), bones=args.bones,
+                 gpu_bytes_per_bone=args.gpu_bytes_per_bone, fps=args.fps))
     return 0
 
 
@@ -238,9 +188,8 @@ def _add_export(subparsers) -> None:
     src.add_argument("--config", metavar="CROWD_JSON",
                      help="crowd configuration manifest written by config_io.save_config")
     src.add_argument("--blend", metavar="SCENE_BLEND",
-                     help="a .blend whose scene has Crowd settings (needs the bpy module); "
-                          "inside Blender (blender -b scene.blend -c crowd export ...) the "
-                          "open file's scene is used when neither option is given")
+                     help="a .blend whose scene has Crowd settings (needs the bpy module; "
+                          "inside Blender: blender -b scene.blend -c crowd export ...)")
     p.add_argument("--scene", default=None, metavar="NAME",
                    help="scene of the .blend (default: the active scene)")
     p.add_argument("--out", required=True, metavar="SHOT_USD",
@@ -257,30 +206,27 @@ def _add_export(subparsers) -> None:
 
 
 def _run_export(args) -> int:
+    import dataclasses
     import json
 
     if args.config:
         from .core.config_io import load_config
-        from .usd import export_crowd
+        from .core.crowd import Crowd
+        from .core.recording import record
+        from .usd import check_export, export_crowd
         config = load_config(args.config)
-        result = export_crowd(config, args.out, args.frames, agents=args.agents,
-                              progress=_progress_printer())
+        check_export(config, args.out, args.agents)     # before simulating the shot
+        progress = _progress_printer()
+        shot = record(Crowd(config, skinning="gpu"), *args.frames, progress=progress)
+        result = export_crowd(shot, args.out, agents=args.agents, progress=progress)
     else:                       # the scene's Crowd settings, baked as the panel does
-        scene = _export_scene(args)
-        from .blender.export import export_scene
-        config, result = export_scene(
-            scene, args.out, args.frames, agents=args.agents,
+        from .blender.cli_commands import export_blend
+        config, result = export_blend(
+            args.out, args.frames, blend=args.blend, scene=args.scene, agents=args.agents,
             progress=_progress_printer(), on_bake=lambda done, total, message: print(
                 f"crowd export: {message}", file=sys.stderr, flush=True))
     if args.json:
-        print(json.dumps({
-            "path": result.path, "layers_dir": result.layers_dir, "files": result.files,
-            "bytes": result.bytes, "frames": list(result.frames), "agents": result.agents,
-            "shared_agents": result.shared_agents, "baked_agents": result.baked_agents,
-            "moving_agents": result.moving_agents,
-            "offset_animations": result.offset_animations,
-            "stream_animations": result.stream_animations,
-            "characters": result.characters, "seconds": result.seconds}))
+        print(json.dumps({**dataclasses.asdict(result), "bytes": result.bytes}))
         return 0
     s = result.seconds
     print("\n".join([
@@ -295,31 +241,6 @@ def _run_export(args) -> int:
         f"  {s['total']:.1f} s (simulate {s['simulate']:.1f} s, author "
         f"{s['author']:.1f} s, write {s['write']:.1f} s)"]))
     return 0
-
-
-def _export_scene(args):
-    """The Blender scene to export (needs bpy): the active (or ``--scene``) scene of
-    the .blend opened here, or of the open file inside Blender."""
-    try:
-        import bpy
-    except ImportError:
-        raise CrowdError("give --config CROWD_JSON, or --blend with the bpy module "
-                         "installed (pip install bpy)") from None
-    if args.blend:
-        if not os.path.isfile(args.blend):
-            raise CrowdError(f"{args.blend}: no such .blend file")
-        bpy.ops.wm.open_mainfile(filepath=os.path.abspath(args.blend))
-    elif not bpy.data.filepath:
-        raise CrowdError("give --config CROWD_JSON or --blend SCENE_BLEND (no .blend is "
-                         "open)")
-    scene = bpy.context.scene if args.scene is None else bpy.data.scenes.get(args.scene)
-    if scene is None:
-        raise CrowdError(f"no scene {args.scene!r} in {bpy.data.filepath} (scenes: "
-                         f"{[s.name for s in bpy.data.scenes]})")
-    if not hasattr(scene, "crowd"):             # outside an installed extension
-        from . import register
-        register()
-    return scene
 
 
 def _progress_printer():
@@ -379,6 +300,9 @@ def _run_preview(args) -> int:
     from .gpu.preview_render import render_preview
 
     config = load_config(args.config)
+    if args.backend == "blender":           # bpy runs in background mode: wake its GPU
+        from .blender.headless_gpu import init_headless_gpu
+        init_headless_gpu()
     shown = [-1]
 
     def progress(done, total):

@@ -1,19 +1,19 @@
-"""A scene's crowd written to USD: the shared bake-and-export step and the
+"""A scene's crowd written to USD: the shared bake-record-write steps and the
 *Export Crowd USD* operator (Crowd panel button, File > Export > Crowd (.usd)).
 
-:func:`export_steps` is the export, one unit of work per step: it checks the output
-and the frame range against the scene, bakes the scene's Crowd settings
-(:func:`.scene_config.config_steps`, one action per step) and writes the shot with
-:func:`crowd_addon.usd.export_crowd` (one progress report per step: a simulated frame,
-a layer...; all or nothing: a failure or a cancel leaves no new file and a previous
-export as it was). :func:`export_scene` runs it to the end in one call
-(``crowd export --blend``, the operator run from a script); the operator run from
-the UI steps it on a timer and Esc cancels it. The USD modules (``pxr``) are
-imported only when an export runs.
+:func:`export_steps` is the export, one unit of work per step, all on the caller's
+thread: it checks the output and the frame range against the scene, bakes the
+scene's Crowd settings (:func:`.scene_config.config_steps`, one action per step),
+records the shot once (:class:`crowd_addon.core.recording.Recorder`, one frame per
+step, a crowd that skins nothing) and writes the recording
+(:func:`crowd_addon.usd.export_steps`, a layer or a batch of agents per step; all or
+nothing: a failure or a cancel leaves no new file and a previous export as it was).
+:func:`export_scene` runs it to the end in one call (``crowd export --blend``, the
+operator run from a script); the operator run from the UI steps it on a timer and
+Esc cancels it. The USD modules (``pxr``) are imported only when an export runs.
 """
 
 import os
-import threading
 import time
 from numbers import Integral
 
@@ -66,8 +66,10 @@ def export_scene(scene, path, frames, agents=None, progress=None, on_bake=None,
     Parameters
     ----------
     scene : a scene with Crowd settings (``scene.crowd``, the extension registered).
-    path, frames, agents, progress : as :func:`crowd_addon.usd.export_crowd`
-        (``progress(stage, done, total)`` during the export).
+    path, agents : as :func:`crowd_addon.usd.export_crowd`; frames : ``(first, last)``
+        (:func:`check_export`).
+    progress : optional ``progress(stage, done, total)`` after each recorded frame
+        (``"simulate"``) and each step of the writing.
     on_bake : optional ``on_bake(done, total, message)`` before each bake step
         (:func:`.scene_config.config_steps`).
     depsgraph : evaluated depsgraph for the agent sources (default: the scene's).
@@ -100,23 +102,25 @@ def export_steps(scene, path, frames, agents=None, depsgraph=None):
     ``next()``: returns ``(config, result)`` (``StopIteration.value``).
 
     Yields ``(stage, done, total, message)``: stage ``"bake"`` before each bake step
-    (``message`` as :func:`.scene_config.config_steps`), then each progress report of
-    :func:`crowd_addon.usd.export_crowd` (``message`` is the stage). The output and the
-    frame range are checked when it is called (CrowdError); a fault found later is
-    raised by ``next()``. Blender is only used inside ``next()`` on the caller's
-    thread. The export proper (no ``bpy``) runs on a worker thread that is held at
-    each report until the next ``next()``, so the two never run at once.
+    (``message`` as :func:`.scene_config.config_steps`), ``"simulate"`` after each
+    recorded frame, then each step of :func:`crowd_addon.usd.export_steps`
+    (``message`` is the stage). The output and the frame range are checked when it is
+    called (CrowdError); a fault found later (the agent count, a missing proxy mesh:
+    checked once baked, before recording) is raised by ``next()``.
 
     Closing the generator before it is done (``close()``, or dropping it) cancels the
-    export: close returns once the export has removed its temporary files; nothing is
-    written, a previous export at ``path`` is left as it was, the scene is unchanged.
+    export: close returns once its temporary files are removed; nothing is written, a
+    previous export at ``path`` is left as it was, the scene is unchanged.
     """
     frames = check_export(scene, path, frames)
     return _export_steps(scene, path, frames, agents, depsgraph)
 
 
 def _export_steps(scene, path, frames, agents, depsgraph):
-    from ..usd import export_crowd
+    from ..core.crowd import Crowd
+    from ..core.recording import Recorder
+    from ..usd.export import check_export as check_output
+    from ..usd.export import export_steps as write_steps
 
     bake = scene_config.config_steps(scene, depsgraph)
     try:
@@ -130,61 +134,21 @@ def _export_steps(scene, path, frames, agents, depsgraph):
             yield "bake", done, total, message
     finally:
         bake.close()
-    result = yield from _held_at_reports(
-        lambda report: export_crowd(config, path, frames, agents=agents, progress=report))
-    return config, result
-
-
-class _Cancelled(BaseException):
-    """Raised in the export's worker, at the progress report it is held at, when the
-    export is cancelled (a BaseException: nothing on the way catches it)."""
-
-
-def _held_at_reports(run):
-    """Generator running ``run(report)`` on a worker thread one report at a time.
-
-    Each ``next()`` lets the worker go on to its next ``report(stage, done, total)``
-    call, yields ``(stage, done, total, stage)`` and holds the worker there; the
-    generator returns what ``run`` returns and raises what it raises. Closed (or
-    interrupted) early, the held ``report`` call raises :class:`_Cancelled` in the
-    worker, and the generator ends once the worker has unwound.
-    """
-    resume, reported = threading.Semaphore(0), threading.Semaphore(0)
-    state = {"cancel": False, "finished": False}
-
-    def report(stage, done, total):
-        state["report"] = (stage, done, total, stage)
-        reported.release()
-        resume.acquire()
-        if state["cancel"]:
-            raise _Cancelled
-
-    def work():
-        try:
-            state["result"] = run(report)
-        except BaseException as e:      # noqa: BLE001 - raised again on the caller's thread
-            state["error"] = e
-        finally:
-            state["finished"] = True
-            reported.release()
-
-    worker = threading.Thread(target=work, name="crowd USD export", daemon=True)
-    worker.start()
+    check_output(config, path, agents)
+    recorder = Recorder(Crowd(config, skinning="gpu"), *frames)
+    while not recorder.finished:
+        recorder.step()
+        yield "simulate", recorder.done, recorder.total, "simulate"
+    writing = write_steps(recorder.finish(), path, agents)
     try:
         while True:
-            reported.acquire()
-            if state["finished"]:
-                break
-            yield state.pop("report")
-            resume.release()
+            try:
+                stage, done, total = next(writing)
+            except StopIteration as stop:
+                return config, stop.value
+            yield stage, done, total, stage
     finally:
-        if not state["finished"]:       # closed, or the caller was interrupted
-            state["cancel"] = True
-            resume.release()
-        worker.join()
-    if "error" in state:
-        raise state["error"]
-    return state["result"]
+        writing.close()                 # a cancel: its temporary files are removed
 
 
 class ExportJob:

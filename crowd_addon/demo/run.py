@@ -4,10 +4,11 @@
    because it resets Blender's session) with ``--agents`` seats;
 2. open it, author its crowd settings and bake its actions through the extension's
    own code (:mod:`.stadium`), and save the crowd configuration next to it;
-3. run the stadium show (:mod:`.show`: goal, Mexican wave, hits, claps) and render
-   preview frames headless with the GPU path (PNG, and MP4 when imageio-ffmpeg is
-   there);
-4. export the same show to ``stadium.usdc`` (UsdSkel), re-simulated deterministically;
+3. run the stadium show (:mod:`.show`: goal, Mexican wave, hits, claps) once, render
+   preview frames headless with the GPU path as it runs (PNG, and MP4 when
+   imageio-ffmpeg is there) and record it (:mod:`crowd_addon.core.recording`);
+4. export that recording to ``stadium.usdc`` (UsdSkel): the same show, not simulated
+   again;
 5. print a summary and write it as ``summary.json``.
 """
 
@@ -17,13 +18,18 @@ import json
 import subprocess
 import sys
 import time
+from importlib import resources
 from pathlib import Path
 
 from ..core.errors import CrowdError
 
 __all__ = ["run_demo"]
 
-SAMPLE_BUILDER = Path(__file__).resolve().parents[2] / "sample_scenes" / "build_stadium.py"
+try:    # the sample_scenes resource package beside crowd_addon (repository, wheel)
+    SAMPLE_BUILDER = resources.files(".".join(__name__.split(".")[:-3] + ["sample_scenes"])) \
+        / "build_stadium.py"
+except ModuleNotFoundError:     # not shipped (the Blender extension)
+    SAMPLE_BUILDER = None
 
 
 def _bar(done, total, what, stream=sys.stderr, width=30):
@@ -41,8 +47,8 @@ def _bar(done, total, what, stream=sys.stderr, width=30):
 
 
 def _build_scene(path: Path, seats: int, log):
-    if not SAMPLE_BUILDER.is_file():
-        raise CrowdError(f"the stadium builder {SAMPLE_BUILDER} is missing")
+    if SAMPLE_BUILDER is None or not SAMPLE_BUILDER.is_file():
+        raise CrowdError(f"the stadium builder {SAMPLE_BUILDER or 'sample_scenes'} is missing")
     log(f"building the stadium with {seats:,} seats -> {path}")
     run = subprocess.run([sys.executable, str(SAMPLE_BUILDER), "--out", str(path),
                           "--seats", str(seats), "--quiet"], capture_output=True, text=True)
@@ -109,24 +115,29 @@ def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
     import numpy as np
 
     from ..core.crowd import Crowd
+    from ..core.recording import Recorder
     from ..gpu.preview_render import render_preview
     from .show import ShowPlan, StadiumShow
 
-    # the wave starts just before the stand the camera looks at, so it passes early
-    plan = ShowPlan(wave_start_angle=-np.pi / 2 - 0.4)
-
-    def make_show(crowd):
-        return StadiumShow(crowd, stadium.seat_angle, stadium.home, cheer="cheer",
-                           wave="wave", hits=stadium.hits, hit_frames=stadium.hit_frames,
-                           away_reaction="groan", actors=stadium.fan, plan=plan)
-
     log(f"simulating and rendering {frames} frames of {cfg.agent_count:,} agents")
     t = time.perf_counter()
-    crowd = Crowd(cfg, gpu_skinning=True)
-    show = make_show(crowd)
+    crowd = Crowd(cfg, skinning="gpu")
+    # the wave starts just before the stand the camera looks at, so it passes early
+    show = StadiumShow(crowd, stadium.seat_angle, stadium.home, cheer="cheer", wave="wave",
+                       hits=stadium.hits, hit_frames=stadium.hit_frames,
+                       away_reaction="groan", actors=stadium.fan,
+                       plan=ShowPlan(wave_start_angle=-np.pi / 2 - 0.4))
+    # the frames the preview shows, recorded as they are rendered
+    recorder = Recorder(crowd, crowd.frame, crowd.frame + frames - 1) if usd else None
+
+    def before_step(crowd, frame):
+        if recorder is not None:
+            recorder.capture()                   # the frame just rendered
+        show.before_step(crowd, frame)
+
     camera = section_camera(stadium, aspect=size[0] / size[1])
     preview = render_preview(crowd, out / "frames", frames, size=size, mp4=mp4,
-                             before_step=show.before_step, camera=camera,
+                             before_step=before_step, camera=camera,
                              progress=lambda d, n: _bar(d, n, "render"))
     seconds["simulate_render"] = time.perf_counter() - t
     step_ms = crowd.stats["ms_total"] / max(crowd.stats["steps"], 1)
@@ -139,13 +150,10 @@ def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
 
     if usd:
         from ..usd.export import export_crowd
+        recorder.capture()                       # the last frame
         log("exporting the show to USD")
         t = time.perf_counter()
-        usd_crowd = Crowd(cfg)
-        usd_show = make_show(usd_crowd)
-        first = usd_crowd.frame                  # the frames the preview shows
-        res = export_crowd(usd_crowd, out / "stadium.usdc", (first, first + frames - 1),
-                           on_frame=usd_show.before_step,
+        res = export_crowd(recorder.finish(), out / "stadium.usdc",
                            progress=lambda stage, d, n: _bar(d, n, stage))
         seconds["usd"] = time.perf_counter() - t
         summary.update(usd=str(res.path), usd_bytes=int(sum(res.files.values())),

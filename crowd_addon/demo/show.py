@@ -83,20 +83,20 @@ class StadiumShow:
                  start_frame=None, clap_event="clap", away_reaction=None, actors=None):
         self.crowd = crowd
         self.plan = plan or ShowPlan()
-        n = crowd.N
+        n = crowd.agents.count
         self.angle = np.mod(np.asarray(seat_angle, np.float64).reshape(-1), 2 * np.pi)
         self.home = np.asarray(home, bool).reshape(-1)
         if self.angle.shape != (n,) or self.home.shape != (n,):
             raise CrowdError(f"show: seat_angle and home need one value per agent ({n}), got "
                              f"{self.angle.shape} and {self.home.shape}")
-        self.cheer = crowd._resolve(cheer, "stream")
-        self.wave = crowd._resolve(wave, "stream")
-        self.away = None if away_reaction is None else crowd._resolve(away_reaction, "stream")
+        self.cheer = crowd.streams.index(cheer)
+        self.wave = crowd.streams.index(wave)
+        self.away = None if away_reaction is None else crowd.streams.index(away_reaction)
         self.actors = np.ones(n, bool) if actors is None else np.asarray(actors, bool).reshape(-1)
         if self.actors.shape != (n,):
             raise CrowdError(f"show: actors needs one value per agent ({n}), got "
                              f"{self.actors.shape}")
-        self.hits = np.array([crowd._resolve(h, "unique") for h in hits], np.int64)
+        self.hits = np.array([crowd.uniques.index(h) for h in hits], np.int64)
         self.hit_frames = int(hit_frames)
         self.idle_stream = np.asarray(crowd.config.agent_stream, np.int64).copy()
         if (self.idle_stream < 0).any():

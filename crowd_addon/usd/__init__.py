@@ -1,9 +1,9 @@
-"""Crowd -> UsdSkel stage (issue 5; layout and usage in docs/usd_export.md).
+"""A recorded crowd shot -> UsdSkel stage (layout and usage in docs/usd_export.md).
 
 Imports ``pxr`` (usd-core outside Blender, Blender's bundled ``pxr`` inside); the
 command line imports this package only when ``crowd export`` runs.
 """
 
-from .export import FORMAT_VERSION, ExportResult, export_crowd
+from .export import FORMAT_VERSION, ExportResult, check_export, export_crowd, export_steps
 
-__all__ = ["export_crowd", "ExportResult", "FORMAT_VERSION"]
+__all__ = ["export_crowd", "export_steps", "check_export", "ExportResult", "FORMAT_VERSION"]

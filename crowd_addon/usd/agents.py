@@ -38,6 +38,8 @@ _T = Sdf.ValueTypeNames
 _ORDER = Vt.TokenArray(["xformOp:translate", "xformOp:rotateZ"])
 #: agents' own animations are baked this many at a time (bounds memory)
 _CHUNK = 64
+#: agent prims authored per step of the export
+_LAYOUT_CHUNK = 4096
 
 
 def agent_names(ids) -> list:
@@ -67,34 +69,40 @@ def author_offset_animations(root: Sdf.PrimSpec, shot, stream_names, stream_asse
     return paths
 
 
-def author_agents(root: Sdf.PrimSpec, shot, names, character_assets, sources) -> None:
-    """The agent prims.
+def author_agents(root: Sdf.PrimSpec, shot, names, character_assets, sources):
+    """The agent prims: a generator yielding ``("layout", done, total)`` after each
+    batch of agents.
 
     Parameters
     ----------
     root : the ``/Crowd`` prim spec.
-    shot : ShotRecording.
+    shot : the :class:`~.shot.Shot`.
     names : prim name per exported agent.
     character_assets : asset path per skeleton index.
     sources : ``skel:animationSource`` target (Sdf.Path) per exported agent.
     """
-    parent = define(root, "Agents", "Scope")
+    with Sdf.ChangeBlock():
+        parent = define(root, "Agents", "Scope")
     refs = {k: Sdf.Reference(a) for k, a in character_assets.items()}
-    translate = shot.position.astype(np.float64)
-    degrees = np.degrees(shot.heading.astype(np.float64))
+    degrees = np.degrees(shot.heading.astype(np.float64)).tolist()
+    agents = list(zip(names, shot.agent_skeleton.tolist(), sources, shot.position.tolist(),
+                      degrees))
+    for a in range(0, len(agents), _LAYOUT_CHUNK):
+        with Sdf.ChangeBlock():
+            for name, skel, source, position, heading in agents[a:a + _LAYOUT_CHUNK]:
+                prim = define(parent, name, "SkelRoot")
+                prim.instanceable = True
+                prim.referenceList.Prepend(refs[skel])
+                apply_api(prim, "SkelBindingAPI")
+                relationship(prim, "skel:animationSource", source)
+                attribute(prim, "xformOp:translate", _T.Float3, Gf.Vec3f(*position))
+                attribute(prim, "xformOp:rotateZ", _T.Double, heading)
+                attribute(prim, "xformOpOrder", _T.TokenArray, _ORDER, uniform=True)
+        yield "layout", min(a + _LAYOUT_CHUNK, len(agents)), len(agents)
     moving = np.flatnonzero(shot.moving)
-    for i, (name, skel, source) in enumerate(zip(names, shot.agent_skeleton.tolist(),
-                                                 sources)):
-        prim = define(parent, name, "SkelRoot")
-        prim.instanceable = True
-        prim.referenceList.Prepend(refs[skel])
-        apply_api(prim, "SkelBindingAPI")
-        relationship(prim, "skel:animationSource", source)
-        attribute(prim, "xformOp:translate", _T.Float3, Gf.Vec3f(*translate[i]))
-        attribute(prim, "xformOp:rotateZ", _T.Double, float(degrees[i]))
-        attribute(prim, "xformOpOrder", _T.TokenArray, _ORDER, uniform=True)
     if moving.size:
-        _author_moves(parent, shot, names, moving)
+        with Sdf.ChangeBlock():
+            _author_moves(parent, shot, names, moving)
 
 
 def _author_moves(parent, shot, names, moving):
@@ -111,24 +119,24 @@ def _author_moves(parent, shot, names, moving):
             layer.SetTimeSample(r_path, f, float(degrees[k, j]))
 
 
-def author_agent_animations(layer: Sdf.Layer, shot, names, joints_of, progress=None) -> list:
+def author_agent_animations(layer: Sdf.Layer, shot, names, joints_of):
     """Each non-static agent's own SkelAnimation over the shot, under
-    ``/Crowd/AgentAnimations`` in ``layer``; returns their paths (in agent order).
-
-    ``joints_of`` maps a skeleton index to its joint tokens.
-    """
+    ``/Crowd/AgentAnimations`` in ``layer``: a generator yielding ``("agent
+    animations", done, total)`` after each batch of agents and returning their paths
+    (in agent order). ``joints_of`` maps a skeleton index to its joint tokens."""
     own = np.flatnonzero(~shot.static)
-    crowd = Sdf.PrimSpec(layer, ROOT, Sdf.SpecifierOver)
-    parent = define(crowd, "AgentAnimations", "Scope")
+    with Sdf.ChangeBlock():
+        crowd = Sdf.PrimSpec(layer, ROOT, Sdf.SpecifierOver)
+        parent = define(crowd, "AgentAnimations", "Scope")
     paths = []
     for a in range(0, own.size, _CHUNK):
         chunk = own[a:a + _CHUNK]
         poses = shot.agent_poses(chunk)
-        for j, i in enumerate(chunk.tolist()):
-            prim = define(parent, names[i])
-            author_animation(prim, joints_of[int(shot.agent_skeleton[i])], poses[:, j],
-                             shot.frames)
-            paths.append(prim.path)
-        if progress is not None:
-            progress("agent animations", a + chunk.size, own.size)
+        with Sdf.ChangeBlock():
+            for j, i in enumerate(chunk.tolist()):
+                prim = define(parent, names[i])
+                author_animation(prim, joints_of[int(shot.agent_skeleton[i])], poses[:, j],
+                                 shot.frames)
+                paths.append(prim.path)
+        yield "agent animations", a + chunk.size, own.size
     return paths

@@ -1,15 +1,20 @@
-"""Crowd -> UsdSkel export (docs/usd_export.md): the entry point.
+"""Recording -> UsdSkel export (docs/usd_export.md): the entry point.
 
-:func:`export_crowd` takes a core :class:`~crowd_addon.core.config.CrowdConfig` (from
-``config_io.load_config``, or from a Blender scene converted by ``blender/``) or an
-already built :class:`~crowd_addon.core.crowd.Crowd`, runs it over the shot and
-writes::
+:func:`export_crowd` writes a :class:`~crowd_addon.core.recording.Recording` (a shot
+simulated once by :func:`crowd_addon.core.recording.record`; nothing here runs a
+crowd) as::
 
     shot.usdc                      layout: offset animations, agents (main layer)
     shot.layers/characters/*.usdc  one SkelRoot + Skeleton + Mesh per character
     shot.layers/streams/*.usdc     one baked SkelAnimation per stream used
     shot.layers/agents.usdc        own animations of agents that are not static
                                    (sublayer of the main layer; only if any)
+
+:func:`export_steps` is the same export one unit of work per ``next()`` (a stream
+layer, a batch of agents' own animations, the layout...), for a caller that must stay
+responsive (one step stays well under a second at 65,000 agents); closing it early
+cancels the export. :func:`check_export` checks a
+configuration, an output and an agent count before a shot is recorded.
 
 All or nothing: see :mod:`.files`.
 """
@@ -22,9 +27,8 @@ from dataclasses import dataclass
 import numpy as np
 from pxr import Sdf, Vt
 
-from ..core.config import CrowdConfig
-from ..core.crowd import Crowd
 from ..core.errors import CrowdError
+from ..core.recording import Recording
 from .agents import (ROOT, agent_names, author_agent_animations, author_agents,
                      author_offset_animations)
 from .animation import author_animation
@@ -32,9 +36,9 @@ from .character import character_layer
 from .files import ExportFiles
 from .layers import new_layer
 from .naming import unique_identifiers
-from .recorder import agent_skeletons, record_shot
+from .shot import Shot
 
-__all__ = ["export_crowd", "ExportResult", "FORMAT_VERSION"]
+__all__ = ["export_crowd", "export_steps", "check_export", "ExportResult", "FORMAT_VERSION"]
 
 FORMAT_VERSION = "1.0"
 
@@ -52,7 +56,8 @@ class ExportResult:
         baked_agents : those with their own animation; moving_agents : those whose
         transform is time-sampled.
     offset_animations, stream_animations, characters : prims/layers written.
-    seconds : dict ``simulate``, ``author``, ``write``, ``total`` (wall clock).
+    seconds : dict ``simulate`` (the recording's), ``author``, ``write``, ``total``
+        (wall clock).
     """
 
     path: str
@@ -73,60 +78,95 @@ class ExportResult:
         return int(sum(self.files.values()))
 
 
-def export_crowd(source, path, frames, agents=None, on_frame=None,
-                 progress=None) -> ExportResult:
-    """Export a crowd shot to UsdSkel.
+def export_crowd(recording, path, agents=None, progress=None) -> ExportResult:
+    """Write ``recording`` to UsdSkel in one call (:func:`export_steps` to the end).
 
     Parameters
     ----------
-    source : CrowdConfig (a Crowd is built from it) or Crowd (advanced in place; reset
-        to its start first if it is already past the shot's first frame).
+    recording : a :class:`~crowd_addon.core.recording.Recording`.
     path : main layer, ``.usdc``/``.usd`` (binary) or ``.usda`` (text).
-    frames : ``(first, last)`` integer frames, inclusive,
-        ``config.start_frame <= first <= last``.
     agents : None (all) or N, the first N agents (ids ``0 .. N-1``); more than the
-        crowd has is an error.
-    on_frame : optional ``on_frame(crowd, frame)``, called before each step with the
-        frame about to be evaluated (from the crowd's start on): the simulation
-        driving the crowd (transitions, triggers, parameters, agent moves).
-    progress : optional ``progress(stage, done, total)``.
+        recording has is an error.
+    progress : optional ``progress(stage, done, total)``: ``characters``, ``streams``,
+        ``agent animations``, ``layout``.
 
     Raises
     ------
     CrowdError naming the thing at fault; nothing is written then, and a previous
-    export at ``path`` is left as it was.
+    export at ``path`` is left as it was. An exception raised by ``progress`` stops
+    the export the same way.
     """
+    steps = export_steps(recording, path, agents)
+    try:
+        while True:
+            try:
+                report = next(steps)
+            except StopIteration as stop:
+                return stop.value
+            if progress is not None:
+                progress(*report)
+    finally:
+        steps.close()
+
+
+def export_steps(recording, path, agents=None):
+    """The export of :func:`export_crowd` as a generator yielding ``(stage, done,
+    total)`` after each unit of work and returning the :class:`ExportResult`
+    (``StopIteration.value``). The recording, ``path`` and ``agents`` are checked
+    when it is called (CrowdError). Closed before it is done, it removes its
+    temporary files: nothing is written, a previous export is left as it was."""
+    if not isinstance(recording, Recording):
+        raise CrowdError(f"export: expected a Recording (crowd_addon.core.recording), got "
+                         f"{type(recording).__name__}")
+    ids = _agent_ids(agents, recording.agent_count)
+    meshes = _meshes(recording.config, recording.agent_skeleton[ids])
+    return _steps(recording, ids, meshes, ExportFiles(path))
+
+
+def check_export(config, path, agents=None) -> None:
+    """Check, before recording ``config``'s shot, what :func:`export_steps` would
+    refuse: the output (extension, folder, writable), the agent count and a proxy mesh
+    for every exported agent's skeleton. Raises CrowdError."""
+    with ExportFiles(path):
+        pass
+    ids = _agent_ids(agents, config.agent_count)
+    names = list(config.skeletons)
+    st = np.asarray(config.agent_stream, np.int64)[ids]
+    un = np.asarray(config.agent_unique, np.int64)[ids]
+    of_stream = np.array([names.index(d.skeleton) for d in config.streams] + [0], np.int64)
+    of_unique = np.array([names.index(d.skeleton) for d in config.uniques] + [0], np.int64)
+    _meshes(config, np.where(st >= 0, of_stream[st], of_unique[un]))
+
+
+def _steps(rec, ids, meshes, files):
     t0 = time.perf_counter()
-    crowd = _crowd(source)
-    first, last = _frame_range(frames, crowd)
-    ids = _agent_ids(agents, crowd)
-    meshes = _meshes(crowd, ids)
-    files = ExportFiles(path)
+    out = _Output(files)
     with files:
-        shot = record_shot(crowd, ids, first, last, on_frame, progress)
-        out = _Output(files, progress, time.perf_counter() - t0)
-        joints_of, char_assets = _write_characters(out, crowd, meshes)
-        stream_names, stream_assets = _write_streams(out, crowd, shot, joints_of)
+        shot = Shot(rec, ids)
+        joints_of, char_assets = _write_characters(out, rec, meshes)
+        yield "characters", len(meshes), len(meshes)
+        stream_names, stream_assets = yield from _write_streams(out, rec, shot, joints_of)
         names = agent_names(ids)
-        own_paths = _write_own_animations(out, shot, names, joints_of)
-        layer = new_layer(files.format, crowd.fps, first, last, default_prim=ROOT,
+        own_paths = yield from _write_own_animations(out, shot, names, joints_of)
+        yield "layout", 0, ids.size
+        layer = new_layer(files.format, rec.fps, rec.first, rec.last, default_prim=ROOT,
                           comment="crowd shot written by crowd_addon.usd")
-        layer.customLayerData = {"crowd": _settings(crowd, shot)}
+        layer.customLayerData = {"crowd": _settings(rec, shot)}
         if own_paths:
             layer.subLayerPaths.append(files.asset_path("agents"))
         with Sdf.ChangeBlock():
             root = Sdf.PrimSpec(layer, ROOT, Sdf.SpecifierDef, "Xform")
             offsets = author_offset_animations(root, shot, stream_names, stream_assets)
-            author_agents(root, shot, names, char_assets, _sources(shot, offsets, own_paths))
-        _report(progress, "layout", ids.size, ids.size)
+        yield from author_agents(root, shot, names, char_assets,
+                                 _sources(shot, offsets, own_paths))
         out.save(layer)
         files.commit()
-    total = time.perf_counter() - t0
-    seconds = {"simulate": out.simulate, "author": total - out.simulate - out.write,
-               "write": out.write, "total": total}
+    author = time.perf_counter() - t0 - out.write
+    seconds = {"simulate": rec.seconds, "author": author, "write": out.write,
+               "total": rec.seconds + author + out.write}
     return ExportResult(
         path=files.path, layers_dir=files.layers_dir, files=dict(files.written),
-        frames=(first, last), agents=int(ids.size),
+        frames=(rec.first, rec.last), agents=int(ids.size),
         shared_agents=int(shot.static.sum()), baked_agents=int((~shot.static).sum()),
         moving_agents=int(shot.moving.sum()), offset_animations=len(offsets),
         stream_animations=len(stream_assets), characters=len(char_assets),
@@ -134,11 +174,10 @@ def export_crowd(source, path, frames, agents=None, on_frame=None,
 
 
 class _Output:
-    """The export's files, progress callback and time spent writing files."""
+    """The export's files and the time spent writing them."""
 
-    def __init__(self, files, progress, simulate_seconds):
-        self.files, self.progress = files, progress
-        self.simulate, self.write = simulate_seconds, 0.0
+    def __init__(self, files):
+        self.files, self.write = files, 0.0
 
     def save(self, layer, name=None):
         t = time.perf_counter()
@@ -146,102 +185,67 @@ class _Output:
         self.write += time.perf_counter() - t
 
 
-def _write_characters(out, crowd, meshes) -> tuple:
+def _write_characters(out, rec, meshes) -> tuple:
     """One layer per skeleton in ``meshes``; returns ``(joints_of, asset_of)`` keyed by
     skeleton index."""
-    cfg = crowd.config
+    cfg = rec.config
     skeleton_names = list(cfg.skeletons)
     ids = sorted(meshes)
     file_names = unique_identifiers([skeleton_names[k] for k in ids], casefold=True)
     joints_of, asset_of = {}, {}
     for k, name in zip(ids, file_names):
         layer, joints_of[k] = character_layer(cfg.skeletons[skeleton_names[k]], meshes[k],
-                                              out.files.format, crowd.fps, name)
+                                              out.files.format, rec.fps, name)
         out.save(layer, f"characters/{name}")
         asset_of[k] = out.files.asset_path(f"characters/{name}")
-    _report(out.progress, "characters", len(ids), len(ids))
     return joints_of, asset_of
 
 
-def _write_streams(out, crowd, shot, joints_of) -> tuple:
-    """One layer per stream a static agent plays; returns ``(prim names of all
-    streams, {stream: asset path})``."""
-    names = unique_identifiers(crowd.names[:crowd.S], casefold=True)
+def _write_streams(out, rec, shot, joints_of):
+    """One layer per stream a static agent plays (a step each); returns ``(prim names
+    of all streams, {stream: asset path})``."""
+    names = unique_identifiers(rec.stream_names, casefold=True)
     used = np.unique(shot.stream[shot.static]).tolist()
     assets = {}
     for j, s in enumerate(used):
-        out.save(_stream_layer(shot, s, crowd.names[s], names[s],
-                               joints_of[int(shot.stream_skeleton[s])], out.files.format),
+        out.save(_stream_layer(rec, shot, s, names[s],
+                               joints_of[int(rec.stream_skeleton[s])], out.files.format),
                  f"streams/{names[s]}")
         assets[s] = out.files.asset_path(f"streams/{names[s]}")
-        _report(out.progress, "streams", j + 1, len(used))
+        yield "streams", j + 1, len(used)
     return names, assets
 
 
-def _write_own_animations(out, shot, names, joints_of) -> list:
-    """The sublayer of agents' own animations (none if every agent is static)."""
+def _write_own_animations(out, shot, names, joints_of):
+    """The sublayer of agents' own animations (none if every agent is static), a step
+    per batch of agents; returns their prim paths."""
     if shot.static.all():
         return []
     layer = new_layer(out.files.format, shot.fps, shot.first, shot.last,
                       comment="own animations of agents that are not static")
-    with Sdf.ChangeBlock():
-        paths = author_agent_animations(layer, shot, names, joints_of, out.progress)
+    paths = yield from author_agent_animations(layer, shot, names, joints_of)
     out.save(layer, "agents")
     return paths
 
 
-def _report(progress, stage, done, total):
-    if progress is not None:
-        progress(stage, done, total)
-
-
-def _crowd(source) -> Crowd:
-    if isinstance(source, Crowd):
-        return source
-    if isinstance(source, CrowdConfig):
-        return Crowd(source)
-    raise CrowdError(f"export: expected a CrowdConfig or a Crowd, got "
-                     f"{type(source).__name__}")
-
-
-def _frame_range(frames, crowd) -> tuple:
-    try:
-        first, last = frames
-    except (TypeError, ValueError):
-        raise CrowdError(f"export: frames must be (first, last), got {frames!r}") from None
-    for f in (first, last):
-        if isinstance(f, bool) or not isinstance(f, (int, np.integer)):
-            raise CrowdError(f"export: frames must be whole numbers, got {frames!r}")
-    first, last = int(first), int(last)
-    if last < first:
-        raise CrowdError(f"export: frame range {first}-{last} is empty (last < first)")
-    start = int(crowd.config.start_frame)
-    if first < start:
-        raise CrowdError(f"export: frame range {first}-{last} starts before the crowd's "
-                         f"start frame {start}")
-    return first, last
-
-
-def _agent_ids(agents, crowd) -> np.ndarray:
-    if crowd.N == 0:
+def _agent_ids(agents, count) -> np.ndarray:
+    if count == 0:
         raise CrowdError("export: the crowd has no agents")
     if agents is None:
-        return np.arange(crowd.N, dtype=np.int64)
+        return np.arange(count, dtype=np.int64)
     if isinstance(agents, bool) or not isinstance(agents, (int, np.integer)) or agents < 1:
         raise CrowdError(f"export: agents must be a count >= 1, got {agents!r}")
-    if agents > crowd.N:
-        raise CrowdError(f"export: {agents} agents requested but the crowd has "
-                         f"{crowd.N}")
+    if agents > count:
+        raise CrowdError(f"export: {agents} agents requested but the crowd has {count}")
     return np.arange(int(agents), dtype=np.int64)
 
 
-def _meshes(crowd, ids) -> dict:
-    """Proxy mesh (LOD 0) per skeleton index the exported agents use."""
-    cfg = crowd.config
-    skeleton_names = list(cfg.skeletons)
+def _meshes(config, agent_skeleton) -> dict:
+    """Proxy mesh (LOD 0) per skeleton index in ``agent_skeleton``."""
+    skeleton_names = list(config.skeletons)
     out = {}
-    for k in np.unique(agent_skeletons(crowd, ids)).tolist():
-        levels = cfg.meshes.get(skeleton_names[k])
+    for k in np.unique(agent_skeleton).tolist():
+        levels = config.meshes.get(skeleton_names[k])
         if not levels:
             raise CrowdError(f"export: skeleton {skeleton_names[k]!r} has no proxy mesh "
                              "(CrowdConfig.add_mesh); its agents cannot be drawn")
@@ -249,18 +253,19 @@ def _meshes(crowd, ids) -> dict:
     return out
 
 
-def _stream_layer(shot, s, name, prim_name, joints, fmt):
-    frames = shot.stream_frames
-    layer = new_layer(fmt, shot.fps, frames[0], frames[-1], default_prim=prim_name,
+def _stream_layer(rec, shot, s, prim_name, joints, fmt):
+    frames = rec.stream_frames
+    name = rec.stream_names[s]
+    layer = new_layer(fmt, rec.fps, frames[0], frames[-1], default_prim=prim_name,
                       comment=f"crowd stream {name!r}: the head's pose at each frame")
-    events = shot.stream_events[s]
+    events = shot.stream_events(s)
     with Sdf.ChangeBlock():
         prim = Sdf.PrimSpec(layer, prim_name, Sdf.SpecifierDef, "SkelAnimation")
         prim.customData = {"crowd": {
             "stream": name, "streamIndex": int(s),
             "eventNames": Vt.StringArray([n for n, _ in events]),
             "eventFrames": Vt.DoubleArray([float(f) for _, f in events])}}
-        author_animation(prim, joints, shot.stream_poses[:, s], frames)
+        author_animation(prim, joints, rec.stream_poses[:, s], frames)
     return layer
 
 
@@ -271,10 +276,10 @@ def _sources(shot, offsets, own_paths) -> list:
             for k, st in zip(keys.tolist(), shot.static.tolist())]
 
 
-def _settings(crowd, shot) -> dict:
-    cfg = crowd.config
-    return {"M": int(crowd.M), "NT": int(crowd.NT), "fps": float(crowd.fps),
-            "seed": int(cfg.seed), "streams": int(crowd.S), "uniques": int(crowd.U),
-            "agents": int(shot.agents.size), "firstFrame": int(shot.first),
-            "lastFrame": int(shot.last), "writer": "crowd_addon.usd",
-            "version": FORMAT_VERSION}
+def _settings(rec, shot) -> dict:
+    cfg = rec.config
+    return {"M": int(rec.max_offset), "NT": int(cfg.transition_slots), "fps": float(rec.fps),
+            "seed": int(cfg.seed), "streams": len(rec.stream_names),
+            "uniques": len(rec.unique_names), "agents": int(shot.agents.size),
+            "firstFrame": int(rec.first), "lastFrame": int(rec.last),
+            "writer": "crowd_addon.usd", "version": FORMAT_VERSION}

@@ -54,7 +54,8 @@ def attribute(prim: Sdf.PrimSpec, name: str, type_name, value=None, uniform: boo
 def relationship(prim: Sdf.PrimSpec, name: str, target) -> Sdf.RelationshipSpec:
     """A relationship with one explicit target path."""
     spec = Sdf.RelationshipSpec(prim, name, False)
-    spec.targetPathList.explicitItems = [Sdf.Path(str(target))]
+    spec.targetPathList.explicitItems = [target if isinstance(target, Sdf.Path)
+                                         else Sdf.Path(str(target))]
     return spec
 
 

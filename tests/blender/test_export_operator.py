@@ -365,9 +365,13 @@ TIMER, ESC, RIGHT, MOUSE, ESC_UP = (type("Event", (), {"type": t, "value": v})()
                                                  ("ESC", "RELEASE")))
 
 
-def _export_threads():
+@pytest.fixture
+def new_threads():
+    """Threads started since the test began: none, the export steps on the caller's
+    thread."""
     import threading
-    return [t for t in threading.enumerate() if t.name == "crowd USD export"]
+    before = set(threading.enumerate())
+    return lambda: [t for t in threading.enumerate() if t not in before]
 
 
 def _files(folder):
@@ -376,7 +380,7 @@ def _files(folder):
 
 
 def test_modal_export_steps_on_timer_events_and_writes_what_a_script_export_writes(
-        scene, tmp_path, event_loop):
+        scene, tmp_path, event_loop, new_threads):
     (tmp_path / "modal").mkdir()
     (tmp_path / "script").mkdir()
     path = tmp_path / "modal" / "shot.usda"
@@ -405,7 +409,7 @@ def test_modal_export_steps_on_timer_events_and_writes_what_a_script_export_writ
     assert "Esc to cancel" in ctx.workspace.status[0]
     assert op.reports[-1][0] == {"INFO"} and \
         f"wrote 30 agents, frames 1-12 to {path}" in op.reports[-1][1]
-    assert _export_threads() == []
+    assert new_threads() == []
     # the stage: 30 agents over the scene's range ...
     stage, agents = agents_of(path)
     assert len(agents) == 30
@@ -438,7 +442,7 @@ def _run_until(op, ctx, stage, count=1):
     ("layout", 1, ESC),                  # the last report before the files move in
 ])
 def test_esc_cancels_the_modal_export_and_leaves_no_file(scene, tmp_path, event_loop,
-                                                         stage, count, event):
+                                                         stage, count, event, new_threads):
     path = tmp_path / "shot.usdc"
     op, ctx = _ModalExport(path), _Context()
     assert op.execute(ctx) == {"RUNNING_MODAL"}
@@ -447,19 +451,19 @@ def test_esc_cancels_the_modal_export_and_leaves_no_file(scene, tmp_path, event_
         (tmp,) = listing(tmp_path)
         assert tmp.startswith(".shot.usdc.") and tmp.endswith(".tmp")
         assert any((tmp_path / tmp).rglob("*.usdc"))
-    assert len(_export_threads()) == (stage != "bake")
+    assert new_threads() == []
     assert op.modal(ctx, event) == {"CANCELLED"}
     assert listing(tmp_path) == []                     # no file, no temporary left
     assert op.reports == [({"WARNING"}, "Export cancelled: nothing was written")]
     assert ctx.window_manager.calls[-2:] == ["timer_remove", "progress_end"]
     assert ctx.window_manager.timers == [] and op._timer is None
     assert ctx.workspace.status[-1] is None
-    assert _export_threads() == []
+    assert new_threads() == []
 
 
 @pytest.mark.parametrize("stage", ["bake", "simulate", "streams", "layout"])
 def test_a_cancelled_export_leaves_a_previous_export_untouched(scene, tmp_path,
-                                                               event_loop, stage):
+                                                               event_loop, stage, new_threads):
     path = tmp_path / "shot.usdc"
     scene.frame_end = 6
     assert bpy.ops.crowd.export_usd(filepath=str(path)) == {"FINISHED"}
@@ -472,10 +476,11 @@ def test_a_cancelled_export_leaves_a_previous_export_untouched(scene, tmp_path,
     assert op.modal(ctx, ESC) == {"CANCELLED"}
     assert _files(tmp_path) == before
     assert listing(tmp_path) == ["shot.layers", "shot.usdc"]
-    assert ctx.window_manager.timers == [] and _export_threads() == []
+    assert ctx.window_manager.timers == [] and new_threads() == []
 
 
-def test_modal_export_errors_are_reported_and_end_the_timer(scene, tmp_path, event_loop):
+def test_modal_export_errors_are_reported_and_end_the_timer(scene, tmp_path, event_loop,
+                                                           new_threads):
     # found when the export starts: no timer, no progress
     op, ctx = _ModalExport(tmp_path / "bad.abc"), _Context()
     assert op.execute(ctx) == {"CANCELLED"}
@@ -490,10 +495,10 @@ def test_modal_export_errors_are_reported_and_end_the_timer(scene, tmp_path, eve
                                          "crowd has 30")
     assert ctx.window_manager.calls[-2:] == ["timer_remove", "progress_end"]
     assert ctx.window_manager.timers == [] and listing(tmp_path) == []
-    assert _export_threads() == []
+    assert new_threads() == []
 
 
-def test_blender_ending_the_modal_export_drops_it(scene, tmp_path, event_loop):
+def test_blender_ending_the_modal_export_drops_it(scene, tmp_path, event_loop, new_threads):
     """``cancel`` (Blender closes the operator: file loaded, window closed)."""
     op, ctx = _ModalExport(tmp_path / "shot.usdc"), _Context()
     op.cancel(ctx)                                     # file browser cancelled: no job
@@ -503,19 +508,19 @@ def test_blender_ending_the_modal_export_drops_it(scene, tmp_path, event_loop):
     op.cancel(ctx)
     assert listing(tmp_path) == [] and ctx.window_manager.timers == []
     assert ctx.window_manager.calls[-2:] == ["timer_remove", "progress_end"]
-    assert _export_threads() == []
+    assert new_threads() == []
 
 
-def test_without_a_window_the_export_runs_in_one_call(scene, tmp_path):
+def test_without_a_window_the_export_runs_in_one_call(scene, tmp_path, new_threads):
     """``interactive`` (set by invoke) needs an event loop: a script in background
     Blender passing it still exports in one call."""
     path = tmp_path / "shot.usdc"
     assert bpy.app.background and not crowd_export._event_loop(bpy.context)
     assert bpy.ops.crowd.export_usd(filepath=str(path), interactive=True) == {"FINISHED"}
-    assert len(agents_of(path)[1]) == 30 and _export_threads() == []
+    assert len(agents_of(path)[1]) == 30 and new_threads() == []
 
 
-def test_export_scene_drops_the_export_when_a_callback_raises(scene, tmp_path):
+def test_export_scene_drops_the_export_when_a_callback_raises(scene, tmp_path, new_threads):
     """The one-call export drives the same steps: a raising callback stops it at
     once and nothing is written."""
     path = tmp_path / "shot.usdc"
@@ -529,7 +534,7 @@ def test_export_scene_drops_the_export_when_a_callback_raises(scene, tmp_path):
 
     with pytest.raises(KeyboardInterrupt):
         crowd_export.export_scene(scene, path, (1, 12), progress=progress)
-    assert listing(tmp_path) == [] and _export_threads() == []
+    assert listing(tmp_path) == [] and new_threads() == []
     assert [r for r in reports if r[0] == "simulate"][-1] == ("simulate", 11, 11)
     bakes = []
     config, result = crowd_export.export_scene(

@@ -123,10 +123,10 @@ def _skinned_boxes(crowd, vp, size):
     mesh = crowd.config.meshes["Rig"][0]
     verts = skin_vertices(mesh.positions, mesh.bone_indices, mesh.bone_weights,
                           crowd.agent_rows())                           # (N, V, 3)
-    c, s = np.cos(crowd.agent_heading), np.sin(crowd.agent_heading)
+    c, s = np.cos(crowd.agents.heading), np.sin(crowd.agents.heading)
     x, y = verts[..., 0], verts[..., 1]
     world = np.stack([c[:, None] * x - s[:, None] * y, s[:, None] * x + c[:, None] * y,
-                      verts[..., 2]], -1) + crowd.agent_position[:, None]
+                      verts[..., 2]], -1) + crowd.agents.position[:, None]
     clip = np.einsum("ij,nvj->nvi", vp, np.concatenate([world, np.ones_like(x)[..., None]],
                                                        -1))
     ndc = clip[..., :2] / clip[..., 3:4]
@@ -229,7 +229,7 @@ def test_generate_agents_updates_the_running_crowd_without_a_bake(running):
     scene.crowd.agent_sources[0].object = cs.make_seats(3, 3, name="Few")
     assert bpy.ops.crowd.generate_agents() == {"FINISHED"}
     now = preview.get(scene)
-    assert now.crowd.N == 9 and now.crowd.config.clips is clips
+    assert now.crowd.agents.count == 9 and now.crowd.config.clips is clips
 
 
 def test_settings_survive_save_and_reload_and_the_preview_restarts(running, tmp_path):
@@ -241,7 +241,7 @@ def test_settings_survive_save_and_reload_and_the_preview_restarts(running, tmp_
     tr.target, tr.trigger = "calm", "reset"
     s.when_full, s.lod_far = "CUT", 650.0
     before = settings_fingerprint(s)
-    agents = pv.crowd.N
+    agents = pv.crowd.agents.count
     path = str(tmp_path / "crowd.blend")
     bpy.ops.wm.save_as_mainfile(filepath=path)
     bpy.ops.wm.read_factory_settings(use_empty=True)
@@ -251,7 +251,7 @@ def test_settings_survive_save_and_reload_and_the_preview_restarts(running, tmp_
     assert settings_fingerprint(scene.crowd) == before
     assert scene.crowd.streams[0].nodes["sm"].transitions[0].trigger == "reset"
     again = preview.get(scene)                                  # load_post rebuilt it
-    assert again is not None and again.crowd.N == agents and preview.draw_handle()
+    assert again is not None and again.crowd.agents.count == agents and preview.draw_handle()
     # a file whose armature is gone loads with the preview stopped and the reason
     bpy.data.objects.remove(scene.crowd.armature)
     bpy.ops.wm.save_as_mainfile(filepath=path)

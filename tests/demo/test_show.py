@@ -28,6 +28,19 @@ def stadium(slots=40, clap_at=7.0):
     return cfg, angle
 
 
+def playing(crowd, ids):
+    """``(kind, ref, offset)`` each agent plays, a transition as its target."""
+    a = crowd.view.agents
+    kind, ref, off = (a.kind[ids].astype(np.int64), a.ref[ids].copy(),
+                      a.offset[ids].copy())
+    tr = np.flatnonzero(kind == TRANSITION)
+    if tr.size:
+        slot = crowd.view.transitions(ids[tr])
+        kind[tr], ref[tr], off[tr] = (slot["target_kind"], slot["target_ref"],
+                                      slot["target_offset"])
+    return kind, ref, off
+
+
 def run(show, crowd, frames):
     for _ in range(frames):
         show.before_step()
@@ -43,16 +56,16 @@ def test_goal_sends_home_to_cheer_through_slots_then_back():
     run(show, crowd, 3)
     assert show.stats.cheering == home.sum() > 40
     assert show.stats.queued == home.sum() - 40    # more requests than slots: queued
-    assert (crowd.agent_kind[home] == TRANSITION).sum() == 40
-    assert (crowd.agent_kind[~home] == STREAM).all()
+    assert (crowd.agents.kind[home] == TRANSITION).sum() == 40
+    assert (crowd.agents.kind[~home] == STREAM).all()
     run(show, crowd, 40)                           # queue drained: all home agents cheer
-    assert (crowd.agent_kind[home] == STREAM).all()
-    assert (crowd.agent_ref[home] == crowd.names.index("cheer")).all()
-    assert (crowd.agent_offset[home] == 0).all()
+    assert (crowd.agents.kind[home] == STREAM).all()
+    assert (crowd.agents.ref[home] == crowd.streams.index("cheer")).all()
+    assert (crowd.agents.offset[home] == 0).all()
     run(show, crowd, 60)                           # cheer over: back to own idle + offset
-    assert (crowd.agent_kind == STREAM).all()
-    np.testing.assert_array_equal(crowd.agent_ref, cfg.agent_stream)
-    np.testing.assert_array_equal(crowd.agent_offset, cfg.agent_offset)
+    assert (crowd.agents.kind == STREAM).all()
+    np.testing.assert_array_equal(crowd.agents.ref, cfg.agent_stream)
+    np.testing.assert_array_equal(crowd.agents.offset, cfg.agent_offset)
     assert crowd.slots.served == 2 * home.sum() and show.stats.cut == 0
 
 
@@ -63,11 +76,11 @@ def test_wave_passes_each_seat_once_per_lap_in_angle_order():
                     hit_frame=-1)
     show = StadiumShow(crowd, angle, np.zeros(N, bool), plan=plan)
     first_wave = np.full(N, -1)
-    wave = crowd.names.index("wave")
+    wave = crowd.streams.index("wave")
     for f in range(80):
         show.before_step()
         crowd.step()
-        kind, ref, _ = crowd._playing(np.arange(N))
+        kind, ref, _ = playing(crowd, np.arange(N))
         now = (kind == STREAM) & (ref == wave) & (first_wave < 0)
         first_wave[now] = f
     assert (first_wave >= 0).all() and show.stats.waves == N
@@ -75,8 +88,8 @@ def test_wave_passes_each_seat_once_per_lap_in_angle_order():
     assert (np.diff(first_wave) >= 0).all()
     assert first_wave[-1] - first_wave[0] >= 55
     run(show, crowd, 30)
-    assert (crowd.agent_kind == STREAM).all()
-    np.testing.assert_array_equal(crowd.agent_ref, cfg.agent_stream)
+    assert (crowd.agents.kind == STREAM).all()
+    np.testing.assert_array_equal(crowd.agents.ref, cfg.agent_stream)
 
 
 def test_hit_agents_get_their_own_unique_and_return():
@@ -87,10 +100,10 @@ def test_hit_agents_get_their_own_unique_and_return():
                        hit_frames=20, plan=plan)
     run(show, crowd, 10)
     hit = show._hit_ids
-    kind, ref, _ = crowd._playing(hit)
+    kind, ref, _ = playing(crowd, hit)
     assert (kind == UNIQUE).all() and sorted(ref.tolist()) == [0, 1, 2]
     run(show, crowd, 25)
-    assert (crowd.agent_kind[hit] == STREAM).all()
+    assert (crowd.agents.kind[hit] == STREAM).all()
 
 
 def test_claps_counted_once_per_frame_with_all_agents():
@@ -129,12 +142,12 @@ def test_away_side_reacts_and_non_actors_are_never_moved():
                     wave_hold=5, hit_frame=3)
     show = StadiumShow(crowd, angle, home, away_reaction="idle_b", actors=actors,
                        hits=["hit0", "hit1"], plan=plan)
-    ref0 = crowd.agent_ref.copy()
+    ref0 = crowd.agents.ref.copy()
     for _ in range(60):
         show.before_step()
         crowd.step()
-        assert (crowd.agent_kind[~actors] == STREAM).all()
-        np.testing.assert_array_equal(crowd.agent_ref[~actors], ref0[~actors])
+        assert (crowd.agents.kind[~actors] == STREAM).all()
+        np.testing.assert_array_equal(crowd.agents.ref[~actors], ref0[~actors])
     assert not np.isin(show._hit_ids, np.flatnonzero(~actors)).any()
     away_agents = np.flatnonzero(~home & actors)
     assert show.stats.requested >= 2 * (home & actors).sum() + away_agents.size

@@ -1,5 +1,6 @@
-"""A small crowd shot with every kind of agent, exported once per module, and the
-core oracle: the same crowd run again frame by frame, driven by the same simulation.
+"""A small crowd shot with every kind of agent, recorded and exported once per module,
+and the core oracle: the same crowd run again frame by frame (skinned on the CPU),
+driven by the same simulation.
 
 Two characters (24- and 26-bone humanoids, so poses are padded to the larger one),
 three streams (a clip, a 2-way blend, a state machine driven by a trigger), one
@@ -15,6 +16,7 @@ import pytest
 
 from crowd_addon.core import (Blend2, ClipPlayer, Crowd, CrowdConfig, StateMachine,
                               StateTransition)
+from crowd_addon.core.recording import record
 from crowd_addon.core.synthetic import humanoid, humanoid_mesh, periodic_clip
 
 FIRST, LAST = 2, 16        # start_frame is 0: frames 1 and 2 run before the shot
@@ -67,10 +69,8 @@ def simulate(crowd, frame):
         crowd.transition_to_streamed([4], "cheer.loud", 0, offset=5)   # a cut
         crowd.set_trigger("wave", "go")
     if frame == 9:
-        crowd.agent_position = crowd.agent_position.copy()
-        crowd.agent_position[7] += (0.5, -0.25, 0.0)
-        crowd.agent_heading = crowd.agent_heading.copy()
-        crowd.agent_heading[8] += 0.75
+        crowd.place_agents([7], position=crowd.view.agents.position[7] + (0.5, -0.25, 0.0))
+        crowd.place_agents([8], heading=crowd.view.agents.heading[8] + 0.75)
 
 
 #: agents whose animation is not one (stream, offset) during FIRST..LAST
@@ -84,6 +84,7 @@ def oracle():
     ``(kind, ref, offset)`` per agent (N, 3), and every event delivered to each agent
     as ``(agent, name, frame)``."""
     crowd = Crowd(make_config())
+    view = crowd.view
     events = set()
     crowd.on_event("*", lambda name, frame, ids: events.update(
         (int(a), name, int(frame)) for a in ids))
@@ -92,20 +93,25 @@ def oracle():
         simulate(crowd, crowd.frame + 1)
         crowd.step()
         if crowd.frame >= FIRST:
-            out["poses"][crowd.frame] = crowd.agent_poses()
-            out["position"][crowd.frame] = np.array(crowd.agent_position, np.float64)
-            out["heading"][crowd.frame] = np.array(crowd.agent_heading, np.float64)
-            out["animation"][crowd.frame] = np.stack(
-                [crowd.agent_kind, crowd.agent_ref, crowd.agent_offset], 1).astype(np.int64)
+            a = view.agents
+            out["poses"][crowd.frame] = view.agent_poses()
+            out["position"][crowd.frame] = np.array(a.position, np.float64)
+            out["heading"][crowd.frame] = np.array(a.heading, np.float64)
+            out["animation"][crowd.frame] = np.stack([a.kind, a.ref, a.offset],
+                                                     1).astype(np.int64)
     out["events"] = {e for e in events if FIRST <= e[2] <= LAST}
     return out
 
 
+def recording(config=None, frames=(FIRST, LAST), on_frame=simulate):
+    """The shot recorded (a crowd that skins nothing, as exports use)."""
+    return record(Crowd(config or make_config(), skinning="gpu"), *frames, on_frame=on_frame)
+
+
 @pytest.fixture(scope="module")
 def shot(tmp_path_factory):
-    """The shot exported as text USD: ``(ExportResult, path)``."""
+    """The shot recorded once and exported as text USD: ``(ExportResult, path)``."""
     from crowd_addon.usd import export_crowd
 
     path = tmp_path_factory.mktemp("shot") / "shot.usda"
-    result = export_crowd(make_config(), path, (FIRST, LAST), on_frame=simulate)
-    return result, path
+    return export_crowd(recording(), path), path
