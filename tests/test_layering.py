@@ -19,27 +19,6 @@ import layering  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "crowd_addon"
 
-# TEMPORARY allow-list, ``(node, node)`` import edges left out of the cycle search
-# (any other cycle fails). Empty: the one it was made for, ("blender", "cli") (the
-# lazy import of crowd_addon.cli in crowd_addon/blender/registration.py closed the
-# cycle __init__ -> blender -> cli -> (__init__, blender, demo)), is gone.
-# test_temporary_allow_lists_are_still_needed fails once an entry is no longer needed.
-TEMPORARY_ALLOWED_EDGES = set()
-
-# TEMPORARY allow-list, pending a decision: lazy ``import bpy`` outside
-# crowd_addon.blender that predates the rule (keys are ``module -> bpy``). Each either
-# moves behind a function of crowd_addon.blender or becomes a stated exception in
-# tests/layering.py. A new Blender-API import anywhere else fails now.
-TEMPORARY_ALLOWED_BLENDER_API = {
-    "crowd_addon.demo.run -> bpy",              # run_demo: opens the built stadium
-    "crowd_addon.demo.stadium -> bpy",          # setup_crowd / stadium_config
-}
-
-
-def _allowed(v) -> bool:
-    return v.rule == "blender-api" and v.key in TEMPORARY_ALLOWED_BLENDER_API
-
-
 @pytest.fixture(scope="module")
 def real():
     """The real package read once: its imports and every violation (nothing ignored)."""
@@ -49,25 +28,8 @@ def real():
 
 
 def test_crowd_addon_keeps_the_layering_rules(real):
-    problems = [str(v) for v in layering.find(PACKAGE, TEMPORARY_ALLOWED_EDGES, real.imports)
-                if not _allowed(v)]
+    problems = [str(v) for v in real.violations]
     assert not problems, "layering rules broken (docs/testing.md):\n" + "\n".join(problems)
-
-
-def test_temporary_allow_lists_are_still_needed(real):
-    """Once an allowed violation is gone, its allow-list entry must go too."""
-    edges = real.graph
-    cycles = [set(v.key.removeprefix("cycle: ").split(" <-> ")) for v in real.violations
-              if v.rule == "cycle"]
-    for a, b in TEMPORARY_ALLOWED_EDGES:
-        assert b in edges.get(a, {}), f"{a} no longer imports {b}: delete ({a!r}, {b!r}) " \
-            "from TEMPORARY_ALLOWED_EDGES"
-        assert any({a, b} <= c for c in cycles), \
-            f"the edge {a} -> {b} closes no cycle any more: delete it from " \
-            "TEMPORARY_ALLOWED_EDGES"
-    keys = {v.key for v in real.violations if v.rule == "blender-api"}
-    stale = sorted(TEMPORARY_ALLOWED_BLENDER_API - keys)
-    assert not stale, f"fixed, delete from TEMPORARY_ALLOWED_BLENDER_API: {stale}"
 
 
 def test_the_walk_sees_the_whole_package(real):

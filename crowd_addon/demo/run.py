@@ -93,21 +93,10 @@ def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
     seconds["build_scene"] = time.perf_counter() - t0
 
     t = time.perf_counter()
-    import bpy
-
-    from .. import register, unregister
+    from ..blender.stadium import author_stadium
     from ..core.config_io import save_config
-    from .stadium import stadium_config
-    bpy.ops.wm.open_mainfile(filepath=str(blend))
-    register()
-    try:
-        log("authoring the crowd and baking its actions")
-        stadium = stadium_config(bpy.context.scene,
-                                 progress=lambda d, n, m: _bar(d + 1, n, "bake"))
-        bpy.context.preferences.filepaths.save_version = 0  # no stadium.blend1 backup
-        bpy.ops.wm.save_mainfile(filepath=str(blend))       # with its crowd settings
-    finally:
-        unregister()
+    log("authoring the crowd and baking its actions")
+    stadium = author_stadium(blend, progress=lambda d, n, m: _bar(d + 1, n, "bake"))
     cfg = stadium.config
     save_config(cfg, out / "stadium_crowd.json")
     seconds["bake"] = time.perf_counter() - t

@@ -21,7 +21,7 @@ import sys, bpy
 from crowd_addon import register
 bpy.ops.wm.open_mainfile(filepath=sys.argv[1])
 register()
-from crowd_addon.demo.stadium import setup_crowd
+from crowd_addon.blender.stadium import setup_crowd
 setup_crowd(bpy.context.scene, hits=2, slots=16)
 bpy.context.preferences.filepaths.save_version = 0
 bpy.ops.wm.save_as_mainfile(filepath=sys.argv[2])

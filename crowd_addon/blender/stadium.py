@@ -1,4 +1,4 @@
-"""The stadium's crowd, authored the way an animator would in Blender (needs ``bpy``).
+"""The demo stadium's crowd, authored the way an animator would in Blender.
 
 :func:`setup_crowd` fills the scene's Crowd settings of a stadium built by
 ``sample_scenes/build_stadium.py``: the fan rig and body, one stream per authored
@@ -8,20 +8,23 @@ agent source (heading from their ``heading`` attribute, stream from a ``stream``
 attribute written here: home seats play ``idle_a`` / ``idle_c`` / ``clap``, away seats
 ``idle_b``). :func:`stadium_config` converts it with the extension's own
 :func:`~crowd_addon.blender.scene_config.config_from_scene`, then adds the motion
-capture character (a second skeleton) for a few home seats.
+capture character (a second skeleton) for a few home seats. :func:`author_stadium`
+does it all on a built ``stadium.blend`` and saves the file with its settings.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+import bpy
 import numpy as np
 
 from ..core.config import CrowdConfig
 from ..core.controllers import ClipPlayer
 from ..core.errors import CrowdError
 
-__all__ = ["STREAMS", "HOME_MIX", "AWAY_MIX", "setup_crowd", "stadium_config", "Stadium"]
+__all__ = ["STREAMS", "HOME_MIX", "AWAY_MIX", "setup_crowd", "stadium_config", "Stadium",
+           "author_stadium"]
 
 #: stream name -> action of FanRig
 STREAMS = {"idle_a": "idle_seated_a", "idle_b": "idle_seated_b", "idle_c": "idle_seated_c",
@@ -44,7 +47,7 @@ class Stadium:
     hit_frames: int
 
 
-def _obj(bpy, name):
+def _obj(name):
     obj = bpy.data.objects.get(name)
     if obj is None:
         raise CrowdError(f"stadium scene: object {name!r} is missing (build it with "
@@ -52,7 +55,7 @@ def _obj(bpy, name):
     return obj
 
 
-def _action(bpy, name):
+def _action(name):
     act = bpy.data.actions.get(name)
     if act is None:
         raise CrowdError(f"stadium scene: action {name!r} is missing")
@@ -61,11 +64,10 @@ def _action(bpy, name):
 
 def setup_crowd(scene, hits=6, slots=800, max_offset=60, seed=5):
     """Author the Crowd settings of a stadium scene (replacing any there)."""
-    import bpy
 
     s = scene.crowd
-    s.armature = _obj(bpy, "FanRig")
-    s.proxy_mesh = _obj(bpy, "FanBody")
+    s.armature = _obj("FanRig")
+    s.proxy_mesh = _obj("FanBody")
     s.max_offset, s.transition_slots, s.seed = max_offset, slots, seed
     s.when_full = "QUEUE"
     s.forward_axis = "NEG_Y"
@@ -78,8 +80,8 @@ def setup_crowd(scene, hits=6, slots=800, max_offset=60, seed=5):
             anim = getattr(s, pool).add()
             anim.name = name
             node = anim.nodes.add()
-            node.name, node.kind, node.action = "clip", "CLIP", _action(bpy, action)
-    seats = _obj(bpy, "Seats")
+            node.name, node.kind, node.action = "clip", "CLIP", _action(action)
+    seats = _obj("Seats")
     me = seats.data
     n = len(me.vertices)
     section = np.zeros(n, np.int32)
@@ -105,7 +107,6 @@ def setup_crowd(scene, hits=6, slots=800, max_offset=60, seed=5):
 
 def stadium_config(scene, progress=None, hits=6, slots=800, seed=5) -> Stadium:
     """The stadium's :class:`Stadium` from a built stadium scene (see module doc)."""
-    import bpy
 
     from ..blender.armature import proxy_mesh_from_object
     from ..blender.bake import bake_actions
@@ -113,7 +114,7 @@ def stadium_config(scene, progress=None, hits=6, slots=800, seed=5) -> Stadium:
 
     setup_crowd(scene, hits=hits, slots=slots, seed=seed)
     cfg = config_from_scene(scene, progress)
-    seats = _obj(bpy, "Seats")
+    seats = _obj("Seats")
     n = len(seats.data.vertices)
     if cfg.agent_count != n:
         raise CrowdError(f"stadium: {cfg.agent_count} agents from {n} seats")
@@ -124,8 +125,8 @@ def stadium_config(scene, progress=None, hits=6, slots=800, seed=5) -> Stadium:
     team = np.where(home[:, None], (0.85, 0.18, 0.15), (0.2, 0.35, 0.85))
     cfg.agent_color = (0.6 * team + 0.4 * cfg.agent_color).astype(np.float32)
     # the motion-capture character: a second skeleton on a few home seats
-    rig, body = _obj(bpy, "MocapRig"), _obj(bpy, "MocapBody")
-    baked = bake_actions(rig, [_action(bpy, MOCAP_ACTION)], scene_fps(scene), loop=True,
+    rig, body = _obj("MocapRig"), _obj("MocapBody")
+    baked = bake_actions(rig, [_action(MOCAP_ACTION)], scene_fps(scene), loop=True,
                          scene=scene)
     skel = baked.skeleton
     cfg.add_skeleton(skel)
@@ -145,3 +146,19 @@ def stadium_config(scene, progress=None, hits=6, slots=800, seed=5) -> Stadium:
     hit_clip = cfg.clips[HIT]
     return Stadium(cfg, angle, home, fan, tuple(f"hit{k}" for k in range(hits)),
                    int(hit_clip.frame_count))
+
+
+def author_stadium(blend, progress=None) -> Stadium:
+    """Open the built ``blend``, author its crowd (:func:`setup_crowd`), bake it with the
+    extension registered (:func:`stadium_config`; ``progress(done, total, message)``)
+    and save the file with its Crowd settings. Returns the :class:`Stadium`."""
+    from .registration import register, unregister
+    bpy.ops.wm.open_mainfile(filepath=str(blend))
+    register()
+    try:
+        stadium = stadium_config(bpy.context.scene, progress=progress)
+        bpy.context.preferences.filepaths.save_version = 0  # no stadium.blend1 backup
+        bpy.ops.wm.save_mainfile(filepath=str(blend))       # with its crowd settings
+    finally:
+        unregister()
+    return stadium
