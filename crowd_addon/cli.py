@@ -23,44 +23,16 @@ with ``--mib``.
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import sys
 
+from .cli_args import frame_range, int_at_least, positive_float, progress_printer
 from .core.errors import CrowdError
 
 __all__ = ["build_parser", "main"]
 
 MB = 10**6
 MIB = 2**20
-
-
-# ----------------------------------------------------------- argument converters
-
-def _int_at_least(minimum: int):
-    def convert(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"must be an integer, got {text!r}") from None
-        if value < minimum:
-            raise argparse.ArgumentTypeError(f"must be >= {minimum}, got {value}")
-        return value
-    convert.__name__ = "integer"
-    return convert
-
-
-def _positive_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a number, got {text!r}") from None
-    if not math.isfinite(value) or value <= 0:
-        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text!r}")
-    return value
-
-
-_positive_float.__name__ = "number"
 
 
 # ------------------------------------------------------------------------- budget
@@ -77,42 +49,42 @@ def _add_budget(subparsers) -> None:
                     "Sizes are bytes; MB means 10**6 bytes unless --mib is given.",
         epilog="example: crowd budget --bones 82 --pose-bytes 800 --clip-frames 300 "
                "--budget-mb 520 --max-offset 60")
-    p.add_argument("--agents", type=_int_at_least(1), default=65000,
+    p.add_argument("--agents", type=int_at_least(1), default=65000,
                    help="agents in the crowd (default: %(default)s)")
-    p.add_argument("--bones", type=_int_at_least(1), default=b.PAPER_BONES,
+    p.add_argument("--bones", type=int_at_least(1), default=b.PAPER_BONES,
                    help="bones per skeleton, NBones (default: %(default)s)")
-    p.add_argument("--bytes-per-bone", type=_positive_float,
+    p.add_argument("--bytes-per-bone", type=positive_float,
                    default=float(b.PAPER_BYTES_PER_BONE),
                    help="SizePerBone of the paper's model, bytes (default: %(default)g, "
                         "the paper's 0.8 KB pose / 82 bones)")
-    p.add_argument("--pose-bytes", type=_positive_float, default=None,
+    p.add_argument("--pose-bytes", type=positive_float, default=None,
                    help="PoseSize in bytes; overrides bones x --bytes-per-bone in the "
                         "paper's model (the plan always uses the GPU row size)")
-    p.add_argument("--clip-frames", type=_positive_float, nargs="+",
+    p.add_argument("--clip-frames", type=positive_float, nargs="+",
                    default=[float(b.PAPER_MOTION_LENGTH)], metavar="FRAMES",
                    help="clip length(s) in frames; the model uses their mean as "
                         "MotionLength, M may not exceed the shortest (default: 300)")
-    p.add_argument("--budget-mb", type=_positive_float, default=float(b.PAPER_BUDGET_MB),
+    p.add_argument("--budget-mb", type=positive_float, default=float(b.PAPER_BUDGET_MB),
                    help="GPU pose budget, MemBudget, in MB = 10**6 B (default: %(default)g)")
     p.add_argument("--mib", action="store_true",
                    help="read --budget-mb as MiB (2**20 B) instead of MB")
-    p.add_argument("--max-offset", type=_int_at_least(1), default=None,
+    p.add_argument("--max-offset", type=int_at_least(1), default=None,
                    help="M in frames; default: chosen by the planner")
-    p.add_argument("--streams", type=_int_at_least(1), default=None,
+    p.add_argument("--streams", type=int_at_least(1), default=None,
                    help="fix the stream count S; default: chosen by the planner")
-    p.add_argument("--fps", type=_positive_float, default=30.0,
+    p.add_argument("--fps", type=positive_float, default=30.0,
                    help="crowd frames per second (default: %(default)g)")
-    p.add_argument("--unique-agents", type=_int_at_least(0), default=0,
+    p.add_argument("--unique-agents", type=int_at_least(0), default=0,
                    help="agents in the unique pool, one row each (default: %(default)s)")
-    p.add_argument("--transition-slots", type=_int_at_least(0), default=800,
+    p.add_argument("--transition-slots", type=int_at_least(0), default=800,
                    help="transition slots NT, one row each (default: %(default)s)")
-    p.add_argument("--agents-per-key", type=_positive_float, default=4.0,
+    p.add_argument("--agents-per-key", type=positive_float, default=4.0,
                    help="diversity target: most agents per (stream, offset) "
                         "(default: %(default)g)")
-    p.add_argument("--offset-seconds", type=_positive_float, default=2.0,
+    p.add_argument("--offset-seconds", type=positive_float, default=2.0,
                    help="preferred M in seconds, capped by the shortest clip "
                         "(default: %(default)g)")
-    p.add_argument("--gpu-bytes-per-bone", type=_positive_float,
+    p.add_argument("--gpu-bytes-per-bone", type=positive_float,
                    default=float(b.GPU_BYTES_PER_BONE),
                    help="bytes per bone of a GPU pose row (default: %(default)g, "
                         "three RGBA32F texels)")
@@ -156,23 +128,6 @@ def _run_budget(args) -> int:
 
 # ------------------------------------------------------------------------- export
 
-def _frame_range(text: str) -> tuple:
-    """``"FIRST-LAST"`` (e.g. ``1-300``, ``-10-20``) or ``"N"`` -> ``(first, last)``."""
-    import re
-
-    m = re.fullmatch(r"\s*(-?\d+)\s*(?:-\s*(-?\d+)\s*)?", text)
-    if m is None:
-        raise argparse.ArgumentTypeError(f"must be FIRST-LAST or a frame, got {text!r}")
-    first = int(m.group(1))
-    last = first if m.group(2) is None else int(m.group(2))
-    if last < first:
-        raise argparse.ArgumentTypeError(f"last frame {last} is before first frame {first}")
-    return first, last
-
-
-_frame_range.__name__ = "frame range"
-
-
 def _add_export(subparsers) -> None:
     p = subparsers.add_parser(
         "export",
@@ -194,10 +149,10 @@ def _add_export(subparsers) -> None:
                    help="scene of the .blend (default: the active scene)")
     p.add_argument("--out", required=True, metavar="SHOT_USD",
                    help="main layer to write (.usdc, .usd or .usda)")
-    p.add_argument("--frames", required=True, type=_frame_range, metavar="FIRST-LAST",
+    p.add_argument("--frames", required=True, type=frame_range, metavar="FIRST-LAST",
                    help="shot frames, inclusive; FIRST must not be before the "
                         "configuration's start frame")
-    p.add_argument("--agents", type=_int_at_least(1), default=None, metavar="N",
+    p.add_argument("--agents", type=int_at_least(1), default=None, metavar="N",
                    help="export only the first N agents (ids 0..N-1); more than the "
                         "crowd has is an error (default: all)")
     p.add_argument("--json", action="store_true",
@@ -216,14 +171,14 @@ def _run_export(args) -> int:
         from .usd import check_export, export_crowd
         config = load_config(args.config)
         check_export(config, args.out, args.agents)     # before simulating the shot
-        progress = _progress_printer()
+        progress = progress_printer("crowd export")
         shot = record(Crowd(config, skinning="gpu"), *args.frames, progress=progress)
         result = export_crowd(shot, args.out, agents=args.agents, progress=progress)
     else:                       # the scene's Crowd settings, baked as the panel does
         from .blender.cli_commands import export_blend
         config, result = export_blend(
             args.out, args.frames, blend=args.blend, scene=args.scene, agents=args.agents,
-            progress=_progress_printer(), on_bake=lambda done, total, message: print(
+            progress=progress_printer("crowd export"), on_bake=lambda done, total, message: print(
                 f"crowd export: {message}", file=sys.stderr, flush=True))
     if args.json:
         print(json.dumps({**dataclasses.asdict(result), "bytes": result.bytes}))
@@ -241,18 +196,6 @@ def _run_export(args) -> int:
         f"  {s['total']:.1f} s (simulate {s['simulate']:.1f} s, author "
         f"{s['author']:.1f} s, write {s['write']:.1f} s)"]))
     return 0
-
-
-def _progress_printer():
-    """``progress(stage, done, total)`` printing to stderr about every 10% per stage."""
-    shown = {}
-
-    def progress(stage, done, total):
-        tenth = 10 if total <= 0 else done * 10 // total
-        if shown.get(stage, -1) < tenth:
-            shown[stage] = tenth
-            print(f"crowd export: {stage} {done}/{total}", file=sys.stderr, flush=True)
-    return progress
 
 
 # ------------------------------------------------------------------------ preview
@@ -274,13 +217,13 @@ def _add_preview(subparsers) -> None:
                    help="crowd configuration manifest written by config_io.save_config")
     p.add_argument("--out", required=True, metavar="DIR",
                    help="folder for the frames (created if missing)")
-    p.add_argument("--frames", required=True, type=_int_at_least(1), metavar="N",
+    p.add_argument("--frames", required=True, type=int_at_least(1), metavar="N",
                    help="number of frames to render")
     p.add_argument("--start", type=int, default=None, metavar="F",
                    help="first frame (default: the configuration's start frame)")
-    p.add_argument("--width", type=_int_at_least(1), default=960,
+    p.add_argument("--width", type=int_at_least(1), default=960,
                    help="image width in pixels (default: %(default)s)")
-    p.add_argument("--height", type=_int_at_least(1), default=540,
+    p.add_argument("--height", type=int_at_least(1), default=540,
                    help="image height in pixels (default: %(default)s)")
     p.add_argument("--mp4", action="store_true",
                    help="also write preview.mp4 (H.264 at the crowd's fps; needs an even "
@@ -348,12 +291,12 @@ def _add_demo(subparsers) -> None:
                     "bpy module. See docs/pipeline.md.",
         epilog="example: crowd demo --out demo_out --agents 65000")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
-    p.add_argument("--agents", type=_int_at_least(10), default=2000, metavar="N",
+    p.add_argument("--agents", type=int_at_least(10), default=2000, metavar="N",
                    help="seats, one agent each (default: %(default)s; the paper: 65000)")
-    p.add_argument("--frames", type=_int_at_least(1), default=240, metavar="N",
+    p.add_argument("--frames", type=int_at_least(1), default=240, metavar="N",
                    help="frames to simulate, render and export (default: %(default)s)")
-    p.add_argument("--width", type=_int_at_least(2), default=960)
-    p.add_argument("--height", type=_int_at_least(2), default=540)
+    p.add_argument("--width", type=int_at_least(2), default=960)
+    p.add_argument("--height", type=int_at_least(2), default=540)
     p.add_argument("--no-mp4", dest="mp4", action="store_false", help="PNG frames only")
     p.add_argument("--no-usd", dest="usd", action="store_false", help="skip the USD export")
     p.set_defaults(handler=_run_demo)

@@ -25,9 +25,9 @@ import argparse
 import dataclasses
 import json
 import os
-import re
 import sys
 
+from ..cli_args import frame_range, int_at_least, progress_printer
 from ..core.errors import CrowdError
 
 __all__ = ["open_scene", "export_blend", "build_parser", "crowd_command", "register_command",
@@ -79,32 +79,6 @@ def export_blend(out: str, frames: tuple, *, blend: str | None = None,
 
 # ------------------------------------------------------------- blender -c crowd
 
-def _frame_range(text: str) -> tuple:
-    """``"FIRST-LAST"`` or ``"N"`` -> ``(first, last)`` (ints)."""
-    m = re.fullmatch(r"\s*(-?\d+)\s*(?:-\s*(-?\d+)\s*)?", text)
-    if m is None:
-        raise argparse.ArgumentTypeError(f"must be FIRST-LAST or a frame, got {text!r}")
-    first = int(m.group(1))
-    last = first if m.group(2) is None else int(m.group(2))
-    if last < first:
-        raise argparse.ArgumentTypeError(f"last frame {last} is before first frame {first}")
-    return first, last
-
-
-def _agent_count(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be an integer, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
-    return value
-
-
-_frame_range.__name__ = "frame range"
-_agent_count.__name__ = "integer"
-
-
 def build_parser() -> argparse.ArgumentParser:
     """The parser of Blender's ``-c crowd`` command (prog ``crowd``)."""
     parser = argparse.ArgumentParser(
@@ -122,9 +96,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="scene to export (default: the active scene)")
     p.add_argument("--out", required=True, metavar="SHOT_USD",
                    help="main layer to write (.usdc, .usd or .usda)")
-    p.add_argument("--frames", required=True, type=_frame_range, metavar="FIRST-LAST",
+    p.add_argument("--frames", required=True, type=frame_range, metavar="FIRST-LAST",
                    help="shot frames, inclusive")
-    p.add_argument("--agents", type=_agent_count, default=None, metavar="N",
+    p.add_argument("--agents", type=int_at_least(1), default=None, metavar="N",
                    help="export only the first N agents (default: all)")
     p.add_argument("--json", action="store_true",
                    help="print the summary as one JSON object")
@@ -142,20 +116,13 @@ def crowd_command(argv) -> int:
     if args.command is None:
         parser.print_help(sys.stderr)
         return 2
-    shown = {}
-
-    def progress(stage, done, total):           # about every 10% per stage
-        tenth = 10 if total <= 0 else done * 10 // total
-        if shown.get(stage, -1) < tenth:
-            shown[stage] = tenth
-            print(f"crowd export: {stage} {done}/{total}", file=sys.stderr, flush=True)
-
     try:
         import bpy
         if not bpy.data.filepath:
             raise CrowdError("no .blend is open (blender -b SCENE_BLEND -c crowd export ...)")
         _, result = export_blend(
-            args.out, args.frames, scene=args.scene, agents=args.agents, progress=progress,
+            args.out, args.frames, scene=args.scene, agents=args.agents,
+            progress=progress_printer("crowd export"),
             on_bake=lambda done, total, message: print(
                 f"crowd export: {message}", file=sys.stderr, flush=True))
     except CrowdError as exc:
