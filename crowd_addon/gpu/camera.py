@@ -1,7 +1,7 @@
 """Cameras for crowd rendering: look-at view, perspective projection, framing.
 
 Matrices are float64 ``(4, 4)`` acting on column vectors (``clip = P @ V @ p``),
-OpenGL clip space (z in -w..w), world Z up (Blender's axes, DESIGN.md s.3).
+OpenGL clip space (z in -w..w), world Z up (Blender's axes, docs/architecture.md).
 """
 
 from __future__ import annotations

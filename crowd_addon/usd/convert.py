@@ -2,7 +2,7 @@
 
 Two conventions differ between ``core`` and USD and are converted only here:
 
-- quaternions: ``core`` stores ``(w, x, y, z)`` (DESIGN.md s.3); ``Gf.Quatf`` keeps
+- quaternions: ``core`` stores ``(w, x, y, z)`` (docs/architecture.md); ``Gf.Quatf`` keeps
   the imaginary part first in memory, so ``Vt.QuatfArray`` buffers are
   ``(x, y, z, w)`` (its constructor ``Gf.Quatf(w, x, y, z)`` is real-first);
 - matrices: ``core`` uses column vectors (``p' = M @ p``, translation in the last

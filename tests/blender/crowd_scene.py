@@ -174,18 +174,7 @@ class registered:
 
 
 def init_gpu():
-    """One tiny Workbench render: after it Blender's gpu module (and a GL context for
-    moderngl) works in background mode (DESIGN.md s.6). Returns the engine used."""
-    scene = bpy.context.scene
-    engine = scene.render.engine
-    size = scene.render.resolution_x, scene.render.resolution_y
-    scene.render.engine = "BLENDER_WORKBENCH"
-    scene.render.resolution_x = scene.render.resolution_y = 8
-    cam = bpy.data.objects.new("InitCamera", bpy.data.cameras.new("InitCamera"))
-    scene.collection.objects.link(cam)
-    scene.camera = cam
-    bpy.ops.render.render()
-    scene.camera = None
-    bpy.data.objects.remove(cam)
-    scene.render.engine = engine
-    scene.render.resolution_x, scene.render.resolution_y = size
+    """Blender's gpu module (and a GL context for moderngl) usable in background mode:
+    the extension's own one-time initialising render."""
+    from crowd_addon.blender.headless_gpu import init_headless_gpu
+    init_headless_gpu()

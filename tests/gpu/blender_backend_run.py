@@ -5,7 +5,7 @@
 Blender's GPU context and moderngl's standalone context do not share a thread
 well (each makes its own context current), so the tests run this in a
 subprocess: ``bpy`` is imported, the GPU initialised by one tiny Workbench
-render (DESIGN.md s.6), every scene run, and the arrays saved as
+render (blender.headless_gpu), every scene run, and the arrays saved as
 ``<scene>/<gpu|ref>/<name>``. Also draws one scene the way a viewport draw
 handler does (into a bound ``GPUOffScreen``, no clear of its own).
 """

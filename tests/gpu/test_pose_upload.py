@@ -1,5 +1,5 @@
 """Per-frame uploads: exactly core's dirty rows, never the whole texture, and the GPU
-copy stays equal to core's mirror (DESIGN.md s.3: the new slice, unique rows and
+copy stays equal to core's mirror (docs/architecture.md: the new slice, unique rows and
 active transition rows)."""
 
 import numpy as np

@@ -1,5 +1,5 @@
 """Skinned vertices read back from the GPU (transform feedback of the draw program's
-vertex stage) against core's CPU reference skinning, paper Eq. 1 (DESIGN.md s.5)."""
+vertex stage) against core's CPU reference skinning, paper Eq. 1."""
 
 import numpy as np
 import pytest
