@@ -145,14 +145,19 @@ class StadiumShow:
             self.stats.waves += ids.size
             self._later(f + p.wave_hold, ids)
         if t == p.hit_frame and self._hit_ids.size:
-            free = ~self._busy[self._hit_ids]
-            for a, u in zip(self._hit_ids[free], self.hits[free]):
+            # the ball waits for nobody: a hit interrupts whatever the fan was doing
+            self._cancel_returns(self._hit_ids)
+            for a, u in zip(self._hit_ids, self.hits):
                 self._request(np.array([a]), "unique", int(u))
-            ids = self._hit_ids[free]
-            self.stats.hits += ids.size
-            self._later(f + self.hit_frames, ids)
+            self.stats.hits += self._hit_ids.size
+            self._later(f + self.hit_frames, self._hit_ids)
 
     __call__ = before_step
+
+    def _cancel_returns(self, ids):
+        """Forget the scheduled returns of ``ids`` (they get a new reaction)."""
+        for frame, groups in self._returns.items():
+            self._returns[frame] = [g[~np.isin(g, ids)] for g in groups]
 
     def _later(self, frame, ids):
         if ids.size:

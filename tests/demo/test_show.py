@@ -151,3 +151,25 @@ def test_away_side_reacts_and_non_actors_are_never_moved():
     assert not np.isin(show._hit_ids, np.flatnonzero(~actors)).any()
     away_agents = np.flatnonzero(~home & actors)
     assert show.stats.requested >= 2 * (home & actors).sum() + away_agents.size
+
+
+def test_a_hit_interrupts_a_cheer_and_the_fan_returns_once():
+    """Regression: with the default plan every fan is cheering when the ball comes
+    (goal at 45, hit at 70), and the hit was skipped for busy fans (0 hits)."""
+    cfg, angle = stadium()
+    crowd = Crowd(cfg)
+    plan = ShowPlan(goal_frame=1, cheer_frames=30, wave_lap_frames=0, hit_frame=5)
+    show = StadiumShow(crowd, angle, np.ones(N, bool), hits=["hit0", "hit1"],
+                       hit_frames=10, plan=plan)
+    run(show, crowd, 8)
+    hit = show._hit_ids
+    assert show.stats.hits == 2
+    kind, ref, _ = playing(crowd, hit)
+    assert (kind == UNIQUE).all() and sorted(ref.tolist()) == [0, 1]
+    requested = show.stats.requested
+    run(show, crowd, 40)                        # past the hit's end and the cheer's
+    assert (crowd.agents.kind[hit] == STREAM).all()
+    np.testing.assert_array_equal(crowd.agents.ref[hit], cfg.agent_stream[hit])
+    # the cheer's return left them alone: one return each after the hit, no second
+    others = N - hit.size
+    assert show.stats.requested - requested == hit.size + others
