@@ -271,6 +271,9 @@ def main(argv=None):
     args = ap.parse_args(argv)
     size = tuple(int(v) for v in args.size.lower().split("x"))
     backend = args.backend
+    if backend == "blender":                  # bpy in background mode: wake its GPU
+        from crowd_addon.blender.headless_gpu import init_headless_gpu
+        init_headless_gpu()
     rng = np.random.default_rng(7)
     best, device = throughput(backend, size, 3 if args.quick else 5, rng)
     proto, raw, real = best["prototype"] or None, best["draw_only"], best["real_work"]

@@ -42,8 +42,9 @@ def make_renderer(view, backend: str = "moderngl", size=(640, 360), **kwargs):
         try:
             import gpu  # noqa: F401  (Blender's module: bpy or a Blender process)
         except ImportError:
-            raise CrowdError("backend blender needs Blender's gpu module (pip install bpy)") \
-                from None
+            raise CrowdError("backend blender needs Blender's gpu module: run inside "
+                             "Blender, or with the bpy module call crowd_addon.blender."
+                             "headless_gpu.init_headless_gpu() first") from None
         from .blender_backend import BlenderGPURenderer
         return BlenderGPURenderer(view, size, **kwargs)
     if backend == "viewport":
