@@ -276,14 +276,6 @@ class Crowd:
             raise CrowdError(f"agent {int(agents[bad[0]])}: cannot transition to "
                              f"{name!r}, it uses another skeleton")
 
-    def transition_of(self, agents) -> dict:
-        """The slot state of ``agents`` (k,) blending now (see FrameView.transitions)."""
-        agents = self.agents.ids(agents)
-        other = agents[self.agents.kind[agents] != TRANSITION]
-        if other.size:
-            raise CrowdError(f"agent {int(other[0])} is not in a transition")
-        return self.slots.describe(self.agents.ref[agents])
-
     # ------------------------------------------------------------------ agents
     def place_agents(self, agents, position=None, heading=None, color=None):
         """Move, turn or recolour agents (see :meth:`AgentState.place`)."""

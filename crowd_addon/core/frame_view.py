@@ -13,6 +13,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from .agents import TRANSITION
+from .errors import CrowdError
+
 __all__ = ["FrameView"]
 
 
@@ -129,7 +132,12 @@ class FrameView:
         (k,): ``start_pose`` (k, B, 10) float32 StartP, ``t0`` int64 start frame,
         ``length`` int64 L in frames, ``target_kind`` int8, ``target_ref`` int64,
         ``target_offset`` int64. An agent not in a transition is an error."""
-        return self._crowd.transition_of(agents)
+        c = self._crowd
+        agents = c.agents.ids(agents)
+        other = agents[c.agents.kind[agents] != TRANSITION]
+        if other.size:
+            raise CrowdError(f"agent {int(other[0])} is not in a transition")
+        return c.slots.describe(c.agents.ref[agents])
 
     def stream_events(self, since_frame: int):
         """Event tags the stream heads crossed at frames ``>= since_frame`` (at most the
