@@ -24,7 +24,10 @@ from .agents import STREAM, TRANSITION, UNIQUE
 from .config import WHEN_FULL
 from .errors import CrowdError
 
-__all__ = ["TransitionSlots", "TransitionResult"]
+__all__ = ["TransitionSlots", "TransitionResult", "MAX_DURATION"]
+
+#: The longest transition, in frames (2**31 - 1: frame arithmetic stays in int64).
+MAX_DURATION = 2 ** 31 - 1
 
 @dataclass(frozen=True)
 class TransitionResult:
@@ -98,18 +101,24 @@ class TransitionSlots:
         except (TypeError, ValueError):
             raise CrowdError(f"transition: duration must be a number of frames, got "
                              f"{duration!r}") from None
-        if not (np.isfinite(d) and d >= 0):
-            raise CrowdError(f"transition: duration must be >= 0 frames, got {duration!r}")
+        if not (np.isfinite(d) and 0 <= d <= MAX_DURATION):
+            raise CrowdError(f"transition: duration must be 0..{MAX_DURATION} frames, got "
+                             f"{duration!r}")
         return int(round(d)), policy
 
     def request(self, agents, kind, ref, offsets, length, policy) -> TransitionResult:
         """Blend ``agents`` (k,) to ``(kind, ref)`` at ``offsets`` (k,) over ``length``
-        frames: agents already blending reuse their slot, others take free slots, the
-        rest wait (``"queue"``) or switch at once (``"cut"``); ``length`` 0 cuts."""
+        frames: agents already blending reuse their slot; free slots go first to the
+        requests already waiting (FIFO), then to these agents; the rest wait
+        (``"queue"``) or switch at once (``"cut"``). ``length`` 0 cuts; with no slots
+        at all (``NT = 0``) every request cuts, since nothing could serve a queue."""
         agents, first = np.unique(agents, return_index=True)
         offsets = offsets[first]
         for a in agents.tolist():
             self.queue.pop(a, None)
+        if self.count == 0:          # nothing could ever serve a queue: switch at once
+            policy = "cut"
+        self.serve_queue()           # first in, first out: the waiting go first
         if length == 0:
             self.cut(agents, kind, ref, offsets)
             empty = np.zeros(0, np.int64)
