@@ -265,7 +265,7 @@ class Crowd:
         length, policy = self.slots.check_request(duration, when_full)
         u = self.uniques.index(unique)
         self._check_skeleton(agents, self.uniques.skeleton[u], self.uniques.names[u])
-        if restart:
+        if restart and agents.size:
             self.uniques.restart(u, self.frame + 1)
         return self.slots.request(agents, UNIQUE, u, self.agents.offset[agents].copy(),
                                   length, policy)

@@ -173,7 +173,11 @@ class TreeEvaluator:
 
     def set_parameter(self, root: int, name: str, value: float):
         """Set controller parameter ``name`` of tree ``root`` (finite values only)."""
-        v = float(value)
+        try:
+            v = float(value)
+        except (TypeError, ValueError):
+            raise CrowdError(f"parameter {name!r}: value must be a number, got "
+                             f"{value!r}") from None
         if not np.isfinite(v):
             raise CrowdError(f"parameter {name!r}: value must be finite, got {value!r}")
         self.ctx.params[root][str(name)] = v

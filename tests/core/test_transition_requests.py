@@ -80,3 +80,27 @@ def test_a_huge_duration_is_refused_before_anything_changes(duration):
     with pytest.raises(CrowdError, match="duration"):
         c.transition_to_streamed([5], "idle", duration)
     assert c.agents.kind[5] == STREAM and c.slots.free_slots().size == 2
+
+
+def test_an_empty_unique_request_leaves_its_clock_alone():
+    skel = synthetic.humanoid(bones=24)
+    cfg = CrowdConfig(max_offset=6, transition_slots=2)
+    cfg.add_skeleton(skel)
+    cfg.add_clip(synthetic.periodic_clip(skel, "walk", frames=9, seed=1))
+    cfg.add_clip(synthetic.periodic_clip(skel, "solo", frames=11, seed=2))
+    cfg.add_stream("walk", skel.name, ClipPlayer("walk"))
+    cfg.add_unique("solo", skel.name, ClipPlayer("solo"))
+    cfg.add_agents(4, streams=np.zeros(4, np.int64), seed=3)
+    c = Crowd(cfg)
+    for _ in range(3):
+        c.step()
+    start = c.uniques.start.copy()
+    r = c.transition_to_unique([], "solo", 4)
+    assert r.started.size == 0
+    np.testing.assert_array_equal(c.uniques.start, start)
+
+
+def test_a_parameter_that_is_not_a_number_is_named():
+    c = crowd(slots=1)
+    with pytest.raises(CrowdError, match="parameter 'speed': value must be a number, got 'fast'"):
+        c.set_parameter("walk", "speed", "fast")
