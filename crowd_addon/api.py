@@ -95,8 +95,9 @@ class CrowdHandle:
         self._callbacks.off(handle)
 
     @property
-    def errors(self) -> list:
-        """``CallbackError`` records of callbacks that raised."""
+    def errors(self):
+        """The newest ``CallbackError`` records of callbacks that raised (see
+        ``core.events.EventDispatcher``: older ones are counted, not kept)."""
         return self._callbacks.errors
 
     def _dispatch(self, name, frame, agents):

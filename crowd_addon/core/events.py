@@ -14,7 +14,7 @@ raises is logged and recorded in :attr:`EventDispatcher.errors`; the crowd goes 
 from __future__ import annotations
 
 import logging
-from collections import Counter
+from collections import Counter, deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,6 +22,11 @@ import numpy as np
 __all__ = ["EventDispatcher", "CallbackError", "deliver"]
 
 log = logging.getLogger("crowd_addon.events")
+
+#: Callback errors kept with their tracebacks (the newest); older ones are counted.
+KEPT_ERRORS = 20
+#: Errors of one callback that are logged; later ones are only counted.
+LOGGED_ERRORS = 5
 
 
 @dataclass(frozen=True)
@@ -33,13 +38,22 @@ class CallbackError:
 
 
 class EventDispatcher:
-    """Callbacks by event name; ``label`` names the owner in logged errors."""
+    """Callbacks by event name; ``label`` names the owner in logged errors.
+
+    A callback that raises is counted per callback (:attr:`error_counts`); the last
+    :data:`KEPT_ERRORS` errors are kept with their tracebacks (:attr:`errors`), older
+    ones are dropped and counted (:attr:`errors_dropped`), and each callback's first
+    :data:`LOGGED_ERRORS` errors are logged, so one that always raises costs neither
+    memory nor a flooded log.
+    """
 
     def __init__(self, label: str = "crowd"):
         self.label = label
         self._handlers = {}
         self._next = 0
-        self.errors = []
+        self.errors = deque(maxlen=KEPT_ERRORS)
+        self.errors_dropped = 0
+        self.error_counts = Counter()   # callback -> errors it raised
         self.fired = Counter()          # event name -> agent-crossings delivered
         self.calls = Counter()          # event name -> frames it fired on
 
@@ -66,10 +80,20 @@ class EventDispatcher:
             try:
                 fn(name, frame, agents)
             except Exception as exc:  # noqa: BLE001 - reported, never fatal
-                self.errors.append(CallbackError(name, frame, fn, exc))
-                log.error("%s: event callback %r for %r at frame %d raised %s: %s",
-                          self.label, getattr(fn, "__name__", fn), name, frame,
-                          type(exc).__name__, exc)
+                self._failed(CallbackError(name, frame, fn, exc))
+
+    def _failed(self, err: CallbackError):
+        if len(self.errors) == self.errors.maxlen:
+            self.errors_dropped += 1
+        self.errors.append(err)
+        self.error_counts[err.callback] += 1
+        count = self.error_counts[err.callback]
+        if count <= LOGGED_ERRORS:
+            more = ("; its further errors are counted, not logged"
+                    if count == LOGGED_ERRORS else "")
+            log.error("%s: event callback %r for %r at frame %d raised %s: %s%s",
+                      self.label, getattr(err.callback, "__name__", err.callback),
+                      err.event, err.frame, type(err.error).__name__, err.error, more)
 
 
 def deliver(frame, roots, names, streams, uniques, index, dispatcher, tag_names) -> int:

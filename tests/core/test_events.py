@@ -208,10 +208,11 @@ def test_raising_callback_is_recorded_and_crowd_keeps_stepping():
     for _ in range(30):
         crowd.step()
     assert crowd.frame == f0 + 30
-    errs = crowd.events.errors
-    assert len(errs) == len(rec.calls) > 0
+    errs = crowd.events.errors                 # the newest kept, the rest counted
+    assert len(errs) + crowd.events.errors_dropped == len(rec.calls) > 0
+    assert crowd.events.error_counts[boom] == len(rec.calls)
     assert all(isinstance(e.error, RuntimeError) and e.event == "clap" for e in errs)
-    assert [e.frame for e in errs] == [f for _, f, _ in rec.calls]
+    assert [e.frame for e in errs] == [f for _, f, _ in rec.calls][-len(errs):]
 
 
 def test_star_handler_receives_all_events():
@@ -315,3 +316,24 @@ def test_stream_events_are_the_head_crossings_of_the_last_m_frames():
     since = crowd.frame - 1
     later = crowd.view.stream_events(since)[2]
     assert sorted(later.tolist()) == sorted(f for f in frame.tolist() if f >= since)
+
+
+def test_a_callback_that_always_raises_costs_bounded_memory_and_log(caplog):
+    """Regression: every error was kept with its traceback (207 MB after 3,000 frames)
+    and logged. Now the newest few are kept, the rest counted per callback."""
+    from crowd_addon.core.events import KEPT_ERRORS, LOGGED_ERRORS, EventDispatcher
+    d = EventDispatcher("test")
+
+    def boom(name, frame, ids):
+        raise RuntimeError(f"bug at {frame}")
+
+    d.on("clap", boom)
+    with caplog.at_level("ERROR", logger="crowd_addon.events"):
+        for f in range(500):
+            d.dispatch(f, "clap", np.arange(3))
+    assert len(d.errors) == KEPT_ERRORS
+    assert [e.frame for e in d.errors] == list(range(500 - KEPT_ERRORS, 500))
+    assert d.errors_dropped == 500 - KEPT_ERRORS
+    assert d.error_counts[boom] == 500
+    assert len(caplog.records) == LOGGED_ERRORS
+    assert "counted, not logged" in caplog.records[-1].getMessage()
