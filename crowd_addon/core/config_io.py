@@ -43,6 +43,7 @@ from .config import WHEN_FULL, AnimationDef, CrowdConfig
 from .controllers import (Blend2, BlendMask, BlendSpace2D, ClipPlayer, Layer, StateMachine,
                           StateTransition)
 from .errors import CrowdError
+from .files import file_mode
 from .mesh import ProxyMesh
 from .skeleton import Skeleton
 
@@ -610,15 +611,6 @@ def _sha256(path) -> tuple:
     return h.hexdigest(), size
 
 
-def _file_mode(target) -> int:
-    try:
-        return os.stat(target).st_mode & 0o777
-    except OSError:
-        mask = os.umask(0)
-        os.umask(mask)
-        return 0o666 & ~mask
-
-
 def save_config(config: CrowdConfig, path) -> None:
     """Write ``config`` to ``path`` (the ``.json`` manifest) and ``<stem>.npz``.
 
@@ -653,8 +645,8 @@ def save_config(config: CrowdConfig, path) -> None:
             f.write(_format_json(manifest) + "\n")
             f.flush()
             os.fsync(f.fileno())
-        os.chmod(tmp_npz, _file_mode(npz_path))
-        os.chmod(tmp_json, _file_mode(path))
+        os.chmod(tmp_npz, file_mode(npz_path))
+        os.chmod(tmp_json, file_mode(path))
         os.replace(tmp_npz, npz_path)
         tmp.remove(tmp_npz)
         os.replace(tmp_json, path)

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.errors import CrowdError
+from ..core.files import file_mode
 
 __all__ = ["encode_png", "write_png"]
 
@@ -46,6 +47,7 @@ def write_png(path, image: np.ndarray, level: int = 6) -> Path:
     try:
         with os.fdopen(fd, "wb") as f:
             f.write(data)
+        os.chmod(tmp, file_mode(path))          # mkstemp's 0600 is for its secrecy
         os.replace(tmp, path)
     except OSError as e:
         os.unlink(tmp)

@@ -55,3 +55,19 @@ def test_frame_crowd_keeps_every_agent_in_view(h):
     ndc = project(cam.view_projection, pts)
     assert (np.abs(ndc) <= 1).all()
     assert np.abs(ndc[:, :2]).max() > 0.5            # and it is framed, not tiny
+
+
+def test_png_files_get_the_usual_permissions(tmp_path):
+    """Regression: PNGs were left with mkstemp's 0600, unlike every other output."""
+    import os
+
+    from crowd_addon.gpu.png import write_png
+    mask = os.umask(0o022)
+    try:
+        p = write_png(tmp_path / "a.png", np.zeros((2, 3, 4), np.uint8))
+        assert os.stat(p).st_mode & 0o777 == 0o644
+        os.chmod(p, 0o664)                       # an existing file keeps its mode
+        write_png(p, np.ones((2, 3, 4), np.uint8))
+        assert os.stat(p).st_mode & 0o777 == 0o664
+    finally:
+        os.umask(mask)
