@@ -3,9 +3,8 @@
 import numpy as np
 import pytest
 
-from crowd_addon.core import Crowd, CrowdConfig, CrowdError, synthetic
+from crowd_addon.core import CrowdError
 from crowd_addon.core.agents import STREAM, TRANSITION, UNIQUE, AgentState
-from crowd_addon.core.controllers import ClipPlayer
 
 
 def state(n=10):
@@ -72,19 +71,8 @@ def test_place_names_a_bad_id():
         state().place([10], heading=0.0)
 
 
-def small_crowd(slots=2):
-    skel = synthetic.humanoid(bones=24)
-    cfg = CrowdConfig(max_offset=6, transition_slots=slots)
-    cfg.add_skeleton(skel)
-    for name, period in (("walk", 9), ("idle", 13)):
-        cfg.add_clip(synthetic.periodic_clip(skel, name, frames=period, seed=period))
-        cfg.add_stream(name, skel.name, ClipPlayer(name))
-    cfg.add_agents(8, streams=np.arange(8) % 2, seed=3)
-    return Crowd(cfg)
-
-
-def test_crowd_logs_every_agent_it_changes():
-    crowd = small_crowd()
+def test_crowd_logs_every_agent_it_changes(two_streams):
+    crowd = two_streams(2, 8, np.arange(8) % 2)
     cur = crowd.view.agent_changes(0).cursor
     r = crowd.transition_to_streamed([0, 1, 2, 3], "idle", 3, offset=1)   # 2 start, 2 queue
     ch = crowd.view.agent_changes(cur)
@@ -104,8 +92,8 @@ def test_crowd_logs_every_agent_it_changes():
     np.testing.assert_array_equal(crowd.agents.position[5], (1.0, 2.0, 0.0))
 
 
-def test_view_reports_the_transition_of_blending_agents():
-    crowd = small_crowd()
+def test_view_reports_the_transition_of_blending_agents(two_streams):
+    crowd = two_streams(2, 8, np.arange(8) % 2)
     crowd.step()
     shown = crowd.view.agent_poses([4])
     crowd.transition_to_streamed([4], "walk", 5, offset=2)
@@ -118,11 +106,11 @@ def test_view_reports_the_transition_of_blending_agents():
         crowd.view.transitions([5])
 
 
-def test_the_log_covers_every_change_a_diff_would_find():
+def test_the_log_covers_every_change_a_diff_would_find(two_streams):
     """Property: over a random session (transitions that queue, cuts, uniques-free
     streams, moves), the agents the log reports each frame include every agent whose
     arrays differ from the last read."""
-    crowd = small_crowd(slots=3)
+    crowd = two_streams(3, 8, np.arange(8) % 2)
     rng = np.random.default_rng(5)
     a = crowd.agents
     cursor = crowd.view.agent_changes(0).cursor

@@ -10,21 +10,10 @@ from crowd_addon.core.agents import STREAM, TRANSITION
 from crowd_addon.core.controllers import ClipPlayer
 
 
-def crowd(slots, agents=12):
-    skel = synthetic.humanoid(bones=24)
-    cfg = CrowdConfig(max_offset=6, transition_slots=slots)
-    cfg.add_skeleton(skel)
-    for name, period in (("walk", 9), ("idle", 13)):
-        cfg.add_clip(synthetic.periodic_clip(skel, name, frames=period, seed=period))
-        cfg.add_stream(name, skel.name, ClipPlayer(name))
-    cfg.add_agents(agents, streams=np.zeros(agents, np.int64), seed=3)
-    return Crowd(cfg)
-
-
-def test_queue_is_first_in_first_out_when_a_slot_frees_between_steps():
+def test_queue_is_first_in_first_out_when_a_slot_frees_between_steps(two_streams):
     """A request made after a slot frees but before the next step used to take the
     free slot ahead of agents already waiting (who could starve)."""
-    c = crowd(slots=2)
+    c = two_streams(slots=2)
     c.transition_to_streamed([0, 1], "idle", 2)               # both slots busy
     r = c.transition_to_streamed([2, 3], "idle", 2)           # wait, 2 then 3
     assert r.queued.tolist() == [2, 3]
@@ -42,10 +31,10 @@ def test_queue_is_first_in_first_out_when_a_slot_frees_between_steps():
     assert c.agents.kind[4] == TRANSITION                     # its turn came next
 
 
-def test_served_in_request_order_over_a_long_interleaving():
+def test_served_in_request_order_over_a_long_interleaving(two_streams):
     """Two requests a frame for three slots and 3-6 frame blends: the queue is always in
     use, slots free during steps and requests arrive between them."""
-    c = crowd(slots=3, agents=60)
+    c = two_streams(slots=3, agents=60)
     rng = np.random.default_rng(1)
     started = []
 
@@ -67,16 +56,16 @@ def test_served_in_request_order_over_a_long_interleaving():
     assert started == list(range(len(started)))
 
 
-def test_no_slots_cuts_instead_of_queueing_forever():
-    c = crowd(slots=0)
+def test_no_slots_cuts_instead_of_queueing_forever(two_streams):
+    c = two_streams(slots=0)
     r = c.transition_to_streamed([1, 2], "idle", 5)           # policy "queue" by default
     assert r.cut.tolist() == [1, 2] and r.queued.size == 0 and not c.slots.queue
     assert (c.agents.kind[[1, 2]] == STREAM).all() and (c.agents.ref[[1, 2]] == 1).all()
 
 
 @pytest.mark.parametrize("duration", [1e30, 2.0 ** 31, float("inf")])
-def test_a_huge_duration_is_refused_before_anything_changes(duration):
-    c = crowd(slots=2)
+def test_a_huge_duration_is_refused_before_anything_changes(two_streams, duration):
+    c = two_streams(slots=2)
     with pytest.raises(CrowdError, match="duration"):
         c.transition_to_streamed([5], "idle", duration)
     assert c.agents.kind[5] == STREAM and c.slots.free_slots().size == 2
@@ -100,7 +89,7 @@ def test_an_empty_unique_request_leaves_its_clock_alone():
     np.testing.assert_array_equal(c.uniques.start, start)
 
 
-def test_a_parameter_that_is_not_a_number_is_named():
-    c = crowd(slots=1)
+def test_a_parameter_that_is_not_a_number_is_named(two_streams):
+    c = two_streams(slots=1)
     with pytest.raises(CrowdError, match="parameter 'speed': value must be a number, got 'fast'"):
         c.set_parameter("walk", "speed", "fast")
