@@ -136,7 +136,7 @@ def _add_export(subparsers) -> None:
                     "UsdSkel: one layer per character, one baked SkelAnimation per "
                     "stream, shared offset animations, instanceable agents "
                     "(docs/usd_export.md). The main layer's extension picks the format: "
-                    ".usdc or .usd binary, .usda text; its layers go to <stem>.layers/ "
+                    ".usdc or .usd binary, .usda text; its layers go to <stem>.layers/vN/ "
                     "beside it. Nothing is written unless the whole export succeeds.",
         epilog="example: crowd export --config crowd.json --out shot.usdc --frames 1-300")
     src = p.add_mutually_exclusive_group()

@@ -4,11 +4,11 @@
 simulated once by :func:`crowd_addon.core.recording.record`; nothing here runs a
 crowd) as::
 
-    shot.usdc                      layout: offset animations, agents (main layer)
-    shot.layers/characters/*.usdc  one SkelRoot + Skeleton + Mesh per character
-    shot.layers/streams/*.usdc     one baked SkelAnimation per stream used
-    shot.layers/agents.usdc        own animations of agents that are not static
-                                   (sublayer of the main layer; only if any)
+    shot.usdc                         layout: offset animations, agents (main layer)
+    shot.layers/vN/characters/*.usdc  one SkelRoot + Skeleton + Mesh per character
+    shot.layers/vN/streams/*.usdc     one baked SkelAnimation per stream used
+    shot.layers/vN/agents.usdc        own animations of agents that are not static
+                                      (sublayer of the main layer; only if any)
 
 :func:`export_steps` is the same export one unit of work per ``next()`` (a stream
 layer, a batch of agents' own animations, the layout...), for a caller that must stay

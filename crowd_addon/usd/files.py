@@ -1,18 +1,28 @@
 """All-or-nothing output of a main layer and its folder of layers.
 
-An export is ``shot.usdc`` plus the folder ``shot.layers/`` beside it (characters,
-streams, baked agents). Everything is first written into a hidden temporary folder
-in the target directory; :meth:`ExportFiles.commit` then swaps the finished folder in
-(the previous one is moved aside) and renames the main layer into place, so a
-failure at any point before leaves no new file behind and the previous export as it
-was. If a rename in the swap itself fails, the swap is undone before the error is
-raised.
+An export is ``shot.usdc`` plus a *version* of its layers beside it,
+``shot.layers/vN/`` (characters, streams, baked agents), which the main layer's asset
+paths name. Everything is first written into a hidden temporary folder in the target
+directory (``.shot.usdc.XXXX.tmp``, with an ``owner`` file naming the process).
+:meth:`ExportFiles.commit` then
+
+1. renames the finished layers to the new version folder, ``shot.layers/vN`` (the
+   previous export, whose main layer names ``vN-1``, is untouched);
+2. renames the main layer into place: this one rename is the commit;
+3. removes the older versions.
+
+A crash (or kill) before step 2 leaves the previous export whole; after it, the new
+one. What a killed export leaves behind (its temporary folder, an orphan version) is
+removed by the next export to the same place: temporaries of our naming whose owner
+process is gone, and every version but the one committed.
 """
 
 from __future__ import annotations
 
 import os
+import re
 import shutil
+import socket
 import tempfile
 
 from pxr import Tf
@@ -43,25 +53,30 @@ class ExportFiles:
         self.format = FORMATS[ext.lower()]
         self.ext = f".{self.format}"
         self.directory = os.path.dirname(self.path)
-        self.layers_name = f"{stem}.layers"
-        self.layers_dir = os.path.join(self.directory, self.layers_name)
+        self.layers_root = os.path.join(self.directory, f"{stem}.layers")
         if not os.path.isdir(self.directory):
             raise CrowdError(f"{path}: directory {self.directory} does not exist")
         if os.path.isdir(self.path):
             raise CrowdError(f"{path}: is a directory")
-        if os.path.lexists(self.layers_dir) and not os.path.isdir(self.layers_dir):
-            raise CrowdError(f"{path}: {self.layers_dir} exists and is not a folder of "
+        if os.path.lexists(self.layers_root) and not os.path.isdir(self.layers_root):
+            raise CrowdError(f"{path}: {self.layers_root} exists and is not a folder of "
                              "layers")
+        self.version = f"v{_next_version(self.layers_root)}"
+        self.layers_name = f"{stem}.layers/{self.version}"
+        self.layers_dir = os.path.join(self.layers_root, self.version)
         self._tmp = None
         self.written = {}            # relative path -> bytes
 
     def __enter__(self):
+        _remove_stale_temporaries(self.directory, os.path.basename(self.path))
         try:
             self._tmp = tempfile.mkdtemp(prefix=f".{os.path.basename(self.path)}.",
                                          suffix=".tmp", dir=self.directory)
         except OSError as e:
             raise CrowdError(f"{self.path}: cannot write in {self.directory}: "
                              f"{e.strerror or e}") from None
+        with open(os.path.join(self._tmp, "owner"), "w", encoding="utf-8") as f:
+            f.write(f"{socket.gethostname()} {os.getpid()}\n")
         os.mkdir(os.path.join(self._tmp, "layers"))
         return self
 
@@ -98,22 +113,86 @@ class ExportFiles:
         """Move the finished export into place (see the module docstring)."""
         staged = os.path.join(self._tmp, "layers")
         main = os.path.join(self._tmp, f"main{self.ext}")
-        previous = os.path.join(self._tmp, "previous")
         mask = os.umask(0)
         os.umask(mask)
-        moved_old = moved_new = False
+        _step("start")
         try:
+            os.makedirs(self.layers_root, exist_ok=True)
             os.chmod(staged, 0o777 & ~mask)
-            if os.path.isdir(self.layers_dir):
-                os.rename(self.layers_dir, previous)
-                moved_old = True
+            if os.path.lexists(self.layers_dir):
+                raise CrowdError(f"{self.path}: another export wrote {self.layers_dir} "
+                                 "meanwhile; export again")
             os.rename(staged, self.layers_dir)
-            moved_new = True
-            os.replace(main, self.path)
         except OSError as e:
-            if moved_new:
-                os.rename(self.layers_dir, staged)
-            if moved_old:
-                os.rename(previous, self.layers_dir)
             raise CrowdError(f"{self.path}: cannot move the export into place: "
                              f"{e.strerror or e}") from None
+        _step("layers")
+        try:
+            os.replace(main, self.path)                      # the commit
+        except OSError as e:
+            shutil.rmtree(self.layers_dir, ignore_errors=True)
+            raise CrowdError(f"{self.path}: cannot move the export into place: "
+                             f"{e.strerror or e}") from None
+        _step("main")
+        for name in os.listdir(self.layers_root):           # older versions, old layouts
+            if name != self.version:
+                old = os.path.join(self.layers_root, name)
+                if os.path.isdir(old) and not os.path.islink(old):
+                    shutil.rmtree(old, ignore_errors=True)
+                else:
+                    _unlink(old)
+
+
+def _step(name: str) -> None:
+    """A point of :meth:`ExportFiles.commit` (``start``, ``layers``, ``main``); tests
+    replace it to kill the process there."""
+
+
+def _next_version(layers_root) -> int:
+    """One more than the highest ``vN`` folder in ``layers_root`` (1 when none)."""
+    try:
+        names = os.listdir(layers_root)
+    except OSError:
+        return 1
+    found = [int(m.group(1)) for n in names if (m := re.fullmatch(r"v(\d+)", n))]
+    return max(found, default=0) + 1
+
+
+def _remove_stale_temporaries(directory, main_name):
+    """Remove ``.MAIN.XXXX.tmp`` folders of exports to ``main_name`` in ``directory``
+    whose owner process (on this host) is gone, or that name no owner."""
+    pattern = re.compile(re.escape(f".{main_name}.") + r"[A-Za-z0-9_]+\.tmp")
+    try:
+        names = os.listdir(directory)
+    except OSError:
+        return
+    host = socket.gethostname()
+    for name in names:
+        path = os.path.join(directory, name)
+        if not pattern.fullmatch(name) or not os.path.isdir(path) or os.path.islink(path):
+            continue
+        try:
+            with open(os.path.join(path, "owner"), encoding="utf-8") as f:
+                owner_host, pid = f.read().split()
+            alive = owner_host != host or _running(int(pid))
+        except (OSError, ValueError):
+            alive = False
+        if not alive:
+            shutil.rmtree(path, ignore_errors=True)
+
+
+def _running(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def _unlink(path):
+    try:
+        os.unlink(path)
+    except OSError:
+        pass

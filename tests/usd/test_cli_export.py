@@ -92,4 +92,4 @@ def test_python_m_crowd_addon_export(config_path, tmp_path):
                          cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert run.returncode == 0, run.stderr
     assert "crowd export: simulate" in run.stderr and "wrote" in run.stdout
-    assert (tmp_path / "shot.layers" / "characters" / "fan.usdc").is_file()
+    assert (tmp_path / "shot.layers" / "v1" / "characters" / "fan.usdc").is_file()

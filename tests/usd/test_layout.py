@@ -41,7 +41,7 @@ def usdchecker(stage):
 
 def test_usdchecker_passes(shot, stage):
     assert usdchecker(stage) == []
-    layers = shot[1].parent / "shot.layers"
+    layers = shot[1].parent / "shot.layers" / "v1"
     for character in sorted((layers / "characters").iterdir()):
         assert usdchecker(Usd.Stage.Open(str(character))) == []
 
@@ -49,7 +49,7 @@ def test_usdchecker_passes(shot, stage):
 def test_usdchecker_would_notice_a_broken_binding(shot, tmp_path):
     """Control: the same checker flags a skinned mesh without SkelBindingAPI."""
     copy = tmp_path / "fan.usda"
-    copy.write_bytes((shot[1].parent / "shot.layers/characters/fan.usda").read_bytes())
+    copy.write_bytes((shot[1].parent / "shot.layers/v1/characters/fan.usda").read_bytes())
     bad = Usd.Stage.Open(str(copy))
     mesh = next(p for p in bad.Traverse() if p.IsA(UsdGeom.Mesh))
     mesh.RemoveAPI(UsdSkel.BindingAPI)
@@ -59,10 +59,10 @@ def test_usdchecker_would_notice_a_broken_binding(shot, tmp_path):
 def test_every_layer_shares_units_axis_and_time(shot):
     result, path = shot
     assert set(result.files) == {
-        "shot.usda", "shot.layers/agents.usda", "shot.layers/characters/fan.usda",
-        "shot.layers/characters/kid.usda", "shot.layers/streams/idle.usda",
-        "shot.layers/streams/cheer_loud.usda", "shot.layers/streams/wave.usda",
-        "shot.layers/streams/kid_play.usda"}
+        "shot.usda", "shot.layers/v1/agents.usda", "shot.layers/v1/characters/fan.usda",
+        "shot.layers/v1/characters/kid.usda", "shot.layers/v1/streams/idle.usda",
+        "shot.layers/v1/streams/cheer_loud.usda", "shot.layers/v1/streams/wave.usda",
+        "shot.layers/v1/streams/kid_play.usda"}
     for name, size in result.files.items():
         file = path.parent / name
         assert file.stat().st_size == size
@@ -121,7 +121,7 @@ def test_agents_are_instances_of_two_characters(stage):
     assert len(stage.GetPrototypes()) == 2
     for a, character in ((0, "fan"), (FAN_AGENTS, "kid")):
         (ref,) = agent_prim(stage, a).GetPrimStack()[0].referenceList.prependedItems
-        assert ref.assetPath == f"./shot.layers/characters/{character}.usda"
+        assert ref.assetPath == f"./shot.layers/v1/characters/{character}.usda"
 
 
 def test_only_moving_agents_have_time_sampled_transforms(stage):
@@ -149,7 +149,7 @@ def test_stream_event_tags_are_what_agents_receive(stage, oracle):
 
 
 def test_stream_layers_cover_every_offset(shot):
-    path = shot[1].parent / "shot.layers/streams/idle.usda"
+    path = shot[1].parent / "shot.layers/v1/streams/idle.usda"
     layer = Sdf.Layer.FindOrOpen(str(path))
     times = layer.ListTimeSamplesForPath("/idle.rotations")
     assert (min(times), max(times), len(times)) == (FIRST - M + 1, LAST, LAST - FIRST + M)
