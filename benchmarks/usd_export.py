@@ -74,7 +74,7 @@ def reactions(share: float, seed: int = 7):
 def run_export(agents: int, frames: int, react: float, directory: str) -> dict:
     """Record the shot once (a crowd that skins nothing) and write it."""
     from crowd_addon.core import Crowd
-    from crowd_addon.core.recording import record
+    from crowd_addon.core.recorder import record
     from crowd_addon.usd import export_crowd
 
     cfg = build(agents)
@@ -103,7 +103,7 @@ def blender_baseline(agents: int, frames: int, directory: str) -> dict:
     """Bake the streams the first ``agents`` agents play (core, this process), then
     time Blender's exporter on them in a child process (bpy's own pxr)."""
     from crowd_addon.core import Crowd
-    from crowd_addon.core.recording import record
+    from crowd_addon.core.recorder import record
 
     cfg = build(agents, streams=agents)          # one stream each: no sharing to help it
     last = FIRST + frames - 1

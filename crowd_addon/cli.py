@@ -167,7 +167,7 @@ def _run_export(args) -> int:
     if args.config:
         from .core.config_io import load_config
         from .core.crowd import Crowd
-        from .core.recording import record
+        from .core.recorder import record
         from .usd import check_export, export_crowd
         config = load_config(args.config)
         check_export(config, args.out, args.agents)     # before simulating the shot

@@ -4,7 +4,7 @@
 :func:`export_steps` is the export, one unit of work per step, all on the caller's
 thread: it checks the output and the frame range against the scene, bakes the
 scene's Crowd settings (:func:`.scene_config.config_steps`, one action per step),
-records the shot once (:class:`crowd_addon.core.recording.Recorder`, one frame per
+records the shot once (:class:`crowd_addon.core.recorder.Recorder`, one frame per
 step, a crowd that skins nothing) and writes the recording
 (:func:`crowd_addon.usd.export_steps`, a layer or a batch of agents per step; all or
 nothing: a failure or a cancel leaves no new file and a previous export as it was).
@@ -118,7 +118,7 @@ def export_steps(scene, path, frames, agents=None, depsgraph=None):
 
 def _export_steps(scene, path, frames, agents, depsgraph):
     from ..core.crowd import Crowd
-    from ..core.recording import Recorder
+    from ..core.recorder import Recorder
     from ..usd.export import check_export as check_output
     from ..usd.export import export_steps as write_steps
 

@@ -104,7 +104,7 @@ def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
     import numpy as np
 
     from ..core.crowd import Crowd
-    from ..core.recording import Recorder
+    from ..core.recorder import Recorder
     from ..gpu.preview_render import render_preview
     from .show import ShowPlan, StadiumShow
 

@@ -1,7 +1,7 @@
 """Recording -> UsdSkel export (docs/usd_export.md): the entry point.
 
 :func:`export_crowd` writes a :class:`~crowd_addon.core.recording.Recording` (a shot
-simulated once by :func:`crowd_addon.core.recording.record`; nothing here runs a
+simulated once by :func:`crowd_addon.core.recorder.record`; nothing here runs a
 crowd) as::
 
     shot.usdc                         layout: offset animations, agents (main layer)

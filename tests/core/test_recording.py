@@ -7,7 +7,7 @@ import pytest
 
 from crowd_addon.core import ClipPlayer, Crowd, CrowdConfig, CrowdError
 from crowd_addon.core.agents import STREAM, TRANSITION, UNIQUE
-from crowd_addon.core.recording import Recorder, record
+from crowd_addon.core.recorder import Recorder, record
 from crowd_addon.core.synthetic import humanoid, periodic_clip
 
 FIRST, LAST = 3, 24          # start frame 0: frames 1..3 run before the shot
@@ -263,3 +263,17 @@ def test_every_agent_reported_changed_still_records_only_changes():
         np.testing.assert_array_equal(rec.agent_poses(f), seen[f][0])
         np.testing.assert_array_equal(rec.agent_transforms(f)[1], seen[f][1])
     assert rec.segment_agent.size < N + 30 and rec.moving.all()
+
+
+def test_a_far_first_frame_or_a_huge_range_is_refused_before_running(two_streams):
+    """Regression: a first frame two billion frames after the start simulated for
+    days, and a 100-million-frame range asked for hundreds of GiB."""
+    from crowd_addon.core.recorder import MAX_PREROLL
+    crowd = two_streams(2)
+    start = crowd.view.config.start_frame
+    with pytest.raises(CrowdError, match="2,000,000,000 frames after the crowd's start"):
+        Recorder(crowd, start + 2_000_000_000, start + 2_000_000_001)
+    with pytest.raises(CrowdError, match="GiB of poses"):
+        Recorder(crowd, start + 1, start + 100_000_000)
+    assert crowd.view.frame == start                 # nothing ran
+    Recorder(crowd, start + MAX_PREROLL, start + MAX_PREROLL).close()   # at the limit: fine

@@ -16,7 +16,7 @@ import pytest
 
 from crowd_addon.core import (Blend2, ClipPlayer, Crowd, CrowdConfig, StateMachine,
                               StateTransition)
-from crowd_addon.core.recording import record
+from crowd_addon.core.recorder import record
 from crowd_addon.core.synthetic import humanoid, humanoid_mesh, periodic_clip
 
 FIRST, LAST = 2, 16        # start_frame is 0: frames 1 and 2 run before the shot
