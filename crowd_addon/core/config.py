@@ -190,11 +190,12 @@ def validate_config(cfg: CrowdConfig) -> None:
         raise CrowdError("crowd: needs at least one skeleton")
     if not cfg.streams and not cfg.uniques:
         raise CrowdError("crowd: needs at least one stream or unique animation")
-    if int(cfg.max_offset) < 1:
-        raise CrowdError(f"crowd: max offset M must be >= 1, got {cfg.max_offset}")
-    if int(cfg.transition_slots) < 0:
-        raise CrowdError(f"crowd: transition slots NT must be >= 0, got "
-                         f"{cfg.transition_slots}")
+    for what, value, least in (("max offset M", cfg.max_offset, 1),
+                               ("transition slots NT", cfg.transition_slots, 0)):
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) \
+                or value < least:
+            raise CrowdError(f"crowd: {what} must be a whole number >= {least}, got "
+                             f"{value!r}")
     if not (np.isfinite(cfg.fps) and cfg.fps > 0):
         raise CrowdError(f"crowd: fps must be positive, got {cfg.fps}")
     if cfg.when_full not in WHEN_FULL:
@@ -239,8 +240,13 @@ def _validate_agents(cfg):
     for field_name, shape in (("agent_position", (n, 3)), ("agent_heading", (n,)),
                               ("agent_color", (n, 3))):
         arr = np.asarray(getattr(cfg, field_name))
-        if arr.shape != shape or not np.isfinite(arr).all():
-            raise CrowdError(f"crowd: {field_name} must be finite {shape}, got {arr.shape}")
+        if arr.shape != shape:
+            raise CrowdError(f"crowd: {field_name} must be {shape}, got {arr.shape}")
+        finite = np.isfinite(arr)
+        bad = np.flatnonzero(~(finite if finite.ndim == 1 else finite.all(axis=1)))
+        if bad.size:
+            raise CrowdError(f"agent {int(bad[0])}: {field_name} is not finite "
+                             f"({arr[bad[0]].tolist()})")
     check_offsets(cfg.agent_offset, int(cfg.max_offset))
     st, un = np.asarray(cfg.agent_stream), np.asarray(cfg.agent_unique)
     both = (st >= 0) == (un >= 0)

@@ -235,3 +235,23 @@ def test_two_dimensional_agent_ids(busy):
 
 def test_non_numeric_duration(busy):
     check_request(busy, lambda c: c.transition_to_streamed([4], 0, "soon"), "duration")
+
+
+@pytest.mark.parametrize("field, value, message", [
+    ("max_offset", 1.5, "max offset M must be a whole number >= 1, got 1.5"),
+    ("max_offset", 0, "max offset M must be a whole number >= 1, got 0"),
+    ("transition_slots", 2.5, "transition slots NT must be a whole number >= 0, got 2.5"),
+])
+def test_sizes_must_be_whole_numbers(field, value, message):
+    """Regression: M = 1.5 was truncated and then blamed an agent's offset."""
+    cfg = make_config()
+    setattr(cfg, field, value)
+    with pytest.raises(CrowdError, match=message):
+        Crowd(cfg)
+
+
+def test_a_non_finite_agent_position_names_the_agent():
+    cfg = make_config()
+    cfg.agent_position[7, 1] = np.nan
+    with pytest.raises(CrowdError, match=r"agent 7: agent_position is not finite"):
+        Crowd(cfg)
