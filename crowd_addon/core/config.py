@@ -16,10 +16,12 @@ from .agents import assign_offsets, assign_streams, check_offsets
 from .controllers import Controller
 from .errors import CrowdError
 
-__all__ = ["AnimationDef", "CrowdConfig", "validate_config", "WHEN_FULL"]
+__all__ = ["AnimationDef", "CrowdConfig", "validate_config", "WHEN_FULL", "MAX_TREE_DEPTH"]
 
 #: What a transition request does when every slot is busy: wait, or switch at once.
 WHEN_FULL = ("queue", "cut")
+#: The deepest controller tree (levels below the root) a crowd accepts.
+MAX_TREE_DEPTH = 64
 
 
 @dataclass
@@ -221,14 +223,17 @@ def _validate_animations(cfg):
             if d.skeleton not in cfg.skeletons:
                 raise CrowdError(f"{pool} {d.name!r}: unknown skeleton {d.skeleton!r}")
             lookup = _ClipLookup(cfg, cfg.skeletons[d.skeleton])
-            stack = [d.root]
+            stack = [(d.root, 0)]
             while stack:
-                node = stack.pop()
+                node, depth = stack.pop()
+                if depth > MAX_TREE_DEPTH:
+                    raise CrowdError(f"{pool} {d.name!r}: controllers nested deeper than "
+                                     f"{MAX_TREE_DEPTH} levels")
                 try:
                     node.validate(lookup)
                 except CrowdError as e:
                     raise CrowdError(f"{pool} {d.name!r}: {e}") from None
-                stack.extend(node.children())
+                stack.extend((c, depth + 1) for c in node.children())
 
 
 def _validate_agents(cfg):

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import os
 import tempfile
 from dataclasses import dataclass
@@ -39,7 +40,7 @@ import numpy as np
 
 from . import pose as sqt
 from .clip import Clip
-from .config import WHEN_FULL, AnimationDef, CrowdConfig
+from .config import MAX_TREE_DEPTH, WHEN_FULL, AnimationDef, CrowdConfig
 from .controllers import (Blend2, BlendMask, BlendSpace2D, ClipPlayer, Layer, StateMachine,
                           StateTransition)
 from .errors import CrowdError
@@ -157,16 +158,30 @@ class Encoder:
 
 
 # ------------------------------------------------------------------------- decoder
+#: Bounds of every number read from a file: integers (sizes, frames, indices, seeds)
+#: below 2**31 in magnitude, other numbers finite and at most 1e9 (times, speeds,
+#: weights, fps), so nothing downstream overflows or allocates without end.
+MAX_INT, MAX_NUMBER = 2**31 - 1, 1e9
+
+
+def _is_int(v) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool) and abs(v) <= MAX_INT
+
+
+def _is_number(v) -> bool:
+    return (isinstance(v, (int, float)) and not isinstance(v, bool)
+            and math.isfinite(v) and abs(v) <= MAX_NUMBER)
+
+
 _TYPES = {
     "str": (lambda v: isinstance(v, str), "a string"),
-    "int": (lambda v: isinstance(v, int) and not isinstance(v, bool), "an integer"),
-    "number": (lambda v: isinstance(v, (int, float)) and not isinstance(v, bool), "a number"),
+    "int": (_is_int, f"an integer of magnitude at most {MAX_INT}"),
+    "number": (_is_number, "a finite number of magnitude at most 1e9"),
     "bool": (lambda v: isinstance(v, bool), "true or false"),
     "list": (lambda v: isinstance(v, list), "a list"),
     "object": (lambda v: isinstance(v, dict), "an object"),
-    "weight": (lambda v: isinstance(v, str) or (isinstance(v, (int, float))
-                                                and not isinstance(v, bool)),
-               "a number or a parameter name"),
+    "weight": (lambda v: isinstance(v, str) or _is_number(v),
+               "a finite number (magnitude at most 1e9) or a parameter name"),
 }
 
 
@@ -178,15 +193,15 @@ class Decoder:
     """
 
     def __init__(self, file: str, npz=None, npz_file: str = "", path: str = "",
-                 skeleton=None):
+                 skeleton=None, depth: int = 0):
         self.file, self.npz, self.npz_file = file, npz, npz_file
-        self.path, self.skeleton = path, skeleton
+        self.path, self.skeleton, self.depth = path, skeleton, depth
 
     def at(self, *keys) -> "Decoder":
         p = self.path
         for k in keys:
             p = _join(p, k)
-        return Decoder(self.file, self.npz, self.npz_file, p, self.skeleton)
+        return Decoder(self.file, self.npz, self.npz_file, p, self.skeleton, self.depth)
 
     def error(self, msg, file=None) -> CrowdError:
         where = f"{file or self.file}: {self.path}" if self.path else f"{file or self.file}"
@@ -225,6 +240,9 @@ class Decoder:
             if not 0 <= k < len(value):
                 raise dec.error(f"missing item {k}")
             value, dec = value[k], dec.at(k)
+        dec.depth = self.depth + 1
+        if dec.depth > MAX_TREE_DEPTH:
+            raise dec.error(f"controllers nested deeper than {MAX_TREE_DEPTH} levels")
         return _decode_controller(value, dec)
 
     def controllers(self, d: dict, key) -> list:

@@ -291,7 +291,13 @@ MANIFEST_ERRORS = [
      r"crowd\.json: streams\[2\]\.root\.children\[1\]: unknown controller kind 'foo'"),
     (("uniques", 0, "root", "states", 1, "controller", "kind"), "foo",
      r"uniques\[0\]\.root\.states\[1\]\.controller: unknown controller kind 'foo'"),
-    (("clips", 0, "fps"), "thirty", r"crowd\.json: clips\[0\]\.fps: must be a number"),
+    (("clips", 0, "fps"), "thirty", r"crowd\.json: clips\[0\]\.fps: must be a finite number"),
+    # numbers are bounded where they are read (each raised a raw error downstream)
+    (("clips", 0, "fps"), 1e30, r"clips\[0\]\.fps: must be a finite number of magnitude at "
+                                 r"most 1e9, got 1e\+30"),
+    (("settings", "start_frame"), 10**30, r"settings\.start_frame: must be an integer of "
+                                          r"magnitude at most 2147483647"),
+    (("streams", 0, "root", "speed"), 1e308, r"streams\[0\]\.root\.speed: must be a finite"),
     (("clips", 1, "name"), "walk", r"clips\[1\]\.name: duplicate clip name 'walk'"),
     (("streams", 7, "skeleton"), "giant", r"streams\[7\]\.skeleton: unknown skeleton 'giant'"),
     (("streams", 6, "root", "initial"), "nope",
@@ -473,3 +479,29 @@ def test_overwrite_keeps_file_mode(saved):
     save_config(changed_config(), saved)
     assert saved.stat().st_mode & 0o777 == 0o640
     assert load_config(saved).seed == 99
+
+
+def test_controllers_nested_too_deep_are_named(saved):
+    """Regression: 400 nested controllers raised a RecursionError."""
+    from crowd_addon.core.config import MAX_TREE_DEPTH
+
+    def nest(m):
+        leaf = m["streams"][0]["root"]
+        node = leaf
+        for _ in range(400):
+            node = {"kind": "blend2", "a": node, "b": leaf, "weight": 0.5}
+        m["streams"][0]["root"] = node
+    rewrite(saved, manifest=nest)
+    with pytest.raises(CrowdError, match=f"nested deeper than {MAX_TREE_DEPTH} levels"):
+        load_config(saved)
+
+
+def test_a_deep_tree_built_in_python_is_named():
+    from crowd_addon.core.config import MAX_TREE_DEPTH
+    cfg = make_config()
+    root = cfg.streams[0].root
+    for _ in range(MAX_TREE_DEPTH + 1):
+        root = Blend2(root, cfg.streams[0].root, weight=0.5)
+    cfg.streams[0].root = root
+    with pytest.raises(CrowdError, match="nested deeper than"):
+        Crowd(cfg)
