@@ -101,7 +101,14 @@ def build_extension(out_dir, wheel_cache=None, source=REPO_ROOT, progress=print,
                     split_platforms=False) -> list:
     """Build the extension zip(s) into ``out_dir``; returns the zip paths."""
     out_dir = os.path.abspath(out_dir)
-    os.makedirs(out_dir, exist_ok=True)
+    if os.path.lexists(out_dir) and not os.path.isdir(out_dir):
+        raise CrowdError(f"{out_dir}: exists and is not a folder (--out names the folder "
+                         "the zip goes to)")
+    try:
+        os.makedirs(out_dir, exist_ok=True)
+    except OSError as e:
+        raise CrowdError(f"{out_dir}: cannot make the output folder ({e.strerror or e})") \
+            from None
     wheel_cache = wheel_cache or os.path.join(source, "build", "wheels")
     wheels = fetch_wheels(wheel_cache, progress)
     tool = extension_tool()

@@ -48,7 +48,12 @@ def open_scene(blend: str | None = None, scene: str | None = None):
     if blend:
         if not os.path.isfile(blend):
             raise CrowdError(f"{blend}: no such .blend file")
-        bpy.ops.wm.open_mainfile(filepath=os.path.abspath(blend))
+        try:
+            bpy.ops.wm.open_mainfile(filepath=os.path.abspath(blend))
+        except RuntimeError as e:            # not a .blend, damaged, from a newer Blender
+            reason = str(e).strip().splitlines()[-1] if str(e).strip() else "unreadable"
+            raise CrowdError(f"{blend}: Blender cannot open it as a .blend file "
+                             f"({reason})") from None
     elif not bpy.data.filepath:
         raise CrowdError("give --config CROWD_JSON or --blend SCENE_BLEND (no .blend is "
                          "open)")

@@ -68,11 +68,16 @@ def test_python_m_export_with_blend(crowd_blend):
 @pytest.mark.parametrize("args, message", [
     (["--blend", "missing.blend"], "no such .blend file"),
     (["--scene", "Nope"], "no scene 'Nope'"),
+    (["--blend", "notes.blend"], "notes.blend: Blender cannot open it as a .blend file"),
 ])
 def test_bad_blend_input_is_named(crowd_blend, args, message):
+    """A text file given as --blend used to end in a RuntimeError traceback."""
     tmp, blend, _ = crowd_blend
     if args[0] == "--scene":
         args = ["--blend", str(blend)] + args
+    if args[1] == "notes.blend":
+        (tmp / "notes.blend").write_text("not a blend file\n")
+        args = ["--blend", str(tmp / "notes.blend")]
     out = tmp / "bad.usdc"
     run = subprocess.run([sys.executable, "-m", "crowd_addon", "export", *args, "--out",
                           str(out), "--frames", "1-5"], cwd=ROOT, capture_output=True,

@@ -66,3 +66,16 @@ def test_installs_and_enables_in_blender(extension_zip, tmp_path):
     info = json.loads(run.stdout.strip().splitlines()[-1])
     assert info["result"] == ["FINISHED"] and info["enabled"]
     assert info["file"].startswith(str(tmp_path / "blender_user"))
+
+
+def test_out_naming_an_existing_file_is_refused(tmp_path):
+    """Regression: `crowd build-extension --out FILE` ended in a raw traceback."""
+    target = tmp_path / "dist"
+    target.write_text("mine")
+    run = subprocess.run([sys.executable, "-m", "crowd_addon", "build-extension", "--out",
+                          str(target)], capture_output=True, text=True, timeout=300,
+                         cwd=os.path.dirname(os.path.dirname(os.path.dirname(
+                             os.path.abspath(__file__)))))
+    assert run.returncode == 2, run.stderr[-2000:]
+    assert "exists and is not a folder" in run.stderr and "Traceback" not in run.stderr
+    assert target.read_text() == "mine"
