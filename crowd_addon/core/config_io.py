@@ -565,8 +565,10 @@ def _decode_config(m: dict, dec: Decoder) -> CrowdConfig:
                                              f"(known: {sorted(cfg.skeletons)})")
             d.skeleton = cfg.skeletons[skel]
             out.append(AnimationDef(d.get(a, "name", "str"), skel, d.controller(a, "root")))
-    cfg.lod_distances = tuple(dec.items(m, "lod_distances", "number",
-                                         list(CrowdConfig.lod_distances)))
+    lods = dec.items(m, "lod_distances", "number", list(CrowdConfig.lod_distances))
+    if any(b <= a for a, b in zip(lods, lods[1:])) or any(d < 0 for d in lods):
+        raise dec.at("lod_distances").error(f"must be increasing distances >= 0, got {lods}")
+    cfg.lod_distances = tuple(lods)
     for i, mesh in enumerate(dec.items(m, "meshes", "object", [])):
         d = dec.at("meshes", i)
         skel = d.get(mesh, "skeleton", "str")
@@ -709,8 +711,8 @@ def load_config(path) -> CrowdConfig:
     arrays = dec.get(manifest, "arrays", "object")
     ad = dec.at("arrays")
     uri = ad.get(arrays, "uri", "str")
-    if os.path.isabs(uri):
-        raise ad.at("uri").error(f"must be relative to the manifest, got {uri!r}")
+    if os.path.isabs(uri) or os.path.dirname(os.path.normpath(uri)) or uri in ("", ".", ".."):
+        raise ad.at("uri").error(f"must name a file beside the manifest, got {uri!r}")
     npz_path = os.path.join(os.path.dirname(path), uri)
     if not os.path.isfile(npz_path):
         raise ad.at("uri").error(f"array file {npz_path} does not exist")

@@ -308,6 +308,11 @@ MANIFEST_ERRORS = [
      r"streams\[2\]\.root\.masks\[1\]\.bones\.hand\.L: bone weight must be a number"),
     (("arrays", "uri"), "elsewhere.npz", r"arrays\.uri: array file .*elsewhere\.npz does not "
                                          "exist"),
+    # accepted before: a folder outside the manifest's, LOD distances that do not grow
+    (("arrays", "uri"), "../crowd.npz", r"arrays\.uri: must name a file beside the "
+                                        r"manifest, got '\.\./crowd\.npz'"),
+    (("lod_distances",), [30.0, 20.0, 150.0], r"lod_distances: must be increasing "
+                                              r"distances >= 0"),
 ]
 
 
