@@ -26,7 +26,8 @@ import argparse
 import os
 import sys
 
-from .cli_args import frame_range, int_at_least, positive_float, progress_printer
+from .cli_args import (add_shot_arguments, int_at_least, parse_command, positive_float,
+                       progress_printer)
 from .core.errors import CrowdError
 
 __all__ = ["build_parser", "main"]
@@ -145,18 +146,7 @@ def _add_export(subparsers) -> None:
     src.add_argument("--blend", metavar="SCENE_BLEND",
                      help="a .blend whose scene has Crowd settings (needs the bpy module; "
                           "inside Blender: blender -b scene.blend -c crowd export ...)")
-    p.add_argument("--scene", default=None, metavar="NAME",
-                   help="scene of the .blend (default: the active scene)")
-    p.add_argument("--out", required=True, metavar="SHOT_USD",
-                   help="main layer to write (.usdc, .usd or .usda)")
-    p.add_argument("--frames", required=True, type=frame_range, metavar="FIRST-LAST",
-                   help="shot frames, inclusive; FIRST must not be before the "
-                        "configuration's start frame")
-    p.add_argument("--agents", type=int_at_least(1), default=None, metavar="N",
-                   help="export only the first N agents (ids 0..N-1); more than the "
-                        "crowd has is an error (default: all)")
-    p.add_argument("--json", action="store_true",
-                   help="print the summary as one JSON object")
+    add_shot_arguments(p)
     p.set_defaults(handler=_run_export)
 
 
@@ -374,13 +364,9 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     """Run ``crowd`` with ``argv`` (default ``sys.argv[1:]``); return the exit code."""
     parser = build_parser()
-    try:
-        args = parser.parse_args(argv)
-    except SystemExit as exc:  # --help (0) or a usage error argparse has printed (2)
-        return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
-    if args.command is None:
-        parser.print_help(sys.stderr)
-        return 2
+    args, code = parse_command(parser, argv)
+    if args is None:
+        return code
     try:
         return args.handler(args)
     except CrowdError as exc:

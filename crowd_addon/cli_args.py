@@ -10,7 +10,8 @@ import math
 import re
 import sys
 
-__all__ = ["int_at_least", "positive_float", "frame_range", "progress_printer"]
+__all__ = ["int_at_least", "positive_float", "frame_range", "progress_printer",
+           "add_shot_arguments", "parse_command"]
 
 
 def int_at_least(minimum: int):
@@ -66,3 +67,34 @@ def progress_printer(prefix: str):
             shown[stage] = tenth
             print(f"{prefix}: {stage} {done}/{total}", file=sys.stderr, flush=True)
     return progress
+
+
+def add_shot_arguments(parser) -> None:
+    """The options every ``export`` command shares: ``--scene``, ``--out``, ``--frames``,
+    ``--agents`` and ``--json``."""
+    parser.add_argument("--scene", default=None, metavar="NAME",
+                        help="scene of the .blend (default: the active scene)")
+    parser.add_argument("--out", required=True, metavar="SHOT_USD",
+                        help="main layer to write (.usdc, .usd or .usda)")
+    parser.add_argument("--frames", required=True, type=frame_range, metavar="FIRST-LAST",
+                        help="shot frames, inclusive; FIRST must not be before the "
+                             "crowd's start frame")
+    parser.add_argument("--agents", type=int_at_least(1), default=None, metavar="N",
+                        help="export only the first N agents (ids 0..N-1); more than the "
+                             "crowd has is an error (default: all)")
+    parser.add_argument("--json", action="store_true",
+                        help="print the summary as one JSON object")
+
+
+def parse_command(parser, argv):
+    """``(args, None)`` for ``argv`` parsed by ``parser`` (with subcommands in
+    ``command``), or ``(None, exit code)`` when there is nothing to run: ``--help``
+    (0), a usage error argparse has printed (2), no command (help printed, 2)."""
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:
+        return None, exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
+    if args.command is None:
+        parser.print_help(sys.stderr)
+        return None, 2
+    return args, None

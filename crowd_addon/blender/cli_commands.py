@@ -27,7 +27,7 @@ import json
 import os
 import sys
 
-from ..cli_args import frame_range, int_at_least, progress_printer
+from ..cli_args import add_shot_arguments, parse_command, progress_printer
 from ..core.errors import CrowdError
 
 __all__ = ["open_scene", "export_blend", "build_parser", "crowd_command", "register_command",
@@ -97,30 +97,16 @@ def build_parser() -> argparse.ArgumentParser:
                     "(docs/usd_export.md); nothing is written unless it all succeeds.",
         epilog="example: blender -b scene.blend -c crowd export --out shot.usdc "
                "--frames 1-300")
-    p.add_argument("--scene", default=None, metavar="NAME",
-                   help="scene to export (default: the active scene)")
-    p.add_argument("--out", required=True, metavar="SHOT_USD",
-                   help="main layer to write (.usdc, .usd or .usda)")
-    p.add_argument("--frames", required=True, type=frame_range, metavar="FIRST-LAST",
-                   help="shot frames, inclusive")
-    p.add_argument("--agents", type=int_at_least(1), default=None, metavar="N",
-                   help="export only the first N agents (default: all)")
-    p.add_argument("--json", action="store_true",
-                   help="print the summary as one JSON object")
+    add_shot_arguments(p)
     return parser
 
 
 def crowd_command(argv) -> int:
     """``blender -b scene.blend -c crowd <command> ...``: run a command on the open
     file and return the exit code (progress on stderr, a summary on stdout)."""
-    parser = build_parser()
-    try:
-        args = parser.parse_args(list(argv))
-    except SystemExit as exc:  # --help (0) or a usage error argparse has printed (2)
-        return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
-    if args.command is None:
-        parser.print_help(sys.stderr)
-        return 2
+    args, code = parse_command(build_parser(), list(argv))
+    if args is None:
+        return code
     try:
         import bpy
         if not bpy.data.filepath:

@@ -159,4 +159,4 @@ class FrameView:
     def take_skinning_batch(self):
         """The pose rows the GPU must write now (:class:`~.skinning_modes.SkinningBatch`)
         with GPU skinning; rows pending since the last take. An error on the CPU mode."""
-        return self._crowd.skinning.take_batch(self._crowd)
+        return self._crowd.skinning.take_batch()

@@ -84,7 +84,7 @@ class _Mode:
             out[skeletons == k] = self._crowd.plans[k].rows(poses[skeletons == k])
         return out
 
-    def take_batch(self, crowd):
+    def take_batch(self):
         raise CrowdError("skinning batch: this crowd skins on the CPU (create it with "
                          "Crowd(config, skinning='gpu'))")
 
@@ -216,7 +216,7 @@ class GpuSkinning(_Mode):
             skel[is_slot] = c.slots.target_skeleton(slots, c.streams, c.uniques)
         return self._skin_poses(poses, skel)[inverse.reshape(-1)]
 
-    def take_batch(self, crowd) -> SkinningBatch:
+    def take_batch(self) -> SkinningBatch:
         """The rows the GPU must write now: every stream and unique row whose local pose
         changed since the last take (the new slice and the uniques after a step;
         everything after a reset) and every active slot. Take it after the upload

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.errors import CrowdError
-from .texture_region import TextureRegion
+from ..core.pose_storage import TextureRegion
 
 __all__ = ["DrawGroup", "DrawLists", "lod_levels", "frustum_planes",
            "proxy_bounds", "view_distances", "REFERENCE_FOCAL_PX"]

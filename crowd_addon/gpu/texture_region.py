@@ -12,7 +12,7 @@ import numpy as np
 
 from ..core.pose_storage import TextureRegion
 
-__all__ = ["TextureRegion", "block_regions", "block_image", "stage_rows"]
+__all__ = ["block_regions", "block_image", "stage_rows"]
 
 
 def block_regions(rows: np.ndarray, changed: np.ndarray, block_rows: int,
