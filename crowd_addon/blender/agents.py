@@ -19,7 +19,7 @@ import numpy as np
 from ..core.errors import CrowdError
 from ..core.placement import SOURCE_SEED, AgentSet, PlacementPolicy, place_agents, z_angle
 
-__all__ = ["agents_from_source", "agents_from_scene", "placement_policy"]
+__all__ = ["agents_from_source", "agents_from_scene", "describe_source", "placement_policy"]
 
 
 # ----------------------------------------------------------------------- geometry
@@ -98,8 +98,17 @@ def placement_policy(source) -> PlacementPolicy:
         color_attribute=source.color_attribute)
 
 
+def describe_source(source, index: int | None = None) -> str:
+    """How errors name an agent source: its name, or its place in the list when the
+    name is empty, and its object ("agent source 2 (object 'Stands')")."""
+    label = repr(source.name) if source.name.strip() else \
+        (str(index + 1) if index is not None else "(unnamed)")
+    obj = source.object
+    return f"agent source {label}" + (f" (object {obj.name!r})" if obj is not None else "")
+
+
 def agents_from_source(source, depsgraph, *, streams, stream_weights, max_offset, seed,
-                       forward_axis="NEG_Y") -> AgentSet:
+                       forward_axis="NEG_Y", index: int | None = None) -> AgentSet:
     """The agents of one source.
 
     Parameters
@@ -109,8 +118,9 @@ def agents_from_source(source, depsgraph, *, streams, stream_weights, max_offset
     streams : stream names (index = stream id); stream_weights : (S,) weights.
     max_offset : M. seed : int. forward_axis : key of
         :data:`crowd_addon.core.placement.FORWARD`.
+    index : the source's place in the scene's list, named in errors when it has no name.
     """
-    what = f"agent source {source.name!r}"
+    what = describe_source(source, index)
     obj = source.object
     if obj is None:
         raise CrowdError(f"{what}: no object chosen")
@@ -148,6 +158,6 @@ def agents_from_scene(scene, depsgraph, streams, stream_weights) -> AgentSet:
     s = scene.crowd
     sets = [agents_from_source(src, depsgraph, streams=streams, stream_weights=stream_weights,
                                max_offset=s.max_offset, seed=s.seed + i * SOURCE_SEED,
-                               forward_axis=s.forward_axis)
+                               forward_axis=s.forward_axis, index=i)
             for i, src in enumerate(s.agent_sources) if src.enabled]
     return AgentSet.concatenate(sets)

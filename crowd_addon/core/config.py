@@ -32,6 +32,11 @@ class AnimationDef:
     skeleton: str
     root: Controller
 
+    def __post_init__(self):
+        if not str(self.name).strip():
+            raise CrowdError(f"an animation on skeleton {self.skeleton!r} has an empty name "
+                             f"({self.name!r}); name each stream and unique")
+
 
 @dataclass
 class CrowdConfig:

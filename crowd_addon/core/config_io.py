@@ -175,6 +175,7 @@ def _is_number(v) -> bool:
 
 _TYPES = {
     "str": (lambda v: isinstance(v, str), "a string"),
+    "name": (lambda v: isinstance(v, str) and bool(v.strip()), "a non-empty name"),
     "int": (_is_int, f"an integer of magnitude at most {MAX_INT}"),
     "number": (_is_number, "a finite number of magnitude at most 1e9"),
     "bool": (lambda v: isinstance(v, bool), "true or false"),
@@ -395,7 +396,7 @@ def _sm_from(d, dec):
     states = {}
     for i, s in enumerate(dec.items(d, "states", "object")):
         sd = dec.at("states", i)
-        name = sd.get(s, "name", "str")
+        name = sd.get(s, "name", "name")
         if name in states:
             raise sd.at("name").error(f"duplicate state {name!r}")
         states[name] = sd.controller(s, "controller")
@@ -531,8 +532,8 @@ def _decode_config(m: dict, dec: Decoder) -> CrowdConfig:
         raise sd.at("when_full").error(f"must be one of {WHEN_FULL}, got {cfg.when_full!r}")
     for i, s in enumerate(dec.items(m, "skeletons", "object")):
         d = dec.at("skeletons", i)
-        name = d.get(s, "name", "str")
-        names = d.items(s, "bone_names", "str")
+        name = d.get(s, "name", "name")
+        names = d.items(s, "bone_names", "name")
         parents = d.items(s, "parents", "int")
         b = len(names)
         bind = d.array(s, "bind_pose", "f", (b, sqt.WIDTH))
@@ -542,8 +543,8 @@ def _decode_config(m: dict, dec: Decoder) -> CrowdConfig:
         cfg.skeletons[name] = _exact_skeleton(d, name, names, parents, bind, inv)
     for i, c in enumerate(dec.items(m, "clips", "object")):
         d = dec.at("clips", i)
-        name = d.get(c, "name", "str")
-        bones = d.items(c, "bone_names", "str", None) if c.get("bone_names") is not None \
+        name = d.get(c, "name", "name")
+        bones = d.items(c, "bone_names", "name", None) if c.get("bone_names") is not None \
             else None
         keys = d.array(c, "keys", "f", (None, None if bones is None else len(bones), sqt.WIDTH))
         events = []
@@ -564,24 +565,30 @@ def _decode_config(m: dict, dec: Decoder) -> CrowdConfig:
                 raise d.at("skeleton").error(f"unknown skeleton {skel!r} "
                                              f"(known: {sorted(cfg.skeletons)})")
             d.skeleton = cfg.skeletons[skel]
-            out.append(AnimationDef(d.get(a, "name", "str"), skel, d.controller(a, "root")))
+            out.append(AnimationDef(d.get(a, "name", "name"), skel, d.controller(a, "root")))
     lods = dec.items(m, "lod_distances", "number", list(CrowdConfig.lod_distances))
     if any(b <= a for a, b in zip(lods, lods[1:])) or any(d < 0 for d in lods):
         raise dec.at("lod_distances").error(f"must be increasing distances >= 0, got {lods}")
     cfg.lod_distances = tuple(lods)
+    mesh_of = {}
     for i, mesh in enumerate(dec.items(m, "meshes", "object", [])):
         d = dec.at("meshes", i)
         skel = d.get(mesh, "skeleton", "str")
         if skel not in cfg.skeletons:
             raise d.at("skeleton").error(f"unknown skeleton {skel!r} "
                                          f"(known: {sorted(cfg.skeletons)})")
+        if skel in mesh_of:
+            raise d.at("skeleton").error(f"a second mesh for skeleton {skel!r} (the first is "
+                                         f"meshes[{mesh_of[skel]}]); give each skeleton one "
+                                         "mesh with its LOD levels")
+        mesh_of[skel] = i
         levels = []
         for j, lv in enumerate(d.items(mesh, "levels", "object")):
             dl = d.at("levels", j)
             arrays = {k: dl.array(lv, k, kinds, shape) for k, (kinds, shape) in
                       _MESH_ARRAYS.items()}
             try:
-                levels.append(ProxyMesh(dl.get(lv, "name", "str"), skel,
+                levels.append(ProxyMesh(dl.get(lv, "name", "name"), skel,
                                         bone_count=cfg.skeletons[skel].bone_count, **arrays))
             except CrowdError as e:
                 raise dl.error(str(e)) from None

@@ -38,6 +38,8 @@ class Skeleton:
     levels: tuple = field(init=False, repr=False)
 
     def __post_init__(self):
+        if not str(self.name).strip():
+            raise CrowdError(f"skeleton: the name must not be empty, got {self.name!r}")
         names = tuple(str(n) for n in self.bone_names)
         if not names:
             raise CrowdError(f"skeleton {self.name!r}: it has no bones")

@@ -69,20 +69,43 @@ def _check(config, out_dir, frames, size, mp4, backend) -> Path:
     if not config.meshes:
         raise CrowdError("the crowd has no proxy mesh to draw its agents with "
                          "(CrowdConfig.add_mesh)")
-    return output_dir(out_dir)
+    return writable_dir(out_dir)
+
+
+def writable_dir(path) -> Path:
+    """``path`` checked to be a folder that exists and is writable, or one that can be
+    created (its nearest existing ancestor is a writable folder); nothing is created.
+    A CrowdError names the folder otherwise."""
+    out = Path(path)
+    probe = out
+    while not probe.exists() and probe.parent != probe:
+        probe = probe.parent
+    if not probe.is_dir():
+        raise CrowdError(f"output folder {out}: cannot create it ({probe} is not a folder)")
+    if not os.access(probe, os.W_OK):
+        raise CrowdError(f"output folder {out}: "
+                         + ("not writable" if probe == out else f"{probe} is not writable"))
+    return out
 
 
 def output_dir(path) -> Path:
     """``path`` as a folder that exists and is writable (created if missing), or a
     CrowdError naming it."""
-    out = Path(path)
+    out = writable_dir(path)
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         raise CrowdError(f"output folder {out}: cannot create it ({e.strerror})") from None
-    if not os.access(out, os.W_OK):
-        raise CrowdError(f"output folder {out}: not writable")
     return out
+
+
+def _missing_folders(path: Path) -> list:
+    """The folders of ``path`` that do not exist yet, deepest first."""
+    missing = []
+    while not path.exists() and path.parent != path:
+        missing.append(path)
+        path = path.parent
+    return missing
 
 
 def _mp4_writer(path, size, fps):
@@ -124,9 +147,11 @@ def render_preview(config, out_dir, frames: int, start: int | None = None,
     camera = camera or frame_crowd(crowd, aspect=w / h)
     mp4_path = out / "preview.mp4" if mp4 else None
     partial = out / ".preview.partial.mp4"
-    writer = _mp4_writer(partial, (w, h), config.fps) if mp4 else None
-    pngs, uploads, first = [], [], crowd.frame
+    made = _missing_folders(out)
+    pngs, uploads, first, writer, done = [], [], crowd.frame, None, False
     try:
+        output_dir(out)
+        writer = _mp4_writer(partial, (w, h), config.fps) if mp4 else None
         for i in range(int(frames)):
             t = time.perf_counter()
             if i:
@@ -155,12 +180,25 @@ def render_preview(config, out_dir, frames: int, start: int | None = None,
             writer = None
             os.replace(partial, mp4_path)
             seconds["write"] += time.perf_counter() - t
+        done = True
+    except OSError as e:
+        raise CrowdError(f"output folder {out}: cannot write "
+                         f"{os.path.basename(e.filename or '') or 'a frame'}: "
+                         f"{e.strerror or e}") from None
     finally:
         if writer is not None:
             writer.close()
         if mp4 and partial.exists():
             partial.unlink()
         renderer.release()
+        if not done:                  # nothing half-written: this run's frames go
+            for png in pngs:
+                Path(png).unlink(missing_ok=True)
+            for folder in made:
+                try:
+                    folder.rmdir()
+                except OSError:
+                    break
     seconds["total"] = time.perf_counter() - t0
     return PreviewResult((first, crowd.frame), pngs, None if mp4_path is None else
                          str(mp4_path), (w, h), crowd.agents.count, backend, device,

@@ -19,7 +19,7 @@ sys.path.insert(0, os.path.dirname(__file__))
 import crowd_scene as cs  # noqa: E402
 from mathutils import Matrix, Vector  # noqa: E402
 
-from crowd_addon.blender.agents import agents_from_source  # noqa: E402
+from crowd_addon.blender.agents import agents_from_scene, agents_from_source  # noqa: E402
 from crowd_addon.core.errors import CrowdError  # noqa: E402
 
 STREAMS = ["idle", "cheer", "sit"]
@@ -189,6 +189,20 @@ def test_bad_sources_name_the_problem(scene):
         _agents(scene, _source(scene, empty))
     with pytest.raises(CrowdError, match="generates no instances"):
         _agents(scene, _source(scene, seats, mode="INSTANCES"))
+
+
+def test_errors_name_the_object_of_an_unnamed_source(scene):
+    # before: "agent source '': ..." said nothing about which source was wrong
+    seats = cs.make_seats(2, 2)
+    scene.crowd.agent_sources.clear()
+    _source(scene, seats)
+    _source(scene, seats, name="", mode="VERTEX_GROUP", vertex_group="back")
+    with pytest.raises(CrowdError, match=r"^agent source 2 \(object 'Seats'\): object 'Seats' "
+                                         r"has no vertex group 'back'"):
+        agents_from_scene(scene, bpy.context.evaluated_depsgraph_get(), STREAMS, [1, 1, 1])
+    with pytest.raises(CrowdError, match=r"^agent source 'seats' \(object 'Seats'\): object "
+                                         r"'Seats' has no vertex group 'back'"):
+        _agents(scene, _source(scene, seats, mode="VERTEX_GROUP", vertex_group="back"))
 
 
 def test_a_stadium_of_65k_seats(scene):

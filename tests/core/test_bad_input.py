@@ -185,6 +185,15 @@ def test_duplicate_animation_names():
     build_error(cfg, "'mix'")
 
 
+def test_empty_names_are_refused():
+    # accepted before: an unnamed stream or skeleton cannot be addressed afterwards
+    cfg = make_config()
+    with pytest.raises(CrowdError, match=r"an animation on skeleton 'fan' has an empty name"):
+        cfg.add_stream(" ", "fan", ClipPlayer("c0"))
+    with pytest.raises(CrowdError, match=r"skeleton: the name must not be empty"):
+        humanoid("", bones=24)
+
+
 def test_bad_when_full_in_config():
     build_error(make_config(when_full="drop"), "when_full", "'drop'")
 

@@ -313,7 +313,24 @@ MANIFEST_ERRORS = [
                                         r"manifest, got '\.\./crowd\.npz'"),
     (("lod_distances",), [30.0, 20.0, 150.0], r"lod_distances: must be increasing "
                                               r"distances >= 0"),
+    # accepted before: empty names (an unnamed stream, state or mesh level could not be
+    # addressed), and a second mesh for a skeleton silently replaced the first
+    (("streams", 0, "name"), "", r"streams\[0\]\.name: must be a non-empty name"),
+    (("skeletons", 0, "name"), "", r"skeletons\[0\]\.name: must be a non-empty name"),
+    (("clips", 0, "name"), " ", r"clips\[0\]\.name: must be a non-empty name"),
+    (("streams", 6, "root", "states", 0, "name"), "",
+     r"streams\[6\]\.root\.states\[0\]\.name: must be a non-empty name"),
+    (("meshes", 0, "levels", 0, "name"), "", r"meshes\[0\]\.levels\[0\]\.name: must be a "
+                                             r"non-empty name"),
 ]
+
+
+def test_second_mesh_for_a_skeleton_is_named(saved):
+    # accepted before: the second entry silently replaced the first
+    rewrite(saved, manifest=lambda m: m["meshes"].append(json.loads(json.dumps(m["meshes"][0]))))
+    with pytest.raises(CrowdError, match=r"meshes\[1\]\.skeleton: a second mesh for skeleton "
+                                         r"'fan' \(the first is meshes\[0\]\)"):
+        load_config(saved)
 
 
 @pytest.mark.parametrize("keys, value, message", MANIFEST_ERRORS,

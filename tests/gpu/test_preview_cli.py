@@ -86,7 +86,37 @@ def test_bad_input_exits_2_and_writes_nothing(config_path, tmp_path, capsys, arg
     assert code == 2
     assert "crowd preview: error:" in err
     assert message in err
-    assert not out_dir.exists() or not os.listdir(out_dir)
+    assert not out_dir.exists()
+
+
+def test_a_crowd_refused_after_the_arguments_creates_no_folder(h, tmp_path, capsys):
+    # created before: the folder was made before the crowd was built (and refused)
+    path = tmp_path / "narrow.json"
+    save_config(h.make_config(M=8, agents=16, max_texture_size=32), path)
+    out_dir = tmp_path / "shot"
+    code, _, err = run(capsys, "--config", path, "--out", out_dir / "deep", "--frames", 1)
+    assert code == 2 and "crowd preview: error:" in err and "32" in err
+    assert not out_dir.exists()
+
+
+def test_a_failed_render_removes_its_frames(config_path, tmp_path, capsys, monkeypatch):
+    from crowd_addon.gpu import preview_render
+    out_dir = tmp_path / "shot"
+    out_dir.mkdir()
+    (out_dir / "notes.txt").write_text("mine")
+    real, calls = preview_render.write_png, []
+
+    def failing(path, *a, **k):
+        calls.append(path)
+        if len(calls) == 3:
+            raise OSError(28, "No space left on device")
+        return real(path, *a, **k)
+
+    monkeypatch.setattr(preview_render, "write_png", failing)
+    code, _, err = run(capsys, "--config", config_path, "--out", out_dir, "--frames", 4,
+                       "--width", 32, "--height", 32)
+    assert code == 2 and "No space left on device" in err
+    assert sorted(os.listdir(out_dir)) == ["notes.txt"]
 
 
 def test_missing_config_and_unwritable_output(config_path, tmp_path, capsys):
