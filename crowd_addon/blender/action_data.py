@@ -48,6 +48,9 @@ class ActionSource:
     events : ((name, clip frame), ...) from the pose markers.
     frame_set_reason : why only ``scene.frame_set`` sampling is exact, or None.
     notes : resampling remarks for the bake report.
+    between : None when ``keys`` and ``fast`` hold for any time in the sampled range,
+        else ``between()`` -> ``(keys, fast)`` that do (``keys`` then lacks the
+        interpolation of curves sampled only on their keys, where it does not matter).
     """
 
     action: object
@@ -63,6 +66,7 @@ class ActionSource:
     events: tuple
     frame_set_reason: str | None = None
     notes: list = field(default_factory=list)
+    between: object = None
 
     @property
     def curves(self) -> list:
@@ -293,15 +297,20 @@ def read_action(armature_obj, skeleton, action, fps: float, scene_fps: float,
                          "at least two frames")
     loop = auto_loop if loop is None else bool(loop)
     times, notes = sample_times(name, begin, end, scene_fps / fps, loop)
-    keys, fast = _read_interpolation(mods, kps, what, co, start, keyed,
-                                     times.astype(np.float32),
-                                     extrapolation == linear_value)
+    times32, extrap_linear = times.astype(np.float32), extrapolation == linear_value
+    keys, fast, on_keys = _read_interpolation(mods, kps, what, co, start, keyed, times32,
+                                              extrap_linear)
+
+    def between():
+        """The curves read for evaluation anywhere in the sampled range."""
+        return _read_interpolation(mods, kps, what, co, start, keyed, times32,
+                                   extrap_linear, force=True)[:2]
 
     events = marker_events(name, [(m.name, m.frame) for m in action.pose_markers], times,
                            begin, end)
     return ActionSource(action, slot, name, fcurves, np.array(bones, np.int64),
                         np.array(columns, np.int64), keys, fast, times, loop, events,
-                        reason, notes)
+                        reason, notes, between if on_keys else None)
 
 
 def _modifiers_allow(mods, inside) -> bool:
@@ -311,16 +320,20 @@ def _modifiers_allow(mods, inside) -> bool:
     return not kinds or (inside and kinds == {"CYCLES"})
 
 
-def _read_interpolation(mods, kps, what, co, start, keyed, times32, extrap_linear):
-    """Complete the packed keys with interpolation and handles where they matter,
-    and decide which curves the numpy evaluator takes.
+def _read_interpolation(mods, kps, what, co, start, keyed, times32, extrap_linear,
+                        force=False):
+    """Complete the packed keys with interpolation and handles where they matter at
+    the (sorted) frames ``times32`` (everywhere in their range when ``force``), and
+    decide which curves the numpy evaluator takes. Returns ``(keys, fast, on_keys)``,
+    ``on_keys`` telling whether some curves were left unread because every time is
+    one of their keys.
 
     Cycles modifiers change nothing inside a curve's key range, so such curves stay
     fast; other modifiers, easing and sampled points are left to ``FCurve.evaluate``.
     Where every sample time is a key frame of a curve, the value there is the key's
     whatever the interpolation (Blender returns the key itself), so interpolation
     and handles are not read: dense motion capture costs one ``foreach_get`` per
-    curve.
+    curve (until the bake's interpolation check evaluates between the keys).
     """
     n = len(mods)
     ipo = np.full(len(co), LINEAR, np.int32)
@@ -335,13 +348,15 @@ def _read_interpolation(mods, kps, what, co, start, keyed, times32, extrap_linea
     eligible = [c for c in keyed.tolist()
                 if mods[c] is None or _modifiers_allow(mods[c], inside[c])]
     fast = np.zeros(n, bool)
+    on_keys = False
     for group in keys.groups(eligible, frames_only=True):
         x = co[bounds[group[0]]:bounds[group[0] + 1], 0]
         if not (np.diff(x) > 0).all():
             continue
         fast[group] = True
         at = np.minimum(np.searchsorted(x, times32), len(x) - 1)
-        if (x[at] == times32).all():
+        if not force and (x[at] == times32).all():
+            on_keys = True
             continue
         _read_interpolation_enum(ipo, keys, kps, group)
         linear[group] = extrap_linear[group]
@@ -356,7 +371,7 @@ def _read_interpolation(mods, kps, what, co, start, keyed, times32, extrap_linea
             _read_keys((("handle_left", left), ("handle_right", right)), kps, bounds,
                        bezier)
     if left is None:
-        return keys, fast
+        return keys, fast, on_keys
     check_finite(left, start, what, "left handle of key")
     check_finite(right, start, what, "right handle of key")
-    return CurveSet(co, ipo, left, right, start, linear), fast
+    return CurveSet(co, ipo, left, right, start, linear), fast, on_keys

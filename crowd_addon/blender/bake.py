@@ -1,4 +1,5 @@
-"""Bake Blender actions into core clips (local SQT keys at the crowd fps).
+"""Bake Blender actions into core clips (local SQT keys at the crowd fps, or at a
+multiple of it: ``samples_per_frame``).
 
 Two ways, one result:
 
@@ -17,6 +18,15 @@ Two ways, one result:
 
 Nothing is built until every action has been read and validated; a cancel through
 the progress callback returns None and leaves the scene as it was.
+
+Samples per frame: a clip keyed ``samples_per_frame`` times per crowd frame plays at
+the same speed (a crowd plays a clip at the clip's own fps) but samples the action
+between crowd frames from the action itself, for playback at other speeds and motion
+blur. After an F-curve bake the curves are also evaluated halfway between the keys:
+where the crowd's interpolation misses them (a bone turning the long way round, such
+as an Euler curve from 179 to -179 degrees, which Blender plays as a full turn) the
+notes name the action, bone and frames and the samples per frame that follow it
+(:func:`crowd_addon.core.clip_sampling.interpolation_note`).
 """
 
 from __future__ import annotations
@@ -27,6 +37,7 @@ import numpy as np
 
 from ..core.armature_math import relative_to_parent, sqt_from_matrices
 from ..core.clip import Clip
+from ..core.clip_sampling import MAX_SAMPLES_PER_FRAME, interpolation_note
 from ..core.errors import CrowdError
 from ..core.pose_channels import CHANNEL_WIDTH, CHANNELS, RigChannels, local_sqt
 from ..core.skeleton import Skeleton
@@ -45,7 +56,8 @@ class BakeResult:
     skeleton : the armature's core skeleton (bone order of every clip).
     clips : one :class:`Clip` per action, in the order given.
     methods : clip name -> ``"fcurves"`` or ``"frame_set"``.
-    notes : why actions were sampled with frame_set, and resampling remarks.
+    notes : why actions were sampled with frame_set, resampling remarks, and keys too
+        far apart to be interpolated (with the samples per frame that would do).
     """
 
     skeleton: Skeleton
@@ -94,15 +106,19 @@ def fast_path_blocker(armature_obj) -> str | None:
 
 def bake_actions(armature_obj, actions, fps: float, progress=None, *, loop=None,
                  scene=None, skeleton: Skeleton | None = None,
-                 method: str = "auto") -> BakeResult | None:
-    """Bake ``actions`` as played by ``armature_obj`` into clips at ``fps``.
+                 method: str = "auto", samples_per_frame: int = 1) -> BakeResult | None:
+    """Bake ``actions`` as played by ``armature_obj`` into clips for a crowd at ``fps``.
 
     Parameters
     ----------
     actions : iterable of ``bpy.types.Action`` or ``(action, slot)`` pairs (slot: an
         ``ActionSlot`` or its identifier; default :func:`.action_data.resolve_slot`).
-    fps : crowd frames per second; one clip key per ``scene_fps / fps`` Blender frames.
-    progress : optional ``progress(done, total)`` in sampled frames; returning False
+    fps : crowd frames per second.
+    samples_per_frame : keys per crowd frame, 1..16: the clips are keyed at ``fps *
+        samples_per_frame`` (one key per ``scene_fps / (fps * samples_per_frame)``
+        Blender frames) and play at the same speed, with in-between poses from the
+        action itself.
+    progress : optional ``progress(done, total)`` in sampled keys; returning False
         cancels: the result is None and nothing changed.
     loop : None (from each action), a bool, or a dict action name -> bool.
     scene : the scene whose fps (and, for frame_set, evaluation) is used; default
@@ -116,6 +132,13 @@ def bake_actions(armature_obj, actions, fps: float, progress=None, *, loop=None,
         raise CrowdError(f"bake method must be 'auto' or 'frame_set', got {method!r}")
     if not (np.isfinite(fps) and fps > 0):
         raise CrowdError(f"bake fps must be positive, got {fps}")
+    if isinstance(samples_per_frame, bool) \
+            or not isinstance(samples_per_frame, (int, np.integer)) \
+            or not 1 <= samples_per_frame <= MAX_SAMPLES_PER_FRAME:
+        raise CrowdError(f"bake samples per frame must be a whole number in "
+                         f"1..{MAX_SAMPLES_PER_FRAME}, got {samples_per_frame!r}")
+    samples = int(samples_per_frame)
+    key_fps = fps * samples
     scene = scene or bpy.context.scene
     skeleton, bone_order, rest, rest_rot = skeleton_and_rest(armature_obj, skeleton)
     scene_fps = scene.render.fps / scene.render.fps_base
@@ -133,7 +156,7 @@ def bake_actions(armature_obj, actions, fps: float, progress=None, *, loop=None,
     sources = []
     for action, slot in pairs:
         want = loop.get(getattr(action, "name", None)) if isinstance(loop, dict) else loop
-        src = read_action(armature_obj, skeleton, action, fps, scene_fps, slot, want)
+        src = read_action(armature_obj, skeleton, action, key_fps, scene_fps, slot, want)
         if src.name in repeated and src.slot is not None:
             src.name = f"{src.name}[{src.slot.identifier}]"
         sources.append(src)
@@ -152,7 +175,9 @@ def bake_actions(armature_obj, actions, fps: float, progress=None, *, loop=None,
                 done += len(src.times)
                 if progress is not None and progress(done, total) is False:
                     return None
+                missed = _interpolation_note(src, keys, rig, skeleton, samples)
             else:
+                missed = None               # the curves alone are not the pose here
                 keys = playback.bake(src, lambda k: progress is None or progress(
                     done + k + 1, total) is not False)
                 if keys is None:
@@ -162,9 +187,25 @@ def bake_actions(armature_obj, actions, fps: float, progress=None, *, loop=None,
                 if method != FRAME_SET:
                     notes.append(f"action {src.name!r} sampled with frame_set: {reason}")
             notes.extend(src.notes)
-            clips.append(Clip(src.name, keys, fps=fps, loop=src.loop, events=src.events,
+            if missed is not None:
+                notes.append(missed)
+            clips.append(Clip(src.name, keys, fps=key_fps, loop=src.loop, events=src.events,
                               bone_names=skeleton.bone_names))
     return BakeResult(skeleton, tuple(clips), methods, tuple(notes))
+
+
+def _interpolation_note(src, keys, rig, skeleton, samples):
+    """The report line when the crowd's interpolation between the keys of ``src``
+    misses its curves (evaluated halfway between the keys), else None."""
+    try:
+        curves, fast = (src.keys, src.fast) if src.between is None else src.between()
+    except CrowdError as e:         # e.g. a NaN handle, unused when sampling on the keys
+        return f"action {src.name!r}: the interpolation between keys was not checked: {e}"
+
+    def evaluate(times):
+        return local_sqt(rig, curves, src.columns, src.bones, times, fast, _evaluator(src))
+    return interpolation_note(src.name, src.times, keys, evaluate, skeleton.bone_names,
+                              samples)
 
 
 def _rig_state(armature_obj, skeleton, bone_order, rest, rest_rot) -> RigChannels:

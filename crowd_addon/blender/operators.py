@@ -37,7 +37,8 @@ class BakeJob:
     preview until :attr:`config` is used; :meth:`cancel` just drops the work."""
 
     def __init__(self, scene):
-        self.steps = scene_config.config_steps(scene)
+        self.notes = []                 # the bake's remarks, reported as warnings
+        self.steps = scene_config.config_steps(scene, notes=self.notes)
         self.done, self.total, self.message = 0, 1, "starting"
         self.config = None
 
@@ -73,7 +74,7 @@ class CROWD_OT_bake(bpy.types.Operator):
         try:
             while job.step():
                 wm.progress_update(int(1000 * job.done / job.total))
-            return self._finish(context, job.config)
+            return self._finish(context, job.config, job.notes)
         except CrowdError as e:
             self.report({"ERROR"}, str(e))
             return {"CANCELLED"}
@@ -103,7 +104,7 @@ class CROWD_OT_bake(bpy.types.Operator):
             more = job.step()
             if not more:
                 self._end(context)
-                return self._finish(context, job.config)
+                return self._finish(context, job.config, job.notes)
         except CrowdError as e:
             self._end(context)
             self.report({"ERROR"}, str(e))
@@ -121,9 +122,11 @@ class CROWD_OT_bake(bpy.types.Operator):
         wm.progress_end()
         context.workspace.status_text_set(None)
 
-    def _finish(self, context, config):
+    def _finish(self, context, config, notes=()):
         pv = preview.start(context.scene, config)
         c = pv.crowd
+        for note in notes:              # e.g. keys too far apart to be interpolated
+            self.report({"WARNING"}, note)
         self.report({"INFO"}, f"Crowd: {len(config.clips)} clips, {c.streams.count} streams, "
                               f"{c.uniques.count} uniques, {c.agents.count} agents")
         return {"FINISHED"}

@@ -226,8 +226,8 @@ class CROWD_PT_settings(_Panel, bpy.types.Panel):
         s = context.scene.crowd
         layout = self.layout
         layout.use_property_split = True
-        for key in ("max_offset", "transition_slots", "when_full", "seed", "forward_axis",
-                    "lod_near", "lod_far", "lod_cards"):
+        for key in ("max_offset", "transition_slots", "when_full", "seed",
+                    "samples_per_frame", "forward_axis", "lod_near", "lod_far", "lod_cards"):
             layout.prop(s, key)
         row = layout.row()
         row.enabled = s.lod_cards

@@ -20,6 +20,7 @@ from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProp
 from bpy.types import PropertyGroup
 
 from ..core import controller_graph
+from ..core.clip_sampling import MAX_SAMPLES_PER_FRAME
 
 __all__ = ["CLASSES", "NODE_KINDS", "settings_fingerprint"]
 
@@ -72,8 +73,11 @@ class CROWD_PG_node(PropertyGroup):
     kind: EnumProperty(name="Kind", items=NODE_KINDS, default="CLIP")
     # CLIP
     action: PointerProperty(name="Action", type=bpy.types.Action)
-    speed: FloatProperty(name="Speed", default=1.0, description="Clip frames per crowd frame")
-    start: FloatProperty(name="Start", default=0.0, description="Clip frame at time 0")
+    speed: FloatProperty(name="Speed", default=1.0,
+                         description="Playback speed (1: the action's own speed)")
+    start: FloatProperty(name="Start", default=0.0,
+                         description="Frame of the action (from its first frame) shown at "
+                                     "time 0")
     # inputs of BLEND2 / LAYER / BLEND_SPACE / STATE_MACHINE
     inputs: CollectionProperty(type=CROWD_PG_input)
     active_input_index: IntProperty()
@@ -183,6 +187,12 @@ class CROWD_PG_settings(PropertyGroup):
         ("QUEUE", "Queue", "Wait for a free slot"),
         ("CUT", "Cut", "Switch at once without blending")))
     seed: IntProperty(name="Seed", default=0, min=0)
+    samples_per_frame: IntProperty(
+        name="Samples per Frame", default=1, min=1, max=MAX_SAMPLES_PER_FRAME,
+        description="Keys baked per scene frame. The clips play at the same speed; more "
+                    "samples follow the action between frames (speeds other than 1, motion "
+                    "blur, rotations that wrap between frames) at that many times the "
+                    "memory")
     forward_axis: EnumProperty(name="Forward", default="NEG_Y", items=(
         ("NEG_Y", "-Y", "The character faces -Y in its rest pose"),
         ("POS_Y", "+Y", "The character faces +Y in its rest pose"),

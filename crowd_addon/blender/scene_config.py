@@ -97,16 +97,21 @@ def lod_distances(settings) -> tuple:
     return tuple(values)
 
 
-def _bake_action(scene, armature_obj, action, skeleton, fps):
+def _bake_action(scene, armature_obj, action, skeleton, fps, samples_per_frame, notes):
     from . import bake
-    return bake.bake_actions(armature_obj, [action], fps, scene=scene,
-                             skeleton=skeleton).clips[0]
+    result = bake.bake_actions(armature_obj, [action], fps, scene=scene, skeleton=skeleton,
+                               samples_per_frame=samples_per_frame)
+    notes.extend(result.notes)
+    return result.clips[0]
 
 
-def config_steps(scene, depsgraph=None):
+def config_steps(scene, depsgraph=None, notes=None):
     """Generator building the scene's crowd: yields ``(done, total, message)`` before
     each unit of work (one per action, then the mesh, then the agents) and returns the
-    :class:`CrowdConfig` (``StopIteration.value``). Raises CrowdError on bad input."""
+    :class:`CrowdConfig` (``StopIteration.value``). Raises CrowdError on bad input.
+
+    Actions are baked at the scene's fps times *Samples per Frame*; the bake's remarks
+    (``BakeResult.notes``) are appended to the list ``notes`` when one is given."""
     from . import agents as agent_mod
     from .armature import proxy_mesh_from_object, skeleton_from_armature
 
@@ -143,7 +148,8 @@ def config_steps(scene, depsgraph=None):
     for i, act in enumerate(actions):
         yield i, total, f"baking action {act.name!r}"
         try:
-            cfg.add_clip(_bake_action(scene, arm, act, skeleton, fps))
+            cfg.add_clip(_bake_action(scene, arm, act, skeleton, fps, s.samples_per_frame,
+                                      [] if notes is None else notes))
         except CrowdError as e:
             msg = str(e)
             raise CrowdError(msg if act.name in msg else f"action {act.name!r}: {msg}") \
@@ -178,10 +184,10 @@ def _depsgraph(scene):
     return dg
 
 
-def config_from_scene(scene, progress=None, depsgraph=None) -> CrowdConfig:
+def config_from_scene(scene, progress=None, depsgraph=None, notes=None) -> CrowdConfig:
     """Build the scene's :class:`CrowdConfig`; ``progress(done, total, message)`` is
-    called before each step."""
-    steps = config_steps(scene, depsgraph)
+    called before each step; the bake's remarks go to the list ``notes`` if given."""
+    steps = config_steps(scene, depsgraph, notes)
     while True:
         try:
             done, total, message = next(steps)

@@ -14,6 +14,7 @@ does it all on a built ``stadium.blend`` and saves the file with its settings.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import bpy
@@ -127,7 +128,7 @@ def stadium_config(scene, progress=None, hits=6, slots=800, seed=5) -> Stadium:
     # the motion-capture character: a second skeleton on a few home seats
     rig, body = _obj("MocapRig"), _obj("MocapBody")
     baked = bake_actions(rig, [_action(MOCAP_ACTION)], scene_fps(scene), loop=True,
-                         scene=scene)
+                         scene=scene, samples_per_frame=scene.crowd.samples_per_frame)
     skel = baked.skeleton
     cfg.add_skeleton(skel)
     clip = baked.clips[0]
@@ -143,9 +144,9 @@ def stadium_config(scene, progress=None, hits=6, slots=800, seed=5) -> Stadium:
     pos = cfg.agent_position
     centre = 0.5 * (pos.min(0) + pos.max(0))
     angle = np.arctan2(pos[:, 1] - centre[1], pos[:, 0] - centre[0])
-    hit_clip = cfg.clips[HIT]
-    return Stadium(cfg, angle, home, fan, tuple(f"hit{k}" for k in range(hits)),
-                   int(hit_clip.frame_count))
+    hit_clip = cfg.clips[HIT]                   # its length in crowd frames, keys included
+    hit_frames = int(math.ceil(hit_clip.frames_at(cfg.fps) - 1e-6)) + 1
+    return Stadium(cfg, angle, home, fan, tuple(f"hit{k}" for k in range(hits)), hit_frames)
 
 
 def author_stadium(blend, progress=None) -> Stadium:

@@ -1,6 +1,8 @@
 """GPU memory budget: the paper's clip-count model and a stream/offset planner.
 
-Paduraru, section 5. All sizes are in **bytes**; clip lengths and offsets in frames.
+Paduraru, section 5. All sizes are in **bytes**; clip lengths and offsets in frames of
+the crowd (a clip keyed at another rate plays at its own rate: its length in crowd
+frames is ``Clip.frames_at(fps)``, not its key count).
 
 The paper's model (functions named after its symbols)::
 
@@ -292,9 +294,16 @@ class BudgetPlan:
     notes: tuple = ()
 
 
-def _clip_frames(clip_frames) -> tuple[float, float]:
-    """(shortest, mean) of a clip length or a sequence of them, in frames."""
-    if isinstance(clip_frames, numbers.Real) and not isinstance(clip_frames, bool):
+def _is_clip(value) -> bool:
+    """A clip object (``Clip``: ``frames_at(fps)`` gives its length at a crowd rate)."""
+    return callable(getattr(value, "frames_at", None))
+
+
+def _clip_frames(clip_frames, fps: float) -> tuple[float, float]:
+    """(shortest, mean) of a clip length or a sequence of them, in crowd frames (clip
+    objects are converted at ``fps``)."""
+    if (isinstance(clip_frames, numbers.Real) and not isinstance(clip_frames, bool)) \
+            or _is_clip(clip_frames):
         values = [clip_frames]
     else:
         try:
@@ -304,7 +313,8 @@ def _clip_frames(clip_frames) -> tuple[float, float]:
                              f"numbers, got {clip_frames!r}") from None
         if not values:
             raise CrowdError("budget: clip_frames is empty")
-    lengths = [_number(v, f"clip_frames[{i}]") for i, v in enumerate(values)]
+    lengths = [_number(v.frames_at(fps) if _is_clip(v) else v, f"clip_frames[{i}]")
+               for i, v in enumerate(values)]
     shortest = min(lengths)
     if shortest < 1:
         raise CrowdError(f"budget: clip_frames must be >= 1 frame, shortest is {shortest:g}")
@@ -338,7 +348,10 @@ def plan(agents, budget_bytes, bones, clip_frames, *, bytes_per_bone=GPU_BYTES_P
     agents : int >= 1, all agents of the crowd.
     budget_bytes : float > 0, GPU bytes for the pose texture.
     bones : int >= 1, max bones of any skeleton (a row fits every skeleton).
-    clip_frames : float or sequence of float, clip lengths in frames (>= 1 each).
+    clip_frames : float or sequence of float, clip lengths in crowd frames (>= 1 each),
+        i.e. at ``fps``: a clip of F keys at its own ``clip_fps`` lasts
+        ``(F - 1) * fps / clip_fps`` crowd frames (a clip plays at its own rate). Clip
+        objects may be given instead of numbers: ``Clip.frames_at(fps)``.
     bytes_per_bone : float > 0, bytes per bone and row (48: three RGBA32F texels).
     fps : float > 0, crowd frames per second.
     max_agents_per_key : float > 0, diversity target.
@@ -368,7 +381,7 @@ def plan(agents, budget_bytes, bones, clip_frames, *, bytes_per_bone=GPU_BYTES_P
     seconds = _number(offset_seconds, "offset_seconds")
     n_unique = _count(unique_agents, "unique_agents", minimum=0)
     n_slots = _count(transition_slots, "transition_slots", minimum=0)
-    shortest, _ = _clip_frames(clip_frames)
+    shortest, _ = _clip_frames(clip_frames, rate)
     if n_unique > n_agents:
         raise CrowdError(f"budget: unique_agents ({n_unique}) exceeds agents ({n_agents})")
     fixed_m = None

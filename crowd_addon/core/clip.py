@@ -1,13 +1,22 @@
 """Clips (sampled local SQT keys with event tags) and the packed clip bank.
 
 A :class:`Clip` is authoring data: keys ``(F, B, 10)`` sampled at integer frames
-``0 .. F-1`` of the clip, its fps, looping or clamped, and event tags
-``(name, frame)``. Clip time is in frames (float). A looping clip repeats with a
-period of ``F - 1`` frames (its last key is the same instant as its first, as a
-cyclic Blender action with matching ends); a clamped clip holds its last key.
+``0 .. F-1`` of the clip, its fps, looping or clamped, event tags ``(name, frame)``
+and optionally the names of the bones its key columns belong to. Clip time is in
+*clip frames* (float): key ``k`` is clip frame ``k``, ``1 / clip.fps`` seconds after
+key ``k - 1``. A looping clip repeats with a period of ``F - 1`` clip frames (its last
+key is the same instant as its first, as a cyclic Blender action with matching ends);
+a clamped clip holds its last key.
+
+A crowd plays a clip at the clip's own rate: ``crowd fps`` frames of the crowd are
+``clip.fps`` clip frames (:meth:`Clip.frames_at`; the clip player converts, see
+``controllers.ClipPlayer``). A clip with bone names is bound to each skeleton that
+plays it by name (:meth:`Clip.bone_order`), one without by index.
 
 :class:`ClipBank` packs every clip of a crowd into one float32 array so that any
-number of (clip, time) pairs is sampled with a handful of numpy calls.
+number of (clip, time) pairs is sampled with a handful of numpy calls; a clip whose
+bones a skeleton lists in another order gets one more entry, its key columns in that
+skeleton's order.
 """
 
 from __future__ import annotations
@@ -33,9 +42,13 @@ class Clip:
     keys : (F, B, 10) local SQT per frame and bone (see :mod:`.pose`), F >= 2.
         Rotations are normalised on construction; zero-length or non-finite keys are
         rejected with the frame and bone named.
-    fps : float, frames per second the keys were sampled at.
+    fps : float, frames per second the keys were sampled at (a crowd plays the clip at
+        this rate, whatever its own fps).
     loop : bool, repeat (period F - 1) or clamp to the last key.
-    events : sequence of ``(name, frame)`` tags, ``0 <= frame <= F - 1``.
+    events : sequence of ``(name, frame)`` tags, ``0 <= frame <= F - 1`` (clip frames).
+    bone_names : None, or the B unique names of the bones the key columns belong to:
+        the clip is then matched to a skeleton by name (any order); without names, by
+        index (the bone counts must agree).
     """
 
     name: str
@@ -65,6 +78,13 @@ class Clip:
         if self.bone_names is not None and len(self.bone_names) != keys.shape[1]:
             raise CrowdError(f"clip {name!r}: {len(self.bone_names)} bone names for "
                              f"{keys.shape[1]} bones")
+        if self.bone_names is not None:
+            seen = {}
+            for i, n in enumerate(self.bone_names):
+                if n in seen:
+                    raise CrowdError(f"clip {name!r}: duplicate bone name {n!r} (columns "
+                                     f"{seen[n]} and {i})")
+                seen[n] = i
         if not np.isfinite(keys).all():
             f, b = np.argwhere(~np.isfinite(keys).all(axis=-1))[0]
             raise CrowdError(f"clip {name!r}: non-finite key at frame {f}, "
@@ -118,52 +138,140 @@ class Clip:
 
     @property
     def duration(self) -> float:
-        """Length in frames (the loop period for looping clips)."""
+        """Length in clip frames (the loop period for looping clips)."""
         return float(self.keys.shape[0] - 1)
 
+    @property
+    def seconds(self) -> float:
+        """Length in seconds."""
+        return self.duration / self.fps
+
+    def frames_at(self, fps: float) -> float:
+        """Length in frames at ``fps`` (e.g. the crowd's): how long the clip plays there."""
+        return self.duration * float(fps) / self.fps
+
+    def bone_order(self, skeleton) -> np.ndarray | None:
+        """Key column of each of ``skeleton``'s bones, or None when the columns are the
+        skeleton's bones already (same names in the same order, or no names and the
+        same bone count).
+
+        Raises CrowdError naming the clip, the skeleton and the bones when the clip
+        names bones the skeleton lacks or lacks bones it has (without names: when the
+        bone counts differ).
+        """
+        want = tuple(skeleton.bone_names)
+        if self.bone_names is None or self.bone_names == want:
+            if self.bone_count != len(want):
+                raise CrowdError(f"clip {self.name!r} has {self.bone_count} bones but "
+                                 f"skeleton {skeleton.name!r} has {len(want)}")
+            return None
+        column = {n: i for i, n in enumerate(self.bone_names)}
+        known = set(want)
+        extra = [n for n in self.bone_names if n not in known]
+        missing = [n for n in want if n not in column]
+        if extra or missing:
+            parts = []
+            if extra:
+                parts.append(f"names bones the skeleton lacks {_first(extra)}")
+            if missing:
+                parts.append(f"lacks bones the skeleton has {_first(missing)}")
+            raise CrowdError(f"clip {self.name!r} ({self.bone_count} bones) does not match "
+                             f"skeleton {skeleton.name!r} ({len(want)} bones): it "
+                             + " and ".join(parts))
+        return np.array([column[n] for n in want], np.int64)
+
     def sample(self, t) -> np.ndarray:
-        """Poses ``(*t.shape, B, 10)`` at clip times ``t`` (frames, float)."""
+        """Poses ``(*t.shape, B, 10)`` at clip times ``t`` (clip frames, float)."""
         bank = ClipBank([self])
         t = np.asarray(t, dtype=np.float64)
         out = bank.sample(np.zeros(t.size, np.int64), t.reshape(-1))
         return out.reshape(t.shape + out.shape[1:])
 
 
+def _first(names, most=5) -> str:
+    """The first ``most`` of ``names`` for a message, and how many more there are."""
+    more = len(names) - most
+    return f"{list(names[:most])}" + (f" (and {more} more)" if more > 0 else "")
+
+
 class ClipBank:
     """All clips of a crowd packed for vectorised sampling.
 
+    Parameters
+    ----------
+    clips : the clips; entries ``0 .. C-1`` are these clips, key columns as stored.
+    bone_count : the row width in bones (at least every clip's bone count).
+    fps : the crowd's frame rate: ``rate[e] = clip fps / fps`` converts crowd frames
+        into clip frames. None: rate 1 (times are clip frames).
+    uses : ``(clip name, skeleton)`` pairs that will be played (e.g. from
+        :func:`~.config.validate_config`): a clip whose bones the skeleton lists in
+        another order gets an entry with its columns in the skeleton's order, one per
+        distinct (clip, order). :meth:`entry` adds a missing one on demand (repacking).
+
     Attributes
     ----------
-    keys : (K + 1, B_max, 10) float32, every clip's keys back to back (bones beyond
+    keys : (K + 1, B_max, 10) float32, every entry's keys back to back (bones beyond
         a clip's skeleton are identity), plus one identity row at the end.
-    start, frames : (C,) int64, first row and key count per clip.
-    loop : (C,) bool.
-    tag_clip, tag_frame, tag_name : flattened event tags, sorted by clip;
-        ``tag_start[c]:tag_start[c + 1]`` are clip ``c``'s tags; names index ``tag_names``.
+    entry_clip : (E,) int64, the clip of each entry.
+    start, frames : (E,) int64, first row and key count per entry.
+    loop : (E,) bool. rate : (E,) float64, clip frames per crowd frame.
+    tag_clip, tag_frame, tag_name : flattened event tags, sorted by entry (frames in
+        clip frames); ``tag_start[e]:tag_start[e + 1]`` are entry ``e``'s tags; names
+        index ``tag_names``.
     """
 
-    def __init__(self, clips, bone_count: int | None = None):
+    def __init__(self, clips, bone_count: int | None = None, *, fps: float | None = None,
+                 uses=()):
         clips = list(clips)
         self.clips = clips
-        b = max([c.bone_count for c in clips] + [bone_count or 1])
-        self.bone_count = b
-        frames = np.array([c.frame_count for c in clips], np.int64)
+        self.fps = None if fps is None else float(fps)
+        self.bone_count = max([c.bone_count for c in clips] + [bone_count or 1])
+        self._names = {}
+        for i, c in enumerate(clips):
+            self._names.setdefault(c.name, i)
+        self._entries = [(i, None) for i in range(len(clips))]
+        self._remapped = {}
+        for name, skeleton in uses:
+            self._add(self.index(name), skeleton)
+        self._pack()
+
+    def _add(self, clip: int, skeleton):
+        """The entry of clip ``clip`` in ``skeleton``'s bone order (added if new), and
+        whether it was added."""
+        order = self.clips[clip].bone_order(skeleton)
+        if order is None:
+            return clip, False
+        key = (clip, order.tobytes())
+        if key in self._remapped:
+            return self._remapped[key], False
+        self._remapped[key] = len(self._entries)
+        self._entries.append((clip, order))
+        return self._remapped[key], True
+
+    def _pack(self):
+        clips, entries = self.clips, self._entries
+        of = [clips[i] for i, _ in entries]
+        self.entry_clip = np.array([i for i, _ in entries], np.int64)
+        frames = np.array([c.frame_count for c in of], np.int64)
         self.frames = frames
         self.start = np.concatenate([[0], np.cumsum(frames)[:-1]]).astype(np.int64) \
-            if clips else np.zeros(0, np.int64)
-        keys = sqt.identity_pose((int(frames.sum()) + 1, b))
-        for c, s in zip(clips, self.start):
-            keys[s:s + c.frame_count, :c.bone_count] = c.keys
+            if entries else np.zeros(0, np.int64)
+        keys = sqt.identity_pose((int(frames.sum()) + 1, self.bone_count))
+        for (_, order), c, s in zip(entries, of, self.start):
+            keys[s:s + c.frame_count, :c.bone_count] = c.keys if order is None \
+                else c.keys[:, order]
         self.keys = keys
-        self.loop = np.array([c.loop for c in clips], bool)
+        self.loop = np.array([c.loop for c in of], bool)
         self.period = np.maximum(frames - 1, 1).astype(np.float64)
+        self.rate = np.array([1.0 if self.fps is None else c.fps / self.fps for c in of],
+                             np.float64)
         names = sorted({e[0] for c in clips for e in c.events})
         self.tag_names = names
         name_id = {n: i for i, n in enumerate(names)}
         tc, tf, tn, ts = [], [], [], [0]
-        for i, c in enumerate(clips):
+        for e, c in enumerate(of):
             for ev_name, fr in c.events:
-                tc.append(i)
+                tc.append(e)
                 tf.append(fr)
                 tn.append(name_id[ev_name])
             ts.append(len(tc))
@@ -173,10 +281,23 @@ class ClipBank:
         self.tag_start = np.array(ts, np.int64)
 
     def index(self, name: str) -> int:
-        for i, c in enumerate(self.clips):
-            if c.name == name:
-                return i
-        raise CrowdError(f"unknown clip {name!r}")
+        """Entry of clip ``name`` with its key columns as stored."""
+        i = self._names.get(name)
+        if i is None:
+            raise CrowdError(f"unknown clip {name!r}")
+        return i
+
+    def entry(self, name: str, skeleton=None) -> int:
+        """Entry of clip ``name`` played by ``skeleton``: its key columns in the
+        skeleton's bone order (see :meth:`Clip.bone_order`, which raises on bones that
+        do not match). Without a skeleton, :meth:`index`."""
+        i = self.index(name)
+        if skeleton is None:
+            return i
+        e, added = self._add(i, skeleton)
+        if added:
+            self._pack()
+        return e
 
     def local_time(self, clip_ids: np.ndarray, t: np.ndarray) -> np.ndarray:
         """Clip-local time in ``[0, F - 1]`` (wrapped when looping, else clamped)."""
@@ -189,8 +310,8 @@ class ClipBank:
 
         Parameters
         ----------
-        clip_ids : (n,) int clip indices.
-        t : (n,) float clip times in frames (any value; wrapped or clamped).
+        clip_ids : (n,) int entry indices.
+        t : (n,) float clip times in clip frames (any value; wrapped or clamped).
 
         Returns
         -------

@@ -15,6 +15,7 @@ import numpy as np
 from .agents import assign_offsets, assign_streams, check_offsets
 from .controllers import Controller
 from .errors import CrowdError
+from .show import Show
 
 __all__ = ["AnimationDef", "CrowdConfig", "validate_config", "WHEN_FULL", "MAX_TREE_DEPTH"]
 
@@ -50,7 +51,9 @@ class CrowdConfig:
     uniques : list of AnimationDef (the UniquePool).
     max_offset : M, frames of pose history per stream (offsets are 0..M-1).
     transition_slots : NT.
-    fps : crowd frame rate (clip times are in frames at this rate).
+    fps : crowd frame rate. Controller times (a clip player's start and speed, layer
+        reference frames, transition durations) are frames at this rate; each clip
+        plays at its own ``Clip.fps`` (docs/architecture.md, Conventions).
     seed : seed used by the agent helpers.
     when_full : ``"queue"`` or ``"cut"``, default for transition requests when all
         slots are busy.
@@ -62,6 +65,8 @@ class CrowdConfig:
         back to a stream without an explicit offset).
     agent_position : (N, 3) float32 world positions (metres); agent_heading : (N,)
         radians about +Z; agent_color : (N, 3) float32 colour variation 0..1.
+    show : :class:`~.show.Show`, the cues, reactions and animated parameters the crowd
+        runs itself before each step (empty by default).
     """
 
     skeletons: dict = field(default_factory=dict)
@@ -83,6 +88,7 @@ class CrowdConfig:
     agent_color: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float32))
     meshes: dict = field(default_factory=dict)
     lod_distances: tuple = (30.0, 90.0, 150.0)
+    show: Show = field(default_factory=Show)
 
     # authoring helpers ---------------------------------------------------------
     def add_skeleton(self, skeleton):
@@ -177,22 +183,35 @@ class CrowdConfig:
 
 
 class _ClipLookup:
-    """What a controller may look up while it is validated."""
+    """What a controller may look up while it is validated: ``skeleton`` (the tree's),
+    ``fps`` (the crowd's) and :meth:`clip`, which also checks that the clip's bones
+    are the skeleton's and records the clips looked up (``used``)."""
 
-    def __init__(self, cfg, skeleton):
-        self.cfg, self.skeleton = cfg, skeleton
+    def __init__(self, cfg, skeleton, used):
+        self.cfg, self.skeleton, self.fps = cfg, skeleton, float(cfg.fps)
+        self.used = used
 
     def clip(self, name):
+        """The clip ``name``; CrowdError when it does not exist or its bone names (or,
+        without names, its bone count) do not match the skeleton."""
         try:
-            return self.cfg.clips[name]
+            clip = self.cfg.clips[name]
         except KeyError:
             raise CrowdError(f"unknown clip {name!r} (known: {sorted(self.cfg.clips)})") \
                 from None
+        clip.bone_order(self.skeleton)
+        self.used.setdefault(name, None)
+        return clip
 
 
-def validate_config(cfg: CrowdConfig) -> None:
+def validate_config(cfg: CrowdConfig) -> dict:
     """Raise :class:`CrowdError` naming the first thing wrong with ``cfg``: sizes, names,
-    every controller of every stream and unique, agent arrays and references."""
+    every controller of every stream and unique (clips they play must exist and have
+    the bones of the skeleton that plays them, see ``Clip.bone_order``), agent arrays
+    and references.
+
+    Returns the clips each skeleton plays: ``{skeleton name: [clip names]}`` (first use
+    first), what ``Crowd`` prepares its clip bank for."""
     if not cfg.skeletons:
         raise CrowdError("crowd: needs at least one skeleton")
     if not cfg.streams and not cfg.uniques:
@@ -214,12 +233,14 @@ def validate_config(cfg: CrowdConfig) -> None:
     for name, clip in cfg.clips.items():
         if clip.name != name:
             raise CrowdError(f"crowd: clip stored as {name!r} is named {clip.name!r}")
-    _validate_animations(cfg)
+    uses = _validate_animations(cfg)
     _validate_agents(cfg)
+    return uses
 
 
 def _validate_animations(cfg):
     seen = set()
+    uses = {}
     for pool, defs in (("stream", cfg.streams), ("unique", cfg.uniques)):
         for d in defs:
             if d.name in seen:
@@ -227,7 +248,8 @@ def _validate_animations(cfg):
             seen.add(d.name)
             if d.skeleton not in cfg.skeletons:
                 raise CrowdError(f"{pool} {d.name!r}: unknown skeleton {d.skeleton!r}")
-            lookup = _ClipLookup(cfg, cfg.skeletons[d.skeleton])
+            lookup = _ClipLookup(cfg, cfg.skeletons[d.skeleton],
+                                 uses.setdefault(d.skeleton, {}))
             stack = [(d.root, 0)]
             while stack:
                 node, depth = stack.pop()
@@ -239,6 +261,7 @@ def _validate_animations(cfg):
                 except CrowdError as e:
                     raise CrowdError(f"{pool} {d.name!r}: {e}") from None
                 stack.extend((c, depth + 1) for c in node.children())
+    return {skeleton: list(names) for skeleton, names in uses.items()}
 
 
 def _validate_agents(cfg):

@@ -46,13 +46,14 @@ from .controllers import (Blend2, BlendMask, BlendSpace2D, ClipPlayer, Layer, St
 from .errors import CrowdError
 from .files import file_mode
 from .mesh import ProxyMesh
+from .show import Action, Cue, Reaction, Show, Sweep, Track
 from .skeleton import Skeleton
 
 __all__ = ["FORMAT", "VERSION", "save_config", "load_config", "register_kind",
            "unregister_kind", "controller_kinds", "ControllerKind", "Encoder", "Decoder"]
 
 FORMAT = "crowd_addon.config"
-VERSION = (1, 1)            # (major, minor): readers accept any minor of their major
+VERSION = (1, 2)            # (major, minor): readers accept any minor of their major
 _REQUIRED = object()
 
 
@@ -480,7 +481,92 @@ def _encode_config(cfg: CrowdConfig) -> tuple:
     m["agents"] = {"count": cfg.agent_count}
     for key, _, _ in _AGENTS:
         m["agents"][key] = e.array(getattr(cfg, f"agent_{key}"), key)
+    m["show"] = _encode_show(cfg.show, enc.at("show"))
     return _plain(m, ""), arrays
+
+
+# ------------------------------------------------------------------------- show
+_ACTION = (("kind", "str", None), ("target", "str", None), ("duration", "number", 8.0),
+           ("hold", "int", 0), ("name", "str", ""), ("value", "number", 0.0))
+_SWEEP = (("mode", "str", "angle"), ("speed", "number", None),
+          ("start_angle", "number", 0.0), ("laps", "int", 1))
+_CUE = (("frame", "int", None), ("spread", "int", 0), ("seed", "int", 0),
+        ("interrupt", "bool", False), ("muted", "bool", False), ("timeline", "bool", True))
+_REACTION = (("event", "name", None), ("cue", "name", None), ("source", "str", ""),
+             ("radius", "number", 0.0), ("muted", "bool", False))
+
+
+def _encode_show(show: Show, enc) -> dict:
+    cues = []
+    for i, c in enumerate(show.cues):
+        a = c.action
+        cues.append({"name": c.name, **{k: getattr(c, k) for k, _, _ in _CUE},
+                     "action": {**{k: getattr(a, k) for k, _, _ in _ACTION},
+                                "offset": a.offset, "when_full": a.when_full},
+                     "agents": None if c.agents is None else
+                     enc.at("cues", i).array(c.agents, "agents"),
+                     "sweep": None if c.sweep is None else
+                     {"centre": list(c.sweep.centre), **{k: getattr(c.sweep, k)
+                                                         for k, _, _ in _SWEEP}}})
+    return {"cues": cues,
+            "reactions": [{"name": r.name, **{k: getattr(r, k) for k, _, _ in _REACTION}}
+                          for r in show.reactions],
+            "tracks": [{"target": t.target, "name": t.name, "kind": t.kind, "first": t.first,
+                        "values": enc.at("tracks", i).array(t.values, "values")}
+                       for i, t in enumerate(show.tracks)]}
+
+
+def _fields(d, obj, spec) -> dict:
+    return {k: d.get(obj, k, kind, _REQUIRED if default is None else default)
+            for k, kind, default in spec}
+
+
+def _built(d, make):
+    try:
+        return make()
+    except CrowdError as e:
+        raise d.error(str(e)) from None
+
+
+def _decode_show(m: dict, dec) -> Show:
+    show = dec.get(m, "show", "object", None)
+    if show is None:                       # files before 1.2 have no show
+        return Show()
+    dec = dec.at("show")
+    cues = []
+    for i, c in enumerate(dec.items(show, "cues", "object", [])):
+        d = dec.at("cues", i)
+        da = d.at("action")
+        raw = d.get(c, "action", "object")
+        action = _fields(da, raw, _ACTION)
+        offset = raw.get("offset", "keep")
+        if offset not in ("keep", "random") and not _TYPES["int"][0](offset):
+            raise da.at("offset").error(f"must be 'keep', 'random' or an offset, got "
+                                        f"{json.dumps(offset)[:60]}")
+        action = _built(da, lambda: Action(offset=offset, when_full=da.get(
+            raw, "when_full", "str", None, nullable=True), **action))
+        agents = d.array(c, "agents", "iu", (None,)) if c.get("agents") is not None else None
+        sweep = None
+        if c.get("sweep") is not None:
+            ds, raw_sweep = d.at("sweep"), d.get(c, "sweep", "object")
+            centre = ds.items(raw_sweep, "centre", "number")
+            sweep = _built(ds, lambda: Sweep(centre, **_fields(ds, raw_sweep, _SWEEP)))
+        name = d.get(c, "name", "name")
+        cues.append(_built(d, lambda: Cue(name, action=action, agents=agents, sweep=sweep,
+                                          **_fields(d, c, _CUE))))
+    reactions = []
+    for i, r in enumerate(dec.items(show, "reactions", "object", [])):
+        d = dec.at("reactions", i)
+        name = d.get(r, "name", "name")
+        reactions.append(_built(d, lambda: Reaction(name, **_fields(d, r, _REACTION))))
+    tracks = []
+    for i, t in enumerate(dec.items(show, "tracks", "object", [])):
+        d = dec.at("tracks", i)
+        fields = _fields(d, t, (("target", "name", None), ("name", "name", None),
+                                ("kind", "str", "parameter"), ("first", "int", None)))
+        values = d.array(t, "values", "f", (None,))
+        tracks.append(_built(d, lambda: Track(values=values, **fields)))
+    return _built(dec, lambda: Show(tuple(cues), tuple(reactions), tuple(tracks)))
 
 
 def _plain(obj, path):
@@ -601,6 +687,7 @@ def _decode_config(m: dict, dec: Decoder) -> CrowdConfig:
     for key, kinds, width in _AGENTS:
         setattr(cfg, f"agent_{key}",
                 d.array(agents, key, kinds, (n,) if width == 1 else (n, width)))
+    cfg.show = _decode_show(m, dec)
     return cfg
 
 
@@ -703,6 +790,9 @@ def load_config(path) -> CrowdConfig:
         raise CrowdError(f"{path}: no such file") from None
     except (OSError, UnicodeDecodeError, ValueError) as e:
         raise CrowdError(f"{path}: cannot read the manifest: {e}") from None
+    except RecursionError:
+        raise CrowdError(f"{path}: cannot read the manifest: JSON nested too deeply") \
+            from None
     dec = Decoder(path)
     if not isinstance(manifest, dict):
         raise CrowdError(f"{path}: the manifest must be a JSON object")

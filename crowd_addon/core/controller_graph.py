@@ -55,8 +55,8 @@ class NodeSpec:
     """One node of an animation graph (the fields its ``kind`` reads).
 
     kind : one of :data:`NODE_KINDS`.
-    CLIP: ``action`` (clip name, None when not chosen) played at ``speed`` clip
-    frames per frame from clip frame ``start``.
+    CLIP: ``action`` (clip name, None when not chosen) played at ``speed`` (1: its own
+    speed) from ``start`` frames after its first frame.
     BLEND2 / LAYER: ``weight`` 0..1, or the stream parameter ``weight_parameter``.
     LAYER: ``layer_mode`` ``"OVERRIDE"`` or ``"ADDITIVE"``; ``mask_source``
     ``"ALL"``, ``"BONES"`` (comma-separated ``mask_bones``) or ``"COLLECTION"``
@@ -97,16 +97,18 @@ def build_tree(label: str, nodes, root: str, skeleton: Skeleton, frame_start: fl
     nodes : sequence of :class:`NodeSpec`; root : the output node's name (empty: the
         first node).
     skeleton : the skeleton the masks' bones must belong to.
-    frame_start : scene frame at which an action node shows clip frame ``start``.
+    frame_start : scene frame at which an action node shows its action ``start`` frames
+        in.
     bone_collections : dict bone collection name -> bone names, for masks by
         collection; armature : the armature's name in their error messages.
 
-    Time: an action node shows clip frame ``start + speed * (F - frame_start)`` at
-    scene frame ``F`` (clip frame 0 is the action's first frame, so with speed 1 and
-    start 0 the crowd shows what the armature playing the action shows when the
-    action begins at the scene start); inside a state machine ``F - frame_start`` is
-    replaced by the frames since the state was entered. Raises CrowdError naming the
-    animation, node and input at fault.
+    Time: an action node shows its action ``start + speed * (F - frame_start)`` scene
+    (crowd) frames after the action's first frame at scene frame ``F``, whatever the
+    samples per frame its clip was baked with (a clip plays at its own rate), so with
+    speed 1 and start 0 the crowd shows what the armature playing the action shows
+    when the action begins at the scene start; inside a state machine ``F -
+    frame_start`` is replaced by the frames since the state was entered. Raises
+    CrowdError naming the animation, node and input at fault.
     """
     if len(nodes) == 0:
         raise CrowdError(f"{label}: has no nodes (add an action)")

@@ -14,6 +14,11 @@ its nodes into ``ctx.poses``. The scheduler knows nothing else about kinds.
 Weights and parameters: a weight is a number or the name of a parameter that the
 simulation sets per stream (``Crowd.set_parameter``); triggers
 (``Crowd.set_trigger``) drive state machines.
+
+Time: node times, a clip player's ``start``, a layer's reference frame and transition
+durations are crowd frames; a clip player converts to clip frames with the clip's
+``rate = clip.fps / crowd fps`` (``ClipBank.rate``), so every clip plays at its own
+rate. Clips are played in the bone order of the tree's skeleton (``ClipBank.entry``).
 """
 
 from __future__ import annotations
@@ -39,7 +44,11 @@ class Controller:
         pass
 
     def validate(self, crowd_view) -> None:
-        """Check references (clips, bones) against the crowd; raise CrowdError."""
+        """Check references (clips, bones) against the crowd; raise CrowdError.
+
+        ``crowd_view`` has ``skeleton`` (the tree's), ``fps`` (the crowd's) and
+        ``clip(name)``, which raises unless the clip exists and has the skeleton's
+        bones."""
 
 
 class Batch:
@@ -109,7 +118,9 @@ def _weight_spec(value, what):
 
 # --------------------------------------------------------------------------- clip
 class ClipPlayer(Controller):
-    """Plays a clip: pose = clip sampled at ``start + speed * t`` (frames)."""
+    """Plays a clip: at node time ``t`` (crowd frames) the clip is ``start + speed * t``
+    crowd frames in, i.e. at clip frame ``rate * (start + speed * t)`` with ``rate =
+    clip.fps / crowd fps``: speed 1 plays the clip at its own rate, whatever its fps."""
 
     def __init__(self, clip: str, speed: float = 1.0, start: float = 0.0):
         self.clip = str(clip)
@@ -119,23 +130,23 @@ class ClipPlayer(Controller):
             raise CrowdError(f"clip player {clip!r}: speed and start must be finite")
 
     def validate(self, view):
-        clip = view.clip(self.clip)
-        if clip.bone_count != view.skeleton.bone_count:
-            raise CrowdError(f"clip {clip.name!r} has {clip.bone_count} bones but skeleton "
-                             f"{view.skeleton.name!r} has {view.skeleton.bone_count}")
+        view.clip(self.clip)            # exists, with the skeleton's bones
 
     class Batch(Batch):
         def setup(self):
-            self.clip_ids = np.array([self.bank.index(n.clip) for n in self.nodes], np.int64)
-            self.speed = np.array([n.speed for n in self.nodes])
-            self.start = np.array([n.start for n in self.nodes])
+            self.clip_ids = np.array([self.bank.entry(n.clip, sk)
+                                      for n, sk in zip(self.nodes, self.skeletons)], np.int64)
+            rate = self.bank.rate[self.clip_ids]
+            # in clip frames: t_clip = start + speed * t (exactly the given values at rate 1)
+            self.speed = rate * np.array([n.speed for n in self.nodes])
+            self.start = rate * np.array([n.start for n in self.nodes])
             self.prev = np.full(len(self.nodes), np.nan)
 
         def reset(self):
             self.prev[:] = np.nan
 
         def evaluate(self, ctx):
-            t = self.start + self.speed * ctx.time[self.index]
+            t = self.start + self.speed * ctx.time[self.index]        # clip frames
             if isinstance(self.out, slice):
                 self.bank.sample(self.clip_ids, t, out=ctx.poses[self.out])
             else:
@@ -256,7 +267,8 @@ class Layer(Controller):
         (other bones 0), e.g. ``{"upperarm.R": 1, "forearm.R": 1, "hand.R": 1}``.
     weight : overall weight, number or parameter name.
     reference : for additive layers, ``(clip name, frame)`` whose pose is the
-        zero of the delta; default the skeleton's bind pose.
+        zero of the delta, ``frame`` in crowd frames from the clip's start (clip frame
+        ``frame * clip.fps / crowd fps``); default the skeleton's bind pose.
     """
 
     MODES = ("override", "additive")
@@ -279,9 +291,10 @@ class Layer(Controller):
         if self.reference is not None:
             clip_name, frame = self.reference
             clip = view.clip(clip_name)
-            if not 0 <= float(frame) <= clip.frame_count - 1:
+            length = clip.frames_at(view.fps)
+            if not 0 <= float(frame) <= length * (1 + 1e-12):
                 raise CrowdError(f"layer: reference frame {frame} outside clip "
-                                 f"{clip_name!r} (0..{clip.frame_count - 1})")
+                                 f"{clip_name!r} (0..{length:g} frames at {view.fps:g} fps)")
 
     @staticmethod
     def group_key(node):
@@ -299,8 +312,9 @@ class Layer(Controller):
                 if node.reference is None:
                     self.ref[i, :sk.bone_count] = sk.bind_pose
                 else:
-                    c = self.bank.index(node.reference[0])
-                    self.ref[i] = self.bank.sample([c], [float(node.reference[1])])[0]
+                    c = self.bank.entry(node.reference[0], sk)
+                    at = self.bank.rate[c] * float(node.reference[1])      # clip frames
+                    self.ref[i] = self.bank.sample([c], [at])[0]
             self.specs = [node.weight for node in self.nodes]
             self.additive = self.nodes[0].mode == "additive"
             # bones no node of the batch layers stay the base pose, computed on none

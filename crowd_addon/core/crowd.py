@@ -32,6 +32,7 @@ from .events import EventDispatcher, deliver
 from .frame_view import FrameView
 from .graph import DependencyGraph, TreeEvaluator
 from .pools import StreamPool, UniquePool
+from .show import ShowRunner
 from .skinning import SkinningPlan
 from .skinning_modes import skinning_mode
 from .transitions import TransitionResult, TransitionSlots
@@ -68,7 +69,7 @@ class Crowd:
     """
 
     def __init__(self, config: CrowdConfig, skinning: str = "cpu"):
-        validate_config(config)
+        uses = validate_config(config)
         cfg = self.config = config
         self.fps = float(cfg.fps)
         skel_names = list(cfg.skeletons)
@@ -76,7 +77,10 @@ class Crowd:
         self.bones = max(s.bone_count for s in self.skeletons)
         defs = list(cfg.streams) + list(cfg.uniques)
         skel = np.array([skel_names.index(d.skeleton) for d in defs], np.int64)
-        self.bank = ClipBank(list(cfg.clips.values()), self.bones)
+        # clips play at their own rate and in each skeleton's bone order
+        self.bank = ClipBank(list(cfg.clips.values()), self.bones, fps=self.fps,
+                             uses=[(clip, cfg.skeletons[sk]) for sk, names in uses.items()
+                                   for clip in names])
         self.evaluator = TreeEvaluator([(d.root, cfg.skeletons[d.skeleton]) for d in defs],
                                        self.bank, self.bones)
         self.plans = [SkinningPlan(s, self.bones) for s in self.skeletons]
@@ -104,6 +108,7 @@ class Crowd:
         self.view = FrameView(self)
         self.skinning.bind(self)
         self._build_graph()
+        self.show = ShowRunner(cfg.show, self) if cfg.show else None
         self.reset(cfg.start_frame)
 
     # ---------------------------------------------------------------- dependency graph
@@ -138,7 +143,12 @@ class Crowd:
         their configured references, slots and queue empty. Deterministic."""
         cfg = self.config
         f0 = cfg.start_frame if frame is None else int(frame)
+        if self.show is not None:
+            self.show.reset()
         self.evaluator.reset()
+        for params, triggers in zip(self.evaluator.ctx.params, self.evaluator.ctx.triggers):
+            params.clear()             # a reset crowd is a new crowd: no leftover parameters
+            triggers.clear()
         self.slots.release(np.arange(self.slots.count))
         self.slots.queue.clear()
         self.slots.served = self.slots.cuts = 0
@@ -164,6 +174,11 @@ class Crowd:
         kind, ref, off = self._playing(agents)
         return np.where(kind == STREAM, self.streams.key(ref, off), self.uniques.key(ref))
 
+    def playing(self, agents):
+        """(kind, ref, offset) arrays: what each agent plays, a transition resolved to
+        its target (``kind`` STREAM or UNIQUE, see :mod:`.agents`)."""
+        return self._playing(self.agents.ids(agents))
+
     def _playing(self, agents):
         """(kind, ref, offset) each agent plays, a transition resolved to its target."""
         a = self.agents
@@ -182,6 +197,8 @@ class Crowd:
         """Advance one frame and return what it cost."""
         t_start = time.perf_counter()
         mark = self.storage.mark()
+        if self.show is not None:
+            self.show.before_step(self.frame + 1)
         started = self.slots.serve_queue()
         self.frame += 1
         self._finished = 0
@@ -247,14 +264,24 @@ class Crowd:
 
     def transition_to_streamed(self, agents, stream, duration, offset=None,
                                when_full=None) -> TransitionResult:
-        """Blend agents to ``stream`` at ``offset`` (default: each agent's own offset)
-        over ``duration`` frames (0 switches at once)."""
+        """Blend agents to ``stream`` (a name or index, or one stream index per agent)
+        at ``offset`` (default: each agent's own offset) over ``duration`` frames (0
+        switches at once)."""
         agents = self.agents.ids(agents)
         length, policy = self.slots.check_request(duration, when_full)
-        s = self.streams.index(stream)
+        if np.ndim(stream) == 0:
+            s = self.streams.index(stream)
+        else:
+            s = np.asarray(stream).reshape(-1)
+            if s.shape != agents.shape or (s.size and s.dtype.kind not in "iu"):
+                raise CrowdError(f"transition: per-agent streams must be {agents.size} stream "
+                                 f"indices, got {s.dtype} {s.shape}")
+            if s.size and (s.min() < 0 or s.max() >= self.streams.count):
+                raise CrowdError(f"transition: stream index out of range 0.."
+                                 f"{self.streams.count - 1}")
         off = self.agents.offset[agents].copy() if offset is None else \
             self.streams.offsets_for(offset, agents.size)
-        self._check_skeleton(agents, self.streams.skeleton[s], self.streams.names[s])
+        self._check_skeleton(agents, self.streams.skeleton[s], self.streams.names, s)
         return self.slots.request(agents, STREAM, s, off, length, policy)
 
     def transition_to_unique(self, agents, unique, duration, restart=True,
@@ -264,15 +291,16 @@ class Crowd:
         agents = self.agents.ids(agents)
         length, policy = self.slots.check_request(duration, when_full)
         u = self.uniques.index(unique)
-        self._check_skeleton(agents, self.uniques.skeleton[u], self.uniques.names[u])
+        self._check_skeleton(agents, self.uniques.skeleton[u], self.uniques.names, u)
         if restart and agents.size:
             self.uniques.restart(u, self.frame + 1)
         return self.slots.request(agents, UNIQUE, u, self.agents.offset[agents].copy(),
                                   length, policy)
 
-    def _check_skeleton(self, agents, skeleton, name):
+    def _check_skeleton(self, agents, skeleton, names, ref):
         bad = np.flatnonzero(self.agent_skeleton[agents] != skeleton)
         if bad.size:
+            name = names[int(np.broadcast_to(ref, agents.shape)[bad[0]])]
             raise CrowdError(f"agent {int(agents[bad[0]])}: cannot transition to "
                              f"{name!r}, it uses another skeleton")
 

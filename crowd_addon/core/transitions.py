@@ -107,13 +107,15 @@ class TransitionSlots:
         return int(round(d)), policy
 
     def request(self, agents, kind, ref, offsets, length, policy) -> TransitionResult:
-        """Blend ``agents`` (k,) to ``(kind, ref)`` at ``offsets`` (k,) over ``length``
-        frames: agents already blending reuse their slot; free slots go first to the
-        requests already waiting (FIFO), then to these agents; the rest wait
-        (``"queue"``) or switch at once (``"cut"``). ``length`` 0 cuts; with no slots
-        at all (``NT = 0``) every request cuts, since nothing could serve a queue."""
+        """Blend ``agents`` (k,) to ``(kind, ref)`` (``ref`` one index or (k,) indices)
+        at ``offsets`` (k,) over ``length`` frames: agents already blending reuse their
+        slot; free slots go first to the requests already waiting (FIFO), then to these
+        agents; the rest wait (``"queue"``) or switch at once (``"cut"``). ``length`` 0
+        cuts; with no slots at all (``NT = 0``) every request cuts, since nothing could
+        serve a queue."""
+        ref = np.broadcast_to(np.asarray(ref, np.int64), np.shape(agents))
         agents, first = np.unique(agents, return_index=True)
-        offsets = offsets[first]
+        offsets, ref = offsets[first], ref[first]
         for a in agents.tolist():
             self.queue.pop(a, None)
         if self.count == 0:          # nothing could ever serve a queue: switch at once
@@ -133,17 +135,18 @@ class TransitionSlots:
         all_slots = np.concatenate([reuse_slots, free[:take]]).astype(np.int64)
         overflow = rest[take:]
         if all_slots.size:
-            self._begin(all_slots, all_agents, kind, ref,
-                        offsets[np.searchsorted(agents, all_agents)], length)
+            at = np.searchsorted(agents, all_agents)
+            self._begin(all_slots, all_agents, kind, ref[at], offsets[at], length)
         queued = cut = np.zeros(0, np.int64)
         if overflow.size:
-            ov_off = offsets[np.searchsorted(agents, overflow)]
+            at = np.searchsorted(agents, overflow)
+            ov_off, ov_ref = offsets[at], ref[at]
             if policy == "queue":
-                for a, o in zip(overflow.tolist(), ov_off.tolist()):
-                    self.queue[a] = (kind, ref, o, length)
+                for a, r, o in zip(overflow.tolist(), ov_ref.tolist(), ov_off.tolist()):
+                    self.queue[a] = (kind, r, o, length)
                 queued = overflow
             else:
-                self.cut(overflow, kind, ref, ov_off)
+                self.cut(overflow, kind, ov_ref, ov_off)
                 cut = overflow
         return TransitionResult(all_agents, all_slots, queued, cut)
 
@@ -162,9 +165,13 @@ class TransitionSlots:
             return 0
         free = self.free_slots()
         n = min(free.size, len(self.queue))
-        for slot in free[:n].tolist():
-            a, (kind, ref, off, length) = self.queue.popitem(last=False)
-            self._begin(np.array([slot]), np.array([a]), kind, ref, np.array([off]), length)
+        if n == 0:
+            return 0
+        served = [self.queue.popitem(last=False) for _ in range(n)]
+        agents = np.fromiter((a for a, _ in served), np.int64, n)
+        kind, ref, off, length = (np.array(col, np.int64)
+                                  for col in zip(*(req for _, req in served)))
+        self._begin(free[:n], agents, kind, ref, off, length)    # all at once, in order
         return n
 
     def start(self, slots, agents, kind, ref, offset, length, start_pose, frame):

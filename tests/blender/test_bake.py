@@ -6,8 +6,8 @@ Fractional frames: core samples a clip by lerp/nlerp between its integer keys, w
 Blender evaluates the F-curves exactly at a subframe, so the two differ between keys
 by the curvature of the motion (up to 0.24 on this rig at half frames). Fractional
 Blender frames are therefore compared where the clip has keys: baking at 4x the scene
-fps puts keys at quarter frames, and a 30 fps crowd over a 24 fps scene puts keys
-every 0.8 frames.
+fps (or 4 samples per frame) puts keys at quarter frames, and a 30 fps crowd over a
+24 fps scene puts keys every 0.8 frames.
 Comparisons go through ``ClipBank`` sampling and core's ``model_matrices``.
 """
 
@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from crowd_addon.blender.bake import bake_actions
+from crowd_addon.core import ClipPlayer, Crowd, CrowdConfig
 from crowd_addon.core.clip import ClipBank
 from crowd_addon.core.errors import CrowdError
 from crowd_addon.core.skinning import model_matrices
@@ -43,7 +44,13 @@ def test_integer_frames_match_blender(scene, blend):
     blend.rig_action(obj)
     action = obj.animation_data.action
     result = bake_actions(obj, [action], fps=scene.render.fps)
-    assert result.methods == {"Wave": "fcurves"} and result.notes == ()
+    assert result.methods == {"Wave": "fcurves"}
+    # this rig turns fast: the report says its in-between poses need 2 keys a frame
+    note, = result.notes
+    assert note.startswith("action 'Wave': bone 'leg' turns too fast between the keys at "
+                           "frames 11 and 12") and note.endswith("bake with 2 samples per "
+                                                                 "frame to follow it")
+    assert bake_actions(obj, [action], fps=scene.render.fps, samples_per_frame=2).notes == ()
     clip = result.clips[0]
     assert clip.frame_count == 20 and clip.fps == scene.render.fps
     assert result.skeleton.bone_names[0] == "root"
@@ -68,6 +75,82 @@ def test_crowd_fps_differs_from_scene_fps(scene, blend):
     assert clip.frame_count == 26 and clip.fps == 30      # 20 frames at 24 fps = 25 steps
     keys = np.arange(26)
     assert_matches_blender(blend, scene, obj, result, 0, 1 + keys * 0.8, 1.0, 0.8)
+
+
+def test_samples_per_frame_follow_blender_between_crowd_frames(scene, blend):
+    """4 keys per crowd frame: the clip plays at the crowd's speed (its fps is 4x, and a
+    crowd plays a clip at its own rate) and its half-frame poses are Blender's, in a
+    crowd at speed 0.5 too; 1 key per frame interpolates there and misses."""
+    obj = blend.build_rig(scene)
+    action, _, _ = blend.rig_action(obj)
+    fps = scene.render.fps
+    one = bake_actions(obj, [action], fps=fps)
+    four = bake_actions(obj, [action], fps=fps, samples_per_frame=4)
+    assert four.notes == ()
+    assert four.clips[0].fps == 4 * fps and four.clips[0].frame_count == 77
+    assert one.clips[0].fps == fps and one.clips[0].frame_count == 20
+    names = four.skeleton.bone_names
+    frames = np.arange(1.5, 20, 1.0)                          # half crowd frames
+    want = np.stack([blend.pose_at(scene, obj, names, f) for f in frames])
+
+    def clip_pose(result, t):
+        """Model matrices of the clip at crowd time ``t`` (frames since its start)."""
+        bank = ClipBank(result.clips, fps=fps)
+        local = bank.sample(np.zeros(t.size, np.int64), bank.rate[0] * t)
+        return model_matrices(local, result.skeleton)
+
+    err4 = np.abs(clip_pose(four, frames - 1) - want).max()
+    err1 = np.abs(clip_pose(one, frames - 1) - want).max()
+    assert err4 < TOL and err1 > 0.05, (err4, err1)
+    # the same through a crowd playing the clip at half speed: frame f shows 1 + f / 2
+    for result, ok in ((four, True), (one, False)):
+        cfg = CrowdConfig(max_offset=1, transition_slots=0, fps=fps)
+        cfg.add_skeleton(result.skeleton)
+        cfg.add_clip(result.clips[0])
+        cfg.add_stream("half", result.skeleton.name, ClipPlayer("Wave", speed=0.5))
+        cfg.add_agents(1)
+        crowd = Crowd(cfg)
+        worst = 0.0
+        for f in range(1, 38):
+            crowd.advance_to(f)
+            got = model_matrices(crowd.pose("half")[None], result.skeleton)[0]
+            worst = max(worst, np.abs(got - blend.pose_at(scene, obj, names, 1 + f / 2)).max())
+        assert (worst < TOL) == ok, worst
+
+
+def test_euler_curve_wrapping_between_keys_is_reported(scene, blend):
+    """An Euler curve keyed 179 then -179 degrees on consecutive frames turns the bone a
+    full turn in Blender; one key a frame interpolates the short way (a half turn off
+    halfway). The report names the action, bone and frames and 2 samples per frame,
+    which follow it."""
+    obj = blend.build_rig(scene)
+    action, slot, bag = blend.new_action("Spin")
+    obj.pose.bones["arm.L"].rotation_mode = "XYZ"
+    blend.add_curve(bag, 'pose.bones["arm.L"].rotation_euler', 2, np.array([1.0, 5, 6, 9]),
+                    np.radians([0.0, 179, -179, -90]), "LINEAR")
+    blend.play(obj, action, slot)
+    one = bake_actions(obj, [action], fps=scene.render.fps)
+    note, = one.notes
+    assert note.startswith("action 'Spin': bone 'arm.L' turns too fast between the keys at "
+                           "frames 5 and 6 to be interpolated: halfway, the crowd's rotation "
+                           "is 3.14 rad off the action's (the long way round")
+    assert note.endswith("; bake with 2 samples per frame to follow it")
+    two = bake_actions(obj, [action], fps=scene.render.fps, samples_per_frame=2)
+    assert two.notes == ()
+    names = one.skeleton.bone_names
+    want = blend.pose_at(scene, obj, names, 5.5)
+    arm = names.index("arm.L")
+    assert np.abs(core_pose(one, 0, [4.5])[0, arm] - want[arm]).max() > 1.0
+    np.testing.assert_allclose(core_pose(two, 0, [9.0])[0], want, atol=TOL)
+
+
+@pytest.mark.parametrize("samples", [0, 17, 2.0, True])
+def test_samples_per_frame_must_be_1_to_16(scene, blend, samples):
+    obj = blend.build_rig(scene)
+    action, _, _ = blend.rig_action(obj)
+    with pytest.raises(CrowdError, match=r"bake samples per frame must be a whole number in "
+                                         r"1\.\.16, got"):
+        bake_actions(obj, [action], fps=24, samples_per_frame=samples)
 
 
 def test_frame_set_path_gives_the_same_clip(scene, blend):

@@ -257,6 +257,66 @@ def _root(anim, name, add, kind, inputs, **props):
     return anim
 
 
+def test_samples_per_frame_setting_keys_the_clips_between_frames(rig_scene):
+    """Settings > Samples per Frame 4: the clips keep 4 keys per scene frame and play
+    at the same speed, so a stream at half speed shows Blender's pose at half frames
+    (1 sample per frame interpolates there)."""
+    scene, rig, acts = rig_scene
+    s = scene.crowd
+    assert s.samples_per_frame == 1
+    cs.add_stream(s, "walk", acts["walk"])
+    cs.add_stream(s, "slow", acts["walk"]).nodes[0].speed = 0.5
+    misses = {}
+    for samples in (1, 4):
+        s.samples_per_frame = samples
+        cfg = scene_config.config_from_scene(scene)
+        sk = cfg.skeletons["Rig"]
+        assert cfg.fps == 24 and cfg.clips["walk"].fps == 24 * samples
+        crowd = Crowd(cfg)
+        misses[samples] = 0.0
+        for frame in (2, 7, 12, 29, 40):
+            crowd.advance_to(frame)
+            got = model_matrices(np.stack([crowd.pose("walk"), crowd.pose("slow")]), sk)
+            for k, clip_t in enumerate((frame - 1, (frame - 1) / 2)):
+                want = _blender_model(scene, rig, acts["walk"], 1 + clip_t % 24, sk)
+                miss = np.abs(got[k] - want).max()
+                if k == 0:
+                    assert miss < 2e-5, f"frame {frame}"        # whole frames: keys
+                misses[samples] = max(misses[samples], miss)
+    assert misses[4] < 2e-5 < 1e-3 < misses[1], misses
+
+
+def test_the_bake_reports_keys_too_far_apart(rig_scene):
+    """An Euler curve wrapping from 179 to -179 degrees between two frames: the bake
+    reports it (a warning of the operator) with the samples per frame that follow it."""
+    scene, rig, _acts = rig_scene
+    pb = rig.pose.bones["head"]
+    pb.rotation_mode = "XYZ"
+    spin = bpy.data.actions.new("spin")
+    rig.animation_data_create()
+    rig.animation_data.action = spin
+    for frame, degrees in ((1, 0), (5, 179), (6, -179), (9, -90)):
+        pb.rotation_euler = (0, 0, np.radians(degrees))
+        pb.keyframe_insert("rotation_euler", index=2, frame=frame)
+    rig.animation_data.action = None
+    cs.add_stream(scene.crowd, "spin", spin)
+    timer = type("Event", (), {"type": "TIMER"})()
+    op = _FakeOperator(scene)
+    while op.modal(bpy.context, timer) == {"RUNNING_MODAL"}:
+        pass
+    warnings = [m for kind, m in op.reports if kind == {"WARNING"}]
+    assert len(warnings) == 1 and op.reports[-1][0] == {"INFO"}
+    assert warnings[0].startswith("action 'spin': bone 'head' turns too fast between the keys "
+                                  "at frames 5 and 6")
+    assert warnings[0].endswith("samples per frame to follow it")
+    assert op._job.notes == warnings
+    scene.crowd.samples_per_frame = int(warnings[0].split("bake with ")[1].split()[0])
+    job = BakeJob(scene)
+    while job.step():
+        pass
+    assert job.notes == []
+
+
 def test_bake_operator_reports_bad_actions_and_keeps_the_running_crowd(rig_scene):
     scene, rig, acts = rig_scene
     s = scene.crowd

@@ -4,7 +4,8 @@ The same through Blender actions: tests/blender/test_bake.py."""
 import numpy as np
 import pytest
 
-from crowd_addon.core.clip_sampling import marker_events, sample_times
+from crowd_addon.core.clip_sampling import (interpolation_misses, interpolation_note,
+                                            marker_events, sample_times)
 from crowd_addon.core.errors import CrowdError
 
 
@@ -35,3 +36,52 @@ def test_markers_become_clip_frames():
     with pytest.raises(CrowdError, match=r"action 'Wave': pose marker 'late' at frame 40 is "
                                          r"outside the action's frames 1..20"):
         marker_events("Wave", [("late", 40)], times, 1.0, 20.0)
+
+
+# ------------------------------------------------------------ interpolation check
+def euler_z_keys(angle, times):
+    """Local SQT (n, 2, 10) of a root at rest and a bone turned ``angle(t)`` about Z."""
+    a = np.asarray(angle(np.asarray(times, np.float64)), np.float64)
+    out = np.zeros((a.size, 2, 10))
+    out[..., :3] = 1
+    out[:, :, 3] = 1
+    out[:, 1, 3], out[:, 1, 6] = np.cos(a / 2), np.sin(a / 2)
+    return out.astype(np.float32)
+
+
+def wrapping(t):
+    """An Euler Z curve keyed 0 at frame 1, 179 degrees at 5, -179 at 6 (Blender goes
+    through 0 in between: a full turn in one frame), -90 at 9; linear."""
+    return np.radians(np.interp(t, [1, 5, 6, 9], [0, 179, -179, -90]))
+
+
+def test_interpolation_note_names_a_wrap_and_the_samples_that_follow_it():
+    times = np.arange(1.0, 10.0)
+    keys = euler_z_keys(wrapping, times)
+    misses = interpolation_misses(keys, euler_z_keys(wrapping, times[:-1] + 0.5))
+    assert misses.shape == (8, 2) and misses[:, 0].max() < 1e-3
+    assert misses[4, 1] == pytest.approx(np.pi, abs=0.04)            # frames 5 .. 6
+    assert np.delete(misses[:, 1], 4).max() < 1e-3
+    note = interpolation_note("Spin", times, keys, lambda t: euler_z_keys(wrapping, t),
+                              ("root", "arm"), samples_per_frame=1)
+    assert note.startswith("action 'Spin': bone 'arm' turns too fast between the keys at "
+                           "frames 5 and 6 to be interpolated: halfway, the crowd's rotation "
+                           "is 3.14 rad off the action's (the long way round, e.g. an Euler "
+                           "angle crossing +-180 degrees); 1 key interval of 1 bone misses "
+                           "by more than 0.05 rad")
+    assert note.endswith("; bake with 2 samples per frame to follow it")
+
+
+def test_interpolation_note_is_none_for_smooth_motion_and_says_when_16_do_not_do():
+    times = np.arange(0.0, 20.0, 0.5)                       # 2 samples per frame
+    smooth = lambda t: 0.3 * np.sin(t / 3)                  # noqa: E731
+    keys = euler_z_keys(smooth, times)
+    assert interpolation_note("Calm", times, keys, lambda t: euler_z_keys(smooth, t),
+                              ("root", "arm"), samples_per_frame=2) is None
+    # a jump no sampling follows: a constant curve stepping from 0 to 2 rad at frame 7.2
+    step = lambda t: np.where(t < 7.2, 0.0, 2.0)            # noqa: E731
+    note = interpolation_note("Jump", times, euler_z_keys(step, times),
+                              lambda t: euler_z_keys(step, t), ("root", "arm"),
+                              samples_per_frame=2)
+    assert "between the keys at frames 7 and 7.5" in note
+    assert note.endswith("; 16 samples per frame still miss by 1.00 rad there")

@@ -1,5 +1,6 @@
 """Saving and loading a crowd configuration (crowd.json + crowd.npz)."""
 
+import functools
 import hashlib
 import json
 import os
@@ -14,6 +15,7 @@ from crowd_addon.core import (Blend2, BlendMask, BlendSpace2D, ClipPlayer, Contr
                               synthetic)
 from crowd_addon.core import config_io
 from crowd_addon.core.config_io import load_config, register_kind, save_config, unregister_kind
+from crowd_addon.core.show import Action, Cue, Reaction, Show, Sweep, Track
 
 DOCS = Path(__file__).resolve().parents[2] / "docs" / "config_format.md"
 ARM = ("upperarm.L", "forearm.L", "hand.L")
@@ -26,15 +28,14 @@ def make_config() -> CrowdConfig:
                       max_texture_size=2048, start_frame=5)
     fan = cfg.add_skeleton(synthetic.humanoid("fan", bones=24))
     kid = cfg.add_skeleton(synthetic.humanoid("kid", bones=26))
-    cfg.add_clip(synthetic.periodic_clip(fan, "walk", events=[("step.L", 10), ("step.R", 40)]))
-    cfg.add_clip(synthetic.periodic_clip(fan, "idle", frames=41, seed=2,
-                                         events=[("breathe", 15.5)]))
-    cfg.add_clip(synthetic.periodic_clip(fan, "cheer", frames=31, seed=3, loop=False,
-                                         events=[("clap", 20)]))
-    cfg.add_clip(synthetic.periodic_clip(fan, "wave", frames=25, seed=4, amplitude=1.0,
-                                         bones=ARM, events=[("wave", 5)]))
-    cfg.add_clip(synthetic.periodic_clip(kid, "kid_run", frames=21, seed=5,
-                                         events=[("kid_step", 7.5)]))
+    # clips keyed at the crowd's rate (a clip plays at its own fps)
+    clip = functools.partial(synthetic.periodic_clip, fps=cfg.fps)
+    cfg.add_clip(clip(fan, "walk", events=[("step.L", 10), ("step.R", 40)]))
+    cfg.add_clip(clip(fan, "idle", frames=41, seed=2, events=[("breathe", 15.5)]))
+    cfg.add_clip(clip(fan, "cheer", frames=31, seed=3, loop=False, events=[("clap", 20)]))
+    cfg.add_clip(clip(fan, "wave", frames=25, seed=4, amplitude=1.0, bones=ARM,
+                      events=[("wave", 5)]))
+    cfg.add_clip(clip(kid, "kid_run", frames=21, seed=5, events=[("kid_step", 7.5)]))
     bones = fan.bone_names
     cfg.add_stream("walk", "fan", ClipPlayer("walk"))
     cfg.add_stream("walk_idle", "fan", Blend2(ClipPlayer("walk", speed=1.25),
@@ -74,6 +75,20 @@ def make_config() -> CrowdConfig:
     cfg.lod_distances = (12.5, 40.0)
     cfg.agent_stream[-4:] = -1
     cfg.agent_unique[-4:] = 0
+    cfg.show = Show(
+        (Cue("goal", 8, Action("stream", "walk", 4, offset=2, hold=10), agents=np.arange(0, 90, 3)),
+         Cue("wave", 3, Action("stream", "wave_over", 2, offset="random", when_full="cut",
+                               hold=6), sweep=Sweep((1.0, 2.0, 0.0), "angle", -2.5, 0.5, 2),
+             seed=4),
+         Cue("stand", 12, Action("stream", "walk_idle", 0), agents=np.arange(30, 40), spread=5,
+             interrupt=True, muted=True),
+         Cue("hop", 0, Action("unique", "hero", 3, hold=20), agents=np.array([5]),
+             timeline=False),
+         Cue("go", 20, Action("trigger", "fsm", name="goal")),
+         Cue("calm", 22, Action("parameter", "fsm", name="calm", value=0.75))),
+        (Reaction("jump", "clap", "hop", source="mask", radius=3.5),),
+        (Track("space", "vx", 5, np.linspace(0, 1, 11)),
+         Track("hero", "go", 0, np.r_[np.zeros(15), np.ones(5)], "trigger")))
     assert cfg.agent_count == 100
     return cfg
 
@@ -189,7 +204,7 @@ def test_loaded_crowd_animates_identically(saved):
 
 def test_manifest_is_readable_json(saved):
     m = json.loads(saved.read_text())
-    assert m["format"] == config_io.FORMAT and m["version"] == "1.1"
+    assert m["format"] == config_io.FORMAT and m["version"] == "1.2"
     assert m["arrays"]["uri"] == "crowd.npz"
     assert m["settings"] == {"max_offset": 12, "transition_slots": 4, "fps": 24.0, "seed": 7,
                              "when_full": "cut", "max_texture_size": 2048, "start_frame": 5}
@@ -219,6 +234,41 @@ def test_docs_example_is_a_valid_manifest():
     m = json.loads(blocks[0])
     assert m["format"] == config_io.FORMAT
     assert m["version"].split(".")[0] == str(config_io.VERSION[0])
+
+
+# --------------------------------------------------------- clips bound by bone name
+def test_clip_stored_in_another_bone_order_animates_identically(saved):
+    """A file whose clip lists the skeleton's bones in another order (its key columns
+    following) plays that clip by name: the crowd animates bit for bit as before."""
+    order = np.random.default_rng(5).permutation(24)
+
+    def manifest(m):
+        clip = m["clips"][0]
+        assert clip["name"] == "walk"
+        clip["bone_names"] = [clip["bone_names"][i] for i in order]
+
+    rewrite(saved, manifest=manifest,
+            arrays=lambda a: a.update({"clips[0].keys": a["clips[0].keys"][:, order]}))
+    loaded = load_config(saved)
+    assert loaded.clips["walk"].bone_names != loaded.skeletons["fan"].bone_names
+    rows_a, events_a, state_a = drive(Crowd(make_config()))
+    rows_b, events_b, state_b = drive(Crowd(loaded))
+    assert events_a == events_b and state_a == state_b
+    for f, (a, b) in enumerate(zip(rows_a, rows_b)):
+        assert a.tobytes() == b.tobytes(), f"pose texture differs at step {f}"
+
+
+def test_clip_naming_bones_its_skeleton_lacks_is_named(saved):
+    """Accepted before (the keys were played by index): a clip whose bone names are not
+    its skeleton's is refused before the crowd runs, naming clip, skeleton and bones."""
+    rewrite(saved, manifest=lambda m: m["clips"][1]["bone_names"].__setitem__(5, "tail"))
+    cfg = load_config(saved)
+    with pytest.raises(CrowdError, match=r"stream 'walk_idle': clip 'idle' \(24 bones\) does "
+                                         r"not match skeleton 'fan' \(24 bones\): it names "
+                                         r"bones the skeleton lacks "
+                                         r"\['tail'\] and lacks bones the skeleton has "
+                                         r"\['neck'\]"):
+        Crowd(cfg)
 
 
 # ------------------------------------------------------------------ extensibility
@@ -356,6 +406,17 @@ def test_not_json(saved):
         load_config(saved)
     saved.write_text('{"format": NaN}')
     with pytest.raises(CrowdError, match=r"crowd\.json: cannot read the manifest"):
+        load_config(saved)
+
+
+@pytest.mark.parametrize("opener, closer", [("[", "]"), ('{"a": ', "}")])
+def test_json_nested_too_deep_is_named(saved, opener, closer):
+    # raised a bare RecursionError from the json parser (found by tests/test_fuzz.py)
+    m = json.loads(saved.read_text())
+    m["settings"]["seed"] = "@"
+    saved.write_text(json.dumps(m).replace('"@"', opener * 100_000 + "1" + closer * 100_000))
+    with pytest.raises(CrowdError, match=r"crowd\.json: cannot read the manifest: JSON "
+                                         r"nested too deeply"):
         load_config(saved)
 
 

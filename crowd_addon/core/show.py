@@ -1,0 +1,622 @@
+"""The show: cues on the timeline, animated parameters and reactions to events.
+
+A :class:`Show` is data (it is saved with the configuration and authored in the
+.blend); the crowd runs it itself, before each step, through a :class:`ShowRunner`
+(``Crowd.show``), so the viewport preview, a recording and every export see the same
+requests in the same order, in any process.
+
+- A :class:`Cue` applies an :class:`Action` to its agents at a frame. The agents may
+  start together, be spread at random over ``spread`` frames, or be reached one after
+  the other by a :class:`Sweep` (a front turning around a centre, or moving away from
+  it, at a given speed: the Mexican wave). Actions: a transition to a stream (blend
+  length, target offset keep / random / given, queue or cut), a unique animation, a
+  trigger, a parameter. With ``hold`` the agents go back after that many frames to
+  the animation they were on before the cue (their *home*: their configured stream,
+  or the last stream a cue without ``hold`` sent them to). A cue leaves agents held
+  by another cue alone unless it ``interrupt``\\ s them.
+- A :class:`Reaction` runs a cue's action when event tag ``event`` fires for agents
+  playing ``source``, on those agents or on every agent within ``radius`` metres of
+  them, at the next frame.
+- A :class:`Track` is an animated parameter (the value per frame) or trigger (fires
+  on each frame its value rises above 0.5), sampled from the .blend's F-curves and
+  drivers.
+
+Nothing runs per agent per frame: a frame with no cue, return or reaction due costs a
+dictionary lookup and one comparison per track.
+"""
+
+from __future__ import annotations
+
+import zlib
+from collections import defaultdict
+from dataclasses import dataclass
+
+import numpy as np
+
+from .agents import STREAM, UNIQUE
+from .errors import CrowdError
+
+__all__ = ["Action", "Sweep", "Cue", "Reaction", "Track", "Show", "ShowRunner",
+           "ACTION_KINDS", "select_inside", "select_value", "select_fraction", "neighbours"]
+
+ACTION_KINDS = ("stream", "unique", "trigger", "parameter")
+_OPS = {"==": np.equal, "!=": np.not_equal, "<": np.less, "<=": np.less_equal,
+        ">": np.greater, ">=": np.greater_equal}
+_NEVER = np.iinfo(np.int64).min // 4
+
+
+def _finite(value, what) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise CrowdError(f"{what} must be a number, got {value!r}") from None
+    if not np.isfinite(v):
+        raise CrowdError(f"{what} must be finite, got {value!r}")
+    return v
+
+
+def _whole(value, what, low=None) -> int:
+    v = _finite(value, what)
+    if v != int(v) or abs(v) > 2**31 - 1:
+        raise CrowdError(f"{what} must be a whole number of frames, got {value!r}")
+    if low is not None and v < low:
+        raise CrowdError(f"{what} must be >= {low}, got {value!r}")
+    return int(v)
+
+
+# ---------------------------------------------------------------------------- data
+@dataclass(frozen=True)
+class Action:
+    """What a cue does.
+
+    kind : ``"stream"`` (blend to stream ``target``), ``"unique"`` (blend to unique
+        ``target``, restarted), ``"trigger"`` (set trigger ``name`` on stream or unique
+        ``target``) or ``"parameter"`` (set parameter ``name`` of ``target`` to ``value``).
+    duration : blend length in frames (0 cuts).
+    offset : stream actions: ``"keep"`` (each agent's own offset), ``"random"`` (a
+        random offset per agent, seeded) or an offset ``0 .. M-1``.
+    when_full : ``None`` (the crowd's setting), ``"queue"`` or ``"cut"``.
+    hold : stream and unique actions: frames after which the agents go back home
+        (0: they stay, and the target becomes their home).
+    """
+
+    kind: str
+    target: str
+    duration: float = 8.0
+    offset: object = "keep"
+    when_full: str | None = None
+    hold: int = 0
+    name: str = ""
+    value: float = 0.0
+
+    def __post_init__(self):
+        if self.kind not in ACTION_KINDS:
+            raise CrowdError(f"action: kind must be one of {ACTION_KINDS}, got {self.kind!r}")
+        if not str(self.target).strip():
+            raise CrowdError(f"{self.kind} action: no target animation named")
+        duration = _finite(self.duration, f"{self.kind} action: duration")
+        if duration < 0:
+            raise CrowdError(f"{self.kind} action: duration must be >= 0, got {duration:g}")
+        object.__setattr__(self, "duration", duration)
+        object.__setattr__(self, "hold", _whole(self.hold, f"{self.kind} action: hold", 0))
+        if self.when_full not in (None, "queue", "cut"):
+            raise CrowdError(f"{self.kind} action: when_full must be 'queue', 'cut' or None, "
+                             f"got {self.when_full!r}")
+        if self.offset not in ("keep", "random"):
+            object.__setattr__(self, "offset", _whole(self.offset, "stream action: offset", 0))
+        if self.kind in ("trigger", "parameter") and not str(self.name).strip():
+            raise CrowdError(f"{self.kind} action: no {self.kind} name")
+        object.__setattr__(self, "value", _finite(self.value, f"{self.kind} action: value"))
+
+    @property
+    def moves_agents(self) -> bool:
+        return self.kind in ("stream", "unique")
+
+
+@dataclass(frozen=True)
+class Sweep:
+    """A front that reaches agents in order.
+
+    mode ``"angle"``: the front turns about +Z around ``centre`` from ``start_angle``
+    (radians from +X, counter-clockwise) at ``speed`` radians per second (negative:
+    clockwise), ``laps`` times. ``"distance"``: it moves away from ``centre`` at
+    ``speed`` metres per second.
+    """
+
+    centre: tuple = (0.0, 0.0, 0.0)
+    mode: str = "angle"
+    speed: float = 1.0
+    start_angle: float = 0.0
+    laps: int = 1
+
+    def __post_init__(self):
+        c = tuple(_finite(v, "sweep: centre") for v in np.asarray(self.centre).reshape(-1))
+        if len(c) != 3:
+            raise CrowdError(f"sweep: centre must be 3 numbers, got {self.centre!r}")
+        object.__setattr__(self, "centre", c)
+        if self.mode not in ("angle", "distance"):
+            raise CrowdError(f"sweep: mode must be 'angle' or 'distance', got {self.mode!r}")
+        speed = _finite(self.speed, "sweep: speed")
+        if speed == 0 or (self.mode == "distance" and speed < 0):
+            raise CrowdError(f"sweep: speed must be {'> 0' if self.mode == 'distance' else '!= 0'}"
+                             f", got {speed:g} (a front that does not move reaches nobody)")
+        object.__setattr__(self, "speed", speed)
+        object.__setattr__(self, "start_angle", _finite(self.start_angle, "sweep: start_angle"))
+        object.__setattr__(self, "laps", _whole(self.laps, "sweep: laps", 1))
+
+    def delays(self, positions: np.ndarray, fps: float) -> np.ndarray:
+        """(n, laps) frames after the cue at which the front reaches each position."""
+        d = np.asarray(positions, np.float64) - np.asarray(self.centre)
+        if self.mode == "distance":
+            return (np.hypot(np.hypot(d[:, 0], d[:, 1]), d[:, 2]) / self.speed * fps)[:, None]
+        angle = np.arctan2(d[:, 1], d[:, 0]) - self.start_angle
+        turn = np.mod(angle if self.speed > 0 else -angle, 2 * np.pi)
+        lap = 2 * np.pi / abs(self.speed) * fps
+        return turn[:, None] / abs(self.speed) * fps + lap * np.arange(self.laps)
+
+
+@dataclass(frozen=True, eq=False)
+class Cue:
+    """An action applied to agents from a frame.
+
+    agents : (n,) agent ids, or None for every agent (agents of another skeleton than
+        the target's are left out). Not used by trigger and parameter actions.
+    spread : the agents start at random frames in ``frame .. frame + spread``.
+    sweep : a :class:`Sweep` that orders them instead (not with ``spread``).
+    interrupt : also move agents another cue holds (their pending return is dropped).
+    timeline : False for a cue that only runs through reactions.
+    """
+
+    name: str
+    frame: int
+    action: Action
+    agents: np.ndarray | None = None
+    spread: int = 0
+    sweep: Sweep | None = None
+    seed: int = 0
+    interrupt: bool = False
+    muted: bool = False
+    timeline: bool = True
+
+    def __post_init__(self):
+        if not str(self.name).strip():
+            raise CrowdError("cue: the name must not be empty")
+        what = f"cue {self.name!r}"
+        if not isinstance(self.action, Action):
+            raise CrowdError(f"{what}: action must be an Action, got {type(self.action).__name__}")
+        object.__setattr__(self, "frame", _whole(self.frame, f"{what}: frame"))
+        object.__setattr__(self, "spread", _whole(self.spread, f"{what}: spread", 0))
+        object.__setattr__(self, "seed", _whole(self.seed, f"{what}: seed"))
+        if self.sweep is not None and not isinstance(self.sweep, Sweep):
+            raise CrowdError(f"{what}: sweep must be a Sweep")
+        if self.sweep is not None and self.spread:
+            raise CrowdError(f"{what}: choose a spread or a sweep, not both")
+        if self.agents is not None:
+            ids = np.asarray(self.agents)
+            if ids.ndim != 1 or (ids.size and ids.dtype.kind not in "iu"):
+                raise CrowdError(f"{what}: agents must be a 1-D array of agent ids")
+            if ids.size == 0 and self.action.moves_agents:
+                raise CrowdError(f"{what}: the selection is empty (no agent to move)")
+            ids = np.unique(ids.astype(np.int64))
+            ids.flags.writeable = False
+            object.__setattr__(self, "agents", ids)
+
+
+@dataclass(frozen=True)
+class Reaction:
+    """When event ``event`` fires for agents playing ``source`` (a stream or unique
+    name; "" any), run cue ``cue``'s action on them (``radius`` 0) or on every agent
+    within ``radius`` metres of them, at the next frame. A cue with a selection only
+    reacts with its selected agents."""
+
+    name: str
+    event: str
+    cue: str
+    source: str = ""
+    radius: float = 0.0
+    muted: bool = False
+
+    def __post_init__(self):
+        if not str(self.name).strip():
+            raise CrowdError("reaction: the name must not be empty")
+        what = f"reaction {self.name!r}"
+        if not str(self.event).strip():
+            raise CrowdError(f"{what}: no event named")
+        if not str(self.cue).strip():
+            raise CrowdError(f"{what}: no cue named")
+        r = _finite(self.radius, f"{what}: radius")
+        if r < 0:
+            raise CrowdError(f"{what}: radius must be >= 0, got {r:g}")
+        object.__setattr__(self, "radius", r)
+
+
+@dataclass(frozen=True, eq=False)
+class Track:
+    """Values of a parameter (``kind="parameter"``) or trigger (``"trigger"``) of stream
+    or unique ``target`` at frames ``first, first + 1, ...`` (held beyond both ends)."""
+
+    target: str
+    name: str
+    first: int
+    values: np.ndarray
+    kind: str = "parameter"
+
+    def __post_init__(self):
+        what = f"{self.kind} track {self.target!r}/{self.name!r}"
+        if self.kind not in ("parameter", "trigger"):
+            raise CrowdError(f"track: kind must be 'parameter' or 'trigger', got {self.kind!r}")
+        if not str(self.target).strip() or not str(self.name).strip():
+            raise CrowdError(f"{what}: needs a target animation and a name")
+        object.__setattr__(self, "first", _whole(self.first, f"{what}: first"))
+        v = np.asarray(self.values, np.float64)
+        if v.ndim != 1 or v.size == 0:
+            raise CrowdError(f"{what}: values must be a non-empty 1-D array, got {v.shape}")
+        if not np.isfinite(v).all():
+            bad = int(np.argmax(~np.isfinite(v)))
+            raise CrowdError(f"{what}: value at frame {self.first + bad} is not finite")
+        v = v.copy()
+        v.flags.writeable = False
+        object.__setattr__(self, "values", v)
+
+    def at(self, frame: int) -> float:
+        return float(self.values[min(max(frame - self.first, 0), self.values.size - 1)])
+
+
+@dataclass(frozen=True, eq=False)
+class Show:
+    """Cues, reactions and tracks; names of cues and reactions are unique."""
+
+    cues: tuple = ()
+    reactions: tuple = ()
+    tracks: tuple = ()
+
+    def __post_init__(self):
+        for attr, kind in (("cues", Cue), ("reactions", Reaction), ("tracks", Track)):
+            items = tuple(getattr(self, attr))
+            for item in items:
+                if not isinstance(item, kind):
+                    raise CrowdError(f"show: {attr} must hold {kind.__name__} values, got "
+                                     f"{type(item).__name__}")
+            object.__setattr__(self, attr, items)
+        for attr in ("cues", "reactions"):
+            seen = set()
+            for item in getattr(self, attr):
+                if item.name in seen:
+                    raise CrowdError(f"show: two {attr} are named {item.name!r}")
+                seen.add(item.name)
+        cues = {c.name for c in self.cues}
+        for r in self.reactions:
+            if r.cue not in cues:
+                raise CrowdError(f"reaction {r.name!r}: unknown cue {r.cue!r} "
+                                 f"(known: {sorted(cues)})")
+
+    def cue(self, name) -> Cue:
+        for c in self.cues:
+            if c.name == name:
+                return c
+        raise CrowdError(f"unknown cue {name!r}")
+
+    def outside(self, first: int, last: int) -> list:
+        """Names of timeline cues (not muted) that start outside frames
+        ``first .. last``."""
+        return [c.name for c in self.cues if c.timeline and not c.muted
+                and not first <= c.frame <= last]
+
+    def __bool__(self):
+        return bool(self.cues or self.reactions or self.tracks)
+
+
+# ---------------------------------------------------------------------- selections
+def select_value(values: np.ndarray, op: str, value: float) -> np.ndarray:
+    """Indices where ``values op value`` (op one of ``== != < <= > >=``)."""
+    if op not in _OPS:
+        raise CrowdError(f"selection: op must be one of {sorted(_OPS)}, got {op!r}")
+    return np.flatnonzero(_OPS[op](np.asarray(values), value))
+
+
+def select_inside(positions: np.ndarray, world_to_local: np.ndarray, low, high) -> np.ndarray:
+    """Indices of ``positions`` (n, 3) inside the box ``low .. high`` of the space that
+    the 4x4 ``world_to_local`` maps to (an object's bounds)."""
+    p = np.asarray(positions, np.float64)
+    m = np.asarray(world_to_local, np.float64)
+    local = p @ m[:3, :3].T + m[:3, 3]
+    return np.flatnonzero(((local >= np.asarray(low)) & (local <= np.asarray(high))).all(1))
+
+
+def select_fraction(ids: np.ndarray, fraction: float, seed: int) -> np.ndarray:
+    """A random ``fraction`` (0..1) of ``ids``, sorted, the same for equal inputs."""
+    f = _finite(fraction, "selection: fraction")
+    if not 0 <= f <= 1:
+        raise CrowdError(f"selection: fraction must be in 0..1, got {f:g}")
+    ids = np.asarray(ids, np.int64)
+    keep = int(round(f * ids.size))
+    order = np.random.default_rng([int(seed) & 0xFFFFFFFF, 0x5E1EC7]).permutation(ids.size)
+    return np.sort(ids[order[:keep]])
+
+
+def neighbours(positions: np.ndarray, ids: np.ndarray, radius: float, grid=None):
+    """Agents within ``radius`` of any of ``ids`` (themselves included), sorted; ``grid``
+    from :func:`_grid` to reuse. Cost grows with the agents near ``ids``, not with N."""
+    ids = np.asarray(ids, np.int64)
+    if ids.size == 0 or radius <= 0:
+        return np.unique(ids)
+    order, keys, cells = grid if grid is not None else _grid(positions, radius)
+    pos = np.asarray(positions, np.float64)
+    near = []
+    offsets = np.stack(np.meshgrid(*[np.arange(-1, 2)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    for d in offsets:            # 27 neighbouring cells, each a vectorised range lookup
+        want = _cell_key(cells[ids] + d)
+        lo = np.searchsorted(keys, want, "left")
+        hi = np.searchsorted(keys, want, "right")
+        counts = hi - lo
+        if counts.sum() == 0:
+            continue
+        src = np.repeat(ids, counts)
+        cand = order[np.repeat(lo - np.cumsum(counts) + counts, counts)
+                     + np.arange(counts.sum())]
+        close = np.einsum("ij,ij->i", pos[cand] - pos[src], pos[cand] - pos[src]) \
+            <= radius * radius
+        near.append(cand[close])
+    return np.unique(np.concatenate(near + [ids]))
+
+
+def _cell_key(cells: np.ndarray) -> np.ndarray:
+    c = cells.astype(np.int64) + (1 << 20)
+    return (c[:, 0] << 42) | (c[:, 1] << 21) | c[:, 2]
+
+
+def _grid(positions, radius):
+    cells = np.floor(np.asarray(positions, np.float64) / radius).astype(np.int64)
+    keys = _cell_key(cells)
+    order = np.argsort(keys, kind="stable")
+    return order, keys[order], cells
+
+
+def _mix(seed: int, salt: str, ids: np.ndarray) -> np.ndarray:
+    """A well-mixed uint64 per id (splitmix64), the same in every process."""
+    x = (np.asarray(ids, np.uint64) + np.uint64((int(seed) & 0xFFFFFFFF) << 32)
+         + np.uint64(zlib.crc32(salt.encode())))
+    with np.errstate(over="ignore"):
+        x = x + np.uint64(0x9E3779B97F4A7C15)
+        x = (x ^ (x >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+        x = (x ^ (x >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return x ^ (x >> np.uint64(31))
+
+
+# -------------------------------------------------------------------------- runner
+class ShowRunner:
+    """Runs a :class:`Show` on a crowd: ``before_step(frame)`` issues the requests due
+    at ``frame`` (called by ``Crowd.step``); ``reset()`` rewinds it with the crowd.
+
+    ``stats`` counts per cue: ``agents`` requested, ``skipped`` (held by another cue),
+    ``queued`` and ``cut``; ``reactions`` counts the agents each reaction reached.
+    """
+
+    def __init__(self, show: Show, crowd):
+        self.show, self.crowd = show, crowd
+        n = crowd.agents.count
+        self._n = n
+        self._cue_index = {c.name: i for i, c in enumerate(show.cues)}
+        self._targets = [self._check(c) for c in show.cues]
+        for t in show.tracks:
+            self._root(t.target, f"{t.kind} track {t.name!r}")
+        for r in show.reactions:
+            if r.source:
+                self._root(r.source, f"reaction {r.name!r}: source")
+            if r.event not in crowd.bank.tag_names:
+                raise CrowdError(f"reaction {r.name!r}: no clip has event {r.event!r} "
+                                 f"(events: {sorted(crowd.bank.tag_names)})")
+            if not show.cue(r.cue).action.moves_agents and r.radius:
+                raise CrowdError(f"reaction {r.name!r}: cue {r.cue!r} sets a "
+                                 f"{show.cue(r.cue).action.kind}, which has no agents to reach")
+        self._schedule = self._compile()
+        self._grid, self._grid_cursor = {}, 0
+        self._handles = [crowd.on_event(r.event, self._reacting(i))
+                         for i, r in enumerate(show.reactions) if not r.muted]
+        self.reset()
+
+    # ------------------------------------------------------------ validation
+    def _root(self, name, what):
+        c = self.crowd
+        if name in c.streams.names:
+            return STREAM, c.streams.index(name)
+        if name in c.uniques.names:
+            return UNIQUE, c.uniques.index(name)
+        raise CrowdError(f"{what}: unknown stream or unique {name!r} (streams: "
+                         f"{list(c.streams.names)}, uniques: {list(c.uniques.names)})")
+
+    def _check(self, cue):
+        """(kind, ref, skeleton) of the cue's target, after checking it and its agents."""
+        a, what = cue.action, f"cue {cue.name!r}"
+        c = self.crowd
+        kind, ref = self._root(a.target, what)
+        if a.kind == "stream" and kind != STREAM:
+            raise CrowdError(f"{what}: {a.target!r} is a unique, not a stream")
+        if a.kind == "unique" and kind != UNIQUE:
+            raise CrowdError(f"{what}: {a.target!r} is a stream, not a unique")
+        skeleton = (c.streams.skeleton if kind == STREAM else c.uniques.skeleton)[ref]
+        if isinstance(a.offset, int) and a.offset >= c.streams.max_offset:
+            raise CrowdError(f"{what}: offset {a.offset} is outside 0..{c.streams.max_offset - 1}")
+        if cue.agents is not None and cue.agents.size and \
+                (cue.agents[0] < 0 or cue.agents[-1] >= self._n):
+            bad = cue.agents[(cue.agents < 0) | (cue.agents >= self._n)][0]
+            raise CrowdError(f"{what}: agent {int(bad)} does not exist (the crowd has "
+                             f"{self._n} agents)")
+        if a.moves_agents and not self._agents(cue, (kind, ref, skeleton)).size:
+            raise CrowdError(f"{what}: none of its agents can play {a.target!r} (they use "
+                             "another skeleton)")
+        return kind, ref, skeleton
+
+    def _agents(self, cue, target):
+        """The cue's agents that can play its target."""
+        ids = np.arange(self._n) if cue.agents is None else cue.agents
+        return ids[self.crowd.agent_skeleton[ids] == target[2]]
+
+    # ------------------------------------------------------------ schedule
+    def _compile(self) -> dict:
+        """frame -> [(cue index, agent ids or None)] for the timeline cues."""
+        due = defaultdict(list)
+        pos = self.crowd.agents.position
+        for i, cue in enumerate(self.show.cues):
+            if cue.muted or not cue.timeline:
+                continue
+            if not cue.action.moves_agents:
+                due[cue.frame].append((i, None))
+                continue
+            ids = self._agents(cue, self._targets[i])
+            if cue.sweep is not None:
+                late = np.floor(cue.sweep.delays(pos[ids], self.crowd.fps)).astype(np.int64)
+                ids = np.repeat(ids[:, None], late.shape[1], 1).reshape(-1)
+                late = late.reshape(-1)
+            elif cue.spread:
+                late = (_mix(cue.seed, cue.name, ids) % np.uint64(cue.spread + 1)).astype(
+                    np.int64)
+            else:
+                due[cue.frame].append((i, ids))
+                continue
+            order = np.argsort(late, kind="stable")
+            late, ids = late[order], ids[order]
+            starts = np.flatnonzero(np.r_[True, late[1:] != late[:-1]])
+            for s, e in zip(starts, np.r_[starts[1:], late.size]):
+                due[cue.frame + int(late[s])].append((i, np.sort(ids[s:e])))
+        return dict(due)
+
+    def reset(self):
+        """Back to the start: homes from the configuration, nobody held."""
+        cfg = self.crowd.config
+        st = np.asarray(cfg.agent_stream, np.int64)
+        self.home_kind = np.where(st >= 0, STREAM, UNIQUE).astype(np.int8)
+        self.home_ref = np.where(st >= 0, st, np.asarray(cfg.agent_unique, np.int64))
+        self.home_offset = np.asarray(cfg.agent_offset, np.int64).copy()
+        self.held_until = np.full(self._n, _NEVER, np.int64)
+        self._returns = defaultdict(list)        # frame -> [(ids, duration)]
+        self._reacted = defaultdict(list)        # reaction index -> [ids] for next frame
+        self._track_last = [None] * len(self.show.tracks)
+        self.stats = {c.name: dict.fromkeys(("agents", "skipped", "queued", "cut"), 0)
+                      for c in self.show.cues}
+        self.reactions = {r.name: 0 for r in self.show.reactions}
+
+    # ------------------------------------------------------------------ step
+    def before_step(self, frame: int):
+        """Issue what is due at ``frame`` (the frame about to be stepped): tracks,
+        returns home, reactions to the last frame's events, then cues."""
+        for k, t in enumerate(self.show.tracks):
+            v = t.at(frame)
+            last = self._track_last[k]
+            if t.kind == "parameter":
+                if v != last:
+                    self.crowd.set_parameter(t.target, t.name, v)
+            elif v > 0.5 and (last is None or last <= 0.5):
+                self.crowd.set_trigger(t.target, t.name)
+            self._track_last[k] = v
+        for ids, duration in self._returns.pop(frame, ()):
+            self._send_home(ids[self.held_until[ids] == frame], duration)
+        if self._reacted:
+            reacted, self._reacted = self._reacted, defaultdict(list)
+            for r, groups in reacted.items():
+                reaction = self.show.reactions[r]
+                ids = np.unique(np.concatenate(groups))
+                if reaction.radius > 0:
+                    ids = neighbours(self.crowd.agents.position, ids, reaction.radius,
+                                     self._neighbour_grid(reaction.radius))
+                cue_i = self._cue_index[reaction.cue]
+                self.reactions[reaction.name] += ids.size
+                self._apply(cue_i, ids, frame, selected=False)
+        for cue_i, ids in self._schedule.get(frame, ()):
+            self._apply(cue_i, ids, frame)
+
+    def _apply(self, i, ids, frame, selected=True):
+        cue, c = self.show.cues[i], self.crowd
+        a = cue.action
+        if a.kind == "trigger":
+            c.set_trigger(a.target, a.name)
+            return
+        if a.kind == "parameter":
+            c.set_parameter(a.target, a.name, a.value)
+            return
+        kind, ref, skeleton = self._targets[i]
+        if not selected:                     # a reaction's agents: keep the cue's own
+            if cue.agents is not None:
+                ids = ids[np.isin(ids, cue.agents, assume_unique=True)]
+            ids = ids[c.agent_skeleton[ids] == skeleton]
+        st = self.stats[cue.name]
+        if not cue.interrupt:
+            free = self.held_until[ids] < frame
+            st["skipped"] += int(ids.size - free.sum())
+            ids = ids[free]
+        if ids.size == 0:
+            return
+        if a.kind == "stream":
+            offset = None if a.offset == "keep" else a.offset if isinstance(a.offset, int) \
+                else (_mix(cue.seed, cue.name, ids) % np.uint64(c.streams.max_offset)).astype(
+                    np.int64)
+            r = c.transition_to_streamed(ids, ref, a.duration, offset=offset,
+                                         when_full=a.when_full)
+        else:
+            r = c.transition_to_unique(ids, a.target, a.duration, when_full=a.when_full)
+        st["agents"] += int(ids.size)
+        st["queued"] += int(r.queued.size)
+        st["cut"] += int(r.cut.size)
+        if a.hold:
+            self.held_until[ids] = frame + a.hold
+            self._returns[frame + a.hold].append((ids, a.duration))
+        else:
+            self.held_until[ids] = _NEVER
+            self.home_kind[ids] = kind
+            self.home_ref[ids] = ref
+            if a.kind == "stream" and offset is not None:
+                self.home_offset[ids] = offset
+
+    def _send_home(self, ids, duration):
+        if ids.size == 0:
+            return
+        self.held_until[ids] = _NEVER
+        c = self.crowd
+        streamed = self.home_kind[ids] == STREAM
+        grp = ids[streamed]                  # one request for every stream
+        if grp.size:
+            c.transition_to_streamed(grp, self.home_ref[grp], duration,
+                                     offset=self.home_offset[grp])
+        for u in np.unique(self.home_ref[ids[~streamed]]):
+            grp = ids[~streamed]
+            c.transition_to_unique(grp[self.home_ref[grp] == u], int(u), duration,
+                                   restart=False)
+
+    # -------------------------------------------------------------- reactions
+    def _reacting(self, r):
+        reaction = self.show.reactions[r]
+        source = self._root(reaction.source, "") if reaction.source else None
+
+        def on_event(_name, _frame, ids):
+            ids = np.asarray(ids, np.int64)
+            if source is not None:
+                kind, ref, _off = self.crowd.playing(ids)
+                ids = ids[(kind == source[0]) & (ref == source[1])]
+            if ids.size:
+                self._reacted[r].append(ids)
+        return on_event
+
+    def _neighbour_grid(self, radius):
+        changes = self.crowd.agents.changes_since(self._grid_cursor)
+        self._grid_cursor = changes.cursor
+        if changes.moved:
+            self._grid.clear()
+        if radius not in self._grid:
+            self._grid[radius] = _grid(self.crowd.agents.position, radius)
+        return self._grid[radius]
+
+    def close(self):
+        """Stop reacting (unregister the event callbacks)."""
+        for h in self._handles:
+            self.crowd.events.off(h)
+        self._handles = []
+
+    def describe(self) -> list:
+        """One dict per cue: ``name``, ``frame``, ``agents`` (how many it selects)."""
+        out = []
+        for i, cue in enumerate(self.show.cues):
+            n = 0 if not cue.action.moves_agents else self._agents(cue, self._targets[i]).size
+            out.append({"name": cue.name, "frame": cue.frame, "agents": int(n),
+                        "action": cue.action.kind, "target": cue.action.target})
+        return out
+
