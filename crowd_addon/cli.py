@@ -26,8 +26,8 @@ import argparse
 import os
 import sys
 
-from .cli_args import (add_shot_arguments, int_at_least, parse_command, positive_float,
-                       progress_printer)
+from .cli_args import (add_shot_arguments, frame_number, int_at_least, parse_command, path_arg,
+                       positive_float, progress_printer)
 from .core.errors import CrowdError
 
 __all__ = ["build_parser", "main"]
@@ -141,9 +141,9 @@ def _add_export(subparsers) -> None:
                     "beside it. Nothing is written unless the whole export succeeds.",
         epilog="example: crowd export --config crowd.json --out shot.usdc --frames 1-300")
     src = p.add_mutually_exclusive_group()
-    src.add_argument("--config", metavar="CROWD_JSON",
+    src.add_argument("--config", type=path_arg, metavar="CROWD_JSON",
                      help="crowd configuration manifest written by config_io.save_config")
-    src.add_argument("--blend", metavar="SCENE_BLEND",
+    src.add_argument("--blend", type=path_arg, metavar="SCENE_BLEND",
                      help="a .blend whose scene has Crowd settings (needs the bpy module; "
                           "inside Blender: blender -b scene.blend -c crowd export ...)")
     add_shot_arguments(p)
@@ -160,9 +160,10 @@ def _run_export(args) -> int:
         from .core.recorder import record
         from .usd import check_export, export_crowd
         config = load_config(args.config)
+        crowd = Crowd(config, skinning="gpu")           # checks the agents' references
         check_export(config, args.out, args.agents)     # before simulating the shot
         progress = progress_printer("crowd export")
-        shot = record(Crowd(config, skinning="gpu"), *args.frames, progress=progress)
+        shot = record(crowd, *args.frames, progress=progress)
         result = export_crowd(shot, args.out, agents=args.agents, progress=progress)
     else:                       # the scene's Crowd settings, baked as the panel does
         from .blender.cli_commands import export_blend
@@ -203,13 +204,13 @@ def _add_preview(subparsers) -> None:
                     "without a GPU (Mesa llvmpipe). See docs/preview.md.",
         epilog="example: crowd preview --config crowd.json --out shots/preview --frames "
                "48 --mp4")
-    p.add_argument("--config", required=True, metavar="CROWD_JSON",
+    p.add_argument("--config", required=True, type=path_arg, metavar="CROWD_JSON",
                    help="crowd configuration manifest written by config_io.save_config")
-    p.add_argument("--out", required=True, metavar="DIR",
+    p.add_argument("--out", required=True, type=path_arg, metavar="DIR",
                    help="folder for the frames (created if missing)")
     p.add_argument("--frames", required=True, type=int_at_least(1), metavar="N",
                    help="number of frames to render")
-    p.add_argument("--start", type=int, default=None, metavar="F",
+    p.add_argument("--start", type=frame_number, default=None, metavar="F",
                    help="first frame (default: the configuration's start frame)")
     p.add_argument("--width", type=int_at_least(1), default=960,
                    help="image width in pixels (default: %(default)s)")
@@ -280,7 +281,8 @@ def _add_demo(subparsers) -> None:
                     "(PNG, and MP4 with imageio-ffmpeg) and export stadium.usdc. Needs the "
                     "bpy module. See docs/pipeline.md.",
         epilog="example: crowd demo --out demo_out --agents 65000")
-    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    p.add_argument("--out", required=True, type=path_arg, metavar="DIR",
+                   help="output folder")
     p.add_argument("--agents", type=int_at_least(10), default=2000, metavar="N",
                    help="seats, one agent each (default: %(default)s; the paper: 65000)")
     p.add_argument("--frames", type=int_at_least(1), default=240, metavar="N",
@@ -328,7 +330,7 @@ def _add_build_extension(subparsers) -> None:
                     "extension zip with Blender's own extension tool (from the bpy "
                     "module). Install it with Blender > Preferences > Get Extensions > "
                     "Install from Disk.")
-    p.add_argument("--out", default="dist", metavar="DIR",
+    p.add_argument("--out", default="dist", type=path_arg, metavar="DIR",
                    help="folder for the zip (default: %(default)s)")
     p.add_argument("--split-platforms", action="store_true",
                    help="one zip per platform instead of one for all")
@@ -372,3 +374,7 @@ def main(argv=None) -> int:
     except CrowdError as exc:
         print(f"{parser.prog} {args.command}: error: {exc}", file=sys.stderr)
         return 2
+
+
+if __name__ == "__main__":          # python -m crowd_addon.cli (as python -m crowd_addon)
+    raise SystemExit(main())

@@ -10,8 +10,11 @@ import math
 import re
 import sys
 
-__all__ = ["int_at_least", "positive_float", "frame_range", "progress_printer",
-           "add_shot_arguments", "parse_command"]
+__all__ = ["int_at_least", "positive_float", "frame_range", "frame_number", "path_arg",
+           "progress_printer", "add_shot_arguments", "parse_command"]
+
+#: The largest frame number in magnitude, as in configuration files (config_io.MAX_INT).
+MAX_FRAME = 2**31 - 1
 
 
 def int_at_least(minimum: int):
@@ -52,8 +55,32 @@ def frame_range(text: str) -> tuple:
     return first, last
 
 
+def frame_number(text: str) -> int:
+    """An argparse type: an integer frame of magnitude at most :data:`MAX_FRAME`."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be an integer, got {text!r}") from None
+    if abs(value) > MAX_FRAME:
+        raise argparse.ArgumentTypeError(f"must be an integer of magnitude at most "
+                                         f"{MAX_FRAME}, got {value}")
+    return value
+
+
+def path_arg(text: str) -> str:
+    """An argparse type: a file or folder path, not empty (which would mean the current
+    folder or nothing) and without a NUL character (which no file system accepts)."""
+    if not text:
+        raise argparse.ArgumentTypeError("must not be empty")
+    if "\x00" in text:
+        raise argparse.ArgumentTypeError(f"must not contain a NUL character, got {text!r}")
+    return text
+
+
 positive_float.__name__ = "number"
 frame_range.__name__ = "frame range"
+frame_number.__name__ = "frame"
+path_arg.__name__ = "path"
 
 
 def progress_printer(prefix: str):
@@ -74,7 +101,7 @@ def add_shot_arguments(parser) -> None:
     ``--agents`` and ``--json``."""
     parser.add_argument("--scene", default=None, metavar="NAME",
                         help="scene of the .blend (default: the active scene)")
-    parser.add_argument("--out", required=True, metavar="SHOT_USD",
+    parser.add_argument("--out", required=True, type=path_arg, metavar="SHOT_USD",
                         help="main layer to write (.usdc, .usd or .usda)")
     parser.add_argument("--frames", required=True, type=frame_range, metavar="FIRST-LAST",
                         help="shot frames, inclusive; FIRST must not be before the "

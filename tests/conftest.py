@@ -1,4 +1,5 @@
-"""Suite-wide pytest hooks: the ``fast`` tier, ``CROWD_REQUIRE_ALL`` and the exit.
+"""Suite-wide pytest hooks: the ``fast`` tier, ``CROWD_REQUIRE_ALL``, summaries and the
+exit.
 
 Tiers (docs/testing.md). ``tests/core/`` and ``tests/test_layering.py`` need numpy
 only; they are marked ``fast`` here by path, so ``pytest -m fast`` runs that tier alone
@@ -10,6 +11,10 @@ EGL (moderngl) or ``pxr``, and skips where one is missing.
 run, not skip a third of it. Under it, every skip becomes a failure (a skipped
 module or directory at collection becomes a collection error, which stops the run
 before any test) except :data:`ALLOWED_SKIPS`, named one by one with their reason.
+
+Summaries. A line a test records as the user property ``("summary", line)`` (the fuzz
+test's counts, tests/test_fuzz.py) is printed under "summaries" at the end of the run,
+whether the test passed or failed, so that it is in the CI log.
 
 The exit. Blender's ``gpu`` module (initialised in-process by the viewport-preview
 tests) and moderngl's standalone EGL contexts (the GPU tests) live in one test
@@ -40,6 +45,8 @@ ALLOWED_SKIPS = {
 }
 
 _status = {}
+#: Lines tests recorded for the terminal summary (pytest_terminal_summary).
+_summaries = []
 
 
 def _require_all() -> bool:
@@ -118,6 +125,21 @@ def pytest_runtest_makereport(item, call):
     if allowed is not None and _skip_reason(rep.longrepr) == allowed:
         return
     _fail_skip(rep, item.nodeid)
+
+
+def pytest_runtest_logreport(report):
+    if report.when == "call":
+        _summaries.extend(value for key, value in report.user_properties if key == "summary")
+
+
+def pytest_terminal_summary(terminalreporter):
+    """Print, in the order the tests ran, the lines they recorded as ``("summary", line)``
+    user properties (the fuzz test's counts, tests/test_fuzz.py), so that they are in
+    the CI log when the tests pass too."""
+    if _summaries:
+        terminalreporter.write_sep("-", "summaries")
+        for line in _summaries:
+            terminalreporter.write_line(line)
 
 
 def pytest_sessionfinish(session, exitstatus):

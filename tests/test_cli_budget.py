@@ -68,6 +68,14 @@ def test_python_m_json_subprocess():
     assert plan["bytes_used"] <= plan["budget_bytes"]
 
 
+def test_python_m_cli_module_runs_the_command():
+    # before: `python -m crowd_addon.cli ...` imported the module and exited 0 silently
+    run = subprocess.run([sys.executable, "-m", "crowd_addon.cli", *EXAMPLE, "--json"],
+                         cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert run.returncode == 0, run.stderr
+    assert json.loads(run.stdout)["plan"]["max_offset"] == 60
+
+
 @pytest.mark.parametrize("args, message", [
     (["--max-offset", "0"], "argument --max-offset: must be >= 1, got 0"),
     (["--budget-mb", "nan"], "argument --budget-mb: must be a finite number > 0, got 'nan'"),

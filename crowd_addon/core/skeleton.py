@@ -83,6 +83,11 @@ class Skeleton:
             if inv.shape != (len(names), 4, 4) or not np.isfinite(inv).all():
                 raise CrowdError(f"skeleton {self.name!r}: inverse_bind must be finite "
                                  f"({len(names)}, 4, 4), got {inv.shape}")
+            flat = np.abs(np.linalg.det(inv[:, :3, :3])) < 1e-12
+            if flat.any():         # nothing could undo it (a USD client inverts it)
+                raise CrowdError(f"skeleton {self.name!r}: inverse_bind of bone "
+                                 f"{names[int(np.argmax(flat))]!r} is singular (it flattens "
+                                 "the bone's space)")
         object.__setattr__(self, "inverse_bind", inv)
 
     @property

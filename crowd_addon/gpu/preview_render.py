@@ -78,8 +78,11 @@ def writable_dir(path) -> Path:
     A CrowdError names the folder otherwise."""
     out = Path(path)
     probe = out
-    while not probe.exists() and probe.parent != probe:
-        probe = probe.parent
+    try:
+        while not probe.exists() and probe.parent != probe:
+            probe = probe.parent
+    except OSError as e:                       # a name too long for the file system
+        raise CrowdError(f"output folder {str(out)[:80]}...: {e.strerror}") from None
     if not probe.is_dir():
         raise CrowdError(f"output folder {out}: cannot create it ({probe} is not a folder)")
     if not os.access(probe, os.W_OK):

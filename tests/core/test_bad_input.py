@@ -264,3 +264,14 @@ def test_a_non_finite_agent_position_names_the_agent():
     cfg.agent_position[7, 1] = np.nan
     with pytest.raises(CrowdError, match=r"agent 7: agent_position is not finite"):
         Crowd(cfg)
+
+
+def test_a_singular_inverse_bind_is_named():
+    # accepted before; a USD export then failed inverting it (fuzz seed 5, export:616)
+    from crowd_addon.core import Skeleton
+    sk = humanoid("fan", bones=24)
+    inv = sk.inverse_bind.copy()
+    inv[3] = 0.0
+    with pytest.raises(CrowdError, match=r"skeleton 'fan': inverse_bind of bone "
+                                         r"'.+' is singular"):
+        Skeleton("fan", sk.bone_names, sk.parents, sk.bind_pose, inv)

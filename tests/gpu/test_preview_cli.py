@@ -89,6 +89,27 @@ def test_bad_input_exits_2_and_writes_nothing(config_path, tmp_path, capsys, arg
     assert not out_dir.exists()
 
 
+@pytest.mark.parametrize("args, message", [
+    # before: --start beyond a C long raised OverflowError, a NUL in --out a bare
+    # ValueError (tracebacks), and --out "" wrote the frames into the current folder
+    # (found by tests/test_fuzz.py)
+    (["--start", "99999999999999999999"], "argument --start: must be an integer of "
+                                          "magnitude at most 2147483647"),
+    (["--out", "a\x00b"], "argument --out: must not contain a NUL character"),
+    (["--out", ""], "argument --out: must not be empty"),
+])
+def test_bad_paths_and_frames_are_named(config_path, tmp_path, capsys, monkeypatch, args,
+                                        message):
+    work = tmp_path / "work"
+    work.mkdir()
+    monkeypatch.chdir(work)
+    code, _, err = run(capsys, "--config", config_path, "--out", work / "shot", "--frames",
+                       1, "--width", 16, "--height", 16, *args)
+    assert code == 2
+    assert err.splitlines()[-1].startswith("crowd preview: error: ") and message in err
+    assert os.listdir(work) == []
+
+
 def test_a_crowd_refused_after_the_arguments_creates_no_folder(h, tmp_path, capsys):
     # created before: the folder was made before the crowd was built (and refused)
     path = tmp_path / "narrow.json"
@@ -117,6 +138,14 @@ def test_a_failed_render_removes_its_frames(config_path, tmp_path, capsys, monke
                        "--width", 32, "--height", 32)
     assert code == 2 and "No space left on device" in err
     assert sorted(os.listdir(out_dir)) == ["notes.txt"]
+
+
+def test_an_output_name_too_long_is_named(config_path, tmp_path, capsys):
+    # before: OSError (File name too long) from the folder check (fuzz seed 1711)
+    code, _, err = run(capsys, "--config", config_path, "--out", tmp_path / ("x" * 300),
+                       "--frames", 1)
+    assert code == 2 and "crowd preview: error: output folder" in err
+    assert "File name too long" in err and "Traceback" not in err
 
 
 def test_missing_config_and_unwritable_output(config_path, tmp_path, capsys):

@@ -71,6 +71,43 @@ def test_bad_input_exits_2_and_writes_nothing(config_path, tmp_path, capsys, ext
     assert os.listdir(tmp_path) == []
 
 
+@pytest.mark.parametrize("option, value, message", [
+    # before: a NUL raised a bare ValueError (traceback), an empty --config fell back to
+    # the .blend path ("no .blend is open") after importing bpy (found by test_fuzz.py)
+    ("--out", "a\x00b.usdc", "argument --out: must not contain a NUL character"),
+    ("--out", "", "argument --out: must not be empty"),
+    ("--config", "", "argument --config: must not be empty"),
+    ("--config", "a\x00b.json", "argument --config: must not contain a NUL character"),
+])
+def test_empty_or_nul_paths_are_named(config_path, tmp_path, capsys, option, value,
+                                      message):
+    args = {"--config": str(config_path), "--out": str(tmp_path / "s.usdc")}
+    args[option] = value if option == "--config" or not value else str(tmp_path / value)
+    assert main(["export", *[x for kv in args.items() for x in kv], "--frames", "0-2"]) == 2
+    err = capsys.readouterr().err
+    assert err.splitlines()[-1].startswith("crowd export: error: ") and message in err
+    assert os.listdir(tmp_path) == []
+
+
+@pytest.mark.parametrize("field", ["stream", "unique"])
+def test_agent_index_out_of_range_is_named(tmp_path, capsys, field):
+    # before: check_export indexed with the unchecked agent arrays (IndexError traceback);
+    # the crowd is built, and checks them, first (found by tests/test_fuzz.py)
+    cfg = make_config()
+    if field == "stream":
+        cfg.agent_stream[3] = 25
+    else:
+        cfg.agent_stream[3], cfg.agent_unique[3] = -1, 7
+    save_config(cfg, tmp_path / "crowd.json")
+    out = tmp_path / "out"
+    out.mkdir()
+    assert main(["export", "--config", str(tmp_path / "crowd.json"), "--out",
+                 str(out / "s.usdc"), "--frames", "0-2"]) == 2
+    err = capsys.readouterr().err
+    assert err.splitlines()[-1].startswith("crowd export: error: ") and "agent 3" in err
+    assert os.listdir(out) == []
+
+
 def test_missing_config_is_named(tmp_path, capsys):
     assert main(["export", "--config", str(tmp_path / "nope.json"), "--out",
                  str(tmp_path / "s.usdc"), "--frames", "0-4"]) == 2
