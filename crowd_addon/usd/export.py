@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 from pxr import Sdf, Vt
 
+from ..core.config import validate_config
 from ..core.errors import CrowdError
 from ..core.recording import Recording
 from .agents import (ROOT, agent_names, author_agent_animations, author_agents,
@@ -127,6 +128,7 @@ def check_export(config, path, agents=None) -> None:
     """Check, before recording ``config``'s shot, what :func:`export_steps` would
     refuse: the output (extension, folder, writable), the agent count and a proxy mesh
     for every exported agent's skeleton. Raises CrowdError."""
+    validate_config(config)
     with ExportFiles(path):
         pass
     ids = _agent_ids(agents, config.agent_count)

@@ -181,3 +181,13 @@ def test_built_crowd_past_the_shot_is_reset(tmp_path):
     assert crowd.view.frame == FRAMES[1]
     export(tmp_path / "b" / "shot.usda")
     assert snapshot(tmp_path / "a") == snapshot(tmp_path / "b")
+
+
+def test_check_export_names_an_agent_stream_out_of_range(previous):
+    # before: IndexError from check_export on a configuration nobody had validated
+    path, before = previous
+    cfg = make_config()
+    cfg.agent_stream[2] = 99
+    with pytest.raises(CrowdError, match=r"agent 2|stream"):
+        check_export(cfg, path)
+    assert snapshot(path.parent) == before
