@@ -203,11 +203,12 @@ def crowd_scene(blend, action, n):
     from crowd_addon.blender import preview
     scene, rig, body, act = open_stadium(blend, action)
     s = scene.crowd
-    s.armature, s.proxy_mesh, s.max_offset, s.seed = rig, body, M, 1
-    s.streams.clear()
-    s.uniques.clear()
+    s.max_offset, s.seed = M, 1
+    s.characters.clear()
     s.agent_sources.clear()
-    anim = s.streams.add()
+    fan = s.characters.add()
+    fan.name, fan.armature, fan.body = "Fan", rig, body
+    anim = fan.streams.add()
     anim.name = "play"
     node = anim.nodes.add()
     node.name, node.kind, node.action = "clip", "CLIP", act

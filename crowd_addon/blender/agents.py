@@ -5,21 +5,41 @@ gives world positions (metres) and base headings (radians about +Z) of its point
 read from the depsgraph-evaluated object (modifiers and geometry nodes applied) with
 ``foreach_get`` into numpy; only the vertex-group filter walks the vertices, because
 Blender exposes no array access to group weights. The placement policy (headings,
-a stream per agent, an offset in ``0 .. M-1`` frames, a colour) is
-:func:`crowd_addon.core.placement.place_agents`, with the source's settings as a
-:class:`~crowd_addon.core.placement.PlacementPolicy` and its point attributes read
-here. Random choices are seeded from ``scene.crowd.seed`` and the source's index, so
-the same scene gives the same agents.
+a character and one of its streams per agent, an offset in ``0 .. M-1`` frames, a
+colour) is :func:`crowd_addon.core.placement.place_agents`, with the source's
+settings as a :class:`~crowd_addon.core.placement.PlacementPolicy`, the scene's
+characters as :class:`~crowd_addon.core.placement.CharacterStreams` and its point
+attributes read here. Random choices are seeded from ``scene.crowd.seed`` and the
+source's index, so the same scene gives the same agents.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from ..core.errors import CrowdError
-from ..core.placement import SOURCE_SEED, AgentSet, PlacementPolicy, place_agents, z_angle
+from ..core.placement import (SOURCE_SEED, AgentSet, CharacterStreams, PlacementPolicy,
+                              place_agents, z_angle)
 
-__all__ = ["agents_from_source", "agents_from_scene", "describe_source", "placement_policy"]
+__all__ = ["agents_from_source", "agents_from_scene", "describe_source", "placement_policy",
+           "character_streams", "PlacedSource"]
+
+
+@dataclass(frozen=True)
+class PlacedSource:
+    """Which agents an enabled agent source made: ``index`` (its place in
+    ``scene.crowd.agent_sources``), ``name``, ``object_name``, agent ids ``first ..
+    first + count - 1`` and ``rows``: ``(count,)`` int64 vertex index of the source
+    mesh each agent stands on (None for an 'Instances' source)."""
+
+    index: int
+    name: str
+    object_name: str
+    first: int
+    count: int
+    rows: np.ndarray | None
 
 
 # ----------------------------------------------------------------------- geometry
@@ -90,12 +110,23 @@ def placement_policy(source) -> PlacementPolicy:
         heading_mode=source.heading_mode, heading=source.heading,
         heading_attribute=source.heading_attribute,
         target=None if target is None else tuple(target.matrix_world.translation),
+        character_mode=source.character_mode,
+        character_attribute=source.character_attribute,
+        character_name=source.character_name,
         stream_mode=source.stream_mode, stream_attribute=source.stream_attribute,
         stream_name=source.stream_name, offset_mode=source.offset_mode,
         offset_mean=source.offset_mean, offset_std=source.offset_std,
         offset_attribute=source.offset_attribute, color_mode=source.color_mode,
         color=tuple(source.color), color_variation=source.color_variation,
         color_attribute=source.color_attribute)
+
+
+def character_streams(settings) -> tuple:
+    """The scene's characters (``scene.crowd.characters``) as plain
+    :class:`~crowd_addon.core.placement.CharacterStreams`, in list order."""
+    return tuple(CharacterStreams(c.name, tuple(a.name for a in c.streams),
+                                  tuple(a.weight for a in c.streams), c.weight)
+                 for c in settings.characters)
 
 
 def describe_source(source, index: int | None = None) -> str:
@@ -107,7 +138,44 @@ def describe_source(source, index: int | None = None) -> str:
     return f"agent source {label}" + (f" (object {obj.name!r})" if obj is not None else "")
 
 
-def agents_from_source(source, depsgraph, *, streams, stream_weights, max_offset, seed,
+def _points(source, depsgraph, what):
+    """``(positions (n, 3), base headings (n,), rows, attribute)`` of a source:
+    ``rows`` the vertex indices (None for instances), ``attribute(name, kind)`` the
+    per-point values of a point attribute."""
+    obj = source.object
+    if obj is None:
+        raise CrowdError(f"{what}: no object chosen")
+    if source.mode == "INSTANCES":
+        mats = _instances(obj, depsgraph)
+        if mats.shape[0] == 0:
+            raise CrowdError(f"{what}: object {obj.name!r} generates no instances")
+
+        def no_attribute(_name, _kind):
+            raise CrowdError(f"{what}: attributes are read from mesh vertices; with "
+                             "'Instances' use fixed, random or target settings")
+        return mats[:, :3, 3], z_angle(mats), None, no_attribute
+    mesh, local, world = _mesh_points(obj, depsgraph, what)
+    rows = _group_members(obj, mesh, source.vertex_group, what) \
+        if source.mode == "VERTEX_GROUP" else np.arange(local.shape[0], dtype=np.int64)
+    if rows.size == 0:
+        raise CrowdError(f"{what}: mesh {obj.name!r} has no vertices")
+    pos = local[rows] @ world[:3, :3].T + world[:3, 3]
+
+    def attribute(name, kind):
+        return _attribute(mesh, name, _ATTR_KINDS[kind], what, obj)[rows]
+    return pos, np.full(rows.size, z_angle(world)), rows, attribute
+
+
+def _place(source, depsgraph, characters, max_offset, seed, forward_axis, index):
+    what = describe_source(source, index)
+    pos, base_heading, rows, attribute = _points(source, depsgraph, what)
+    agents = place_agents(what, pos, base_heading, placement_policy(source),
+                          characters=characters, max_offset=max_offset, seed=seed,
+                          forward_axis=forward_axis, attribute=attribute)
+    return agents, rows
+
+
+def agents_from_source(source, depsgraph, *, characters, max_offset, seed,
                        forward_axis="NEG_Y", index: int | None = None) -> AgentSet:
     """The agents of one source.
 
@@ -115,49 +183,30 @@ def agents_from_source(source, depsgraph, *, streams, stream_weights, max_offset
     ----------
     source : a ``CROWD_PG_agent_source``.
     depsgraph : the evaluated depsgraph to read geometry from.
-    streams : stream names (index = stream id); stream_weights : (S,) weights.
+    characters : the scene's characters as
+        :class:`~crowd_addon.core.placement.CharacterStreams` (:func:`character_streams`).
     max_offset : M. seed : int. forward_axis : key of
         :data:`crowd_addon.core.placement.FORWARD`.
     index : the source's place in the scene's list, named in errors when it has no name.
     """
-    what = describe_source(source, index)
-    obj = source.object
-    if obj is None:
-        raise CrowdError(f"{what}: no object chosen")
-    mesh = None
-    if source.mode == "INSTANCES":
-        mats = _instances(obj, depsgraph)
-        if mats.shape[0] == 0:
-            raise CrowdError(f"{what}: object {obj.name!r} generates no instances")
-        pos = mats[:, :3, 3]
-        base_heading = z_angle(mats)
-        rows = None
-    else:
-        mesh, local, world = _mesh_points(obj, depsgraph, what)
-        rows = _group_members(obj, mesh, source.vertex_group, what) \
-            if source.mode == "VERTEX_GROUP" else np.arange(local.shape[0])
-        if rows.size == 0:
-            raise CrowdError(f"{what}: mesh {obj.name!r} has no vertices")
-        pos = local[rows] @ world[:3, :3].T + world[:3, 3]
-        base_heading = np.full(rows.size, z_angle(world))
-
-    def attribute(name, kind):
-        if mesh is None:
-            raise CrowdError(f"{what}: attributes are read from mesh vertices; with "
-                             "'Instances' use fixed, random or target settings")
-        return _attribute(mesh, name, _ATTR_KINDS[kind], what, obj)[rows]
-
-    return place_agents(what, pos, base_heading, placement_policy(source), streams=streams,
-                        stream_weights=stream_weights, max_offset=max_offset, seed=seed,
-                        forward_axis=forward_axis, attribute=attribute)
+    return _place(source, depsgraph, characters, max_offset, seed, forward_axis, index)[0]
 
 
-def agents_from_scene(scene, depsgraph, streams, stream_weights) -> AgentSet:
-    """All enabled sources of ``scene.crowd`` concatenated in list order; source ``i``
-    draws its random numbers from seed ``scene.crowd.seed + i * SOURCE_SEED``."""
+def agents_from_scene(scene, depsgraph) -> tuple:
+    """All enabled sources of ``scene.crowd`` concatenated in list order: ``(AgentSet,
+    placed)``, ``placed`` a tuple of :class:`PlacedSource`, one per enabled source.
+    Source ``i`` draws its random numbers from seed ``scene.crowd.seed + i *
+    SOURCE_SEED``; agents' streams index the scene's streams, character after
+    character (the crowd's stream list)."""
     s = scene.crowd
-    sets = [agents_from_source(src, depsgraph, streams=streams, stream_weights=stream_weights,
-                               max_offset=s.max_offset, seed=s.seed + i * SOURCE_SEED,
-                               forward_axis=s.forward_axis, index=i)
-            for i, src in enumerate(s.agent_sources) if src.enabled]
-    return AgentSet.concatenate(sets)
+    characters = character_streams(s)
+    sets, placed, first = [], [], 0
+    for i, src in enumerate(s.agent_sources):
+        if not src.enabled:
+            continue
+        agents, rows = _place(src, depsgraph, characters, s.max_offset,
+                              s.seed + i * SOURCE_SEED, s.forward_axis, i)
+        placed.append(PlacedSource(i, src.name, src.object.name, first, agents.count, rows))
+        sets.append(agents)
+        first += agents.count
+    return AgentSet.concatenate(sets), tuple(placed)

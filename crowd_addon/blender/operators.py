@@ -21,6 +21,11 @@ from .props import NODE_KINDS
 __all__ = ["CLASSES", "BakeJob"]
 
 
+def _all_animations(settings):
+    """Every stream and unique of every character (their names share one space)."""
+    return [a for c in settings.characters for pool in (c.streams, c.uniques) for a in pool]
+
+
 def _unique_name(existing, base):
     names = {item.name for item in existing}
     if base not in names:
@@ -142,12 +147,9 @@ class CROWD_OT_generate_agents(bpy.types.Operator):
 
     def execute(self, context):
         scene = context.scene
-        s = scene.crowd
         t0 = time.perf_counter()
         try:
-            agents = agents_from_scene(scene, context.evaluated_depsgraph_get(),
-                                       [a.name for a in s.streams],
-                                       [a.weight for a in s.streams])
+            agents, _placed = agents_from_scene(scene, context.evaluated_depsgraph_get())
             pv = preview.get(scene)
             if pv is not None:
                 cfg = dataclasses.replace(
@@ -189,29 +191,64 @@ class CROWD_OT_preview_toggle(bpy.types.Operator):
 
 # ---------------------------------------------------------------- list editing
 _COLLECTIONS = (
-    ("streams", "Streams", ""), ("uniques", "Uniques", ""), ("nodes", "Nodes", ""),
-    ("inputs", "Inputs", ""), ("transitions", "Transitions", ""),
-    ("agent_sources", "Agent Sources", ""),
+    ("characters", "Characters", ""), ("lods", "LODs", ""), ("streams", "Streams", ""),
+    ("uniques", "Uniques", ""), ("nodes", "Nodes", ""), ("inputs", "Inputs", ""),
+    ("transitions", "Transitions", ""), ("agent_sources", "Agent Sources", ""),
 )
-_INDEX = {"streams": "active_stream_index", "uniques": "active_unique_index",
+_INDEX = {"characters": "active_character_index", "lods": "active_lod_index",
+          "streams": "active_stream_index", "uniques": "active_unique_index",
           "nodes": "active_node_index", "inputs": "active_input_index",
           "transitions": "active_transition_index", "agent_sources": "active_source_index"}
+#: lists held by ``scene.crowd`` (or a struct of it): collection -> its owner
+_SETTINGS_LISTS = {"characters": lambda s: s, "agent_sources": lambda s: s}
+#: lists held by the active character
+_CHARACTER_LISTS = ("lods", "streams", "uniques")
+
+
+def _active(items, index, what):
+    if not 0 <= index < len(items):
+        raise CrowdError(f"no active {what}")
+    return items[index]
 
 
 def _owner(settings, collection, pool):
-    """The struct holding ``collection`` (the active stream/unique, node...)."""
-    if collection in ("streams", "uniques", "agent_sources"):
-        return settings
-    anims = settings.streams if pool == "STREAMS" else settings.uniques
-    index = settings.active_stream_index if pool == "STREAMS" else settings.active_unique_index
-    if not 0 <= index < len(anims):
-        raise CrowdError(f"no active {pool.lower()[:-1]}")
-    anim = anims[index]
+    """The struct holding ``collection``: the settings, the active character, its
+    active stream/unique (pool ``STREAMS``/``UNIQUES``) or that animation's active
+    node."""
+    if collection in _SETTINGS_LISTS:
+        return _SETTINGS_LISTS[collection](settings)
+    char = _active(settings.characters, settings.active_character_index, "character")
+    if collection in _CHARACTER_LISTS:
+        return char
+    noun = pool.lower()[:-1]
+    anims = char.streams if pool == "STREAMS" else char.uniques
+    index = char.active_stream_index if pool == "STREAMS" else char.active_unique_index
+    anim = _active(anims, index, f"{noun} of character {char.name!r}")
     if collection == "nodes":
         return anim
     if not 0 <= anim.active_node_index < len(anim.nodes):
-        raise CrowdError(f"{pool.lower()[:-1]} {anim.name!r} has no active node")
+        raise CrowdError(f"{noun} {anim.name!r} has no active node")
     return anim.nodes[anim.active_node_index]
+
+
+def _armature_of(obj):
+    """The armature deforming mesh ``obj`` (its first Armature modifier's), or None."""
+    for mod in obj.modifiers:
+        if mod.type == "ARMATURE" and mod.object is not None:
+            return mod.object
+    return None
+
+
+def _new_character(item, obj):
+    """A new character from the active object: an armature, or a mesh skinned to one
+    (then the body)."""
+    if obj is None:
+        return
+    if obj.type == "ARMATURE":
+        item.armature = obj
+    elif obj.type == "MESH":
+        item.body = obj
+        item.armature = _armature_of(obj)
 
 
 class _ListOperator:
@@ -240,12 +277,17 @@ class CROWD_OT_item_add(_ListOperator, bpy.types.Operator):
             return {"CANCELLED"}
         s = context.scene.crowd
         item = items.add()
-        if self.collection in ("streams", "uniques"):
-            item.name = _unique_name(items, "Stream" if self.collection == "streams"
-                                     else "Unique")
+        if self.collection == "characters":
+            item.name = _unique_name(items, "Character")
+            _new_character(item, context.active_object)
+        elif self.collection == "lods":
+            item.name = f"LOD {len(items)}"
+        elif self.collection in ("streams", "uniques"):
+            item.name = _unique_name(_all_animations(s), "Stream"
+                                     if self.collection == "streams" else "Unique")
             node = item.nodes.add()
             node.name = "Action"
-            arm = s.armature
+            arm = owner.armature
             ad = arm.animation_data if arm is not None else None
             node.action = ad.action if ad is not None else None
         elif self.collection == "nodes":
@@ -257,7 +299,8 @@ class CROWD_OT_item_add(_ListOperator, bpy.types.Operator):
         elif self.collection == "agent_sources":
             item.name = _unique_name(items, "Agents")
             obj = context.active_object
-            item.object = obj if obj is not None and obj != s.armature else None
+            rigs = {c.armature for c in s.characters}
+            item.object = obj if obj is not None and obj not in rigs else None
         setattr(owner, index, len(items) - 1)
         return {"FINISHED"}
 

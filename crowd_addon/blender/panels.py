@@ -1,5 +1,6 @@
-"""The "Crowd" tab of the 3D viewport sidebar: lists, settings, bake, preview, USD
-export, stats."""
+"""The "Crowd" tab of the 3D viewport sidebar: characters (each with its armature, body,
+LOD meshes, streams and unique animations), agent sources, settings, bake, preview,
+USD export, stats."""
 
 import bpy
 
@@ -17,6 +18,21 @@ class CROWD_UL_animations(bpy.types.UIList):
         row.prop(item, "name", text="", emboss=False, icon="ARMATURE_DATA")
         row.label(text=f"{len(item.nodes)} nodes")
         row.prop(item, "weight", text="")
+
+
+class CROWD_UL_characters(bpy.types.UIList):
+    def draw_item(self, _context, layout, _data, item, _icon, _active, _prop):
+        row = layout.row(align=True)
+        row.prop(item, "name", text="", emboss=False, icon="OUTLINER_OB_ARMATURE")
+        row.label(text=item.armature.name if item.armature else "no armature")
+        row.prop(item, "weight", text="")
+
+
+class CROWD_UL_lods(bpy.types.UIList):
+    def draw_item(self, _context, layout, _data, item, _icon, _active, _prop):
+        row = layout.row(align=True)
+        row.label(text=item.name, icon="MESH_DATA")
+        row.prop(item, "object", text="")
 
 
 class CROWD_UL_nodes(bpy.types.UIList):
@@ -79,8 +95,6 @@ class CROWD_PT_main(_Panel, bpy.types.Panel):
         s = scene.crowd
         layout = self.layout
         layout.use_property_split = True
-        layout.prop(s, "armature")
-        layout.prop(s, "proxy_mesh")
         pv = preview.check(scene)
         row = layout.row(align=True)
         row.operator("crowd.bake", icon="RENDER_ANIMATION")
@@ -103,11 +117,20 @@ class CROWD_PT_main(_Panel, bpy.types.Panel):
                 box.label(text=text, icon="ERROR")
 
 
+def _active_character(s):
+    i = s.active_character_index
+    return s.characters[i] if 0 <= i < len(s.characters) else None
+
+
 def _draw_animation_pool(layout, s, pool):
-    anims = s.streams if pool == "STREAMS" else s.uniques
+    char = _active_character(s)
+    if char is None:
+        layout.label(text="Add a character first (Characters)")
+        return
+    anims = char.streams if pool == "STREAMS" else char.uniques
     index = "active_stream_index" if pool == "STREAMS" else "active_unique_index"
-    _list(layout, "CROWD_UL_animations", s, pool.lower(), index, pool)
-    i = getattr(s, index)
+    _list(layout, "CROWD_UL_animations", char, pool.lower(), index, pool)
+    i = getattr(char, index)
     if not 0 <= i < len(anims):
         return
     anim = anims[i]
@@ -167,9 +190,28 @@ def _draw_node(layout, anim, node, pool):
                 layout.prop(tr, "condition_value")
 
 
+class CROWD_PT_characters(_Panel, bpy.types.Panel):
+    bl_label = "Characters"
+    bl_parent_id = "CROWD_PT_main"
+
+    def draw(self, context):
+        s = context.scene.crowd
+        layout = self.layout
+        _list(layout, "CROWD_UL_characters", s, "characters", "active_character_index")
+        char = _active_character(s)
+        if char is None:
+            return
+        col = layout.column()
+        col.use_property_split = True
+        col.prop(char, "armature")
+        col.prop(char, "body")
+        layout.label(text="LOD Meshes (empty: automatic)")
+        _list(layout, "CROWD_UL_lods", char, "lods", "active_lod_index", rows=2)
+
+
 class CROWD_PT_streams(_Panel, bpy.types.Panel):
     bl_label = "Streams"
-    bl_parent_id = "CROWD_PT_main"
+    bl_parent_id = "CROWD_PT_characters"
 
     def draw(self, context):
         _draw_animation_pool(self.layout, context.scene.crowd, "STREAMS")
@@ -177,7 +219,7 @@ class CROWD_PT_streams(_Panel, bpy.types.Panel):
 
 class CROWD_PT_uniques(_Panel, bpy.types.Panel):
     bl_label = "Unique Animations"
-    bl_parent_id = "CROWD_PT_main"
+    bl_parent_id = "CROWD_PT_characters"
     bl_options = {"DEFAULT_CLOSED"}
 
     def draw(self, context):
@@ -205,16 +247,30 @@ class CROWD_PT_agents(_Panel, bpy.types.Panel):
         for mode, fields in (("heading_mode", {"FIXED": ("heading",),
                                                "ATTRIBUTE": ("heading_attribute",),
                                                "TARGET": ("heading_target",)}),
+                             ("character_mode", {"ATTRIBUTE": ("character_attribute",)}),
                              ("stream_mode", {"ATTRIBUTE": ("stream_attribute",)}),
                              ("offset_mode", {"NORMAL": ("offset_mean", "offset_std"),
                                               "ATTRIBUTE": ("offset_attribute",)}),
                              ("color_mode", {"RANDOM": ("color", "color_variation"),
                                              "ATTRIBUTE": ("color_attribute",)})):
             col.prop(src, mode)
+            if mode == "character_mode" and src.character_mode == "FIXED":
+                col.prop_search(src, "character_name", s, "characters")
             if mode == "stream_mode" and src.stream_mode == "FIXED":
-                col.prop_search(src, "stream_name", s, "streams")
+                _stream_search(col, s, src)
             for key in fields.get(getattr(src, mode), ()):
                 col.prop(src, key)
+
+
+def _stream_search(col, s, src):
+    """The One Stream field, searching the streams of the source's character (the
+    fixed one, else the active one)."""
+    char = s.characters.get(src.character_name) if src.character_mode == "FIXED" else None
+    char = char or _active_character(s)
+    if char is None:
+        col.prop(src, "stream_name")
+    else:
+        col.prop_search(src, "stream_name", char, "streams")
 
 
 class CROWD_PT_settings(_Panel, bpy.types.Panel):
@@ -234,6 +290,7 @@ class CROWD_PT_settings(_Panel, bpy.types.Panel):
         row.prop(s, "lod_card")
 
 
-CLASSES = (CROWD_UL_animations, CROWD_UL_nodes, CROWD_UL_inputs, CROWD_UL_transitions,
-           CROWD_UL_sources, CROWD_PT_main, CROWD_PT_streams, CROWD_PT_uniques,
-           CROWD_PT_agents, CROWD_PT_settings)
+CLASSES = (CROWD_UL_characters, CROWD_UL_lods, CROWD_UL_animations, CROWD_UL_nodes,
+           CROWD_UL_inputs, CROWD_UL_transitions, CROWD_UL_sources, CROWD_PT_main,
+           CROWD_PT_characters, CROWD_PT_streams, CROWD_PT_uniques, CROWD_PT_agents,
+           CROWD_PT_settings)

@@ -12,9 +12,9 @@ GPU context (``crowd_addon.gpu.backends.make_renderer(view, "viewport")`` choose
 
 The crowd follows ``scene.frame_current``; going backwards re-simulates from the start
 (deterministic, ``Crowd.advance_to``) without reporting the replayed frames' events
-again. When the armature or an action the crowd was built from is deleted the
-preview pauses with a message instead of failing; undo that restores them resumes
-it. Nothing here keeps Blender data between calls, only names, so undo and file
+again. When a character's armature or an action the crowd was built from is
+deleted the preview pauses with a message instead of failing; undo that restores
+them resumes it. Nothing here keeps Blender data between calls, only names, so undo and file
 loads never leave dangling references; after a load the previews marked in the file
 (``scene.crowd.preview_enabled``) are rebuilt, or stopped with the reason.
 """
@@ -48,7 +48,7 @@ class Preview:
 
     scene_name: str
     crowd: Crowd
-    armature: str
+    armatures: tuple               # (character name, armature name) it was built from
     actions: tuple
     fingerprint: int
     paused: str = ""               # why the crowd stopped advancing ("" = running)
@@ -99,11 +99,12 @@ def start(scene, config=None) -> Preview:
     if config is None:
         with suspended():
             config = scene_config.config_from_scene(scene)
-    if s.armature is None:
-        raise CrowdError(f"scene {scene.name!r}: no armature chosen")
+    for c in s.characters:
+        if c.armature is None:
+            raise CrowdError(f"character {c.name!r}: no armature chosen")
     crowd = Crowd(config, skinning="gpu")
-    pv = Preview(scene.name, crowd, s.armature.name,
-                 tuple(a.name for a in scene_config.used_actions(s)),
+    pv = Preview(scene.name, crowd, tuple((c.name, c.armature.name) for c in s.characters),
+                 tuple(a.name for a in scene_config.scene_actions(s)),
                  settings_fingerprint(s))
     if crowd.agents.count and not config.meshes:
         pv.draw_error = "no proxy mesh chosen: agents run but are not drawn"
@@ -179,11 +180,17 @@ class suspended:
 # ---------------------------------------------------------------------- advancing
 def _problem(scene, pv) -> str:
     """What the preview's crowd lost in the scene ("" when nothing)."""
-    arm = scene.crowd.armature
-    if arm is None:
-        return f"armature {pv.armature!r} was deleted or unset; choose one and Bake"
-    if scene.objects.get(arm.name) is None:
-        return f"armature {arm.name!r} is no longer in the scene"
+    characters = scene.crowd.characters
+    for name, armature in pv.armatures:
+        c = characters.get(name)
+        if c is None:
+            return f"character {name!r} was removed; undo or Bake without it"
+        if c.armature is None:
+            return (f"armature {armature!r} was deleted or unset (character {name!r}); "
+                    "choose one and Bake")
+        if scene.objects.get(c.armature.name) is None:
+            return (f"armature {c.armature.name!r} (character {name!r}) is no longer in "
+                    "the scene")
     gone = [a for a in pv.actions if bpy.data.actions.get(a) is None]
     if gone:
         return f"action {gone[0]!r} was deleted; restore it or Bake without it"

@@ -9,9 +9,14 @@ layer (override or additive, masked by bone names or a bone collection), a 2-D
 blend space (inputs placed at (x, y) points) and a state machine (inputs are its
 states; transitions fire on triggers and parameter conditions with a fade).
 
-Agents come from agent sources (mesh vertices, a vertex group or instanced points,
-see :mod:`.agents`). Nothing here holds runtime state except ``preview_enabled``,
-which :mod:`.preview` reads after a file load to restart the preview.
+A scene has a list of characters (``scene.crowd.characters``): each an armature, the
+body mesh skinned to it, optional LOD meshes, and its own streams and unique
+animations (stream and unique names are unique across the scene, since the crowd
+plays them all). Agents come from agent sources (mesh vertices, a vertex group or
+instanced points, see :mod:`.agents`), which choose a character per agent and then
+one of that character's streams. Nothing here holds runtime state except
+``preview_enabled``, which :mod:`.preview` reads after a file load to restart the
+preview.
 """
 
 import bpy
@@ -22,7 +27,7 @@ from bpy.types import PropertyGroup
 from ..core import controller_graph
 from ..core.clip_sampling import MAX_SAMPLES_PER_FRAME
 
-__all__ = ["CLASSES", "NODE_KINDS", "settings_fingerprint"]
+__all__ = ["CLASSES", "NODE_KINDS", "settings_fingerprint", "CROWD_PG_character"]
 
 _NODE_LABELS = {
     "CLIP": ("Action", "Play an action (baked into a clip) at a speed from a start frame"),
@@ -122,6 +127,33 @@ class CROWD_PG_animation(PropertyGroup):
                           description="Relative share of randomly assigned agents")
 
 
+class CROWD_PG_lod(PropertyGroup):
+    """A level of detail of a character: a mesh skinned to the character's armature."""
+
+    object: PointerProperty(name="Mesh", type=bpy.types.Object, poll=_is_mesh,
+                            description="Mesh skinned to the character's armature (by an "
+                                        "Armature modifier), drawn at this level")
+
+
+class CROWD_PG_character(PropertyGroup):
+    """A character: a rig, the body that draws it and the animations it plays."""
+
+    armature: PointerProperty(name="Armature", type=bpy.types.Object, poll=_is_armature,
+                              description="The rig this character's streams animate")
+    body: PointerProperty(name="Body", type=bpy.types.Object, poll=_is_mesh,
+                          description="Mesh skinned to the armature that draws each agent "
+                                      "(empty: the agents run but are not drawn)")
+    lods: CollectionProperty(type=CROWD_PG_lod)
+    active_lod_index: IntProperty()
+    streams: CollectionProperty(type=CROWD_PG_animation)
+    active_stream_index: IntProperty()
+    uniques: CollectionProperty(type=CROWD_PG_animation)
+    active_unique_index: IntProperty()
+    weight: FloatProperty(name="Weight", default=1.0, min=0.0,
+                          description="Relative share of agents from sources that choose "
+                                      "characters by weight")
+
+
 class CROWD_PG_agent_source(PropertyGroup):
     enabled: BoolProperty(name="Enabled", default=True)
     object: PointerProperty(name="Object", type=bpy.types.Object)
@@ -139,10 +171,19 @@ class CROWD_PG_agent_source(PropertyGroup):
     heading: FloatProperty(name="Angle", subtype="ANGLE", unit="ROTATION")
     heading_attribute: StringProperty(name="Heading Attribute", default="heading")
     heading_target: PointerProperty(name="Target", type=bpy.types.Object)
+    character_mode: EnumProperty(name="Character", default="WEIGHTS", items=(
+        ("WEIGHTS", "By Weight", "Drawn with the characters' weights and the seed"),
+        ("ATTRIBUTE", "Attribute", "An INT point attribute: the character's index in the "
+                                   "list"),
+        ("FIXED", "One Character", "All agents are one character")))
+    character_attribute: StringProperty(name="Character Attribute", default="character")
+    character_name: StringProperty(name="Character")
     stream_mode: EnumProperty(name="Stream", default="RANDOM", items=(
-        ("RANDOM", "Random", "Drawn with the stream weights and the seed"),
-        ("ATTRIBUTE", "Attribute", "An INT point attribute: the stream index"),
-        ("FIXED", "One Stream", "All agents play one stream")))
+        ("RANDOM", "Random", "Drawn with the weights of the character's streams and the "
+                             "seed"),
+        ("ATTRIBUTE", "Attribute", "An INT point attribute: the stream's index among the "
+                                   "character's streams"),
+        ("FIXED", "One Stream", "All agents play one stream (of their character)")))
     stream_attribute: StringProperty(name="Stream Attribute", default="stream")
     stream_name: StringProperty(name="Stream")
     offset_mode: EnumProperty(name="Offset", default="UNIFORM", items=(
@@ -169,14 +210,8 @@ _LOD_VIEW = ("as seen in a 1080-pixel-high view with a 40° field of view (small
 
 
 class CROWD_PG_settings(PropertyGroup):
-    armature: PointerProperty(name="Armature", type=bpy.types.Object, poll=_is_armature)
-    proxy_mesh: PointerProperty(name="Proxy Mesh", type=bpy.types.Object, poll=_is_mesh,
-                                description="Mesh skinned to the armature that draws "
-                                            "each agent")
-    streams: CollectionProperty(type=CROWD_PG_animation)
-    active_stream_index: IntProperty()
-    uniques: CollectionProperty(type=CROWD_PG_animation)
-    active_unique_index: IntProperty()
+    characters: CollectionProperty(type=CROWD_PG_character)
+    active_character_index: IntProperty()
     max_offset: IntProperty(name="Max Offset (M)", default=60, min=1, soft_max=600,
                             description="Frames of pose history per stream; agents play "
                                         "a stream delayed by 0..M-1 frames")
@@ -201,10 +236,12 @@ class CROWD_PG_settings(PropertyGroup):
         description="Used to turn agents toward a target")
     lod_near: FloatProperty(name="LOD 1 From", default=30.0, min=0.01, unit="LENGTH",
                             description="Distance from which agents use the first coarser "
-                                        "mesh (25% of the triangles), " + _LOD_VIEW)
+                                        "mesh (a character's first LOD mesh, or 25% of the "
+                                        "triangles), " + _LOD_VIEW)
     lod_far: FloatProperty(name="LOD 2 From", default=90.0, min=0.01, unit="LENGTH",
                            description="Distance from which agents use the second coarser "
-                                       "mesh (6% of the triangles), " + _LOD_VIEW)
+                                       "mesh (a character's second LOD mesh, or 6% of the "
+                                       "triangles), " + _LOD_VIEW)
     lod_cards: BoolProperty(name="Far Cards", default=True,
                             description="Draw the farthest agents as two crossed quads "
                                         "(8 vertices) that follow the root bone and head")
@@ -219,7 +256,7 @@ class CROWD_PG_settings(PropertyGroup):
 
 
 CLASSES = (CROWD_PG_input, CROWD_PG_state_transition, CROWD_PG_node, CROWD_PG_animation,
-           CROWD_PG_agent_source, CROWD_PG_settings)
+           CROWD_PG_lod, CROWD_PG_character, CROWD_PG_agent_source, CROWD_PG_settings)
 
 
 def _values(struct, skip):
@@ -244,9 +281,9 @@ def _values(struct, skip):
     return tuple(out)
 
 
-_UI_ONLY = {"active_stream_index", "active_unique_index", "active_source_index",
-            "active_node_index", "active_input_index", "active_transition_index",
-            "preview_enabled"}
+_UI_ONLY = {"active_character_index", "active_lod_index", "active_stream_index",
+            "active_unique_index", "active_source_index", "active_node_index",
+            "active_input_index", "active_transition_index", "preview_enabled"}
 
 
 def settings_fingerprint(settings) -> int:

@@ -1,12 +1,18 @@
 """Scene properties (``scene.crowd``) -> a core :class:`~crowd_addon.core.CrowdConfig`.
 
-The armature becomes the skeleton and the proxy mesh its ``ProxyMesh``
-(:mod:`.armature`), every action a node tree uses is baked into a clip named after
-the action (:mod:`.bake`), node lists are read into plain
+Each character (``scene.crowd.characters``) becomes a skeleton named after it, from
+its armature, and its body (with its LOD meshes when given) that skeleton's
+``ProxyMesh`` levels (:mod:`.armature`); every action a character's node trees use is
+baked on that character's armature into a clip (:mod:`.bake`) named after the action,
+or ``"<character>/<action>"`` when several characters use the action (each bakes its
+own); node lists are read into plain
 :class:`~crowd_addon.core.controller_graph.NodeSpec` values that core validates and
-builds into controller trees (:func:`crowd_addon.core.controller_graph.build_tree`),
-and the agent sources become agents (:mod:`.agents`). Errors are :class:`CrowdError` messages that
-name the stream, node, action or object at fault; nothing in the scene changes.
+builds into controller trees (:func:`crowd_addon.core.controller_graph.build_tree`);
+the streams and uniques of all characters go into the one config, character after
+character; and the agent sources become agents (:mod:`.agents`), each on a stream of
+its character, so an agent's character is its stream's skeleton. Errors are
+:class:`CrowdError` messages that name the character, stream, node, action or object
+at fault; nothing in the scene changes.
 
 :func:`config_steps` does the work as a generator, one action per step, so a modal
 operator can report progress and cancel between steps; :func:`config_from_scene` runs
@@ -15,13 +21,18 @@ it to the end (batch export, scripts, tests).
 
 from __future__ import annotations
 
+import dataclasses
+
 from ..core.config import CrowdConfig
 from ..core.controller_graph import InputSpec, NodeSpec, TransitionSpec, build_tree
 from ..core.errors import CrowdError
 from ..core.mesh import CARD
 
 __all__ = ["config_from_scene", "config_steps", "scene_fps", "used_actions", "node_specs",
-           "bone_collections", "lod_distances"]
+           "bone_collections", "lod_distances", "clip_names", "scene_actions"]
+
+#: LOD levels the settings give distances for (*LOD 1 From*, *LOD 2 From*)
+MESH_LODS = 2
 
 
 def scene_fps(scene) -> float:
@@ -29,15 +40,15 @@ def scene_fps(scene) -> float:
     return scene.render.fps / scene.render.fps_base
 
 
-def _pools(settings):
-    return (("stream", settings.streams), ("unique", settings.uniques))
+def _pools(character):
+    return (("stream", character.streams), ("unique", character.uniques))
 
 
-def used_actions(settings) -> list:
-    """Actions referenced by any node (clips and additive references), first use
-    first, each once."""
+def used_actions(character) -> list:
+    """Actions referenced by any node of a character's streams and uniques (clips and
+    additive references), first use first, each once."""
     seen = {}
-    for _pool, anims in _pools(settings):
+    for _pool, anims in _pools(character):
         for anim in anims:
             for node in anim.nodes:
                 for act in (node.action if node.kind == "CLIP" else None,
@@ -48,21 +59,44 @@ def used_actions(settings) -> list:
     return list(seen.values())
 
 
+def scene_actions(settings) -> list:
+    """Every action the scene's characters use, each once (first use first)."""
+    seen = {}
+    for c in settings.characters:
+        for act in used_actions(c):
+            seen.setdefault(act.name, act)
+    return list(seen.values())
+
+
+def clip_names(characters) -> dict:
+    """``{(character name, action name): clip name}`` for every action the characters
+    use: the action's name when one character uses it, else ``"<character>/<action>"``
+    (each character bakes it on its own armature)."""
+    users = {}
+    for c in characters:
+        for act in used_actions(c):
+            users.setdefault(act.name, []).append(c.name)
+    return {(c, a): a if len(names) == 1 else f"{c}/{a}"
+            for a, names in users.items() for c in names}
+
+
 # ------------------------------------------------------------------ controller trees
-def _name(id_block):
-    return None if id_block is None else id_block.name
-
-
-def node_specs(anim) -> tuple:
+def node_specs(anim, clips=None) -> tuple:
     """The nodes of one ``CROWD_PG_animation`` as plain
-    :class:`~crowd_addon.core.controller_graph.NodeSpec` values (actions by name)."""
+    :class:`~crowd_addon.core.controller_graph.NodeSpec` values; actions by their clip
+    name, ``clips`` (action name -> clip name; default: the action's name)."""
+    clips = clips or {}
+
+    def clip(action):
+        return None if action is None else clips.get(action.name, action.name)
+
     return tuple(NodeSpec(
         name=n.name, kind=n.kind,
         inputs=tuple(InputSpec(i.node, i.name, i.x, i.y) for i in n.inputs),
-        action=_name(n.action), speed=n.speed, start=n.start, weight=n.weight,
+        action=clip(n.action), speed=n.speed, start=n.start, weight=n.weight,
         weight_parameter=n.weight_parameter, layer_mode=n.layer_mode,
         mask_source=n.mask_source, mask_bones=n.mask_bones,
-        mask_collection=n.mask_collection, reference_action=_name(n.reference_action),
+        mask_collection=n.mask_collection, reference_action=clip(n.reference_action),
         reference_frame=n.reference_frame, x_parameter=n.x_parameter,
         y_parameter=n.y_parameter, initial_state=n.initial_state,
         transitions=tuple(TransitionSpec(t.source, t.target, t.duration, t.trigger,
@@ -105,71 +139,158 @@ def _bake_action(scene, armature_obj, action, skeleton, fps, samples_per_frame, 
     return result.clips[0]
 
 
+def _characters(scene, s) -> list:
+    """The scene's characters, checked: named, each once, each with an armature, and
+    between them at least one stream or unique animation."""
+    chars = list(s.characters)
+    if not chars:
+        raise CrowdError(f"scene {scene.name!r}: no characters (Crowd panel > Characters > "
+                         "+)")
+    seen = set()
+    for c in chars:
+        if not c.name.strip():
+            raise CrowdError(f"scene {scene.name!r}: a character has no name")
+        if c.name in seen:
+            raise CrowdError(f"scene {scene.name!r}: two characters are named {c.name!r}")
+        seen.add(c.name)
+        what = f"character {c.name!r}"
+        if c.armature is None:
+            raise CrowdError(f"{what}: no armature chosen (Crowd panel > Characters)")
+        if c.armature.type != "ARMATURE":
+            raise CrowdError(f"{what}: object {c.armature.name!r} is not an armature")
+    if not any(len(c.streams) or len(c.uniques) for c in chars):
+        raise CrowdError(f"scene {scene.name!r}: no streams or unique animations to build")
+    _check_names(chars)
+    return chars
+
+
+def _check_names(chars):
+    """Stream and unique names: not empty, and each once in the whole scene (the crowd
+    plays them all by name)."""
+    seen = {}
+    for c in chars:
+        for pool, anims in _pools(c):
+            for a in anims:
+                other = seen.get(a.name)
+                if not a.name.strip() or other == (c.name, pool):
+                    raise CrowdError(f"character {c.name!r}: {pool} names must be unique "
+                                     f"and not empty ({a.name!r})")
+                if other is not None:
+                    raise CrowdError(f"{pool} {a.name!r} of character {c.name!r} has the "
+                                     f"name of {other[1]} {a.name!r} of character "
+                                     f"{other[0]!r}; stream and unique names must be unique "
+                                     "in the scene")
+                seen[a.name] = (c.name, pool)
+
+
+def _trees(scene, c, skeleton, clips) -> dict:
+    """``{"stream": [(name, root)], "unique": [...]}`` of character ``c``."""
+    collections = bone_collections(c.armature.data)
+    mine = {a: clip for (who, a), clip in clips.items() if who == c.name}
+
+    def tree(pool, anim):       # stream time is the scene frame; a unique's starts at 0
+        return build_tree(f"{pool} {anim.name!r}", node_specs(anim, mine), anim.root,
+                          skeleton, scene.frame_start if pool == "stream" else 0,
+                          bone_collections=collections, armature=c.armature.data.name)
+
+    return {pool: [(a.name, tree(pool, a)) for a in anims] for pool, anims in _pools(c)}
+
+
+def _lod_levels(c, skeleton, cards) -> tuple:
+    """The ``lods`` argument of ``CrowdConfig.add_mesh`` for character ``c``: its LOD
+    meshes (one serves both levels) or the automatic ratios, then the card when on."""
+    from .armature import proxy_mesh_from_object
+    card = (CARD,) if cards else ()
+    if len(c.lods) == 0:
+        return (0.25, 0.06) + card
+    what = f"character {c.name!r}"
+    if len(c.lods) > MESH_LODS:
+        raise CrowdError(f"{what}: {len(c.lods)} LOD meshes; there are {MESH_LODS} levels "
+                         "(LOD 1 From, LOD 2 From)")
+    meshes = []
+    for k, lod in enumerate(c.lods, start=1):
+        if lod.object is None:
+            raise CrowdError(f"{what}: LOD {k} has no mesh")
+        try:
+            meshes.append(proxy_mesh_from_object(lod.object, c.armature, skeleton))
+        except CrowdError as e:
+            raise CrowdError(f"{what}: LOD {k}: {e}") from None
+    meshes += meshes[-1:] * (MESH_LODS - len(meshes))
+    return tuple(meshes) + card
+
+
+def _add_mesh(cfg, c, skeleton, cards):
+    from .armature import proxy_mesh_from_object
+    if c.body is None:
+        if len(c.lods):
+            raise CrowdError(f"character {c.name!r}: LOD meshes need a body (LOD 0)")
+        return
+    try:
+        body = proxy_mesh_from_object(c.body, c.armature, skeleton)
+    except CrowdError as e:
+        raise CrowdError(f"character {c.name!r}: body: {e}") from None
+    cfg.add_mesh(body, lods=_lod_levels(c, skeleton, cards))
+
+
 def config_steps(scene, depsgraph=None, notes=None):
     """Generator building the scene's crowd: yields ``(done, total, message)`` before
-    each unit of work (one per action, then the mesh, then the agents) and returns the
-    :class:`CrowdConfig` (``StopIteration.value``). Raises CrowdError on bad input.
+    each unit of work (one per action a character uses, then one per character for its
+    meshes, then the agents) and returns the :class:`CrowdConfig`
+    (``StopIteration.value``). Raises CrowdError on bad input.
 
     Actions are baked at the scene's fps times *Samples per Frame*; the bake's remarks
     (``BakeResult.notes``) are appended to the list ``notes`` when one is given."""
     from . import agents as agent_mod
-    from .armature import proxy_mesh_from_object, skeleton_from_armature
+    from .armature import skeleton_from_armature
 
     s = _settings(scene)
-    arm = s.armature
-    if arm is None:
-        raise CrowdError(f"scene {scene.name!r}: no armature chosen (Crowd panel > Armature)")
-    if arm.type != "ARMATURE":
-        raise CrowdError(f"scene {scene.name!r}: object {arm.name!r} is not an armature")
-    if len(s.streams) == 0 and len(s.uniques) == 0:
-        raise CrowdError(f"scene {scene.name!r}: no streams or unique animations to build")
-    for pool, anims in _pools(s):
-        names = [a.name for a in anims]
-        for a in anims:
-            if not a.name or names.count(a.name) > 1:
-                raise CrowdError(f"{pool} names must be unique and not empty ({a.name!r})")
-    skeleton = skeleton_from_armature(arm)
-    collections = bone_collections(arm.data)
-
-    def tree(pool, anim):       # stream time is the scene frame; a unique's starts at 0
-        return build_tree(f"{pool} {anim.name!r}", node_specs(anim), anim.root, skeleton,
-                          scene.frame_start if pool == "stream" else 0,
-                          bone_collections=collections, armature=arm.data.name)
-
-    trees = {pool: [(a.name, tree(pool, a)) for a in anims] for pool, anims in _pools(s)}
-    actions = used_actions(s)
+    chars = _characters(scene, s)
+    skeletons = {c.name: skeleton_from_armature(c.armature, name=c.name) for c in chars}
+    clips = clip_names(chars)
+    trees = {c.name: _trees(scene, c, skeletons[c.name], clips) for c in chars}
+    jobs = [(c, act) for c in chars for act in used_actions(c)]
+    several = len(chars) > 1
     fps = scene_fps(scene)
-    total = len(actions) + 2
+    total = len(jobs) + len(chars) + 1
     cfg = CrowdConfig(max_offset=s.max_offset, transition_slots=s.transition_slots, fps=fps,
                       seed=s.seed, when_full=s.when_full.lower(),
                       start_frame=scene.frame_start,
                       lod_distances=lod_distances(s))
-    cfg.add_skeleton(skeleton)
-    for i, act in enumerate(actions):
-        yield i, total, f"baking action {act.name!r}"
+    for c in chars:
+        cfg.add_skeleton(skeletons[c.name])
+    for i, (c, act) in enumerate(jobs):
+        yield i, total, f"baking action {act.name!r}" + (
+            f" for character {c.name!r}" if several else "")
         try:
-            cfg.add_clip(_bake_action(scene, arm, act, skeleton, fps, s.samples_per_frame,
-                                      [] if notes is None else notes))
+            clip = _bake_action(scene, c.armature, act, skeletons[c.name], fps,
+                                s.samples_per_frame, [] if notes is None else notes)
+            name = clips[c.name, act.name]
+            cfg.add_clip(clip if clip.name == name else dataclasses.replace(clip, name=name))
         except CrowdError as e:
             msg = str(e)
-            raise CrowdError(msg if act.name in msg else f"action {act.name!r}: {msg}") \
-                from None
-    for name, root in trees["stream"]:
-        cfg.add_stream(name, skeleton.name, root)
-    for name, root in trees["unique"]:
-        cfg.add_unique(name, skeleton.name, root)
-    yield len(actions), total, "reading the proxy mesh"
-    if s.proxy_mesh is not None:
-        cfg.add_mesh(proxy_mesh_from_object(s.proxy_mesh, arm, skeleton),
-                     lods=(0.25, 0.06, CARD) if s.lod_cards else (0.25, 0.06))
-    yield len(actions) + 1, total, "placing agents"
+            msg = msg if act.name in msg else f"action {act.name!r}: {msg}"
+            raise CrowdError(f"character {c.name!r}: {msg}" if several else msg) from None
+    for c in chars:
+        for pool, add in (("stream", cfg.add_stream), ("unique", cfg.add_unique)):
+            for name, root in trees[c.name][pool]:
+                add(name, c.name, root)
+    for k, c in enumerate(chars):
+        yield len(jobs) + k, total, "reading the proxy mesh" + (
+            f" of character {c.name!r}" if several else "")
+        _add_mesh(cfg, c, skeletons[c.name], s.lod_cards)
+    yield total - 1, total, "placing agents"
     dg = depsgraph if depsgraph is not None else _depsgraph(scene)
-    agents = agent_mod.agents_from_scene(scene, dg, [a.name for a in s.streams],
-                                         [a.weight for a in s.streams])
+    agents, placed = agent_mod.agents_from_scene(scene, dg)
     if agents.count:
         cfg.add_agents(agents.count, streams=agents.streams, offsets=agents.offsets,
                        positions=agents.positions, headings=agents.headings,
                        colors=agents.colors)
+    try:
+        from .show_data import show_from_scene
+    except ImportError:             # the show's scene data is not there yet
+        show_from_scene = None
+    if show_from_scene is not None and hasattr(s, "show"):   # (its properties registered)
+        cfg.show = show_from_scene(scene, dg, cfg, placed)
     return cfg
 
 

@@ -1,15 +1,18 @@
 """The demo stadium's crowd, authored the way an animator would in Blender.
 
 :func:`setup_crowd` fills the scene's Crowd settings of a stadium built by
-``sample_scenes/build_stadium.py``: the fan rig and body, one stream per authored
-action that seats play or react with, one unique per agent that can be hit by the
-ball, M = 60 and the paper's 800 transition slots, and the "Seats" points as the
-agent source (heading from their ``heading`` attribute, stream from a ``stream``
-attribute written here: home seats play ``idle_a`` / ``idle_c`` / ``clap``, away seats
-``idle_b``). :func:`stadium_config` converts it with the extension's own
-:func:`~crowd_addon.blender.scene_config.config_from_scene`, then adds the motion
-capture character (a second skeleton) for a few home seats. :func:`author_stadium`
-does it all on a built ``stadium.blend`` and saves the file with its settings.
+``sample_scenes/build_stadium.py`` with both of its characters: "Fan" (the fan rig
+and body, one stream per authored action that seats play or react with, one unique
+per agent that can be hit by the ball) and "Mocap" (the motion-capture rig and body
+with one looping stream, the jumps), M = 60 and the paper's 800 transition slots, and
+the "Seats" points as the agent source: heading from their ``heading`` attribute,
+character from a ``character`` attribute and stream (among the character's) from a
+``stream`` attribute written here: home seats play ``idle_a`` / ``idle_c`` /
+``clap``, away seats ``idle_b``, and 2 % of the home seats are the mocap character.
+:func:`stadium_config` converts it with the extension's own
+:func:`~crowd_addon.blender.scene_config.config_from_scene` and gives the agents
+team colours. :func:`author_stadium` does it all on a built ``stadium.blend`` and
+saves the file with its settings, so the file holds every character of the show.
 """
 
 from __future__ import annotations
@@ -21,11 +24,10 @@ import bpy
 import numpy as np
 
 from ..core.config import CrowdConfig
-from ..core.controllers import ClipPlayer
 from ..core.errors import CrowdError
 
-__all__ = ["STREAMS", "HOME_MIX", "AWAY_MIX", "setup_crowd", "stadium_config", "Stadium",
-           "author_stadium"]
+__all__ = ["STREAMS", "HOME_MIX", "AWAY_MIX", "FAN", "MOCAP", "setup_crowd",
+           "stadium_config", "Stadium", "author_stadium"]
 
 #: stream name -> action of FanRig
 STREAMS = {"idle_a": "idle_seated_a", "idle_b": "idle_seated_b", "idle_c": "idle_seated_c",
@@ -34,6 +36,9 @@ HOME_MIX = {"idle_a": 0.3, "idle_c": 0.3, "clap": 0.4}
 AWAY_MIX = {"idle_b": 1.0}
 HIT = "hit_by_ball"
 MOCAP_ACTION, MOCAP_SHARE = "mocap_01_01", 0.02
+#: the characters: name -> (armature, body)
+FAN, MOCAP = "Fan", "Mocap"
+CHARACTERS = {FAN: ("FanRig", "FanBody"), MOCAP: ("MocapRig", "MocapBody")}
 
 
 @dataclass
@@ -63,26 +68,36 @@ def _action(name):
     return act
 
 
-def setup_crowd(scene, hits=6, slots=800, max_offset=60, seed=5):
-    """Author the Crowd settings of a stadium scene (replacing any there)."""
+def _animation(pool, name, action):
+    anim = pool.add()
+    anim.name = name
+    node = anim.nodes.add()
+    node.name, node.kind, node.action = "clip", "CLIP", _action(action)
+    return anim
 
-    s = scene.crowd
-    s.armature = _obj("FanRig")
-    s.proxy_mesh = _obj("FanBody")
-    s.max_offset, s.transition_slots, s.seed = max_offset, slots, seed
-    s.when_full = "QUEUE"
-    s.forward_axis = "NEG_Y"
-    s.streams.clear()
-    s.uniques.clear()
-    s.agent_sources.clear()
-    for pool, items in (("streams", STREAMS.items()),
-                        ("uniques", [(f"hit{k}", HIT) for k in range(hits)])):
-        for name, action in items:
-            anim = getattr(s, pool).add()
-            anim.name = name
-            node = anim.nodes.add()
-            node.name, node.kind, node.action = "clip", "CLIP", _action(action)
-    seats = _obj("Seats")
+
+def _add_characters(s, hits):
+    s.characters.clear()
+    for name, (rig, body) in CHARACTERS.items():
+        c = s.characters.add()
+        c.name, c.armature, c.body = name, _obj(rig), _obj(body)
+    fan, mocap = s.characters[FAN], s.characters[MOCAP]
+    for name, action in STREAMS.items():
+        _animation(fan.streams, name, action)
+    for k in range(hits):
+        _animation(fan.uniques, f"hit{k}", HIT)
+    _action(MOCAP_ACTION).use_cyclic = True     # the jumps loop (its manual frame range)
+    _animation(mocap.streams, "mocap", MOCAP_ACTION)
+
+
+def _seat_attribute(me, name, values):
+    attr = me.attributes.get(name) or me.attributes.new(name, "INT", "POINT")
+    attr.data.foreach_set("value", values)
+
+
+def _seat_casting(seats, seed):
+    """Per seat: character (0 fan, 1 mocap) and stream index among its character's
+    streams, written as the ``character`` and ``stream`` point attributes."""
     me = seats.data
     n = len(me.vertices)
     section = np.zeros(n, np.int32)
@@ -94,12 +109,32 @@ def setup_crowd(scene, hits=6, slots=800, max_offset=60, seed=5):
         m = section == side
         ids = [names.index(k) for k in mix]
         stream[m] = rng.choice(ids, size=int(m.sum()), p=np.array(list(mix.values())))
-    attr = me.attributes.get("stream") or me.attributes.new("stream", "INT", "POINT")
-    attr.data.foreach_set("value", stream)
+    character = np.zeros(n, np.int32)
+    home = np.flatnonzero(section == 0)
+    jumpers = np.random.default_rng(seed + 1).choice(
+        home, size=max(1, int(MOCAP_SHARE * home.size)), replace=False)
+    character[jumpers] = 1
+    stream[jumpers] = 0                     # the mocap character's only stream
+    _seat_attribute(me, "character", character)
+    _seat_attribute(me, "stream", stream)
     me.update()
+
+
+def setup_crowd(scene, hits=6, slots=800, max_offset=60, seed=5):
+    """Author the Crowd settings of a stadium scene (replacing any there)."""
+
+    s = scene.crowd
+    s.max_offset, s.transition_slots, s.seed = max_offset, slots, seed
+    s.when_full = "QUEUE"
+    s.forward_axis = "NEG_Y"
+    _add_characters(s, hits)
+    s.agent_sources.clear()
+    seats = _obj("Seats")
+    _seat_casting(seats, seed)
     src = s.agent_sources.add()
     src.name, src.object, src.mode = "seats", seats, "VERTICES"
     src.heading_mode, src.heading_attribute = "ATTRIBUTE", "heading"
+    src.character_mode, src.character_attribute = "ATTRIBUTE", "character"
     src.stream_mode, src.stream_attribute = "ATTRIBUTE", "stream"
     src.offset_mode = "UNIFORM"
     src.color_mode = "RANDOM"
@@ -109,9 +144,7 @@ def setup_crowd(scene, hits=6, slots=800, max_offset=60, seed=5):
 def stadium_config(scene, progress=None, hits=6, slots=800, seed=5) -> Stadium:
     """The stadium's :class:`Stadium` from a built stadium scene (see module doc)."""
 
-    from ..blender.armature import proxy_mesh_from_object
-    from ..blender.bake import bake_actions
-    from ..blender.scene_config import config_from_scene, scene_fps
+    from ..blender.scene_config import config_from_scene
 
     setup_crowd(scene, hits=hits, slots=slots, seed=seed)
     cfg = config_from_scene(scene, progress)
@@ -125,22 +158,7 @@ def stadium_config(scene, progress=None, hits=6, slots=800, seed=5) -> Stadium:
     # team colours, varied per agent (the random colours of the source as variation)
     team = np.where(home[:, None], (0.85, 0.18, 0.15), (0.2, 0.35, 0.85))
     cfg.agent_color = (0.6 * team + 0.4 * cfg.agent_color).astype(np.float32)
-    # the motion-capture character: a second skeleton on a few home seats
-    rig, body = _obj("MocapRig"), _obj("MocapBody")
-    baked = bake_actions(rig, [_action(MOCAP_ACTION)], scene_fps(scene), loop=True,
-                         scene=scene, samples_per_frame=scene.crowd.samples_per_frame)
-    skel = baked.skeleton
-    cfg.add_skeleton(skel)
-    clip = baked.clips[0]
-    cfg.add_clip(clip)
-    cfg.add_mesh(proxy_mesh_from_object(body, rig, skel))
-    mocap = cfg.add_stream("mocap", skel.name, ClipPlayer(clip.name))
-    rng = np.random.default_rng(seed + 1)
-    fans = np.flatnonzero(home)
-    jumpers = rng.choice(fans, size=max(1, int(MOCAP_SHARE * fans.size)), replace=False)
-    cfg.agent_stream[jumpers] = mocap
-    fan = np.ones(n, bool)
-    fan[jumpers] = False
+    fan = np.array([d.skeleton == FAN for d in cfg.streams])[cfg.agent_stream]
     pos = cfg.agent_position
     centre = 0.5 * (pos.min(0) + pos.max(0))
     angle = np.arctan2(pos[:, 1] - centre[1], pos[:, 0] - centre[0])

@@ -105,23 +105,42 @@ class CrowdConfig:
 
     def add_mesh(self, mesh, lods=(0.25, 0.06, "card")):
         """Set ``mesh`` as its skeleton's proxy, with LODs built at ``lods`` triangle
-        ratios and, last, ``"card"`` for :func:`~.mesh.card_lod` (``()`` for none, or a
-        list of ready :class:`~.mesh.ProxyMesh`). LOD ``k`` is drawn from
+        ratios and, last, ``"card"`` for :func:`~.mesh.card_lod` (``()`` for none), or
+        ready :class:`~.mesh.ProxyMesh` levels (of the same skeleton), optionally
+        followed by ``"card"`` (the card of ``mesh``). LOD ``k`` is drawn from
         ``lod_distances[k - 1]`` metres."""
-        from .mesh import ProxyMesh, build_lods
+        from .mesh import CARD, ProxyMesh, build_lods, card_lod
+        self._check_mesh(mesh)
+        ready = [m for m in lods if isinstance(m, ProxyMesh)]
+        if not ready:
+            levels = build_lods(mesh, tuple(lods))
+        else:
+            lods = list(lods)
+            rest = lods[len(ready):]
+            if not all(isinstance(m, ProxyMesh) for m in lods[:len(ready)]) \
+                    or not (rest == [] or (len(rest) == 1 and isinstance(rest[0], str)
+                                           and rest[0] == CARD)):
+                raise CrowdError(f"mesh {mesh.name!r}: LODs are either triangle ratios or "
+                                 f"ready meshes, then optionally {CARD!r} (last), got "
+                                 f"{[getattr(m, 'name', m) for m in lods]}")
+            for k, level in enumerate(ready, start=1):
+                if level.skeleton != mesh.skeleton:
+                    raise CrowdError(f"mesh {mesh.name!r}: LOD {k} {level.name!r} is for "
+                                     f"skeleton {level.skeleton!r}, not {mesh.skeleton!r}")
+                self._check_mesh(level, f"mesh {mesh.name!r}: LOD {k}: ")
+            levels = [mesh, *ready] + ([card_lod(mesh)] if rest else [])
+        self.meshes[mesh.skeleton] = levels
+        return levels
+
+    def _check_mesh(self, mesh, what=""):
         if mesh.skeleton not in self.skeletons:
-            raise CrowdError(f"mesh {mesh.name!r}: unknown skeleton {mesh.skeleton!r} "
+            raise CrowdError(f"{what}mesh {mesh.name!r}: unknown skeleton {mesh.skeleton!r} "
                              f"(known: {sorted(self.skeletons)})")
         bones = self.skeletons[mesh.skeleton].bone_count
         if int(mesh.bone_indices.max()) >= bones:
-            raise CrowdError(f"mesh {mesh.name!r}: uses bone {int(mesh.bone_indices.max())} "
-                             f"but skeleton {mesh.skeleton!r} has {bones} bones")
-        if lods and all(isinstance(m, ProxyMesh) for m in lods):
-            levels = [mesh, *lods]
-        else:
-            levels = build_lods(mesh, tuple(lods))
-        self.meshes[mesh.skeleton] = levels
-        return levels
+            raise CrowdError(f"{what}mesh {mesh.name!r}: uses bone "
+                             f"{int(mesh.bone_indices.max())} but skeleton {mesh.skeleton!r} "
+                             f"has {bones} bones")
 
     def add_stream(self, name, skeleton, root):
         self.streams.append(AnimationDef(str(name), str(skeleton), root))

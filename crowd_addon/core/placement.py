@@ -1,14 +1,21 @@
-"""Agent placement policy: points of a source -> agents (heading, stream, offset, colour).
+"""Agent placement policy: points of a source -> agents (heading, character, stream,
+offset, colour).
 
 An agent source gives world positions (metres) and base headings (radians about
 +Z) of its points; :func:`place_agents` turns them into an :class:`AgentSet` by the
 source's :class:`PlacementPolicy`: a heading (fixed angle added to the base, a
-per-point value, or facing a target), a stream per agent (seeded random by weight,
-per point, or one named stream), an offset in ``0 .. M-1`` frames (uniform, normal,
-or per point) and a colour (a base colour varied at random, or per point). Random
-choices are seeded, so the same inputs give the same agents. Per-point values come
-from a callback (the Blender side reads mesh attributes,
+per-point value, or facing a target), a character per agent (seeded random by the
+characters' weights, per point, or one named character), a stream of *that
+character* per agent (seeded random by its streams' weights, per point as an index
+among its streams, or one named stream), an offset in ``0 .. M-1`` frames (uniform,
+normal, or per point) and a colour (a base colour varied at random, or per point).
+Random choices are seeded, so the same inputs give the same agents. Per-point values
+come from a callback (the Blender side reads mesh attributes,
 ``crowd_addon.blender.agents``).
+
+The crowd's stream list is the characters' streams one character after the other
+(:class:`CharacterStreams` in order), so an agent's stream index is its character's
+first stream plus its stream's place among the character's streams.
 """
 
 from __future__ import annotations
@@ -20,27 +27,34 @@ import numpy as np
 from .agents import assign_offsets, assign_streams, check_offsets
 from .errors import CrowdError
 
-__all__ = ["AgentSet", "PlacementPolicy", "place_agents", "z_angle", "FORWARD",
-           "SOURCE_SEED"]
+__all__ = ["AgentSet", "CharacterStreams", "PlacementPolicy", "place_agents", "z_angle",
+           "FORWARD", "SOURCE_SEED", "CHARACTER_SEED"]
 
 #: the character's rest-pose facing per ``forward_axis`` setting (x, y)
 FORWARD = {"NEG_Y": (0.0, -1.0), "POS_Y": (0.0, 1.0), "POS_X": (1.0, 0.0),
            "NEG_X": (-1.0, 0.0)}
 #: seed stride between agent sources: source ``i`` draws from ``seed + i * SOURCE_SEED``
 SOURCE_SEED = 7919
+#: seed stride between characters: the streams of character ``k`` are drawn from
+#: ``seed + k * CHARACTER_SEED`` (character 0 draws as a crowd of one character did)
+CHARACTER_SEED = 104729
+#: added to a source's seed for the draw of characters by weight (offsets use ``+ 1``,
+#: colours ``+ 2``)
+_CHARACTER_DRAW = 3
 
 
 @dataclass(frozen=True)
 class AgentSet:
     """Agents as arrays: positions (n, 3) float32 metres, headings (n,) float32
     radians, streams (n,) int32 stream indices, offsets (n,) int32 frames, colors
-    (n, 3) float32 0..1."""
+    (n, 3) float32 0..1, characters (n,) int32 character indices."""
 
     positions: np.ndarray
     headings: np.ndarray
     streams: np.ndarray
     offsets: np.ndarray
     colors: np.ndarray
+    characters: np.ndarray
 
     @property
     def count(self) -> int:
@@ -52,9 +66,22 @@ class AgentSet:
         if not sets:
             return AgentSet(np.zeros((0, 3), np.float32), np.zeros(0, np.float32),
                             np.zeros(0, np.int32), np.zeros(0, np.int32),
-                            np.zeros((0, 3), np.float32))
+                            np.zeros((0, 3), np.float32), np.zeros(0, np.int32))
         return AgentSet(*(np.concatenate([getattr(s, f) for s in sets])
-                          for f in ("positions", "headings", "streams", "offsets", "colors")))
+                          for f in ("positions", "headings", "streams", "offsets", "colors",
+                                    "characters")))
+
+
+@dataclass(frozen=True)
+class CharacterStreams:
+    """A character as the placement sees it: its ``name``, its streams' names and
+    weights (in the crowd's order) and its ``weight``, the relative share of agents a
+    source drawing characters by weight gives it."""
+
+    name: str
+    streams: tuple = ()
+    stream_weights: tuple = ()
+    weight: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -64,8 +91,12 @@ class PlacementPolicy:
     heading_mode : ``"FIXED"`` (base heading + ``heading`` radians), ``"ATTRIBUTE"``
         (base heading + per-point ``heading_attribute``) or ``"TARGET"`` (face
         ``target``, a world position (3,), None when not chosen).
-    stream_mode : ``"RANDOM"`` (by the stream weights), ``"ATTRIBUTE"`` (per-point
-        stream index ``stream_attribute``) or ``"FIXED"`` (the stream ``stream_name``).
+    character_mode : ``"WEIGHTS"`` (by the characters' weights), ``"ATTRIBUTE"``
+        (per-point character index ``character_attribute``) or ``"FIXED"`` (the
+        character ``character_name``).
+    stream_mode : among the streams of each agent's character: ``"RANDOM"`` (by their
+        weights), ``"ATTRIBUTE"`` (per-point index among them, ``stream_attribute``)
+        or ``"FIXED"`` (the stream ``stream_name``, which must be the character's).
     offset_mode : ``"UNIFORM"``, ``"NORMAL"`` (``offset_mean``, ``offset_std`` in
         frames; negative: the defaults of :func:`.agents.assign_offsets`) or
         ``"ATTRIBUTE"`` (per-point ``offset_attribute``).
@@ -77,6 +108,9 @@ class PlacementPolicy:
     heading: float = 0.0
     heading_attribute: str = "heading"
     target: tuple | None = None
+    character_mode: str = "WEIGHTS"
+    character_attribute: str = "character"
+    character_name: str = ""
     stream_mode: str = "RANDOM"
     stream_attribute: str = "stream"
     stream_name: str = ""
@@ -96,8 +130,8 @@ def z_angle(matrix: np.ndarray) -> np.ndarray:
 
 
 def place_agents(what: str, positions: np.ndarray, base_heading: np.ndarray,
-                 policy: PlacementPolicy, *, streams, stream_weights, max_offset: int,
-                 seed: int, forward_axis: str = "NEG_Y", attribute=None) -> AgentSet:
+                 policy: PlacementPolicy, *, characters, max_offset: int, seed: int,
+                 forward_axis: str = "NEG_Y", attribute=None) -> AgentSet:
     """The agents of one source's points.
 
     Parameters
@@ -105,7 +139,8 @@ def place_agents(what: str, positions: np.ndarray, base_heading: np.ndarray,
     what : the source in error messages (e.g. ``"agent source 'seats'"``).
     positions : (n, 3) world positions; base_heading : (n,) radians about +Z.
     policy : the source's :class:`PlacementPolicy`.
-    streams : stream names (index = stream id); stream_weights : (S,) weights.
+    characters : sequence of :class:`CharacterStreams`, in the crowd's order (the
+        crowd's streams are theirs, one character after the other).
     max_offset : M. seed : int. forward_axis : key of :data:`FORWARD`.
     attribute : ``attribute(name, kind)`` -> per-point values of the point attribute
         ``name``: kind ``"float"`` (n,), ``"int"`` (n,) or ``"color"`` (n, >= 3);
@@ -114,6 +149,7 @@ def place_agents(what: str, positions: np.ndarray, base_heading: np.ndarray,
     pos = np.asarray(positions, np.float64)
     n = pos.shape[0]
     p = policy
+    characters = tuple(characters)
 
     def values(name, kind):
         if attribute is None:
@@ -121,35 +157,9 @@ def place_agents(what: str, positions: np.ndarray, base_heading: np.ndarray,
                              f"(wanted {name!r})")
         return attribute(name, kind)
 
-    if p.heading_mode == "TARGET":
-        if p.target is None:
-            raise CrowdError(f"{what}: heading faces a target but none is chosen")
-        d = np.asarray(p.target, np.float64)[None, :2] - pos[:, :2]
-        fx, fy = FORWARD[forward_axis]
-        heading = np.arctan2(d[:, 1], d[:, 0]) - np.arctan2(fy, fx)
-    elif p.heading_mode == "ATTRIBUTE":
-        heading = base_heading + values(p.heading_attribute, "float")
-    else:
-        heading = base_heading + p.heading
-    heading = np.mod(heading + np.pi, 2 * np.pi) - np.pi
-
-    if p.stream_mode == "ATTRIBUTE":
-        st = values(p.stream_attribute, "int").astype(np.int64)
-        bad = np.flatnonzero((st < 0) | (st >= len(streams)))
-        if bad.size:
-            raise CrowdError(f"{what}: attribute {p.stream_attribute!r} gives stream "
-                             f"{int(st[bad[0]])} at point {int(bad[0])}; streams are "
-                             f"0..{len(streams) - 1} ({list(streams)})")
-    elif p.stream_mode == "FIXED":
-        if p.stream_name not in streams:
-            raise CrowdError(f"{what}: unknown stream {p.stream_name!r} "
-                             f"(streams: {list(streams)})")
-        st = np.full(n, list(streams).index(p.stream_name))
-    else:
-        try:
-            st = assign_streams(n, len(streams), stream_weights, seed)
-        except CrowdError as e:
-            raise CrowdError(f"{what}: {e}") from None
+    heading = _headings(what, pos, base_heading, p, forward_axis, values)
+    char = _characters(what, n, p, characters, seed, values)
+    st = _streams(what, n, p, characters, char, seed, values)
 
     if p.offset_mode == "ATTRIBUTE":
         off = values(p.offset_attribute, "int")
@@ -171,4 +181,91 @@ def place_agents(what: str, positions: np.ndarray, base_heading: np.ndarray,
     col = np.clip(col, 0.0, 1.0)
     return AgentSet(pos.astype(np.float32), np.asarray(heading).astype(np.float32),
                     np.asarray(st, np.int32), np.asarray(off, np.int32),
-                    np.asarray(col, np.float32))
+                    np.asarray(col, np.float32), char)
+
+
+def _headings(what, pos, base_heading, p, forward_axis, values) -> np.ndarray:
+    if p.heading_mode == "TARGET":
+        if p.target is None:
+            raise CrowdError(f"{what}: heading faces a target but none is chosen")
+        d = np.asarray(p.target, np.float64)[None, :2] - pos[:, :2]
+        fx, fy = FORWARD[forward_axis]
+        heading = np.arctan2(d[:, 1], d[:, 0]) - np.arctan2(fy, fx)
+    elif p.heading_mode == "ATTRIBUTE":
+        heading = base_heading + values(p.heading_attribute, "float")
+    else:
+        heading = base_heading + p.heading
+    return np.mod(heading + np.pi, 2 * np.pi) - np.pi
+
+
+def _characters(what, n, p, characters, seed, values) -> np.ndarray:
+    """(n,) int32 character index per point."""
+    names = [c.name for c in characters]
+    if not names:
+        raise CrowdError(f"{what}: there are no characters to place")
+    if p.character_mode == "ATTRIBUTE":
+        ch = np.asarray(values(p.character_attribute, "int")).astype(np.int64)
+        bad = np.flatnonzero((ch < 0) | (ch >= len(names)))
+        if bad.size:
+            raise CrowdError(f"{what}: attribute {p.character_attribute!r} gives character "
+                             f"{int(ch[bad[0]])} at point {int(bad[0])}; characters are "
+                             f"0..{len(names) - 1} ({names})")
+        return ch.astype(np.int32)
+    if p.character_mode == "FIXED":
+        if p.character_name not in names:
+            raise CrowdError(f"{what}: unknown character {p.character_name!r} "
+                             f"(characters: {names})")
+        return np.full(n, names.index(p.character_name), np.int32)
+    w = np.array([c.weight for c in characters], np.float64)
+    if not np.isfinite(w).all() or (w < 0).any() or w.sum() <= 0:
+        raise CrowdError(f"{what}: character weights must be non-negative with a positive "
+                         f"sum ({dict(zip(names, w.tolist()))})")
+    rng = np.random.default_rng(seed + _CHARACTER_DRAW)
+    return rng.choice(len(names), size=n, p=w / w.sum()).astype(np.int32)
+
+
+def _streams(what, n, p, characters, char, seed, values) -> np.ndarray:
+    """(n,) int32 stream index per point in the crowd's stream list: each point's
+    stream among its character's streams, by the policy's stream mode."""
+    counts = np.array([len(c.streams) for c in characters], np.int64)
+    first = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    present = np.unique(char).tolist()
+    for k in present:
+        if counts[k] == 0:
+            raise CrowdError(f"{what}: character {characters[k].name!r} has no streams "
+                             "(its agents need one to play)")
+    if p.stream_mode == "ATTRIBUTE":
+        local = np.asarray(values(p.stream_attribute, "int")).astype(np.int64)
+        bad = np.flatnonzero((local < 0) | (local >= counts[char]))
+        if bad.size:
+            i = int(bad[0])
+            c = characters[char[i]]
+            raise CrowdError(f"{what}: attribute {p.stream_attribute!r} gives stream "
+                             f"{int(local[i])} at point {i}; character {c.name!r} has "
+                             f"streams 0..{len(c.streams) - 1} ({list(c.streams)})")
+        return (first[char] + local).astype(np.int32)
+    local = np.zeros(n, np.int64)
+    for k in present:
+        c, mine = characters[k], char == k
+        if p.stream_mode == "FIXED":
+            local[mine] = _named_stream(what, p.stream_name, c, characters)
+            continue
+        try:
+            local[mine] = assign_streams(int(mine.sum()), len(c.streams),
+                                         c.stream_weights or None, seed + k * CHARACTER_SEED)
+        except CrowdError as e:
+            raise CrowdError(f"{what}: character {c.name!r}: {e}") from None
+    return (first[char] + local).astype(np.int32)
+
+
+def _named_stream(what, name, character, characters) -> int:
+    """Index of stream ``name`` among ``character``'s streams, or a CrowdError saying
+    whose stream it is."""
+    if name in character.streams:
+        return list(character.streams).index(name)
+    owners = [c.name for c in characters if name in c.streams]
+    has = f"{character.name!r} has {list(character.streams)}"
+    if not owners:
+        raise CrowdError(f"{what}: unknown stream {name!r} (character {has})")
+    raise CrowdError(f"{what}: stream {name!r} is not a stream of character "
+                     f"{character.name!r} (it is a stream of {owners[0]!r}; {has})")

@@ -32,14 +32,27 @@ def reset():
     return scene
 
 
-def make_armature(name="Rig"):
-    """A five-bone armature with a bone collection "Arms" (arm.L, arm.R)."""
+#: a second, smaller character: a seven-bone rig of other proportions (no "Arms")
+KID_BONES = (
+    ("root", None, (0, 0, 0), (0, 0, 0.6)),
+    ("spine", "root", (0, 0, 0.6), (0, 0, 0.9)),
+    ("neck", "spine", (0, 0, 0.9), (0, 0, 1.0)),
+    ("head", "neck", (0, 0, 1.0), (0, 0, 1.2)),
+    ("arm.L", "spine", (0.08, 0, 0.85), (0.4, 0, 0.8)),
+    ("hand.L", "arm.L", (0.4, 0, 0.8), (0.5, 0, 0.78)),
+    ("arm.R", "spine", (-0.08, 0, 0.85), (-0.4, 0, 0.8)),
+)
+
+
+def make_armature(name="Rig", bones=BONES):
+    """An armature of ``bones`` (default: five) with a bone collection "Arms" of its
+    bones named arm.L, arm.R."""
     data = bpy.data.armatures.new(name)
     obj = bpy.data.objects.new(name, data)
     bpy.context.scene.collection.objects.link(obj)
     bpy.context.view_layer.objects.active = obj
     bpy.ops.object.mode_set(mode="EDIT")
-    for bname, parent, head, tail in BONES:
+    for bname, parent, head, tail in bones:
         eb = data.edit_bones.new(bname)
         eb.head, eb.tail = head, tail
         if parent:
@@ -63,7 +76,7 @@ def make_action(rig, name, seed=0, frames=(1, 13, 25), amplitude=0.5, markers=()
     act = bpy.data.actions.new(name)
     rig.animation_data_create()
     rig.animation_data.action = act
-    names = [b[0] for b in BONES] if bones is None else list(bones)
+    names = [pb.name for pb in rig.pose.bones] if bones is None else list(bones)
     first = {}
     for i, f in enumerate(frames):
         for bname in names:
@@ -90,19 +103,20 @@ def make_action(rig, name, seed=0, frames=(1, 13, 25), amplitude=0.5, markers=()
     return act
 
 
-def make_proxy(rig, name="Body"):
-    """A box per bone, each box's vertices weighted fully to its bone, deformed by
-    an Armature modifier."""
+def make_proxy(rig, name="Body", width=0.06):
+    """A box per bone (``width`` metres half-wide), each box's vertices weighted fully
+    to its bone, deformed by an Armature modifier."""
     verts, faces, groups = [], [], []
     cube = np.array([(x, y, z) for x in (-1, 1) for y in (-1, 1) for z in (0, 1)], float)
     quads = ((0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4),
              (1, 5, 7, 3))
-    for bname, _parent, head, tail in BONES:
+    bones = [(b.name, b.head_local, b.tail_local) for b in rig.data.bones]
+    for bname, head, tail in bones:
         h, t = np.array(head, float), np.array(tail, float)
         base = len(verts)
         for c in cube:
             p = h + (t - h) * c[2]
-            verts.append(tuple(p + 0.06 * np.array([c[0], c[1], 0.0])))
+            verts.append(tuple(p + width * np.array([c[0], c[1], 0.0])))
         faces += [tuple(base + i for i in q) for q in quads]
         groups.append((bname, list(range(base, base + 8))))
     me = bpy.data.meshes.new(name)
@@ -130,9 +144,27 @@ def make_seats(nx=10, ny=8, name="Seats", spacing=1.0):
     return obj
 
 
-def add_stream(settings, name, action, pool="streams"):
-    """A stream (or unique) with one action node."""
-    anim = getattr(settings, pool).add()
+def add_character(settings, rig, body=None, name=None, weight=1.0):
+    """A character of ``scene.crowd`` (named after the rig unless ``name``)."""
+    c = settings.characters.add()
+    c.name = name or rig.name
+    c.armature, c.body, c.weight = rig, body, weight
+    return c
+
+
+def add_lod(character, mesh):
+    """A LOD mesh of a character (levels 1, 2 in the order added)."""
+    lod = character.lods.add()
+    lod.name, lod.object = f"LOD {len(character.lods)}", mesh
+    return lod
+
+
+def add_stream(owner, name, action, pool="streams"):
+    """A stream (or unique) with one action node, of a character (or, given
+    ``scene.crowd``, of its first character)."""
+    if not hasattr(owner, "streams"):
+        owner = owner.characters[0]
+    anim = getattr(owner, pool).add()
     anim.name = name
     node = anim.nodes.add()
     node.name = "clip"

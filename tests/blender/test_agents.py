@@ -21,6 +21,7 @@ from mathutils import Matrix, Vector  # noqa: E402
 
 from crowd_addon.blender.agents import agents_from_scene, agents_from_source  # noqa: E402
 from crowd_addon.core.errors import CrowdError  # noqa: E402
+from crowd_addon.core.placement import CharacterStreams  # noqa: E402
 
 STREAMS = ["idle", "cheer", "sit"]
 
@@ -46,9 +47,9 @@ def _source(scene, obj, **props):
 
 
 def _agents(scene, src, weights=(1, 1, 1), m=30, seed=4, forward="NEG_Y"):
-    return agents_from_source(src, bpy.context.evaluated_depsgraph_get(), streams=STREAMS,
-                              stream_weights=list(weights), max_offset=m, seed=seed,
-                              forward_axis=forward)
+    cast = (CharacterStreams("fan", tuple(STREAMS), tuple(weights)),)
+    return agents_from_source(src, bpy.context.evaluated_depsgraph_get(), characters=cast,
+                              max_offset=m, seed=seed, forward_axis=forward)
 
 
 def _world_vertices(obj):
@@ -197,9 +198,13 @@ def test_errors_name_the_object_of_an_unnamed_source(scene):
     scene.crowd.agent_sources.clear()
     _source(scene, seats)
     _source(scene, seats, name="", mode="VERTEX_GROUP", vertex_group="back")
+    rig = cs.make_armature()
+    for name in STREAMS:
+        cs.add_stream(cs.add_character(scene.crowd, rig) if name == STREAMS[0] else
+                      scene.crowd, name, None)
     with pytest.raises(CrowdError, match=r"^agent source 2 \(object 'Seats'\): object 'Seats' "
                                          r"has no vertex group 'back'"):
-        agents_from_scene(scene, bpy.context.evaluated_depsgraph_get(), STREAMS, [1, 1, 1])
+        agents_from_scene(scene, bpy.context.evaluated_depsgraph_get())
     with pytest.raises(CrowdError, match=r"^agent source 'seats' \(object 'Seats'\): object "
                                          r"'Seats' has no vertex group 'back'"):
         _agents(scene, _source(scene, seats, mode="VERTEX_GROUP", vertex_group="back"))
@@ -222,3 +227,30 @@ def test_a_stadium_of_65k_seats(scene):
     b = _agents(scene, src)
     assert b.count == 32768
     assert math.isfinite(float(a.headings.sum()))
+
+
+def test_agents_from_scene_tells_which_agents_each_source_made(scene):
+    """``placed``: per enabled source, its agent id range and the vertex each agent
+    stands on (None for instances), what cue selections read."""
+    rig = cs.make_armature()
+    cs.add_stream(cs.add_character(scene.crowd, rig), "idle", None)
+    seats = cs.make_seats(6, 6)
+    seats.vertex_groups.new(name="front").add([3, 8, 20, 33], 1.0, "REPLACE")
+    grid = cs.make_seats(3, 2, name="Stand")
+    grid.instance_type = "VERTS"
+    cs.make_seats(1, 1, name="Seat").parent = grid
+    bpy.context.view_layer.update()
+    _source(scene, seats, name="front", mode="VERTEX_GROUP", vertex_group="front")
+    _source(scene, seats, name="off", enabled=False)
+    _source(scene, grid, name="stand", mode="INSTANCES")
+    _source(scene, seats, name="all")
+    agents, placed = agents_from_scene(scene, bpy.context.evaluated_depsgraph_get())
+    assert agents.count == 4 + 6 + 36
+    assert [(p.index, p.name, p.object_name, p.first, p.count) for p in placed] == [
+        (0, "front", "Seats", 0, 4), (2, "stand", "Stand", 4, 6), (3, "all", "Seats", 10, 36)]
+    np.testing.assert_array_equal(placed[0].rows, [3, 8, 20, 33])
+    assert placed[0].rows.dtype == np.int64 and placed[1].rows is None
+    np.testing.assert_array_equal(placed[2].rows, np.arange(36))
+    world = _world_vertices(seats)
+    np.testing.assert_allclose(agents.positions[placed[0].first:4], world[placed[0].rows],
+                               atol=1e-6)

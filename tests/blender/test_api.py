@@ -145,7 +145,8 @@ def blender_crowd():
         walk = cs.make_action(rig, "walk", markers=[("step", 7)])
         wave = cs.make_action(rig, "wave", seed=2, bones=["arm.L"])
         s = scene.crowd
-        s.armature, s.max_offset = rig, 6
+        s.max_offset = 6
+        cs.add_character(s, rig)
         cs.add_stream(s, "walk", walk)
         cs.add_stream(s, "wave", wave, pool="uniques")
         src = s.agent_sources.add()

@@ -46,8 +46,8 @@ def scene():
     rig = cs.make_armature()
     walk = cs.make_action(rig, "walk", seed=1, amplitude=1.0)
     s = scene.crowd
-    s.armature, s.proxy_mesh, s.max_offset, s.seed = rig, cs.make_proxy(rig), 8, 3
-    cs.add_stream(s, "walk", walk)
+    s.max_offset, s.seed = 8, 3
+    cs.add_stream(cs.add_character(s, rig, cs.make_proxy(rig)), "walk", walk)
     src = s.agent_sources.add()
     src.name, src.object = "seats", cs.make_seats(*SEATS, spacing=SPACING)
     return scene
@@ -132,11 +132,11 @@ def _break(scene, what, tmp_path):
     kw = {"filepath": str(tmp_path / "bad.usdc")}
     s = scene.crowd
     if what == "no armature":
-        s.armature = None
+        s.characters[0].armature = None
     elif what == "no action":
-        s.streams[0].nodes[0].action = None
+        s.characters[0].streams[0].nodes[0].action = None
     elif what == "no streams":
-        s.streams.remove(0)
+        s.characters[0].streams.remove(0)
     elif what == "empty range":
         kw.update(use_scene_range=False, frame_start=9, frame_end=4)
     elif what == "before start":

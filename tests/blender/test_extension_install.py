@@ -50,11 +50,11 @@ SCRIPT = textwrap.dedent("""
         s = scene.crowd
         if not cycle:                      # the scene data outlives a disable/enable
             rig = cs.make_armature()
-            s.armature = rig
+            cs.add_character(s, rig)
             cs.add_stream(s, "walk", cs.make_action(rig, "walk"))
             src = s.agent_sources.add()
             src.object = cs.make_seats(4, 4)
-        enabled["streams"] = len(s.streams)
+        enabled["streams"] = len(s.characters[0].streams)
         baked = sorted(bpy.ops.crowd.bake())
         preview = sys.modules[name + ".crowd_addon.blender.preview"]
         handle = preview.draw_handle()

@@ -38,8 +38,8 @@ def _build_scene():
     rig = cs.make_armature()
     walk = cs.make_action(rig, "walk", seed=1, markers=[("step", 7)], amplitude=1.0)
     s = scene.crowd
-    s.armature, s.proxy_mesh, s.max_offset, s.seed = rig, cs.make_proxy(rig), 8, 3
-    cs.add_stream(s, "walk", walk)
+    s.max_offset, s.seed = 8, 3
+    cs.add_stream(cs.add_character(s, rig, cs.make_proxy(rig)), "walk", walk)
     src = s.agent_sources.add()
     src.name, src.object = "seats", cs.make_seats(6, 5, spacing=1.5)
     src.heading_mode, src.heading = "FIXED", 0.4
@@ -189,7 +189,7 @@ def test_deleting_the_armature_or_an_action_pauses_with_a_message(running):
     assert "armature 'Rig' was deleted" in pv.status()
     # the undo handler resumes once the scene has what the crowd was built from
     new_rig = cs.make_armature("Rig")
-    scene.crowd.armature = new_rig
+    scene.crowd.characters["Rig"].armature = new_rig
     preview.on_undo(scene)
     assert not pv.paused and pv.crowd.frame == 6
     bpy.data.actions.remove(walk)
@@ -235,7 +235,7 @@ def test_generate_agents_updates_the_running_crowd_without_a_bake(running):
 def test_settings_survive_save_and_reload_and_the_preview_restarts(running, tmp_path):
     scene, _rig, _walk, pv = running
     s = scene.crowd
-    anim = s.streams[0]
+    anim = s.characters[0].streams[0]
     cs.add_node(anim, "sm", "STATE_MACHINE", [("calm", "clip")], initial_state="calm")
     tr = anim.nodes["sm"].transitions.add()
     tr.target, tr.trigger = "calm", "reset"
@@ -249,11 +249,11 @@ def test_settings_survive_save_and_reload_and_the_preview_restarts(running, tmp_
     bpy.ops.wm.open_mainfile(filepath=path)
     scene = bpy.context.scene
     assert settings_fingerprint(scene.crowd) == before
-    assert scene.crowd.streams[0].nodes["sm"].transitions[0].trigger == "reset"
+    assert scene.crowd.characters[0].streams[0].nodes["sm"].transitions[0].trigger == "reset"
     again = preview.get(scene)                                  # load_post rebuilt it
     assert again is not None and again.crowd.agents.count == agents and preview.draw_handle()
     # a file whose armature is gone loads with the preview stopped and the reason
-    bpy.data.objects.remove(scene.crowd.armature)
+    bpy.data.objects.remove(scene.crowd.characters[0].armature)
     bpy.ops.wm.save_as_mainfile(filepath=path)
     bpy.ops.wm.open_mainfile(filepath=path)
     scene = bpy.context.scene
@@ -308,15 +308,19 @@ class _OpProps:
 def test_panels_draw_existing_properties_and_operators(running):
     from crowd_addon.blender import panels
     scene, rig, _walk, pv = running
-    anim = scene.crowd.streams[0]
+    anim = scene.crowd.characters[0].streams[0]
     cs.add_node(anim, "sm", "STATE_MACHINE", [("calm", "clip")])
     anim.nodes["sm"].transitions.add()
     cs.add_node(anim, "bs", "BLEND_SPACE", ["clip"])
     cs.add_node(anim, "lay", "LAYER", ["clip", "clip"], layer_mode="ADDITIVE",
                 mask_source="COLLECTION")
+    cs.add_lod(scene.crowd.characters[0], None)
+    src = scene.crowd.agent_sources[0]
     ctx = type("Ctx", (), {"scene": scene})()
     seen = []
-    for kind in ("sm", "bs", "lay", "clip"):
+    for kind, character, stream in (("sm", "FIXED", "FIXED"), ("bs", "ATTRIBUTE", "ATTRIBUTE"),
+                                    ("lay", "WEIGHTS", "FIXED"), ("clip", "FIXED", "RANDOM")):
+        src.character_mode, src.stream_mode = character, stream
         anim.active_node_index = anim.nodes.find(kind)
         for cls in panels.CLASSES:
             if issubclass(cls, bpy.types.Panel):
@@ -324,6 +328,7 @@ def test_panels_draw_existing_properties_and_operators(running):
     labels = [t for k, t in seen if k == "label"]
     assert any("30 agents, 1 streams" in t for t in labels)
     assert ("operator", "crowd.bake") in seen and ("prop", "transition_slots") in seen
+    assert ("prop", "body") in seen and ("prop", "character_attribute") in seen
 
 
 def test_blender_still_draws_right_after_the_crowd(running):

@@ -43,7 +43,7 @@ def rig_scene():
             "wave": cs.make_action(rig, "wave", seed=2, bones=["arm.L", "arm.R"],
                                    amplitude=1.2),
             "idle": cs.make_action(rig, "idle", seed=3, frames=(1, 9, 17))}
-    scene.crowd.armature = rig
+    cs.add_character(scene.crowd, rig)
     scene.crowd.max_offset = 8
     return scene, rig, acts
 
@@ -196,7 +196,7 @@ def test_config_carries_settings_mesh_uniques_and_agents(rig_scene):
     s = scene.crowd
     s.max_offset, s.transition_slots, s.when_full, s.seed = 12, 5, "CUT", 7
     s.lod_near, s.lod_far = 10.0, 40.0
-    s.proxy_mesh = cs.make_proxy(rig)
+    s.characters[0].body = cs.make_proxy(rig)
     cs.add_stream(s, "walk", acts["walk"])
     cs.add_stream(s, "wave", acts["wave"], pool="uniques")
     src = s.agent_sources.add()
@@ -219,7 +219,9 @@ def test_config_carries_settings_mesh_uniques_and_agents(rig_scene):
 
 
 @pytest.mark.parametrize("setup, message", [
-    (lambda s, a: setattr(s, "armature", None), r"scene '.*': no armature chosen"),
+    (lambda s, a: setattr(s.characters[0], "armature", None),
+     r"^character 'Rig': no armature chosen"),
+    (lambda s, a: s.characters.clear(), r"scene '.*': no characters"),
     (lambda s, a: cs.add_stream(s, "walk", None), r"stream 'walk': node 'clip': no action"),
     (lambda s, a: _root(cs.add_stream(s, "w", a["walk"]), "l", cs.add_node, "LAYER",
                         ["clip", "clip"], mask_source="COLLECTION", mask_collection="Legs"),
@@ -243,7 +245,7 @@ def test_bad_scenes_name_what_is_at_fault(rig_scene, setup, message):
 def test_far_cards_can_be_turned_off(rig_scene):
     scene, rig, acts = rig_scene
     s = scene.crowd
-    s.proxy_mesh = cs.make_proxy(rig)
+    s.characters[0].body = cs.make_proxy(rig)
     cs.add_stream(s, "walk", acts["walk"])
     s.lod_cards, s.lod_card = False, 10.0          # ignored when off
     cfg = scene_config.config_from_scene(scene)
@@ -331,7 +333,7 @@ def test_bake_operator_reports_bad_actions_and_keeps_the_running_crowd(rig_scene
     bad = cs.make_action(other, "flap", bones=["wing"])
     for action, message in ((bad, r"action 'flap' animates bones .* lacks: \['wing'\]"),
                             (alien, r"action 'alien'")):
-        s.streams[0].nodes[0].action = action
+        s.characters[0].streams[0].nodes[0].action = action
         with pytest.raises(RuntimeError, match=message):
             bpy.ops.crowd.bake()
         assert preview.get(scene).crowd is running
@@ -383,7 +385,7 @@ def test_the_modal_bake_steps_on_timer_events_and_cancels_on_esc(rig_scene):
     results = [op.modal(bpy.context, timer) for _ in range(5)]
     assert results == [{"RUNNING_MODAL"}] * 4 + [{"FINISHED"}]
     assert preview.get(scene).crowd.streams.count == 2 and "2 clips" in op.reports[-1][1]
-    scene.crowd.streams[1].nodes[0].action = None
+    scene.crowd.characters[0].streams[1].nodes[0].action = None
     op = _FakeOperator(scene)
     assert op.modal(bpy.context, timer) == {"CANCELLED"}
     assert op.reports[-1] == ({"ERROR"}, "stream 'idle': node 'clip': no action chosen")

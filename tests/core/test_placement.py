@@ -1,15 +1,19 @@
-"""Agent placement policy on plain arrays (crowd_addon.core.placement): seeded offsets
-and streams, colours, headings, per-point values. (Reading the points and attributes
-from Blender geometry is tested in tests/blender/test_agents.py.)"""
+"""Agent placement policy on plain arrays (crowd_addon.core.placement): seeded offsets,
+characters and streams, colours, headings, per-point values. (Reading the points and
+attributes from Blender geometry is tested in tests/blender/test_agents.py.)"""
 
 import numpy as np
 import pytest
 
 from crowd_addon.core.errors import CrowdError
-from crowd_addon.core.placement import (SOURCE_SEED, AgentSet, PlacementPolicy,
-                                        place_agents, z_angle)
+from crowd_addon.core.placement import (CHARACTER_SEED, SOURCE_SEED, AgentSet,
+                                        CharacterStreams, PlacementPolicy, place_agents,
+                                        z_angle)
 
 STREAMS = ["idle", "cheer", "sit"]
+#: two characters: a fan with three streams and a kid with two
+CAST = (CharacterStreams("fan", ("idle", "cheer", "sit"), (1.0, 1.0, 1.0), weight=3.0),
+        CharacterStreams("kid", ("jump", "run"), (1.0, 3.0), weight=1.0))
 
 
 def grid(nx, ny):
@@ -19,11 +23,12 @@ def grid(nx, ny):
 
 
 def place(policy=PlacementPolicy(), points=grid(20, 20), weights=(1, 1, 1), m=30, seed=4,
-          forward="NEG_Y", attribute=None):
+          forward="NEG_Y", attribute=None, characters=None):
     pos, heading = points
-    return place_agents("agent source 'seats'", pos, heading, policy, streams=STREAMS,
-                        stream_weights=list(weights), max_offset=m, seed=seed,
-                        forward_axis=forward, attribute=attribute)
+    cast = (CharacterStreams("fan", tuple(STREAMS), tuple(weights)),) if characters is None \
+        else characters
+    return place_agents("agent source 'seats'", pos, heading, policy, characters=cast,
+                        max_offset=m, seed=seed, forward_axis=forward, attribute=attribute)
 
 
 def test_offsets_are_seeded_and_within_range():
@@ -48,7 +53,8 @@ def test_streams_by_weight_and_by_name():
     assert (place(PlacementPolicy(stream_mode="FIXED", stream_name="sit")).streams == 2).all()
     with pytest.raises(CrowdError, match="agent source 'seats': unknown stream 'dance'"):
         place(PlacementPolicy(stream_mode="FIXED", stream_name="dance"))
-    with pytest.raises(CrowdError, match="agent source 'seats': agents: stream weights"):
+    with pytest.raises(CrowdError, match="agent source 'seats': character 'fan': agents: "
+                                         "stream weights"):
         place(weights=(0, 0, 0))
 
 
@@ -101,7 +107,7 @@ def test_per_point_values_come_from_the_attribute_callback():
     np.testing.assert_allclose(a.colors, 0.25)
     values["stream"] = np.array([0] * 5 + [3] + [0] * 6)
     with pytest.raises(CrowdError, match=r"attribute 'stream' gives stream 3 at point 5; "
-                                         r"streams are 0..2"):
+                                         r"character 'fan' has streams 0..2"):
         place(PlacementPolicy(stream_mode="ATTRIBUTE"), (pos, base), attribute=attribute)
     values["offset"] = np.array([0] * 7 + [30] + [0] * 4)
     with pytest.raises(CrowdError, match=r"agent source 'seats': point 7: offset 30 is "
@@ -120,3 +126,77 @@ def test_agent_sets_concatenate_and_z_angles():
     turn = np.eye(4)
     turn[:2, :2] = [[np.cos(0.7), -np.sin(0.7)], [np.sin(0.7), np.cos(0.7)]]
     assert z_angle(turn) == pytest.approx(0.7)
+
+
+def test_characters_by_weight_are_seeded_and_keep_to_their_streams():
+    a = place(points=grid(40, 40), characters=CAST)
+    b = place(points=grid(40, 40), characters=CAST)
+    np.testing.assert_array_equal(a.characters, b.characters)
+    np.testing.assert_array_equal(a.streams, b.streams)
+    assert a.characters.dtype == np.int32 and set(np.unique(a.characters)) == {0, 1}
+    assert 0.72 < (a.characters == 0).mean() < 0.78                # weights 3 : 1
+    # the crowd's streams are the fan's (0..2) then the kid's (3, 4)
+    fan, kid = a.characters == 0, a.characters == 1
+    assert set(np.unique(a.streams[fan])) == {0, 1, 2}
+    assert set(np.unique(a.streams[kid])) == {3, 4}
+    assert 0.7 < (a.streams[kid] == 4).mean() < 0.8                 # the kid's weights 1 : 3
+    other = place(points=grid(40, 40), characters=CAST, seed=5)
+    assert (other.characters != a.characters).any()
+    # one character draws its streams as a crowd without characters did
+    solo = place(points=grid(40, 40))
+    assert (solo.characters == 0).all()
+    np.testing.assert_array_equal(
+        solo.streams, np.random.default_rng(4).choice(3, size=1600, p=[1 / 3] * 3))
+    assert CHARACTER_SEED != SOURCE_SEED
+
+
+def test_characters_by_attribute_or_by_name():
+    pos, base = grid(4, 3)
+    values = {"character": np.arange(12) % 2, "stream": np.arange(12) % 2}
+    attribute = (lambda name, kind: values[name])
+    a = place(PlacementPolicy(character_mode="ATTRIBUTE", stream_mode="ATTRIBUTE"),
+              (pos, base), attribute=attribute, characters=CAST)
+    np.testing.assert_array_equal(a.characters, values["character"])
+    # stream index within the character: fan's stream k is k, kid's is 3 + k
+    np.testing.assert_array_equal(a.streams, values["stream"] + 3 * values["character"])
+    kid = place(PlacementPolicy(character_mode="FIXED", character_name="kid",
+                                stream_mode="FIXED", stream_name="run"), characters=CAST)
+    assert (kid.characters == 1).all() and (kid.streams == 4).all()
+    values["character"] = np.array([0] * 9 + [2] + [0] * 2)
+    with pytest.raises(CrowdError, match=r"agent source 'seats': attribute 'character' gives "
+                                         r"character 2 at point 9; characters are 0..1 "
+                                         r"\(\['fan', 'kid'\]\)"):
+        place(PlacementPolicy(character_mode="ATTRIBUTE"), (pos, base), attribute=attribute,
+              characters=CAST)
+    values["character"] = np.ones(12, int)
+    values["stream"] = np.array([0] * 4 + [2] + [0] * 7)
+    with pytest.raises(CrowdError, match=r"attribute 'stream' gives stream 2 at point 4; "
+                                         r"character 'kid' has streams 0..1 "
+                                         r"\(\['jump', 'run'\]\)"):
+        place(PlacementPolicy(character_mode="ATTRIBUTE", stream_mode="ATTRIBUTE"),
+              (pos, base), attribute=attribute, characters=CAST)
+
+
+def test_a_character_or_stream_that_does_not_fit_is_named():
+    with pytest.raises(CrowdError, match=r"agent source 'seats': unknown character 'dog' "
+                                         r"\(characters: \['fan', 'kid'\]\)"):
+        place(PlacementPolicy(character_mode="FIXED", character_name="dog"), characters=CAST)
+    with pytest.raises(CrowdError, match=r"agent source 'seats': stream 'cheer' is not a "
+                                         r"stream of character 'kid' \(it is a stream of "
+                                         r"'fan'; 'kid' has \['jump', 'run'\]\)"):
+        place(PlacementPolicy(character_mode="FIXED", character_name="kid",
+                              stream_mode="FIXED", stream_name="cheer"), characters=CAST)
+    with pytest.raises(CrowdError, match="stream 'cheer' is not a stream of character 'kid'"):
+        place(PlacementPolicy(stream_mode="FIXED", stream_name="cheer"), characters=CAST)
+    with pytest.raises(CrowdError, match=r"character weights must be non-negative with a "
+                                         r"positive sum \(\{'fan': 0.0, 'kid': 0.0\}\)"):
+        place(characters=tuple(CharacterStreams(c.name, c.streams, c.stream_weights, 0.0)
+                               for c in CAST))
+    mute = (CAST[0], CharacterStreams("ghost", (), (), 1.0))
+    with pytest.raises(CrowdError, match="character 'ghost' has no streams"):
+        place(characters=mute)
+    # a character without streams is fine as long as no agent is it
+    assert (place(PlacementPolicy(character_mode="FIXED", character_name="fan"),
+                  characters=mute).characters == 0).all()
+    with pytest.raises(CrowdError, match="there are no characters"):
+        place(characters=())
