@@ -194,13 +194,18 @@ _COLLECTIONS = (
     ("characters", "Characters", ""), ("lods", "LODs", ""), ("streams", "Streams", ""),
     ("uniques", "Uniques", ""), ("nodes", "Nodes", ""), ("inputs", "Inputs", ""),
     ("transitions", "Transitions", ""), ("agent_sources", "Agent Sources", ""),
+    ("cues", "Cues", ""), ("reactions", "Reactions", ""), ("parameters", "Parameters", ""),
 )
 _INDEX = {"characters": "active_character_index", "lods": "active_lod_index",
           "streams": "active_stream_index", "uniques": "active_unique_index",
           "nodes": "active_node_index", "inputs": "active_input_index",
-          "transitions": "active_transition_index", "agent_sources": "active_source_index"}
+          "transitions": "active_transition_index", "agent_sources": "active_source_index",
+          "cues": "active_cue_index", "reactions": "active_reaction_index",
+          "parameters": "active_parameter_index"}
 #: lists held by ``scene.crowd`` (or a struct of it): collection -> its owner
-_SETTINGS_LISTS = {"characters": lambda s: s, "agent_sources": lambda s: s}
+_SETTINGS_LISTS = {"characters": lambda s: s, "agent_sources": lambda s: s,
+                   "cues": lambda s: s.show, "reactions": lambda s: s.show,
+                   "parameters": lambda s: s.show}
 #: lists held by the active character
 _CHARACTER_LISTS = ("lods", "streams", "uniques")
 
@@ -301,6 +306,10 @@ class CROWD_OT_item_add(_ListOperator, bpy.types.Operator):
             obj = context.active_object
             rigs = {c.armature for c in s.characters}
             item.object = obj if obj is not None and obj not in rigs else None
+        elif self.collection in ("cues", "reactions", "parameters"):
+            item.name = _unique_name(items, self.collection[:-1].title())
+            if self.collection == "cues":
+                item.frame = context.scene.frame_current
         setattr(owner, index, len(items) - 1)
         return {"FINISHED"}
 

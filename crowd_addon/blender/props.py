@@ -25,6 +25,7 @@ from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProp
 from bpy.types import PropertyGroup
 
 from ..core import controller_graph
+from . import show_props
 from ..core.clip_sampling import MAX_SAMPLES_PER_FRAME
 
 __all__ = ["CLASSES", "NODE_KINDS", "settings_fingerprint", "CROWD_PG_character"]
@@ -249,13 +250,16 @@ class CROWD_PG_settings(PropertyGroup):
                             description="Distance from which agents are drawn as "
                                         "cards, " + _LOD_VIEW)
     agent_sources: CollectionProperty(type=CROWD_PG_agent_source)
+    show: PointerProperty(type=show_props.CROWD_PG_show,
+                          description="Cues, reactions and animated parameters "
+                                      "(docs/show.md)")
     active_source_index: IntProperty()
     preview_enabled: BoolProperty(
         name="Preview", default=False, options=set(),
         description="Whether the viewport preview runs (restarted after a file load)")
 
 
-CLASSES = (CROWD_PG_input, CROWD_PG_state_transition, CROWD_PG_node, CROWD_PG_animation,
+CLASSES = show_props.CLASSES + (CROWD_PG_input, CROWD_PG_state_transition, CROWD_PG_node, CROWD_PG_animation,
            CROWD_PG_lod, CROWD_PG_character, CROWD_PG_agent_source, CROWD_PG_settings)
 
 
@@ -283,10 +287,13 @@ def _values(struct, skip):
 
 _UI_ONLY = {"active_character_index", "active_lod_index", "active_stream_index",
             "active_unique_index", "active_source_index", "active_node_index",
-            "active_input_index", "active_transition_index", "preview_enabled"}
+            "active_input_index", "active_transition_index", "preview_enabled",
+            "active_cue_index", "active_reaction_index", "active_parameter_index"}
 
 
 def settings_fingerprint(settings) -> int:
     """Hash of everything in ``scene.crowd`` a built crowd depends on (UI list indices
     and the preview switch excluded); equal settings give equal fingerprints."""
-    return hash(_values(settings, _UI_ONLY))
+    from .show_data import show_fingerprint
+    return hash((_values(settings, _UI_ONLY | show_props.ANIMATED),
+                 show_fingerprint(settings.id_data)))

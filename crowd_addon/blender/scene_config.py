@@ -242,6 +242,7 @@ def config_steps(scene, depsgraph=None, notes=None):
     (``BakeResult.notes``) are appended to the list ``notes`` when one is given."""
     from . import agents as agent_mod
     from .armature import skeleton_from_armature
+    from .show_data import show_from_scene
 
     s = _settings(scene)
     chars = _characters(scene, s)
@@ -285,12 +286,7 @@ def config_steps(scene, depsgraph=None, notes=None):
         cfg.add_agents(agents.count, streams=agents.streams, offsets=agents.offsets,
                        positions=agents.positions, headings=agents.headings,
                        colors=agents.colors)
-    try:
-        from .show_data import show_from_scene
-    except ImportError:             # the show's scene data is not there yet
-        show_from_scene = None
-    if show_from_scene is not None and hasattr(s, "show"):   # (its properties registered)
-        cfg.show = show_from_scene(scene, dg, cfg, placed)
+    cfg.show = show_from_scene(scene, dg, cfg, placed)
     return cfg
 
 
