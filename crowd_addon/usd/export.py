@@ -59,6 +59,8 @@ class ExportResult:
     offset_animations, stream_animations, characters : prims/layers written.
     seconds : dict ``simulate`` (the recording's), ``author``, ``write``, ``total``
         (wall clock).
+    events : ``[name, frame, agents]`` per event tag fired for exported agents in the
+        shot, in firing order (what the crowd's callbacks heard).
     """
 
     path: str
@@ -73,6 +75,7 @@ class ExportResult:
     stream_animations: int
     characters: int
     seconds: dict
+    events: list
 
     @property
     def bytes(self) -> int:
@@ -172,7 +175,16 @@ def _steps(rec, ids, meshes, files):
         shared_agents=int(shot.static.sum()), baked_agents=int((~shot.static).sum()),
         moving_agents=int(shot.moving.sum()), offset_animations=len(offsets),
         stream_animations=len(stream_assets), characters=len(char_assets),
-        seconds=seconds)
+        seconds=seconds, events=_events(rec, ids))
+
+
+def _events(rec, ids) -> list:
+    out = []
+    for name, frame, agents in rec.events:
+        n = int(np.isin(agents, ids).sum())
+        if n:
+            out.append([str(name), int(frame), n])
+    return out
 
 
 class _Output:

@@ -153,3 +153,10 @@ def test_stream_layers_cover_every_offset(shot):
     layer = Sdf.Layer.FindOrOpen(str(path))
     times = layer.ListTimeSamplesForPath("/idle.rotations")
     assert (min(times), max(times), len(times)) == (FIRST - M + 1, LAST, LAST - FIRST + M)
+
+
+def test_the_result_lists_the_events_the_agents_heard(shot, oracle):
+    from collections import Counter
+    got = Counter({(name, frame): n for name, frame, n in shot[0].events})
+    expected = Counter((name, frame) for _agent, name, frame in oracle["events"])
+    assert got == expected and sum(got.values()) > 20
