@@ -1,0 +1,262 @@
+"""The show authored in the .blend (``scene.crowd.show``) and what the crowd makes of it.
+
+Oracles: the scene's own data for selections (attributes, vertex groups, object bounds
+through ``mathutils``), Blender's evaluation of animated properties (``frame_set``) for
+parameter tracks, and, for the whole loop, pxr.UsdSkel reading a ``crowd export
+--blend`` made by a fresh process from the saved file, against the crowd built in this
+(the authoring) process: every agent's joint transforms at every frame, and the events.
+"""
+
+import json
+import os
+import subprocess
+import sys
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+sys.path.insert(0, os.path.dirname(__file__))
+import crowd_scene as cs  # noqa: E402
+from mathutils import Vector  # noqa: E402
+
+from crowd_addon.blender import preview, scene_config  # noqa: E402
+from crowd_addon.blender.props import settings_fingerprint  # noqa: E402
+from crowd_addon.core import Crowd  # noqa: E402
+from crowd_addon.core import pose as sqt  # noqa: E402
+from crowd_addon.core.errors import CrowdError  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[2]
+NX, NY = 8, 6
+N = NX * NY
+
+
+@pytest.fixture(scope="module", autouse=True)
+def extension():
+    with cs.registered():
+        yield
+        preview.stop_all()
+
+
+def _cue(show, name, **props):
+    c = show.cues.add()
+    c.name = name
+    for k, v in props.items():
+        setattr(c, k, v)
+    return c
+
+
+def build():
+    """One character, streams idle / cheer (a "clap" marker) / mix (blend by parameter
+    "w") / fsm (trigger "go"), unique hit; 48 seats with an INT "team" attribute and a
+    "front" vertex group; a show using every cue kind, selection and timing, a
+    reaction and two animated parameters."""
+    preview.stop_all()
+    scene = cs.reset()
+    rig = cs.make_armature("Rig")
+    idle = cs.make_action(rig, "idle", seed=1)
+    cheer = cs.make_action(rig, "cheer", seed=2, frames=(1, 7, 13), amplitude=1.0,
+                           markers=[("clap", 4)])
+    fall = cs.make_action(rig, "fall", seed=3, frames=(1, 11, 21), loop=False)
+    s = scene.crowd
+    s.max_offset, s.seed, s.transition_slots = 6, 4, 16
+    fan = cs.add_character(s, rig, cs.make_proxy(rig))
+    cs.add_stream(fan, "idle", idle)
+    cs.add_stream(fan, "cheer", cheer)
+    mix = fan.streams.add()
+    mix.name = "mix"
+    cs.add_node(mix, "blend", "BLEND2", ["a", "b"], weight_parameter="w")
+    cs.add_node(mix, "a", "CLIP", action=idle)
+    cs.add_node(mix, "b", "CLIP", action=cheer)
+    fsm = fan.streams.add()
+    fsm.name = "fsm"
+    sm = cs.add_node(fsm, "sm", "STATE_MACHINE", [("calm", "a"), ("up", "b")])
+    t = sm.transitions.add()
+    t.source, t.target, t.trigger, t.duration = "calm", "up", "go", 4
+    cs.add_node(fsm, "a", "CLIP", action=idle)
+    cs.add_node(fsm, "b", "CLIP", action=cheer)
+    cs.add_stream(fan, "hit", fall, pool="uniques")
+    seats = cs.make_seats(NX, NY)
+    team = (np.arange(N) % 3).astype(np.int32)
+    seats.data.attributes.new("team", "INT", "POINT").data.foreach_set("value", team)
+    seats.vertex_groups.new(name="front").add(list(range(NX)), 1.0, "REPLACE")
+    src = s.agent_sources.add()
+    src.name, src.object = "seats", seats
+    box = bpy.data.objects.new("Box", bpy.data.meshes.new("Box"))
+    box.data.from_pydata([(x, y, z) for x in (0, 1) for y in (0, 1) for z in (0, 1)], [], [])
+    box.location, box.scale = (-0.5, 1.5, -1.0), (3.0, 2.0, 2.0)
+    scene.collection.objects.link(box)
+    centre = bpy.data.objects.new("Centre", None)
+    centre.location = (3.5, 2.5, 0.0)
+    scene.collection.objects.link(centre)
+    show = s.show
+    _cue(show, "goal", frame=5, target="cheer", duration=4, offset_mode="GIVEN", offset=0,
+         hold=10, select="ATTRIBUTE", attribute="team", op="==", compare=1)
+    _cue(show, "wave", frame=8, target="cheer", duration=3, hold=6, source="seats",
+         timing="SWEEP", sweep_centre=centre, sweep_speed=3.0)
+    _cue(show, "fall", frame=12, action="UNIQUE", target="hit", duration=2, hold=8,
+         interrupt=True, select="GROUP", vertex_group="front", fraction=0.5, seed=3)
+    _cue(show, "box", frame=3, target="idle", offset_mode="RANDOM", select="INSIDE",
+         bounds=box, timing="SPREAD", spread=6, duration=2)
+    _cue(show, "calm", frame=30, action="PARAMETER", target="mix", parameter="w",
+         set_value=0.25)
+    _cue(show, "answer", timeline=False, target="idle", duration=2)
+    r = show.reactions.add()
+    r.name, r.event, r.source, r.cue, r.radius = "near clap", "clap", "cheer", "answer", 1.1
+    for name, target, kind, keys in (("w", "mix", "PARAMETER", ((1, 0.0), (30, 1.0))),
+                                     ("go", "fsm", "TRIGGER", ((1, 0.0), (20, 0.0),
+                                                               (21, 1.0)))):
+        p = show.parameters.add()
+        p.name, p.target, p.kind = name, target, kind
+        for frame, value in keys:
+            p.value = value
+            p.keyframe_insert("value", frame=frame)
+    scene.frame_set(1)
+    return scene
+
+
+@pytest.fixture
+def scene():
+    return build()
+
+
+def _inside(box, points):
+    inv = box.matrix_world.inverted()
+    lo = Vector([min(v[i] for v in box.bound_box) for i in range(3)])
+    hi = Vector([max(v[i] for v in box.bound_box) for i in range(3)])
+    return np.array([all(lo[i] <= (inv @ Vector(p))[i] <= hi[i] for i in range(3))
+                     for p in points])
+
+
+def test_selections_are_the_agents_the_scene_data_names(scene):
+    cfg = scene_config.config_from_scene(scene)
+    cues = {c.name: c for c in cfg.show.cues}
+    seats = bpy.data.objects["Seats"]
+    team = np.array([seats.data.attributes["team"].data[i].value for i in range(N)])
+    assert list(cues["goal"].agents) == list(np.flatnonzero(team == 1))
+    front = {v.index for v in seats.data.vertices if v.groups}
+    fall = set(cues["fall"].agents.tolist())
+    assert len(fall) == len(front) // 2 and fall <= front
+    world = [tuple(seats.matrix_world @ v.co) for v in seats.data.vertices]
+    inside = np.flatnonzero(_inside(bpy.data.objects["Box"], world))
+    assert 0 < inside.size < N and list(cues["box"].agents) == list(inside)
+    assert list(cues["wave"].agents) == list(range(N))
+    assert cues["wave"].sweep.centre == (3.5, 2.5, 0.0)
+    assert cues["answer"].timeline is False and cues["box"].spread == 6
+    assert [(r.event, r.cue, r.radius) for r in cfg.show.reactions] == [("clap", "answer",
+                                                                         pytest.approx(1.1))]
+
+
+def test_animated_parameters_are_sampled_as_blender_evaluates_them(scene):
+    cfg = scene_config.config_from_scene(scene)
+    tracks = {t.name: t for t in cfg.show.tracks}
+    p = scene.crowd.show.parameters
+    for f in (1, 7, 19, 20, 21, 30, 48):
+        scene.frame_set(f)
+        assert tracks["w"].at(f) == pytest.approx(p["w"].value, abs=1e-7)
+        assert tracks["go"].at(f) == pytest.approx(p["go"].value, abs=1e-7)
+    assert tracks["go"].kind == "trigger" and tracks["w"].first == scene.frame_start
+
+
+def test_a_driven_parameter_follows_its_driver(scene):
+    p = scene.crowd.show.parameters["w"]
+    p.driver_add("value").driver.expression = "frame / 10"
+    values = scene_config.config_from_scene(scene).show.tracks[0].values
+    assert np.allclose(values, np.arange(1, 49) / 10)
+    assert scene.frame_current == 1
+
+
+def test_a_keyframe_edit_makes_the_running_crowd_stale(scene):
+    before = settings_fingerprint(scene.crowd)
+    scene.frame_set(17)                             # animated values do not count
+    assert settings_fingerprint(scene.crowd) == before
+    p = scene.crowd.show.parameters["w"]
+    p.value = 0.5
+    p.keyframe_insert("value", frame=10)            # but their keyframes do
+    assert settings_fingerprint(scene.crowd) != before
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda s: setattr(s.show.cues["goal"], "target", "dance"),
+     r"cue 'goal': unknown stream or unique 'dance'"),
+    (lambda s: setattr(s.show.cues["goal"], "compare", 7),
+     r"cue 'goal': the selection is empty"),
+    (lambda s: setattr(s.show.cues["fall"], "frame", 400),
+     r"cue 'fall': frame 400 is outside the scene's frames 1..48"),
+    (lambda s: setattr(s.show.cues["wave"], "sweep_speed", 0.0),
+     r"cue 'wave': sweep: speed must be != 0"),
+    (lambda s: setattr(s.show.cues["wave"], "source", "stands"),
+     r"cue 'wave': no enabled agent source is named 'stands'"),
+    (lambda s: setattr(s.show.reactions["near clap"], "cue", "nope"),
+     r"reaction 'near clap': unknown cue 'nope'"),
+    (lambda s: setattr(s.show.reactions["near clap"], "event", "boo"),
+     r"reaction 'near clap': no clip has event 'boo'"),
+    (lambda s: setattr(s.show.parameters["w"], "target", "ghost"),
+     r"parameter track 'w'.*unknown stream or unique 'ghost'"),
+])
+def test_a_bad_show_is_named_and_changes_nothing(scene, edit, message):
+    edit(scene.crowd)
+    before = settings_fingerprint(scene.crowd)
+    with pytest.raises(CrowdError, match=message):
+        Crowd(scene_config.config_from_scene(scene))
+    assert settings_fingerprint(scene.crowd) == before
+
+
+def run_here(scene, last):
+    """The crowd as the preview builds it in this process: local poses per frame and
+    the events, from the scene's first frame to ``last``."""
+    crowd = Crowd(scene_config.config_from_scene(scene), skinning="gpu")
+    events = []
+    crowd.on_event("*", lambda name, frame, ids: events.append((name, int(frame), ids.size)))
+    poses = {crowd.frame: crowd.agent_poses().copy()}
+    while crowd.frame < last:
+        crowd.step()
+        poses[crowd.frame] = crowd.agent_poses().copy()
+    return crowd, poses, events
+
+
+def test_a_fresh_process_exports_what_the_authoring_session_plays(scene, tmp_path):
+    from pxr import Usd, UsdSkel
+    last = 40
+    crowd, poses, events = run_here(scene, last)
+    stats = crowd.show.stats
+    assert stats["goal"]["agents"] and stats["wave"]["agents"] and stats["fall"]["agents"]
+    assert crowd.show.reactions["near clap"] > 0
+    blend, out = tmp_path / "show.blend", tmp_path / "show.usdc"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    run = subprocess.run([sys.executable, "-m", "crowd_addon", "export", "--blend", str(blend),
+                          "--out", str(out), "--frames", f"1-{last}", "--json"], cwd=ROOT,
+                         capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr[-3000:]
+    result = json.loads(run.stdout.strip().splitlines()[-1])
+    assert Counter({(n, f): k for n, f, k in result["events"]}) == \
+        Counter({(n, f): k for n, f, k in events if f >= 1}) != Counter()
+    assert result["baked_agents"] > 0
+    stage = Usd.Stage.Open(str(out))
+    cache, pred = UsdSkel.Cache(), Usd.TraverseInstanceProxies()
+    worst = 0.0
+    for a in range(N):
+        root = UsdSkel.Root(stage.GetPrimAtPath(f"/Crowd/Agents/agent_{a:02d}"))
+        assert cache.Populate(root, pred)
+        (binding,) = cache.ComputeSkelBindings(root, pred)
+        query = cache.GetSkelQuery(binding.GetSkeleton())
+        for f in range(1, last + 1):
+            local = np.array(query.ComputeJointLocalTransforms(f)).transpose(0, 2, 1)
+            want = sqt.pose_to_matrices(poses[f][a, :local.shape[0]].astype(np.float64))
+            worst = max(worst, float(np.abs(local - want).max()))
+    assert worst < 1e-6, worst
+
+
+def test_saving_and_reloading_gives_the_same_crowd(scene, tmp_path):
+    _, want, events = run_here(scene, 30)
+    before = settings_fingerprint(scene.crowd)
+    path = tmp_path / "again.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    scene = bpy.context.scene
+    assert settings_fingerprint(scene.crowd) == before
+    _, got, events_again = run_here(scene, 30)
+    assert events_again == events
+    assert all(np.array_equal(got[f], want[f]) for f in want)
