@@ -42,7 +42,8 @@ class CROWD_PG_cue(PropertyGroup):
         ("KEEP", "Keep", "Each agent keeps its own offset"),
         ("RANDOM", "Random", "A random offset per agent (seeded)"),
         ("GIVEN", "Given", "Every agent at one offset")))
-    offset: IntProperty(name="Offset Frames", default=0, min=0)
+    offset: IntProperty(name="Offset Frames", default=0, min=0,
+                        description="The offset every agent gets (Offset: Given)")
     when_full: EnumProperty(name="When Full", default="DEFAULT", items=(
         ("DEFAULT", "Crowd Setting", "As the crowd's When Full setting"),
         ("QUEUE", "Queue", "Wait for a free transition slot"),
@@ -65,18 +66,22 @@ class CROWD_PG_cue(PropertyGroup):
                                                             "mesh (INT, FLOAT or BOOLEAN)")
     op: EnumProperty(name="Op", items=_OPS, default="==")
     compare: FloatProperty(name="Compare", description="Value the attribute is compared with")
-    vertex_group: StringProperty(name="Vertex Group")
+    vertex_group: StringProperty(name="Vertex Group",
+                                 description="Vertex group of the source mesh (Select: "
+                                             "Vertex Group)")
     bounds: PointerProperty(name="Bounds", type=bpy.types.Object,
                             description="Agents inside this object's bounding box")
     fraction: FloatProperty(name="Fraction", default=1.0, min=0.0, max=1.0, subtype="FACTOR",
                             description="Keep a random share of the selection")
-    seed: IntProperty(name="Seed", default=0, min=0)
+    seed: IntProperty(name="Seed", default=0, min=0,
+                      description="Seed of the random fraction, spread and offsets")
     # -- timing
     timing: EnumProperty(name="Timing", default="AT_ONCE", items=(
         ("AT_ONCE", "At Once", "Every agent at the cue's frame"),
         ("SPREAD", "Spread", "Each agent at a random frame of a range"),
         ("SWEEP", "Sweep", "A front that reaches the agents in turn (a Mexican wave)")))
-    spread: IntProperty(name="Over Frames", default=10, min=0)
+    spread: IntProperty(name="Over Frames", default=10, min=0,
+                        description="Frames over which the agents start (Timing: Spread)")
     sweep_mode: EnumProperty(name="Sweep", default="ANGLE", items=(
         ("ANGLE", "Around", "In order of angle around the centre"),
         ("DISTANCE", "Away", "In order of distance from the centre")))
@@ -88,13 +93,14 @@ class CROWD_PG_cue(PropertyGroup):
                                            "clockwise) or metres per second away")
     sweep_start: FloatProperty(name="Start Angle", subtype="ANGLE", unit="ROTATION",
                                description="Where the front starts, from +X")
-    sweep_laps: IntProperty(name="Laps", default=1, min=1)
+    sweep_laps: IntProperty(name="Laps", default=1, min=1,
+                            description="Times the front goes round (Sweep: Around)")
 
 
 class CROWD_PG_reaction(PropertyGroup):
     """When an event fires, run a cue's action on those agents (or near them)."""
 
-    mute: BoolProperty(name="Mute")
+    mute: BoolProperty(name="Mute", description="A muted reaction does nothing")
     event: StringProperty(name="Event", description="Event tag (an action's pose marker)")
     source: StringProperty(name="Playing", description="Only agents playing this stream "
                                                        "or unique (empty: any)")
