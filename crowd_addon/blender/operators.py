@@ -16,6 +16,7 @@ from bpy.props import EnumProperty, IntProperty
 from ..core.errors import CrowdError
 from . import preview, scene_config
 from .agents import agents_from_scene
+from .show_data import show_from_scene
 from .props import NODE_KINDS
 
 __all__ = ["CLASSES", "BakeJob"]
@@ -149,7 +150,8 @@ class CROWD_OT_generate_agents(bpy.types.Operator):
         scene = context.scene
         t0 = time.perf_counter()
         try:
-            agents, _placed = agents_from_scene(scene, context.evaluated_depsgraph_get())
+            dg = context.evaluated_depsgraph_get()
+            agents, placed = agents_from_scene(scene, dg)
             pv = preview.get(scene)
             if pv is not None:
                 cfg = dataclasses.replace(
@@ -161,6 +163,7 @@ class CROWD_OT_generate_agents(bpy.types.Operator):
                 cfg.add_agents(agents.count, streams=agents.streams, offsets=agents.offsets,
                                positions=agents.positions, headings=agents.headings,
                                colors=agents.colors)
+                cfg.show = show_from_scene(scene, dg, cfg, placed)   # selections: new ids
                 preview.start(scene, cfg)
         except CrowdError as e:
             self.report({"ERROR"}, str(e))

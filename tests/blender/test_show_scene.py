@@ -260,3 +260,16 @@ def test_saving_and_reloading_gives_the_same_crowd(scene, tmp_path):
     _, got, events_again = run_here(scene, 30)
     assert events_again == events
     assert all(np.array_equal(got[f], want[f]) for f in want)
+
+
+def test_generate_agents_reselects_the_cues_of_the_new_agents(scene):
+    # before: the running crowd kept the old agents' ids in its cues
+    pv = preview.start(scene)
+    assert pv.crowd.show.describe()[0]["agents"] == N // 3
+    seats = bpy.data.objects["Seats"]
+    with bpy.context.temp_override(object=seats):
+        seats.data.attributes["team"].data.foreach_set("value", [1] * N)
+    assert bpy.ops.crowd.generate_agents() == {"FINISHED"}
+    pv = preview.get(scene)
+    assert pv.crowd.show.describe()[0]["agents"] == N
+    preview.stop(scene)
