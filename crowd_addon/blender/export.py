@@ -135,7 +135,10 @@ def _export_steps(scene, path, frames, agents, depsgraph):
     finally:
         bake.close()
     check_output(config, path, agents)
-    recorder = Recorder(Crowd(config, skinning="gpu"), *frames)
+    crowd, note = scene_config.build_crowd(scene, config)
+    if note:
+        yield "bake", 1, 1, note
+    recorder = Recorder(crowd, *frames)
     while not recorder.finished:
         recorder.step()
         yield "simulate", recorder.done, recorder.total, "simulate"

@@ -57,6 +57,7 @@ class Preview:
     draw_ms: float = 0.0
     renderer: object = None
     draw_error: str = ""
+    script_note: str = ""          # why the scene's crowd script did not run
 
     @property
     def handle(self):
@@ -102,10 +103,11 @@ def start(scene, config=None) -> Preview:
     for c in s.characters:
         if c.armature is None:
             raise CrowdError(f"character {c.name!r}: no armature chosen")
-    crowd = Crowd(config, skinning="gpu")
+    crowd, note = scene_config.build_crowd(scene, config)
     pv = Preview(scene.name, crowd, tuple((c.name, c.armature.name) for c in s.characters),
                  tuple(a.name for a in scene_config.scene_actions(s)),
                  settings_fingerprint(s))
+    pv.script_note = note
     if crowd.agents.count and not config.meshes:
         pv.draw_error = "no proxy mesh chosen: agents run but are not drawn"
     old = _PREVIEWS.pop(scene.name, None)

@@ -301,6 +301,17 @@ def _depsgraph(scene):
     return dg
 
 
+def build_crowd(scene, config, skinning="gpu"):
+    """The :class:`~crowd_addon.core.crowd.Crowd` of ``config`` (built from ``scene``)
+    with the scene's crowd script run on it: ``(crowd, note)``, ``note`` saying why the
+    script did not run ("" when it ran or there is none). The preview and the exports
+    build their crowds here, so both run the same script."""
+    from ..core.crowd import Crowd
+    from .show_data import run_script
+    crowd = Crowd(config, skinning=skinning)
+    return crowd, run_script(scene, crowd)
+
+
 def config_from_scene(scene, progress=None, depsgraph=None, notes=None) -> CrowdConfig:
     """Build the scene's :class:`CrowdConfig`; ``progress(done, total, message)`` is
     called before each step; the bake's remarks go to the list ``notes`` if given."""

@@ -19,7 +19,12 @@ from ..core.show import (Action, Cue, Reaction, Show, Sweep, Track, select_fract
 from .action_data import action_fcurves
 from .agents import _attribute, _group_members
 
-__all__ = ["show_from_scene", "selected_agents", "parameter_values", "show_fingerprint"]
+__all__ = ["show_from_scene", "selected_agents", "parameter_values", "show_fingerprint",
+           "run_script", "scripts_trusted", "trust_scripts"]
+
+#: scripts trusted for this session by ``crowd ... --trust-scripts`` or the panel's
+#: button (never saved: trust is the person's, not the file's)
+_SESSION = {"trust": False}
 
 _SELECT_KINDS = ("FLOAT", "INT", "INT8")
 
@@ -182,3 +187,51 @@ def show_fingerprint(scene) -> tuple:
         out.append((path, keys, None if drv is None else
                     (drv.driver.type, drv.driver.expression)))
     return tuple(out)
+
+
+# ----------------------------------------------------------------------- script
+def trust_scripts(trusted: bool = True):
+    """Trust (or stop trusting) the crowd scripts of .blend files for this session."""
+    _SESSION["trust"] = bool(trusted)
+
+
+def scripts_trusted() -> bool:
+    """Whether a .blend's crowd script may run: Blender's *Auto Run Python Scripts*
+    preference (and the file was not blocked by it), or trust given for the session."""
+    import bpy
+    if _SESSION["trust"]:
+        return True
+    return bool(bpy.context.preferences.filepaths.use_scripts_auto_execute
+                and not bpy.app.autoexec_fail)
+
+
+def run_script(scene, crowd) -> str:
+    """Run the scene's crowd script on ``crowd`` (its ``register(crowd)``); returns ""
+    when it ran or there is none, else why it did not run (scripts not trusted). A
+    script that fails raises a CrowdError naming the text and the line."""
+    text = scene.crowd.show.script
+    if text is None:
+        return ""
+    if not scripts_trusted():
+        return (f"crowd script {text.name!r} did not run: scripts in .blend files are not "
+                "trusted here (enable Auto Run Python Scripts, press Trust Script in the "
+                "Show panel, or pass --trust-scripts)")
+    import traceback
+    import types
+    module = types.ModuleType(f"crowd_script_{text.name}")
+    module.__file__ = text.name
+    try:
+        exec(compile(text.as_string(), text.name, "exec"), module.__dict__)
+        register = getattr(module, "register", None)
+        if not callable(register):
+            raise CrowdError(f"crowd script {text.name!r} defines no register(crowd)")
+        register(crowd)
+    except CrowdError:
+        raise
+    except Exception as e:  # noqa: BLE001 - any error of user code is named
+        line = next((f.lineno for f in reversed(traceback.extract_tb(e.__traceback__))
+                     if f.filename == text.name), None)
+        where = f" at line {line}" if line else ""
+        raise CrowdError(f"crowd script {text.name!r} failed{where}: "
+                         f"{type(e).__name__}: {e}") from None
+    return ""

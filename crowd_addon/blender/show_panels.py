@@ -7,7 +7,7 @@ shows its frame, what it does and, while the preview runs, how many agents it se
 
 import bpy
 
-from . import preview
+from . import preview, show_data
 from .panels import _list, _Panel
 
 __all__ = ["CLASSES"]
@@ -49,6 +49,24 @@ class CROWD_UL_parameters(bpy.types.UIList):
         row.prop(item, "value", text="")
 
 
+class CROWD_OT_trust_script(bpy.types.Operator):
+    """Let crowd scripts in .blend files run for this session (not saved), and rebuild
+    the preview so the scene's script runs"""
+
+    bl_idname = "crowd.trust_script"
+    bl_label = "Trust Script"
+
+    def execute(self, context):
+        show_data.trust_scripts(True)
+        if preview.get(context.scene) is not None:
+            try:
+                preview.start(context.scene)
+            except Exception as e:  # noqa: BLE001 - reported, never raised in the UI
+                self.report({"ERROR"}, str(e))
+                return {"CANCELLED"}
+        return {"FINISHED"}
+
+
 class CROWD_PT_show(_Panel, bpy.types.Panel):
     bl_label = "Show"
     bl_parent_id = "CROWD_PT_main"
@@ -82,6 +100,13 @@ class CROWD_PT_show(_Panel, bpy.types.Panel):
             col.prop(p, "target")
             col.prop(p, "kind")
             col.prop(p, "value")
+        layout.separator()
+        layout.prop(show, "script")
+        pv = preview.get(context.scene)
+        if pv is not None and pv.script_note:
+            box = layout.box()
+            box.label(text=pv.script_note, icon="ERROR")
+            box.operator("crowd.trust_script", icon="CHECKMARK")
 
 
 def _draw_cue(layout, scene, c):
@@ -124,4 +149,5 @@ def _draw_cue(layout, scene, c):
             box.prop(c, key)
 
 
-CLASSES = (CROWD_UL_cues, CROWD_UL_reactions, CROWD_UL_parameters, CROWD_PT_show)
+CLASSES = (CROWD_UL_cues, CROWD_UL_reactions, CROWD_UL_parameters, CROWD_OT_trust_script,
+           CROWD_PT_show)

@@ -126,6 +126,11 @@ class CROWD_PG_show(PropertyGroup):
     active_reaction_index: IntProperty()
     parameters: CollectionProperty(type=CROWD_PG_parameter)
     active_parameter_index: IntProperty()
+    script: PointerProperty(
+        name="Script", type=bpy.types.Text,
+        description="A Python module (a text in this file) whose register(crowd) runs "
+                    "each time the crowd is built, in the preview and in exports; it "
+                    "runs only where scripts in .blend files are trusted")
 
 
 CLASSES = (CROWD_PG_cue, CROWD_PG_reaction, CROWD_PG_parameter, CROWD_PG_show)

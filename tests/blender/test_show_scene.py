@@ -207,7 +207,7 @@ def test_a_bad_show_is_named_and_changes_nothing(scene, edit, message):
 def run_here(scene, last):
     """The crowd as the preview builds it in this process: local poses per frame and
     the events, from the scene's first frame to ``last``."""
-    crowd = Crowd(scene_config.config_from_scene(scene), skinning="gpu")
+    crowd, _note = scene_config.build_crowd(scene, scene_config.config_from_scene(scene))
     events = []
     crowd.on_event("*", lambda name, frame, ids: events.append((name, int(frame), ids.size)))
     poses = {crowd.frame: crowd.agent_poses().copy()}
@@ -273,3 +273,58 @@ def test_generate_agents_reselects_the_cues_of_the_new_agents(scene):
     pv = preview.get(scene)
     assert pv.crowd.show.describe()[0]["agents"] == N
     preview.stop(scene)
+
+
+SCRIPT = '''\
+import numpy as np
+
+def register(crowd):
+    def sit_down(name, frame, agents):
+        crowd.transition_to_streamed(agents, "idle", 3)
+    crowd.on_event("clap", sit_down)
+'''
+
+
+def _script(scene, body, name="show.py"):
+    text = bpy.data.texts.new(name)
+    text.from_string(body)
+    scene.crowd.show.script = text
+    return text
+
+
+def test_the_crowd_script_runs_only_where_scripts_are_trusted(scene):
+    from crowd_addon.blender import show_data
+    _, plain, _ = run_here(scene, 30)
+    _script(scene, SCRIPT)
+    cfg = scene_config.config_from_scene(scene)
+    show_data.trust_scripts(False)
+    crowd, note = scene_config.build_crowd(scene, cfg)
+    assert "crowd script 'show.py' did not run: scripts in .blend files are not trusted" \
+        in note
+    try:
+        show_data.trust_scripts(True)
+        crowd, note = scene_config.build_crowd(scene, cfg)
+        assert note == ""
+        crowd.advance_to(30)
+        _, scripted, _ = run_here(scene, 30)
+    finally:
+        show_data.trust_scripts(False)
+    assert not np.array_equal(crowd.agent_poses(), plain[30])   # the callback moved them
+    assert np.array_equal(crowd.agent_poses(), scripted[30])
+
+
+@pytest.mark.parametrize("body, message", [
+    ("x = 1\n\ndef register(crowd):\n    raise ValueError('no stands')\n",
+     r"crowd script 'show.py' failed at line 4: ValueError: no stands"),
+    ("def setup(crowd):\n    pass\n", r"crowd script 'show.py' defines no register\(crowd\)"),
+    ("def register(crowd)\n", r"crowd script 'show.py' failed.*SyntaxError"),
+])
+def test_a_failing_crowd_script_is_named(scene, body, message):
+    from crowd_addon.blender import show_data
+    _script(scene, body)
+    show_data.trust_scripts(True)
+    try:
+        with pytest.raises(CrowdError, match=message):
+            scene_config.build_crowd(scene, scene_config.config_from_scene(scene))
+    finally:
+        show_data.trust_scripts(False)
