@@ -149,6 +149,8 @@ class Crowd:
         for params, triggers in zip(self.evaluator.ctx.params, self.evaluator.ctx.triggers):
             params.clear()             # a reset crowd is a new crowd: no leftover parameters
             triggers.clear()
+        if self.show is not None:
+            self.show.apply_tracks(f0, triggers=False)
         self.slots.release(np.arange(self.slots.count))
         self.slots.queue.clear()
         self.slots.served = self.slots.cuts = 0

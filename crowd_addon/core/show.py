@@ -500,15 +500,7 @@ class ShowRunner:
     def before_step(self, frame: int):
         """Issue what is due at ``frame`` (the frame about to be stepped): tracks,
         returns home, reactions to the last frame's events, then cues."""
-        for k, t in enumerate(self.show.tracks):
-            v = t.at(frame)
-            last = self._track_last[k]
-            if t.kind == "parameter":
-                if v != last:
-                    self.crowd.set_parameter(t.target, t.name, v)
-            elif v > 0.5 and (last is None or last <= 0.5):
-                self.crowd.set_trigger(t.target, t.name)
-            self._track_last[k] = v
+        self.apply_tracks(frame)
         for ids, duration in self._returns.pop(frame, ()):
             self._send_home(ids[self.held_until[ids] == frame], duration)
         if self._reacted:
@@ -524,6 +516,22 @@ class ShowRunner:
                 self._apply(cue_i, ids, frame, selected=False)
         for cue_i, ids in self._schedule.get(frame, ()):
             self._apply(cue_i, ids, frame)
+
+    def apply_tracks(self, frame: int, triggers: bool = True):
+        """Set the tracks' parameters to their values at ``frame`` (when changed) and
+        fire the triggers that rise there (``triggers``). ``Crowd.reset`` calls it for
+        the start frame, without triggers, so the history it fills already has them."""
+        for k, t in enumerate(self.show.tracks):
+            v = t.at(frame)
+            last = self._track_last[k]
+            if t.kind == "parameter":
+                if v != last:
+                    self.crowd.set_parameter(t.target, t.name, v)
+            elif not triggers:
+                continue
+            elif v > 0.5 and (last is None or last <= 0.5):
+                self.crowd.set_trigger(t.target, t.name)
+            self._track_last[k] = v
 
     def _apply(self, i, ids, frame, selected=True):
         cue, c = self.show.cues[i], self.crowd

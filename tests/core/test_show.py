@@ -317,3 +317,10 @@ def test_neighbours_match_brute_force():
         d = np.linalg.norm(pos[:, None] - pos[ids][None], axis=2)
         want = np.flatnonzero((d <= radius).any(1))
         assert np.array_equal(neighbours(pos, ids, radius), want)
+
+
+def test_parameter_tracks_hold_from_the_start_frame():
+    # before: the start frame's history was filled with the parameters' defaults
+    crowd = Crowd(make_config(Show(tracks=(Track("mix", "w", 1, [1.0]),))))
+    for offset in range(M):
+        assert np.allclose(crowd.pose("mix", offset), crowd.pose("wave", offset), atol=1e-6)
