@@ -129,7 +129,7 @@ def update_file(path) -> bool:
 
 
 if __name__ == "__main__":
-    import crowd_addon
-    crowd_addon.register()
+    from .registration import register
+    register()
     changed = update_file(sys.argv[1] if len(sys.argv) > 1 else "docs/scripting.md")
     print("updated" if changed else "up to date")
