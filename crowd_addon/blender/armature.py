@@ -139,8 +139,9 @@ def proxy_mesh_from_object(mesh_obj, armature_obj, skeleton: Skeleton | None = N
     Positions are the base mesh (no shape keys, no modifiers after the Armature
     modifier) in armature space; triangles are the mesh's loop triangles; influences
     come from vertex groups named after deform bones (others are ignored, as the
-    Armature modifier does). The four strongest per vertex are kept: vertices with
-    more differ from Blender, which blends them all.
+    Armature modifier does). Up to eight a vertex are kept exactly; a vertex with more
+    keeps its eight strongest (it then differs slightly from Blender, which blends
+    them all) and the mesh's ``notes`` say how many vertices that was.
     """
     _checked(mesh_obj, "MESH", "mesh")
     _armature(armature_obj)

@@ -196,9 +196,10 @@ def _trees(scene, c, skeleton, clips) -> dict:
     return {pool: [(a.name, tree(pool, a)) for a in anims] for pool, anims in _pools(c)}
 
 
-def _lod_levels(c, skeleton, cards) -> tuple:
+def _lod_levels(c, skeleton, cards, notes) -> tuple:
     """The ``lods`` argument of ``CrowdConfig.add_mesh`` for character ``c``: its LOD
-    meshes (one serves both levels) or the automatic ratios, then the card when on."""
+    meshes (one serves both levels) or the automatic ratios, then the card when on;
+    the meshes' remarks (``ProxyMesh.notes``) go to the list ``notes``."""
     from .armature import proxy_mesh_from_object
     card = (CARD,) if cards else ()
     if len(c.lods) == 0:
@@ -215,11 +216,14 @@ def _lod_levels(c, skeleton, cards) -> tuple:
             meshes.append(proxy_mesh_from_object(lod.object, c.armature, skeleton))
         except CrowdError as e:
             raise CrowdError(f"{what}: LOD {k}: {e}") from None
+        for note in meshes[-1].notes:
+            if note not in notes:           # the body's mesh may serve as a LOD too
+                notes.append(note)
     meshes += meshes[-1:] * (MESH_LODS - len(meshes))
     return tuple(meshes) + card
 
 
-def _add_mesh(cfg, c, skeleton, cards):
+def _add_mesh(cfg, c, skeleton, cards, notes):
     from .armature import proxy_mesh_from_object
     if c.body is None:
         if len(c.lods):
@@ -229,7 +233,8 @@ def _add_mesh(cfg, c, skeleton, cards):
         body = proxy_mesh_from_object(c.body, c.armature, skeleton)
     except CrowdError as e:
         raise CrowdError(f"character {c.name!r}: body: {e}") from None
-    cfg.add_mesh(body, lods=_lod_levels(c, skeleton, cards))
+    notes.extend(body.notes)            # e.g. vertices with more than eight bones
+    cfg.add_mesh(body, lods=_lod_levels(c, skeleton, cards, notes))
 
 
 def config_steps(scene, depsgraph=None, notes=None):
@@ -239,7 +244,9 @@ def config_steps(scene, depsgraph=None, notes=None):
     (``StopIteration.value``). Raises CrowdError on bad input.
 
     Actions are baked at the scene's fps times *Samples per Frame*; the bake's remarks
-    (``BakeResult.notes``) are appended to the list ``notes`` when one is given."""
+    (``BakeResult.notes``) and the proxy meshes' (``ProxyMesh.notes``: vertices that had
+    more than eight bone influences) are appended to the list ``notes`` when one is
+    given."""
     from . import agents as agent_mod
     from .armature import skeleton_from_armature
     from .show_data import show_from_scene
@@ -278,7 +285,7 @@ def config_steps(scene, depsgraph=None, notes=None):
     for k, c in enumerate(chars):
         yield len(jobs) + k, total, "reading the proxy mesh" + (
             f" of character {c.name!r}" if several else "")
-        _add_mesh(cfg, c, skeletons[c.name], s.lod_cards)
+        _add_mesh(cfg, c, skeletons[c.name], s.lod_cards, [] if notes is None else notes)
     yield total - 1, total, "placing agents"
     dg = depsgraph if depsgraph is not None else _depsgraph(scene)
     agents, placed = agent_mod.agents_from_scene(scene, dg)

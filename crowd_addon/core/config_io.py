@@ -435,8 +435,10 @@ _SETTINGS = (  # manifest key = CrowdConfig attribute, JSON type, default (None:
     ("seed", "int", 0), ("when_full", "str", "queue"), ("max_texture_size", "int", 16384),
     ("start_frame", "int", 0))
 _MESH_ARRAYS = {"positions": ("f", (None, 3)), "normals": ("f", (None, 3)),
-                "triangles": ("iu", (None, 3)), "bone_indices": ("iu", (None, 4)),
-                "bone_weights": ("f", (None, 4))}
+                "triangles": ("iu", (None, 3)), "bone_indices": ("iu", (None, None)),
+                "bone_weights": ("f", (None, None))}
+#: Influence columns a mesh level may store (ProxyMesh: 4, or 8 past four a vertex).
+_INFLUENCE_WIDTHS = (4, 8)
 _AGENTS = (("stream", "iu", 1), ("unique", "iu", 1), ("offset", "iu", 1),
            ("position", "f", 3), ("heading", "f", 1), ("color", "f", 3))
 
@@ -673,6 +675,11 @@ def _decode_config(m: dict, dec: Decoder) -> CrowdConfig:
             dl = d.at("levels", j)
             arrays = {k: dl.array(lv, k, kinds, shape) for k, (kinds, shape) in
                       _MESH_ARRAYS.items()}
+            for k in ("bone_indices", "bone_weights"):
+                if arrays[k].shape[1] not in _INFLUENCE_WIDTHS:
+                    raise dl.at(k).error(f"array {lv[k]['array']!r} has shape "
+                                         f"{arrays[k].shape}, expected (*, 4) or (*, 8)",
+                                         dl.npz_file)
             try:
                 levels.append(ProxyMesh(dl.get(lv, "name", "name"), skel,
                                         bone_count=cfg.skeletons[skel].bone_count, **arrays))

@@ -1,9 +1,10 @@
 """Proxy meshes: the skinned character mesh an agent is drawn with, and its LODs.
 
 A :class:`ProxyMesh` is plain arrays (float32 positions and normals in the bind
-pose, in the skeleton's armature space; ``uint32`` triangles; per vertex the four
-strongest bone influences with weights that sum to 1), the form both GPU backends
-and the USD writer consume. :func:`build_lods` makes cheaper versions for far
+pose, in the skeleton's armature space; ``uint32`` triangles; per vertex up to
+eight bone influences with weights that sum to 1, stored four wide, or eight wide
+for a mesh where some vertex has more than four), the form both GPU backends and the
+USD writer consume. :func:`build_lods` makes cheaper versions for far
 agents by vertex clustering, keeping each cluster's most central vertex (and so its
 influences exactly), so an LOD deforms like the full mesh.
 """
@@ -16,9 +17,15 @@ import numpy as np
 
 from .errors import CrowdError
 
-__all__ = ["ProxyMesh", "vertex_normals", "build_lods", "INFLUENCES"]
+__all__ = ["ProxyMesh", "vertex_normals", "build_lods", "INFLUENCES", "MAX_INFLUENCES"]
 
+#: Influence columns of a mesh whose vertices have at most four bones (the GPU vertex
+#: format's first ``uvec4``/``vec4`` pair).
 INFLUENCES = 4
+#: Most influences a vertex keeps: meshes with a vertex of five to eight bones store
+#: eight columns (a second attribute pair on the GPU); past eight, the strongest eight.
+MAX_INFLUENCES = 8
+_WIDTHS = (INFLUENCES, MAX_INFLUENCES)
 
 
 @dataclass(frozen=True, eq=False)
@@ -31,10 +38,15 @@ class ProxyMesh:
     skeleton : the skeleton's name.
     positions : (V, 3) float32 bind-pose positions (metres, armature space).
     triangles : (T, 3) uint32 vertex indices.
-    bone_indices : (V, 4) uint16 bone index per influence (0 where unused).
-    bone_weights : (V, 4) float32 weights, descending, summing to 1.
+    bone_indices : (V, K) uint16 bone index per influence (0 where unused), K = 4 or
+        8 (:data:`INFLUENCES`, :data:`MAX_INFLUENCES`); eight columns whose last four
+        weigh 0 everywhere are stored as four.
+    bone_weights : (V, K) float32 weights, descending, summing to 1.
     normals : (V, 3) float32 unit normals; computed from the triangles when None.
     bone_count : bones of the skeleton, to validate ``bone_indices`` (None: unchecked).
+    notes : remarks for the user about how the mesh was made (``from_influences``
+        names the vertices that had more than eight influences), like
+        ``BakeResult.notes``.
 
     Build from any number of influences per vertex with :meth:`from_influences`.
     """
@@ -47,6 +59,7 @@ class ProxyMesh:
     bone_weights: np.ndarray
     normals: np.ndarray = None
     bone_count: int | None = None
+    notes: tuple = ()
 
     def __post_init__(self):
         what = f"mesh {self.name!r}"
@@ -67,10 +80,13 @@ class ProxyMesh:
                              f"outside 0..{v - 1}")
         idx = np.asarray(self.bone_indices)
         w = np.ascontiguousarray(self.bone_weights, np.float32)
-        if idx.shape != (v, INFLUENCES) or w.shape != (v, INFLUENCES):
-            raise CrowdError(f"{what}: bone_indices and bone_weights must be ({v}, 4), got "
-                             f"{idx.shape} and {w.shape} (use ProxyMesh.from_influences)")
+        if idx.shape != w.shape or idx.shape not in ((v, k) for k in _WIDTHS):
+            raise CrowdError(f"{what}: bone_indices and bone_weights must be ({v}, 4) or "
+                             f"({v}, 8), got {idx.shape} and {w.shape} (use "
+                             "ProxyMesh.from_influences)")
         _finite(w, what, "bone_weights")
+        if w.shape[1] > INFLUENCES and not w[:, INFLUENCES:].any():
+            idx, w = idx[:, :INFLUENCES], np.ascontiguousarray(w[:, :INFLUENCES])
         if idx.min() < 0 or (self.bone_count is not None and idx.max() >= self.bone_count):
             bad = int(np.argmax((idx < 0).any(1) | (idx >= (self.bone_count or 1 << 30)).any(1)))
             raise CrowdError(f"{what}: vertex {bad} uses bone index {idx[bad].tolist()}, "
@@ -90,6 +106,7 @@ class ProxyMesh:
         object.__setattr__(self, "bone_indices", np.ascontiguousarray(idx, np.uint16))
         object.__setattr__(self, "bone_weights", w)
         object.__setattr__(self, "normals", normals)
+        object.__setattr__(self, "notes", tuple(str(n) for n in self.notes))
 
     @property
     def vertex_count(self) -> int:
@@ -104,14 +121,23 @@ class ProxyMesh:
         """(2, 3) float32 bind-pose bounding box (min, max)."""
         return np.stack([self.positions.min(0), self.positions.max(0)])
 
+    @property
+    def influences(self) -> int:
+        """Influence columns: 4, or 8 when some vertex has five to eight bones."""
+        return int(self.bone_indices.shape[1])
+
     @classmethod
     def from_influences(cls, name, skeleton, positions, triangles, indices, weights,
                         normals=None, bone_count=None) -> "ProxyMesh":
-        """Keep each vertex's four strongest influences and renormalise them to sum 1.
+        """Keep each vertex's influences (its eight strongest) renormalised to sum 1.
 
         ``indices``/``weights`` are (V, K) for any K (pad unused entries with weight 0).
-        A vertex with no positive weight is an error naming it: a skinned crowd has no
-        sensible place for it (Blender would leave it at the object origin's rest).
+        The mesh stores four columns when no vertex has more than four influences of
+        positive weight, else eight. Vertices with more than eight keep their eight
+        strongest: :attr:`notes` then says how many (the mesh deforms slightly
+        differently from a skinning that blends them all, as Blender's does). A vertex
+        with no positive weight is an error naming it: a skinned crowd has no sensible
+        place for it (Blender would leave it at the object origin's rest).
         """
         idx = np.asarray(indices, np.int64)
         w = np.asarray(weights, np.float64)
@@ -122,11 +148,21 @@ class ProxyMesh:
         if (w < 0).any():
             bad = int(np.argmax((w < 0).any(1)))
             raise CrowdError(f"mesh {name!r}: vertex {bad} has a negative weight")
-        if idx.shape[1] < INFLUENCES:
-            pad = INFLUENCES - idx.shape[1]
+        used = (w > 0).sum(1)
+        most = int(used.max()) if used.size else 0
+        width = INFLUENCES if most <= INFLUENCES else MAX_INFLUENCES
+        notes = ()
+        if most > MAX_INFLUENCES:
+            cut = int((used > MAX_INFLUENCES).sum())
+            notes = (f"mesh {name!r}: {cut} of {used.size} vertices have more than "
+                     f"{MAX_INFLUENCES} bone influences (up to {most}); each keeps its "
+                     f"{MAX_INFLUENCES} strongest, renormalised, so they deform slightly "
+                     "differently",)
+        if idx.shape[1] < width:
+            pad = width - idx.shape[1]
             idx = np.pad(idx, ((0, 0), (0, pad)))
             w = np.pad(w, ((0, 0), (0, pad)))
-        order = np.argsort(-w, axis=1, kind="stable")[:, :INFLUENCES]
+        order = np.argsort(-w, axis=1, kind="stable")[:, :width]
         top_w = np.take_along_axis(w, order, 1)
         top_i = np.take_along_axis(idx, order, 1)
         total = top_w.sum(1)
@@ -137,7 +173,7 @@ class ProxyMesh:
         top_w /= total[:, None]
         top_i = np.where(top_w > 0, top_i, 0)
         return cls(name, skeleton, positions, triangles, top_i, top_w.astype(np.float32),
-                   normals, bone_count)
+                   normals, bone_count, notes)
 
 
 def _finite(a, what, field):
@@ -170,8 +206,9 @@ def build_lods(mesh: ProxyMesh, ratios=(0.25, 0.06)) -> list:
     Vertex clustering on a uniform grid over the bind pose: the cell size is
     searched (bisection on its logarithm) until the triangle count is close to the
     target; each cell is represented by its vertex nearest the cell's mean, with
-    that vertex's own position, normal and influences; triangles that collapse are
-    dropped. LODs never have more triangles than the level before.
+    that vertex's own position, normal and influences (all of them: a mesh stored
+    eight wide gives eight-wide LODs); triangles that collapse are dropped. LODs never
+    have more triangles than the level before.
     """
     lods = [mesh]
     for k, ratio in enumerate(ratios, start=1):

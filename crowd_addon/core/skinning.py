@@ -167,8 +167,9 @@ def skin_vertices(vertices: np.ndarray, bone_indices: np.ndarray, weights: np.nd
     Parameters
     ----------
     vertices : (V, 3) rest positions.
-    bone_indices : (V, 4) int bone index per influence.
-    weights : (V, 4) weights per influence (normalised here to sum 1; unused
+    bone_indices : (V, K) int bone index per influence, any K (a ``ProxyMesh`` has 4
+        or 8).
+    weights : (V, K) weights per influence (normalised here to sum 1; unused
         influences have weight 0).
     rows : (n, B, 3, 4) skinning rows per agent (pose texture rows) or (n, B, 4, 4).
 
@@ -180,6 +181,6 @@ def skin_vertices(vertices: np.ndarray, bone_indices: np.ndarray, weights: np.nd
     w = np.asarray(weights, np.float64)
     w = w / np.where(w.sum(1, keepdims=True) > 0, w.sum(1, keepdims=True), 1)
     m = np.asarray(rows, np.float64)[:, :, :3, :]               # (n, B, 3, 4)
-    g = m[:, np.asarray(bone_indices, np.int64)]                 # (n, V, 4, 3, 4)
+    g = m[:, np.asarray(bone_indices, np.int64)]                 # (n, V, K, 3, 4)
     blended = np.einsum("vi,nvirc->nvrc", w, g)                  # (n, V, 3, 4)
     return np.einsum("nvrc,vc->nvr", blended[..., :3], v) + blended[..., 3]

@@ -34,7 +34,7 @@ from ..core.pose_storage import TextureRegion
 from .blender_gpu import (CROWD_CAPTURE, UPLOAD_INTS, float_texture, program, read_buffer,
                           set_if_used, use_program)
 from .frame_plan import DRAW_SAMPLERS, SKIN_SAMPLERS, TextureSpec
-from .programs import CROWD_DRAW, ROW_UPLOAD, SKIN_ROWS, UPLOAD_GROUP
+from .programs import CROWD_DRAW, ROW_UPLOAD, SKIN_ROWS, UPLOAD_GROUP, for_influences
 from .renderer import CrowdRenderer
 from .texture_region import stage_rows
 
@@ -44,11 +44,14 @@ _EXACT_INT = 2 ** 24                     # integers up to this are exact in floa
 
 
 def _vertex_buffer(gpu, buffers):
+    """The proxy's attributes (``ProxyBuffers.format``: influences 5..8 too when the
+    mesh has them) in a ``GPUVertBuf``."""
     fmt = gpu.types.GPUVertFormat()
-    fmt.attr_add(id="pos", comp_type="F32", len=3, fetch_mode="FLOAT")
-    fmt.attr_add(id="nor", comp_type="F32", len=3, fetch_mode="FLOAT")
-    fmt.attr_add(id="bone_idx", comp_type="U16", len=4, fetch_mode="INT")
-    fmt.attr_add(id="bone_w", comp_type="F32", len=4, fetch_mode="FLOAT")
+    for name, kind, _ in buffers.format:
+        if kind == "4u2":
+            fmt.attr_add(id=name, comp_type="U16", len=4, fetch_mode="INT")
+        else:
+            fmt.attr_add(id=name, comp_type="F32", len=int(kind[0]), fetch_mode="FLOAT")
     vbo = gpu.types.GPUVertBuf(fmt, buffers.vertex_count)
     for name, values in buffers.attributes.items():
         vbo.attr_fill(name, values)
@@ -192,7 +195,8 @@ class BlenderGPURenderer(CrowdRenderer):
                                    else self.textures[DRAW_SAMPLERS[name]])
 
     def _draw(self, mesh, draw):
-        shader = program(self.gpu, CROWD_DRAW, {"INFLUENCES": mesh.buffers.influences})
+        n = mesh.buffers.influences
+        shader = program(self.gpu, for_influences(CROWD_DRAW, n), {"INFLUENCES": n})
         self._bind(shader, CROWD_DRAW, draw.uniforms, self.textures["lists"])
         mesh.triangles.draw_instanced(shader, instance_count=draw.instances)
 
@@ -207,7 +211,9 @@ class BlenderGPURenderer(CrowdRenderer):
                                                "R32I", capture.ids.data))
         target = gpu.types.GPUTexture(size, format="RGBA32F")
         framebuffer = gpu.types.GPUFrameBuffer(color_slots=(target,))
-        shader = program(gpu, CROWD_CAPTURE, {"INFLUENCES": mesh.buffers.influences})
+        influences = mesh.buffers.influences
+        shader = program(gpu, for_influences(CROWD_CAPTURE, influences),
+                         {"INFLUENCES": influences})
         with framebuffer.bind():
             framebuffer.clear(color=(0.0, 0.0, 0.0, 0.0))
             gpu.state.viewport_set(0, 0, *size)

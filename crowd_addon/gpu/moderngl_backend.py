@@ -17,8 +17,7 @@ import numpy as np
 from ..core.errors import CrowdError
 from .assembler import gl_sources
 from .frame_plan import DRAW_SAMPLERS, SKIN_SAMPLERS, TextureSpec
-from .programs import CROWD_DRAW, SKIN_ROWS
-from .proxies import INTERLEAVED_FORMAT
+from .programs import CROWD_DRAW, SKIN_ROWS, for_influences
 from .renderer import CrowdRenderer
 
 __all__ = ["ModernGLRenderer", "GL_VERSION"]
@@ -38,10 +37,12 @@ class _Mesh:
         batch = buffers.batched(copies)
         self.vbo = ctx.buffer(batch.interleaved().tobytes())
         self.ibo = ctx.buffer(batch.indices.tobytes())
-        self.draw = ctx.vertex_array(self.draw_program, [_layout(self.vbo, self.draw_program)],
+        fmt = buffers.format
+        self.draw = ctx.vertex_array(self.draw_program,
+                                     [_layout(self.vbo, self.draw_program, fmt)],
                                      self.ibo, index_element_size=4)
         self.capture = ctx.vertex_array(self.capture_program,
-                                        [_layout(self.vbo, self.capture_program)])
+                                        [_layout(self.vbo, self.capture_program, fmt)])
 
     def objects(self):
         return [self.draw, self.capture, self.vbo, self.ibo]
@@ -140,8 +141,9 @@ class ModernGLRenderer(CrowdRenderer):
 
     def _create_mesh(self, buffers, copies):
         defines = {"INFLUENCES": buffers.influences}
-        return _Mesh(self.ctx, buffers, copies, (self._program(CROWD_DRAW, defines),
-                                                 self._program(CROWD_DRAW, defines, True)))
+        spec = for_influences(CROWD_DRAW, buffers.influences)
+        return _Mesh(self.ctx, buffers, copies, (self._program(spec, defines),
+                                                 self._program(spec, defines, True)))
 
     def _skin(self, work) -> int:
         if "batch" not in self.textures:
@@ -228,9 +230,10 @@ def _set_uniforms(program, uniforms: dict):
             program[name].value = value
 
 
-def _layout(vbo, program):
-    """``(buffer, format, names...)`` of the interleaved proxy vertices for ``program``;
-    attributes its compiler dropped (the capture program needs no normals) are skipped
-    as padding bytes."""
-    parts = [fmt if name in program else f"{size}x" for name, fmt, size in INTERLEAVED_FORMAT]
-    return (vbo, " ".join(parts), *(n for n, _, _ in INTERLEAVED_FORMAT if n in program))
+def _layout(vbo, program, layout):
+    """``(buffer, format, names...)`` of the interleaved proxy vertices (``layout``:
+    ``ProxyBuffers.format``) for ``program``; attributes its compiler dropped (the
+    capture program needs no normals) or it does not declare are skipped as padding
+    bytes."""
+    parts = [fmt if name in program else f"{size}x" for name, fmt, size in layout]
+    return (vbo, " ".join(parts), *(n for n, _, _ in layout if n in program))

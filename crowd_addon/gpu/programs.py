@@ -10,11 +10,13 @@ into the create-info calls for Blender's ``gpu`` module.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from functools import lru_cache
 from importlib import resources
 
 __all__ = ["SHADER_DIR", "Interface", "ProgramSpec", "CROWD_DRAW", "SKIN_ROWS",
-           "ROW_UPLOAD", "AGENT_TEXELS", "SKIN_GROUP", "UPLOAD_GROUP"]
+           "ROW_UPLOAD", "AGENT_TEXELS", "SKIN_GROUP", "UPLOAD_GROUP", "WIDE_INPUTS",
+           "for_influences"]
 
 #: gpu_shaders/ (importlib.resources): the resource package beside crowd_addon, at the
 #: top of the repository, of a wheel and of the Blender extension (there it is
@@ -91,6 +93,25 @@ CROWD_DRAW = ProgramSpec(
     fragment_out=((0, "VEC4", "frag_color"),),
     defines=("INFLUENCES",),
 )
+
+#: The vertex inputs a skinning program adds for meshes of five to eight influences a
+#: vertex: influences 5..8 (``gpu_shaders/crowd_vertex.glsl`` reads them only when
+#: ``INFLUENCES > 4``).
+WIDE_INPUTS = ((4, "UVEC4", "bone_idx2"), (5, "VEC4", "bone_w2"))
+
+
+def for_influences(spec: ProgramSpec, influences: int) -> ProgramSpec:
+    """``spec`` (a program with the crowd vertex: :data:`CROWD_DRAW` or a capture
+    program) for meshes of ``influences`` bones a vertex: itself up to four, else
+    (one object per spec) with :data:`WIDE_INPUTS` declared and ``_wide`` added to its
+    name."""
+    return spec if int(influences) <= 4 else _wide(spec)
+
+
+@lru_cache(maxsize=None)
+def _wide(spec: ProgramSpec) -> ProgramSpec:
+    return replace(spec, name=f"{spec.name}_wide", vertex_in=spec.vertex_in + WIDE_INPUTS)
+
 
 #: Local poses made skinning rows on the GPU, transition slots blended on the way
 #: (paper s.4.5).

@@ -5,7 +5,10 @@ A core :class:`~crowd_addon.core.mesh.ProxyMesh` becomes one
 names of :data:`~.programs.CROWD_DRAW` (``pos``, ``nor`` float32 ``(V, 3)``,
 ``bone_idx`` uint16 ``(V, 4)``, ``bone_w`` float32 ``(V, 4)``, the form Blender's
 ``GPUVertBuf.attr_fill`` takes), an interleaved copy for moderngl, and uint32
-triangle indices.
+triangle indices. A mesh stored eight influences wide (some vertex has five to
+eight bones) adds ``bone_idx2``/``bone_w2``, influences 5..8, declared by the
+program only then (:func:`~.programs.for_influences`); four-wide meshes keep the
+48-byte vertex.
 """
 
 from __future__ import annotations
@@ -17,13 +20,15 @@ import numpy as np
 from ..core.errors import CrowdError
 
 __all__ = ["ProxyBuffers", "proxy_buffers", "crowd_proxies", "copies_per_instance",
-           "INTERLEAVED_FORMAT"]
+           "INTERLEAVED_FORMAT", "WIDE_FORMAT"]
 
-#: (attribute, moderngl format, bytes) of :meth:`ProxyBuffers.interleaved`, in order.
+#: (attribute, moderngl format, bytes) of :meth:`ProxyBuffers.interleaved`, in order:
+#: meshes of up to four influences a vertex (48 bytes a vertex) ...
 INTERLEAVED_FORMAT = (("pos", "3f", 12), ("nor", "3f", 12), ("bone_idx", "4u2", 8),
                       ("bone_w", "4f", 16))
-_DTYPE = np.dtype([("pos", "<f4", 3), ("nor", "<f4", 3), ("bone_idx", "<u2", 4),
-                   ("bone_w", "<f4", 4)])
+#: ... and of five to eight (influences 5..8 after them: 72 bytes a vertex).
+WIDE_FORMAT = INTERLEAVED_FORMAT + (("bone_idx2", "4u2", 8), ("bone_w2", "4f", 16))
+_NUMPY = {"3f": ("<f4", 3), "4u2": ("<u2", 4), "4f": ("<f4", 4)}
 
 
 def copies_per_instance(vertex_count: int, target: int = 1024, limit: int = 64) -> int:
@@ -55,9 +60,20 @@ class ProxyBuffers:
         return np.stack([p.min(0), p.max(0)])
 
     @property
+    def format(self) -> tuple:
+        """:data:`INTERLEAVED_FORMAT`, or :data:`WIDE_FORMAT` with eight influences."""
+        return WIDE_FORMAT if "bone_w2" in self.attributes else INTERLEAVED_FORMAT
+
+    @property
     def influences(self) -> int:
-        """Most bones any vertex uses (1..4): the skinning shader's ``INFLUENCES``."""
-        return max(1, int((self.attributes["bone_w"] > 0).sum(1).max()))
+        """Influences the shader blends (1..8), its ``INFLUENCES``: up to the last
+        column of positive weight of any vertex (weights are stored strongest first,
+        so this is the most bones a vertex uses)."""
+        w = self.attributes["bone_w"]
+        if "bone_w2" in self.attributes:
+            w = np.concatenate([w, self.attributes["bone_w2"]], 1)
+        used = np.flatnonzero((w > 0).any(0))
+        return int(used[-1]) + 1 if used.size else 1
 
     def batched(self, copies: int) -> "ProxyBuffers":
         """``copies`` back-to-back copies of this mesh in one set of arrays (copy ``k``'s
@@ -69,20 +85,26 @@ class ProxyBuffers:
         return ProxyBuffers(self.name, attrs, indices)
 
     def interleaved(self) -> np.ndarray:
-        """(V,) structured array in :data:`INTERLEAVED_FORMAT` order (48 bytes a vertex)."""
-        out = np.empty(self.vertex_count, _DTYPE)
-        for name in _DTYPE.names:
+        """(V,) structured array in :attr:`format` order (48 bytes a vertex, 72 with
+        eight influences)."""
+        fmt = self.format
+        out = np.empty(self.vertex_count, np.dtype([(n, *_NUMPY[f]) for n, f, _ in fmt]))
+        for name, _, _ in fmt:
             out[name] = self.attributes[name]
         return out
 
 
 def proxy_buffers(mesh) -> ProxyBuffers:
     """Vertex arrays of a :class:`~crowd_addon.core.mesh.ProxyMesh` (already validated:
-    top-4 influences summing to 1)."""
+    4 or 8 influences a vertex, strongest first, summing to 1)."""
+    idx, w = mesh.bone_indices, mesh.bone_weights
     attrs = {"pos": np.ascontiguousarray(mesh.positions, np.float32),
              "nor": np.ascontiguousarray(mesh.normals, np.float32),
-             "bone_idx": np.ascontiguousarray(mesh.bone_indices, np.uint16),
-             "bone_w": np.ascontiguousarray(mesh.bone_weights, np.float32)}
+             "bone_idx": np.ascontiguousarray(idx[:, :4], np.uint16),
+             "bone_w": np.ascontiguousarray(w[:, :4], np.float32)}
+    if idx.shape[1] > 4:
+        attrs["bone_idx2"] = np.ascontiguousarray(idx[:, 4:8], np.uint16)
+        attrs["bone_w2"] = np.ascontiguousarray(w[:, 4:8], np.float32)
     return ProxyBuffers(mesh.name, attrs, np.ascontiguousarray(mesh.triangles, np.uint32)
                         .reshape(-1))
 

@@ -8,7 +8,8 @@
                                                    restTransforms
         def Mesh "<mesh>"  (SkelBindingAPI)        points, triangles, normals, extent,
                                                    primvars:skel:jointIndices/jointWeights
-                                                   (elementSize 4, vertex),
+                                                   (vertex, elementSize = the mesh's
+                                                   influence width: 4, or 8),
                                                    primvars:skel:geomBindTransform = identity,
                                                    skel:skeleton -> Skeleton
 
@@ -70,9 +71,10 @@ def _mesh(root, mesh, skeleton_path):
               convert.ints(np.full(mesh.triangle_count, 3)))
     attribute(prim, "faceVertexIndices", _T.IntArray, convert.ints(mesh.triangles))
     attribute(prim, "subdivisionScheme", _T.Token, "none", uniform=True)
+    width = int(mesh.bone_indices.shape[1])          # 4, or 8 past four influences
     attribute(prim, "primvars:skel:jointIndices", _T.IntArray,
-              convert.ints(mesh.bone_indices), interpolation="vertex", elementSize=4)
+              convert.ints(mesh.bone_indices), interpolation="vertex", elementSize=width)
     attribute(prim, "primvars:skel:jointWeights", _T.FloatArray,
-              convert.floats(mesh.bone_weights), interpolation="vertex", elementSize=4)
+              convert.floats(mesh.bone_weights), interpolation="vertex", elementSize=width)
     attribute(prim, "primvars:skel:geomBindTransform", _T.Matrix4d, Gf.Matrix4d(1.0))
     relationship(prim, "skel:skeleton", skeleton_path)

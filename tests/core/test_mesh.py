@@ -1,4 +1,4 @@
-"""Proxy meshes: top-4 influences, validation, normals and LODs."""
+"""Proxy meshes: influences (up to eight), validation, normals and LODs."""
 
 import numpy as np
 import pytest
@@ -11,14 +11,15 @@ QUAD = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], np.float32)
 QUAD_TRI = np.array([[0, 1, 2], [0, 2, 3]])
 
 
-def test_from_influences_keeps_four_strongest_and_renormalises():
+def test_from_influences_sorts_and_renormalises_keeping_up_to_eight():
     idx = np.array([[0, 1, 2, 3, 4, 5]] * 4)
-    w = np.array([[0.05, 0.3, 0.1, 0.2, 0.25, 0.1]] * 4)
+    w = np.array([[0.05, 0.3, 0.1, 0.2, 0.25, 0.1]] * 4) * 2
     m = ProxyMesh.from_influences("q", "sk", QUAD, QUAD_TRI, idx, w, bone_count=6)
-    assert m.bone_indices[0].tolist() == [1, 4, 3, 2]
-    np.testing.assert_allclose(m.bone_weights[0], np.array([0.3, 0.25, 0.2, 0.1]) / 0.85,
+    assert m.bone_indices[0].tolist() == [1, 4, 3, 2, 5, 0, 0, 0]
+    np.testing.assert_allclose(m.bone_weights[0], [0.3, 0.25, 0.2, 0.1, 0.1, 0.05, 0, 0],
                                rtol=1e-6)
     assert m.bone_indices.dtype == np.uint16 and m.triangles.dtype == np.uint32
+    assert m.notes == ()
 
 
 def test_fewer_than_four_influences_are_padded_with_zero_weights():

@@ -101,6 +101,28 @@ def lods(make):
     return out
 
 
+def many_influences(make, k=6):
+    """A body with ``k`` bones a vertex (up to eight are kept exactly): every agent of
+    the full mesh against core skinning with the vertices' own ``k`` influences, and
+    every LOD against core skinning of that LOD's mesh, after a transition started."""
+    crowd = c.Crowd(c.make_config(influences=k))
+    r, out = make(crowd, None), {}
+    crowd.step()
+    crowd.transition_to_unique([2, 5], "u0", 4)
+    crowd.step()
+    r.sync()
+    agents = np.arange(crowd.agents.count)
+    levels = crowd.config.meshes["fan"]
+    _, _, idx, w = c.spread_influences(crowd.config.skeletons["fan"], k)
+    out["gpu/full"] = r.skinned_positions(agents)
+    out["ref/full"] = c.world_reference(crowd, agents, levels[0], (idx, w))
+    out["gpu/influences"] = np.array([r.meshes[key].buffers.influences
+                                      for key in sorted(r.meshes)])
+    for lod in range(len(levels)):
+        _positions(out, f"lod{lod}", r, crowd, agents[::3], lod)
+    return out
+
+
 def wrapped(make, max_texture_size):
     """24 streams, M = 24, transitions; ``max_texture_size=256`` wraps the pose rows
     into three column blocks."""

@@ -12,6 +12,7 @@ import pytest
 
 from crowd_addon.core import ClipPlayer, Crowd, CrowdConfig, skin_vertices
 from crowd_addon.core import synthetic as sy
+from crowd_addon.core.mesh import ProxyMesh
 
 moderngl = pytest.importorskip("moderngl", reason="moderngl (crowd_addon[gpu]) not installed")
 
@@ -27,11 +28,25 @@ def gl():
     ctx.release()
 
 
+def spread_influences(skeleton, k, seed=0):
+    """The humanoid body of ``skeleton`` with every vertex weighted to the ``k`` bones
+    whose heads are nearest, by 1 / (distance + 5 cm)^2 with some noise (a smooth rig,
+    as an FBX export has): ``(positions, triangles, indices (V, k), weights (V, k))``."""
+    body = sy.humanoid_mesh(skeleton)
+    heads = skeleton.bind_model[:, :3, 3]
+    d = np.linalg.norm(body.positions[:, None].astype(np.float64) - heads[None], axis=2)
+    idx = np.argsort(d, axis=1, kind="stable")[:, :k]
+    w = 1.0 / (np.take_along_axis(d, idx, 1) + 0.05) ** 2
+    w *= np.random.default_rng(seed).uniform(0.5, 1.5, w.shape)
+    return body.positions, body.triangles, idx, w
+
+
 def make_config(M=8, streams=3, agents=24, NT=4, bones=24, max_texture_size=16384,
                 spacing=1.5, lods=(0.25, 0.06, "card"), lod_distances=(30.0, 90.0, 150.0),
-                uniques=1):
+                uniques=1, influences=None):
     """A small crowd on a grid: ``streams`` streams, ``uniques`` uniques, agents at
-    offsets ``0..M-1`` cycling, varied headings and colours, a proxy with LODs."""
+    offsets ``0..M-1`` cycling, varied headings and colours, a proxy with LODs (the
+    humanoid body, or with ``influences`` bones a vertex: :func:`spread_influences`)."""
     sk = sy.humanoid("fan", bones=bones)
     cfg = CrowdConfig(max_offset=M, transition_slots=NT, max_texture_size=max_texture_size,
                       lod_distances=lod_distances)
@@ -48,7 +63,13 @@ def make_config(M=8, streams=3, agents=24, NT=4, bones=24, max_texture_size=1638
                    offsets=(np.arange(agents) * 3) % M,
                    positions=np.c_[grid * spacing, np.zeros(agents)],
                    headings=np.linspace(0.0, 2 * np.pi, agents, endpoint=False))
-    cfg.add_mesh(sy.humanoid_mesh(sk), lods=lods)
+    if influences is None:
+        mesh = sy.humanoid_mesh(sk)
+    else:
+        pos, tri, idx, w = spread_influences(sk, influences)
+        mesh = ProxyMesh.from_influences("fan_body", "fan", pos, tri, idx, w,
+                                         bone_count=sk.bone_count)
+    cfg.add_mesh(mesh, lods=lods)
     return cfg
 
 
@@ -58,12 +79,13 @@ def make_unique(cfg, agents, unique=0):
     cfg.agent_unique[agents] = unique
 
 
-def world_reference(crowd, agents, mesh):
+def world_reference(crowd, agents, mesh, influences=None):
     """CPU reference (core.skin_vertices on crowd.agent_rows) of ``mesh`` for ``agents``,
-    then each agent's heading about +Z and position: (n, V, 3) float64."""
+    then each agent's heading about +Z and position: (n, V, 3) float64. ``influences``:
+    ``(indices, weights)`` to skin with instead of the mesh's own."""
     agents = np.asarray(agents)
-    local = skin_vertices(mesh.positions, mesh.bone_indices, mesh.bone_weights,
-                          crowd.agent_rows(agents))
+    idx, w = influences or (mesh.bone_indices, mesh.bone_weights)
+    local = skin_vertices(mesh.positions, idx, w, crowd.agent_rows(agents))
     h = crowd.agents.heading[agents].astype(np.float64)[:, None]
     c, s = np.cos(h), np.sin(h)
     x, y = local[..., 0], local[..., 1]
@@ -83,6 +105,7 @@ def assert_close_relative(actual, expected, rtol=1e-4):
 def h():
     """The helpers above (test modules are imported by path, not as a package)."""
     return SimpleNamespace(make_config=make_config, make_unique=make_unique,
+                           spread_influences=spread_influences,
                            world_reference=world_reference,
                            assert_close_relative=assert_close_relative, Crowd=Crowd)
 

@@ -75,6 +75,14 @@ def test_every_lod_is_skinned_like_its_mesh_on_the_cpu(blender, h):
         h.assert_close_relative(d[f"gpu/lod{lod}"], d[f"ref/lod{lod}"])
 
 
+def test_six_influences_match_cpu_skinning_with_all_six(blender, h):
+    d = blender("many_influences")
+    h.assert_close_relative(d["gpu/full"], d["ref/full"])
+    assert d["gpu/influences"].tolist() == [6, 6, 6, 1]
+    for lod in range(4):
+        h.assert_close_relative(d[f"gpu/lod{lod}"], d[f"ref/lod{lod}"])
+
+
 def test_wrapped_pose_texture_renders_identically(blender, h):
     flat, wrapped = blender("flat"), blender("wrapped")
     assert flat["gpu/blocks"] == 1 and wrapped["gpu/blocks"] == 3

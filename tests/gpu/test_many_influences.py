@@ -1,0 +1,34 @@
+"""A proxy with six bone influences a vertex skinned by the moderngl backend's vertex
+stage (read back by transform feedback) against core's CPU skinning with all six
+(``backend_scenes.many_influences``; the Blender ``gpu`` backend runs the same scene in
+test_blender_backend.py)."""
+
+import os
+import sys
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import backend_scenes as scenes  # noqa: E402
+
+
+def test_six_influences_match_cpu_skinning_with_all_six(h, renderer):
+    d = scenes.many_influences(lambda crowd, size: renderer(crowd))
+    h.assert_close_relative(d["gpu/full"], d["ref/full"])
+    # the full mesh and its two LODs use six bones a vertex; the card one
+    assert d["gpu/influences"].tolist() == [6, 6, 6, 1]
+    for lod in range(4):
+        h.assert_close_relative(d[f"gpu/lod{lod}"], d[f"ref/lod{lod}"])
+
+
+def test_vertex_format_grows_only_past_four_influences(h):
+    from crowd_addon.gpu.proxies import proxy_buffers
+    four = proxy_buffers(h.make_config().meshes["fan"][0])
+    six = proxy_buffers(h.make_config(influences=6).meshes["fan"][0])
+    assert sorted(four.attributes) == ["bone_idx", "bone_w", "nor", "pos"]
+    assert four.interleaved().itemsize == 48 and four.influences == 2
+    assert sorted(six.attributes) == ["bone_idx", "bone_idx2", "bone_w", "bone_w2", "nor",
+                                      "pos"]
+    assert six.interleaved().itemsize == 72 and six.influences == 6
+    np.testing.assert_array_equal(six.batched(3).attributes["bone_w2"][: six.vertex_count],
+                                  six.attributes["bone_w2"])
