@@ -9,10 +9,11 @@ wheels, ``crowd_addon/packaging.py``).
 
 Each command is one ``_add_<name>`` function that builds its subparser and one
 ``_run_<name>`` function that does the work; heavy modules are imported inside the
-latter so ``crowd --help`` stays fast. What needs Blender (``export --blend``: open a
-.blend, register the extension) is :mod:`crowd_addon.blender.cli_commands`, imported
-only for it; that package never imports this module (inside Blender, ``blender -c
-crowd export`` is its own command). Exit codes: 0 success, 2 bad input (usage
+latter so ``crowd --help`` stays fast. What needs Blender (``export --blend`` and
+``preview --blend``: open a .blend, register the extension, take its frame range and
+camera) is :mod:`crowd_addon.blender.cli_commands`, imported only for them; that
+package never imports this module (inside Blender, ``blender -c crowd export`` is its
+own command). Exit codes: 0 success, 2 bad input (usage
 errors and :class:`~crowd_addon.core.errors.CrowdError`, reported on stderr as
 ``crowd <command>: error: <message>``).
 
@@ -138,7 +139,9 @@ def _add_export(subparsers) -> None:
                     "stream, shared offset animations, instanceable agents "
                     "(docs/usd_export.md). The main layer's extension picks the format: "
                     ".usdc or .usd binary, .usda text; its layers go to <stem>.layers/vN/ "
-                    "beside it. Nothing is written unless the whole export succeeds.",
+                    "beside it. From a .blend the frames default to its scene's frame "
+                    "range. The output's folder is created if missing. Nothing is "
+                    "written unless the whole export succeeds.",
         epilog="example: crowd export --config crowd.json --out shot.usdc --frames 1-300")
     src = p.add_mutually_exclusive_group()
     src.add_argument("--config", type=path_arg, metavar="CROWD_JSON",
@@ -157,14 +160,21 @@ def _run_export(args) -> int:
     if args.config:
         from .core.config_io import load_config
         from .core.crowd import Crowd
+        from .core.files import folders_made
         from .core.recorder import record
+        from .gpu.preview_render import writable_dir
         from .usd import check_export, export_crowd
+        if args.frames is None:
+            raise CrowdError("--frames FIRST-LAST is required with --config (a .blend "
+                             "gives its scene's frame range)")
         config = load_config(args.config)
         crowd = Crowd(config, skinning="gpu")           # checks the agents' references
-        check_export(config, args.out, args.agents)     # before simulating the shot
-        progress = progress_printer("crowd export")
-        shot = record(crowd, *args.frames, progress=progress)
-        result = export_crowd(shot, args.out, agents=args.agents, progress=progress)
+        folder = writable_dir(os.path.dirname(os.path.abspath(args.out)))
+        with folders_made(folder):                      # gone again if the export fails
+            check_export(config, args.out, args.agents)     # before simulating the shot
+            progress = progress_printer("crowd export")
+            shot = record(crowd, *args.frames, progress=progress)
+            result = export_crowd(shot, args.out, agents=args.agents, progress=progress)
     else:                       # the scene's Crowd settings, baked as the panel does
         from .blender.cli_commands import export_blend
         config, result = export_blend(
@@ -197,21 +207,34 @@ def _add_preview(subparsers) -> None:
     p = subparsers.add_parser(
         "preview",
         help="render a crowd headless to PNG frames (and an MP4)",
-        description="Run a saved crowd configuration and draw it with the GPU renderer "
-                    "(instanced skinning from the pose texture) through a camera that "
-                    "frames the whole crowd, headless: frame_<F>.png per frame in the "
-                    "output folder, and preview.mp4 with --mp4 (imageio-ffmpeg). Works "
-                    "without a GPU (Mesa llvmpipe). See docs/preview.md.",
+        description="Run a saved crowd configuration (or a .blend's Crowd settings) and "
+                    "draw it with the GPU renderer (instanced skinning from the pose "
+                    "texture) through a camera that frames the whole crowd, or the "
+                    "scene's camera, headless: frame_<F>.png per frame in the output "
+                    "folder, and preview.mp4 with --mp4 (imageio-ffmpeg). Works without "
+                    "a GPU (Mesa llvmpipe). See docs/preview.md.",
         epilog="example: crowd preview --config crowd.json --out shots/preview --frames "
                "48 --mp4")
-    p.add_argument("--config", required=True, type=path_arg, metavar="CROWD_JSON",
-                   help="crowd configuration manifest written by config_io.save_config")
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--config", type=path_arg, metavar="CROWD_JSON",
+                     help="crowd configuration manifest written by config_io.save_config")
+    src.add_argument("--blend", type=path_arg, metavar="SCENE_BLEND",
+                     help="a .blend whose scene has Crowd settings, baked first (needs the "
+                          "bpy module)")
+    p.add_argument("--scene", default=None, metavar="NAME",
+                   help="scene of the .blend (default: the active scene)")
+    p.add_argument("--camera", default=None, metavar="NAME",
+                   help="a camera object of the .blend's scene to render through "
+                        "(default: the scene camera; without one, or with --config, a "
+                        "camera that frames the whole crowd)")
     p.add_argument("--out", required=True, type=path_arg, metavar="DIR",
                    help="folder for the frames (created if missing)")
-    p.add_argument("--frames", required=True, type=int_at_least(1), metavar="N",
-                   help="number of frames to render")
+    p.add_argument("--frames", type=int_at_least(1), metavar="N",
+                   help="number of frames to render (default, from a .blend: up to the "
+                        "scene's last frame; with --config it must be given)")
     p.add_argument("--start", type=frame_number, default=None, metavar="F",
-                   help="first frame (default: the configuration's start frame)")
+                   help="first frame (default: the configuration's start frame, the "
+                        "scene's for a .blend)")
     p.add_argument("--width", type=int_at_least(1), default=960,
                    help="image width in pixels (default: %(default)s)")
     p.add_argument("--height", type=int_at_least(1), default=540,
@@ -230,13 +253,7 @@ def _add_preview(subparsers) -> None:
 def _run_preview(args) -> int:
     import json
 
-    from .core.config_io import load_config
     from .gpu.preview_render import render_preview
-
-    config = load_config(args.config)
-    if args.backend == "blender":           # bpy runs in background mode: wake its GPU
-        from .blender.headless_gpu import init_headless_gpu
-        init_headless_gpu()
     shown = [-1]
 
     def progress(done, total):
@@ -244,15 +261,36 @@ def _run_preview(args) -> int:
             shown[0] = done * 10 // total
             print(f"crowd preview: frame {done}/{total}", file=sys.stderr, flush=True)
 
-    r = render_preview(config, args.out, args.frames, start=args.start,
-                       size=(args.width, args.height), mp4=args.mp4, backend=args.backend,
-                       progress=progress)
+    size = (args.width, args.height)
+    if args.blend:                  # the scene's Crowd settings, baked as the panel does
+        from .blender.cli_commands import preview_blend
+        config, r, camera = preview_blend(
+            args.out, args.frames, blend=args.blend, scene=args.scene, start=args.start,
+            camera=args.camera, size=size, mp4=args.mp4, backend=args.backend,
+            progress=progress, on_bake=lambda done, total, message: print(
+                f"crowd preview: {message}", file=sys.stderr, flush=True))
+    else:
+        from .core.config_io import load_config
+        for option in ("scene", "camera"):
+            if getattr(args, option) is not None:
+                raise CrowdError(f"--{option} needs --blend (a configuration has no "
+                                 f"{option}s)")
+        if args.frames is None:
+            raise CrowdError("--frames N is required with --config (a .blend gives its "
+                             "scene's frame range)")
+        config, camera = load_config(args.config), None
+        if args.backend == "blender":       # bpy runs in background mode: wake its GPU
+            from .blender.headless_gpu import init_headless_gpu
+            init_headless_gpu()
+        r = render_preview(config, args.out, args.frames, start=args.start, size=size,
+                           mp4=args.mp4, backend=args.backend, progress=progress)
     s = r.seconds
     if args.json:
         print(json.dumps({
             "out": args.out, "pngs": r.pngs, "mp4": r.mp4, "frames": list(r.frames),
             "size": list(r.size), "agents": r.agents, "backend": r.backend,
-            "device": r.device, "upload_bytes_per_frame": r.upload_bytes, "seconds": s}))
+            "device": r.device, "camera": camera, "upload_bytes_per_frame": r.upload_bytes,
+            "seconds": s}))
         return 0
     n = len(r.pngs)
     print("\n".join([
@@ -261,6 +299,7 @@ def _run_preview(args) -> int:
         f"{r.size[0]} x {r.size[1]}",
         *([f"  {r.mp4}: {n} frames at {config.fps:g} fps"] if r.mp4 else []),
         f"  {r.agents:,} agents, {r.backend} on {r.device}, "
+        + (f"camera {camera!r}, " if camera else "") +
         f"{r.upload_bytes:,} B uploaded per frame (median)",
         f"  {s['total']:.1f} s, {n / s['total']:.1f} frames/s (simulate {s['simulate']:.1f} s, "
         f"sync {s['sync']:.1f} s, render {s['render']:.1f} s, write {s['write']:.1f} s)"]))
@@ -274,19 +313,21 @@ def _add_demo(subparsers) -> None:
         "demo",
         help="the stadium demo: build, bake, simulate, render preview frames, export USD",
         description="Build the sample stadium (sample_scenes/build_stadium.py) with one "
-                    "agent per seat, author its crowd and bake its actions with the "
-                    "extension's code, run the show (a goal with cheers through "
-                    "transition slots, a Mexican wave, hits through unique animations, "
-                    "claps counted by an event callback), render preview frames headless "
-                    "(PNG, and MP4 with imageio-ffmpeg) and export stadium.usdc. Needs the "
-                    "bpy module. See docs/pipeline.md.",
+                    "agent per seat, author its crowd and its show as scene data (a goal "
+                    "with cheers through transition slots, a Mexican wave, hits through "
+                    "unique animations; the beats are fractions of --frames) and bake its "
+                    "actions with the extension's code, save stadium.blend, run the "
+                    "crowd (claps are counted from its events), render preview frames "
+                    "headless (PNG, and MP4 with imageio-ffmpeg) and export stadium.usdc. "
+                    "Needs the bpy module. See docs/pipeline.md.",
         epilog="example: crowd demo --out demo_out --agents 65000")
     p.add_argument("--out", required=True, type=path_arg, metavar="DIR",
                    help="output folder")
     p.add_argument("--agents", type=int_at_least(10), default=2000, metavar="N",
                    help="seats, one agent each (default: %(default)s; the paper: 65000)")
     p.add_argument("--frames", type=int_at_least(1), default=240, metavar="N",
-                   help="frames to simulate, render and export (default: %(default)s)")
+                   help="frames to simulate, render and export; the show's beats scale "
+                        "with it (default: %(default)s)")
     p.add_argument("--width", type=int_at_least(2), default=960)
     p.add_argument("--height", type=int_at_least(2), default=540)
     p.add_argument("--no-mp4", dest="mp4", action="store_false", help="PNG frames only")
@@ -312,8 +353,11 @@ def _run_demo(args) -> int:
         f"  transitions: {s['transitions_requested']:,} requested, "
         f"{s['transitions_served']:,} served, {s['queued']:,} queued, {s['cut']} cut",
         f"  events fired {s['events_fired']:,} (clap: {s['clap_agent_events']:,} agent "
-        f"claps in {s['clap_calls']} callbacks), cheering {s['cheering']:,}, wave "
+        f"claps on {s['clap_calls']} frames), cheering {s['cheering']:,}, wave "
         f"{s['wave_agents']:,}, hit {s['hits']}",
+        "  cues: " + ", ".join(f"{c['name']} @{c['frame']}" + (" (muted)" if c["name"] in
+                                                              s["muted_cues"] else "")
+                               for c in s["cues"]),
         f"  {s['pngs']} PNG frames" + (f", {s['mp4']}" if s['mp4'] else "")
         + (f", {s['usd']} ({s['usd_bytes']:,} B)" if "usd" in s else "")]))
     return 0

@@ -97,15 +97,17 @@ def progress_printer(prefix: str):
 
 
 def add_shot_arguments(parser) -> None:
-    """The options every ``export`` command shares: ``--scene``, ``--out``, ``--frames``,
-    ``--agents`` and ``--json``."""
+    """The options every ``export`` command shares: ``--scene``, ``--out``, ``--frames``
+    (None when not given), ``--agents`` and ``--json``."""
     parser.add_argument("--scene", default=None, metavar="NAME",
                         help="scene of the .blend (default: the active scene)")
     parser.add_argument("--out", required=True, type=path_arg, metavar="SHOT_USD",
-                        help="main layer to write (.usdc, .usd or .usda)")
-    parser.add_argument("--frames", required=True, type=frame_range, metavar="FIRST-LAST",
+                        help="main layer to write (.usdc, .usd or .usda); its folder "
+                             "is created if missing")
+    parser.add_argument("--frames", type=frame_range, metavar="FIRST-LAST",
                         help="shot frames, inclusive; FIRST must not be before the "
-                             "crowd's start frame")
+                             "crowd's start frame (default, from a .blend: the scene's "
+                             "frame range; with --config it must be given)")
     parser.add_argument("--agents", type=int_at_least(1), default=None, metavar="N",
                         help="export only the first N agents (ids 0..N-1); more than the "
                              "crowd has is an error (default: all)")

@@ -1,15 +1,18 @@
-"""Command-line exports of a Blender scene: ``crowd export --blend`` and ``blender -c crowd``.
-
-Two front ends, one exporter (:func:`.export.export_scene`, the scene's Crowd
-settings baked as the panel does):
+"""Command-line runs of a Blender scene: ``crowd export --blend``, ``crowd preview
+--blend`` and ``blender -c crowd``.
 
 - the headless ``crowd`` program (:mod:`crowd_addon.cli`) imports this module only
-  for ``crowd export --blend SCENE_BLEND ...`` and calls :func:`export_blend`, which
-  opens the file (the ``bpy`` module) and registers the extension when needed;
+  for ``crowd export --blend SCENE_BLEND ...`` and ``crowd preview --blend ...`` and
+  calls :func:`export_blend` (the scene's Crowd settings baked as the panel does and
+  written by :func:`.export.export_scene`) or :func:`preview_blend` (baked with
+  :func:`.scene_config.config_from_scene`, rendered through a scene camera), which
+  open the file (the ``bpy`` module) and register the extension when needed. The
+  scene's frame range and camera are the defaults; Blender's own log lines go to
+  stderr, so stdout holds only the summary;
 - inside Blender, the extension registers the ``crowd`` command of Blender's ``-c``
   option (:func:`register_command`, from :mod:`.registration`)::
 
-      blender -b scene.blend -c crowd export --out shot.usdc --frames 1-300
+      blender -b scene.blend -c crowd export --out shot.usdc [--frames 1-300]
 
   which exports the open file's scene (:func:`crowd_command`).
 
@@ -22,6 +25,7 @@ scene-facing subset of ``crowd export`` (``--scene``, ``--out``, ``--frames``,
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import json
 import os
@@ -30,7 +34,8 @@ import sys
 from ..cli_args import add_shot_arguments, parse_command, progress_printer
 from ..core.errors import CrowdError
 
-__all__ = ["open_scene", "export_blend", "build_parser", "crowd_command", "register_command",
+__all__ = ["open_scene", "export_blend", "preview_blend", "scene_frames",
+           "blender_output_to_stderr", "build_parser", "crowd_command", "register_command",
            "unregister_command", "command_registered"]
 
 _handle = None          # the registered "crowd" command of Blender's -c option
@@ -67,19 +72,98 @@ def open_scene(blend: str | None = None, scene: str | None = None):
     return found
 
 
-def export_blend(out: str, frames: tuple, *, blend: str | None = None,
+@contextlib.contextmanager
+def blender_output_to_stderr():
+    """For the ``with`` block, whatever is written to the process's standard output
+    (Blender's own log lines such as ``Read blend: ...``, which its C code writes
+    there) goes to standard error, so a command's stdout holds only its summary
+    (``--json``: one JSON object)."""
+    sys.stdout.flush()
+    try:
+        saved = os.dup(1)
+    except OSError:                             # no standard output at all
+        yield
+        return
+    try:
+        os.dup2(2, 1)
+        yield
+    finally:
+        sys.stdout.flush()
+        _flush_c_stdio()
+        os.dup2(saved, 1)
+        os.close(saved)
+
+
+def _flush_c_stdio():
+    try:
+        import ctypes
+        ctypes.CDLL(None).fflush(None)
+    except (OSError, AttributeError, TypeError):     # no C library to flush (Windows)
+        pass
+
+
+def scene_frames(scene, frames=None) -> tuple:
+    """``frames`` (first, last), or the scene's frame range when None."""
+    return (scene.frame_start, scene.frame_end) if frames is None else tuple(frames)
+
+
+def export_blend(out: str, frames: tuple | None = None, *, blend: str | None = None,
                  scene: str | None = None, agents: int | None = None, progress=None,
                  on_bake=None):
     """Export the Crowd settings of a .blend's scene (:func:`open_scene`) as UsdSkel.
 
-    ``out``, ``frames`` (first, last), ``agents``, ``progress(stage, done, total)`` and
-    ``on_bake(done, total, message)`` are those of :func:`.export.export_scene`.
-    Returns ``(config, result)``: the baked ``CrowdConfig`` and the ``ExportResult``.
+    ``out``, ``agents``, ``progress(stage, done, total)`` and ``on_bake(done, total,
+    message)`` are those of :func:`.export.export_scene`; ``frames`` (first, last)
+    defaults to the scene's frame range. The folder of ``out`` is created when
+    missing, and removed again when the export fails. Blender's own output goes to
+    stderr (:func:`blender_output_to_stderr`). Returns ``(config, result)``: the baked
+    ``CrowdConfig`` and the ``ExportResult``.
     """
-    found = open_scene(blend, scene)
+    from ..core.files import folders_made
+    from ..gpu.preview_render import writable_dir
     from .export import export_scene
-    return export_scene(found, out, frames, agents=agents, progress=progress,
-                        on_bake=on_bake)
+    with blender_output_to_stderr():
+        found = open_scene(blend, scene)
+        folder = writable_dir(os.path.dirname(os.path.abspath(out)))
+        with folders_made(folder):
+            return export_scene(found, out, scene_frames(found, frames), agents=agents,
+                                progress=progress, on_bake=on_bake)
+
+
+def preview_blend(out: str, frames: int | None = None, *, blend: str | None = None,
+                  scene: str | None = None, start: int | None = None,
+                  camera: str | None = None, size=(960, 540), mp4: bool = False,
+                  backend: str = "moderngl", progress=None, on_bake=None):
+    """Render the Crowd settings of a .blend's scene (:func:`open_scene`) headless to
+    PNG frames (:func:`crowd_addon.gpu.preview_render.render_preview`).
+
+    ``start`` defaults to the scene's start frame and ``frames`` (a count) to the frames
+    from there to the scene's end; ``camera`` names a camera object of the scene (default:
+    the scene camera; with none, a camera framing the crowd). The camera, the frames
+    and the output folder are checked before the bake. Blender's own output goes to
+    stderr. Returns ``(config, result, camera object name or None)``.
+    """
+    from ..gpu.preview_render import render_preview, writable_dir
+    from .cameras import camera_from_object, find_camera
+    from .scene_config import config_from_scene
+    with blender_output_to_stderr():
+        found = open_scene(blend, scene)
+        first = found.frame_start if start is None else int(start)
+        if frames is None:
+            frames = found.frame_end - first + 1
+            if frames < 1:
+                raise CrowdError(f"--start {first} is after scene {found.name!r}'s last "
+                                 f"frame {found.frame_end}; give --frames")
+        obj = find_camera(found, camera)
+        view = None if obj is None else camera_from_object(obj, size[0] / size[1])
+        writable_dir(out)
+        if backend == "blender":                # bpy runs in background mode: wake its GPU
+            from .headless_gpu import init_headless_gpu
+            init_headless_gpu()
+        config = config_from_scene(found, on_bake)
+        result = render_preview(config, out, frames, start=first, size=size, mp4=mp4,
+                                backend=backend, progress=progress, camera=view)
+    return config, result, None if obj is None else obj.name
 
 
 # ------------------------------------------------------------- blender -c crowd
@@ -96,7 +180,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Bake the scene's Crowd settings and write the shot as UsdSkel "
                     "(docs/usd_export.md); nothing is written unless it all succeeds.",
         epilog="example: blender -b scene.blend -c crowd export --out shot.usdc "
-               "--frames 1-300")
+               "--frames 1-300 (default: the scene's frame range)")
     add_shot_arguments(p)
     return parser
 

@@ -1,18 +1,36 @@
-"""The demo stadium's crowd, authored the way an animator would in Blender.
+"""The demo stadium's crowd and show, authored the way an animator would in Blender.
 
-:func:`setup_crowd` fills the scene's Crowd settings of a stadium built by
-``sample_scenes/build_stadium.py`` with both of its characters: "Fan" (the fan rig
-and body, one stream per authored action that seats play or react with, one unique
-per agent that can be hit by the ball) and "Mocap" (the motion-capture rig and body
-with one looping stream, the jumps), M = 60 and the paper's 800 transition slots, and
-the "Seats" points as the agent source: heading from their ``heading`` attribute,
-character from a ``character`` attribute and stream (among the character's) from a
-``stream`` attribute written here: home seats play ``idle_a`` / ``idle_c`` /
-``clap``, away seats ``idle_b``, and 2 % of the home seats are the mocap character.
-:func:`stadium_config` converts it with the extension's own
-:func:`~crowd_addon.blender.scene_config.config_from_scene` and gives the agents
-team colours. :func:`author_stadium` does it all on a built ``stadium.blend`` and
-saves the file with its settings, so the file holds every character of the show.
+Everything the demo runs is scene data, so the saved ``stadium.blend`` holds it all
+and ``crowd export --blend`` / ``crowd preview --blend`` in another process make the
+same crowd:
+
+- :func:`setup_crowd` fills the scene's Crowd settings of a stadium built by
+  ``sample_scenes/build_stadium.py`` with both of its characters: "Fan" (the fan rig
+  and body, one stream per authored action that seats play or react with, one unique
+  per agent that can be hit by the ball) and "Mocap" (the motion-capture rig and body
+  with one looping stream, the jumps), M = 60 and the paper's 800 transition slots,
+  and the "Seats" points as the agent source. The seats get point attributes written
+  here: ``character`` (0 fan, 1 mocap: 2 % of the home seats), ``stream`` (among the
+  character's streams: home seats ``idle_a`` / ``idle_c`` / ``clap``, away seats
+  ``idle_b``), ``hit`` (``k`` on the seat of the k-th fan the ball hits, 0 elsewhere)
+  and ``team_colour`` (home red, away blue, varied per seat).
+- :func:`setup_show` authors the show (``scene.crowd.show``, docs/show.md) and sets the
+  scene's frame range to the run: the **goal** (home fans blend to ``cheer``, away
+  fans to ``groan``, both at offset 0 and held for the cheer), the **Mexican wave**
+  (a sweep round the pitch centre, the world origin, over the fans: it starts just
+  before the home stand the camera looks at and takes the whole run for one lap;
+  each fan stands ``WAVE_HOLD`` frames), the **hits** (one cue per hit fan, selected
+  by its ``hit`` attribute, to its own unique animation; they interrupt the cheer) and
+  nothing for the claps: they are the ``clap`` action's event tags, counted by the
+  crowd (``crowd.events``). The beats are fractions of the run (:data:`BEATS`), so a
+  short run has all of them; a beat that still falls after the run's last frame (a
+  run of one frame) is authored muted and named in :attr:`Stadium.muted`.
+- :func:`add_stand_camera` adds "StandCamera", on the pitch looking up at the home
+  stand where the wave passes first, as the scene camera: the demo renders through it.
+
+:func:`stadium_config` does all three and converts the scene with the extension's
+own :func:`~crowd_addon.blender.scene_config.config_from_scene`;
+:func:`author_stadium` does it on a built ``stadium.blend`` and saves the file.
 """
 
 from __future__ import annotations
@@ -26,8 +44,9 @@ import numpy as np
 from ..core.config import CrowdConfig
 from ..core.errors import CrowdError
 
-__all__ = ["STREAMS", "HOME_MIX", "AWAY_MIX", "FAN", "MOCAP", "setup_crowd",
-           "stadium_config", "Stadium", "author_stadium"]
+__all__ = ["STREAMS", "HOME_MIX", "AWAY_MIX", "FAN", "MOCAP", "BEATS", "CUES", "CAMERA",
+           "setup_crowd", "setup_show", "add_stand_camera", "stadium_config", "Stadium",
+           "author_stadium"]
 
 #: stream name -> action of FanRig
 STREAMS = {"idle_a": "idle_seated_a", "idle_b": "idle_seated_b", "idle_c": "idle_seated_c",
@@ -39,18 +58,33 @@ MOCAP_ACTION, MOCAP_SHARE = "mocap_01_01", 0.02
 #: the characters: name -> (armature, body)
 FAN, MOCAP = "Fan", "Mocap"
 CHARACTERS = {FAN: ("FanRig", "FanBody"), MOCAP: ("MocapRig", "MocapBody")}
+HOME, AWAY = 0, 1                       # the seats' ``section`` attribute
+
+#: When the beats start, as fractions of the run: a beat at share ``s`` of a run of
+#: ``N`` frames from frame ``F`` starts at frame ``F + 1 + floor(s * N)`` (the first
+#: frame stepped is ``F + 1``; in 240 frames from frame 1: the wave at 22, the goal at
+#: 47, the hits at 72).
+BEATS = {"wave": 20 / 240, "goal": 45 / 240, "hit": 70 / 240}
+CHEER_SHARE = 90 / 240                  # how long the goal's cheer and groan are held
+WAVE_LAP_SHARE = 1.0                    # one lap of the wave takes the whole run
+WAVE_HOLD = 16                          # frames a fan stays up in the wave
+BLEND = 6                               # blend length of every cue, frames
+#: the wave starts just before the home stand the camera looks at (angle -pi/2)
+WAVE_START_ANGLE = -math.pi / 2 - 0.4
+#: cue names (the demo's summary reads their stats)
+CUES = {"goal_home": "goal home", "goal_away": "goal away", "wave": "wave", "hit": "hit"}
+CAMERA = "StandCamera"
+CAMERA_SPAN, CAMERA_FOV = 16.0, math.radians(50.0)   # metres of seats in view, vertical
 
 
 @dataclass
 class Stadium:
-    """A stadium crowd ready to run: the config and what the show needs per agent."""
+    """A stadium crowd ready to run: the config (its show included), the camera the
+    demo renders through and the beats muted because they fall after the run."""
 
     config: CrowdConfig
-    seat_angle: np.ndarray          # (N,) radians around the bowl's centre
-    home: np.ndarray                # (N,) bool
-    fan: np.ndarray                 # (N,) bool, on the fan rig (the show's actors)
-    hits: tuple                     # unique names, one per agent the ball may hit
-    hit_frames: int
+    camera: object                  # crowd_addon.gpu.camera.Camera
+    muted: tuple = ()
 
 
 def _obj(name):
@@ -90,92 +124,207 @@ def _add_characters(s, hits):
     _animation(mocap.streams, "mocap", MOCAP_ACTION)
 
 
-def _seat_attribute(me, name, values):
-    attr = me.attributes.get(name) or me.attributes.new(name, "INT", "POINT")
-    attr.data.foreach_set("value", values)
+def _seat_attribute(me, name, values, kind="INT"):
+    attr = me.attributes.get(name)
+    if attr is not None and attr.data_type != kind:
+        me.attributes.remove(attr)
+        attr = None
+    attr = attr or me.attributes.new(name, kind, "POINT")
+    attr.data.foreach_set("color" if kind == "FLOAT_COLOR" else "value",
+                          np.ascontiguousarray(values).ravel())
 
 
-def _seat_casting(seats, seed):
-    """Per seat: character (0 fan, 1 mocap) and stream index among its character's
-    streams, written as the ``character`` and ``stream`` point attributes."""
+def _seats():
+    """The seats object, its positions (n, 3) and sections (n,)."""
+    seats = _obj("Seats")
     me = seats.data
     n = len(me.vertices)
+    pos = np.zeros(n * 3, np.float32)
+    me.vertices.foreach_get("co", pos)
     section = np.zeros(n, np.int32)
     me.attributes["section"].data.foreach_get("value", section)
+    return seats, pos.reshape(n, 3), section
+
+
+def _camera_stand(pos, section):
+    """(n,) bool: the home seats of the near long side (about angle -pi/2 round the
+    pitch centre), where the camera looks and the wave passes first."""
+    angle = np.arctan2(pos[:, 1], pos[:, 0])
+    near = np.abs(np.angle(np.exp(1j * (angle + np.pi / 2)))) < 0.35
+    return near & (section == HOME)
+
+
+def _seat_casting(seats, section, pos, seed, hits):
+    """Per seat: character (0 fan, 1 mocap), stream index among its character's
+    streams, which hit it takes (1..hits, 0 none) and a team colour, written as the
+    ``character``, ``stream``, ``hit`` and ``team_colour`` point attributes."""
+    me = seats.data
+    n = section.size
     rng = np.random.default_rng(seed)
     names = list(STREAMS)
     stream = np.empty(n, np.int32)
-    for side, mix in ((0, HOME_MIX), (1, AWAY_MIX)):
+    for side, mix in ((HOME, HOME_MIX), (AWAY, AWAY_MIX)):
         m = section == side
         ids = [names.index(k) for k in mix]
         stream[m] = rng.choice(ids, size=int(m.sum()), p=np.array(list(mix.values())))
     character = np.zeros(n, np.int32)
-    home = np.flatnonzero(section == 0)
+    home = np.flatnonzero(section == HOME)
     jumpers = np.random.default_rng(seed + 1).choice(
         home, size=max(1, int(MOCAP_SHARE * home.size)), replace=False)
     character[jumpers] = 1
     stream[jumpers] = 0                     # the mocap character's only stream
+    # the ball lands in the stand the camera looks at (any fan's seat if it has too few)
+    fans = character == 0
+    pool = np.flatnonzero(fans & _camera_stand(pos, section))
+    if pool.size < hits:
+        pool = np.flatnonzero(fans)
+    hit = np.zeros(n, np.int32)
+    chosen = np.random.default_rng(seed + 2).choice(pool, size=min(hits, pool.size),
+                                                    replace=False)
+    hit[chosen] = np.arange(1, chosen.size + 1)
+    # team colours, varied per seat
+    team = np.where((section == HOME)[:, None], (0.85, 0.18, 0.15), (0.2, 0.35, 0.85))
+    vary = 0.8 + 0.5 * (np.random.default_rng(seed + 3).random((n, 3)) - 0.8)
+    colour = np.ones((n, 4), np.float32)
+    colour[:, :3] = 0.6 * team + 0.4 * vary
     _seat_attribute(me, "character", character)
     _seat_attribute(me, "stream", stream)
+    _seat_attribute(me, "hit", hit)
+    _seat_attribute(me, "team_colour", colour, "FLOAT_COLOR")
     me.update()
 
 
 def setup_crowd(scene, hits=6, slots=800, max_offset=60, seed=5):
-    """Author the Crowd settings of a stadium scene (replacing any there)."""
-
+    """Author the Crowd settings of a stadium scene (replacing any there): characters,
+    the seats' attributes and the agent source. The show is :func:`setup_show`'s."""
     s = scene.crowd
     s.max_offset, s.transition_slots, s.seed = max_offset, slots, seed
     s.when_full = "QUEUE"
     s.forward_axis = "NEG_Y"
     _add_characters(s, hits)
     s.agent_sources.clear()
-    seats = _obj("Seats")
-    _seat_casting(seats, seed)
+    seats, pos, section = _seats()
+    _seat_casting(seats, section, pos, seed, hits)
     src = s.agent_sources.add()
     src.name, src.object, src.mode = "seats", seats, "VERTICES"
     src.heading_mode, src.heading_attribute = "ATTRIBUTE", "heading"
     src.character_mode, src.character_attribute = "ATTRIBUTE", "character"
     src.stream_mode, src.stream_attribute = "ATTRIBUTE", "stream"
     src.offset_mode = "UNIFORM"
-    src.color_mode = "RANDOM"
+    src.color_mode, src.color_attribute = "ATTRIBUTE", "team_colour"
     return s
 
 
-def stadium_config(scene, progress=None, hits=6, slots=800, seed=5) -> Stadium:
-    """The stadium's :class:`Stadium` from a built stadium scene (see module doc)."""
+def _cue(show, name, frame, last, target, action="STREAM", hold=0, **props):
+    c = show.cues.add()
+    c.name, c.frame, c.action, c.target, c.hold = name, frame, action, target, hold
+    c.duration = BLEND
+    c.mute = frame > last
+    for key, value in props.items():
+        setattr(c, key, value)
+    return c
 
-    from ..blender.scene_config import config_from_scene
+
+def _select(attribute, value):
+    return {"select": "ATTRIBUTE", "attribute": attribute, "op": "==", "compare": value}
+
+
+def setup_show(scene, frames: int):
+    """Author the stadium's show in ``scene.crowd.show`` (replacing any there) for a run
+    of ``frames`` frames from the scene's start frame, and set the scene's frame range
+    to that run; one hit cue per seat :func:`setup_crowd` marked. Returns the names of
+    the cues muted because they start after the run."""
+    from .scene_config import scene_fps
+
+    seats = _obj("Seats").data
+    hit = np.zeros(len(seats.vertices), np.int32)
+    if "hit" in seats.attributes:
+        seats.attributes["hit"].data.foreach_get("value", hit)
+    hits = int(hit.max(initial=0))
+    if frames < 1:
+        raise CrowdError(f"stadium show: frames must be at least 1, got {frames}")
+    first = scene.frame_start
+    last = scene.frame_end = first + frames - 1
+    at = {beat: first + 1 + int(share * frames) for beat, share in BEATS.items()}
+    show = scene.crowd.show
+    show.cues.clear()
+    show.reactions.clear()
+    show.parameters.clear()
+    cheer = max(1, round(CHEER_SHARE * frames))
+    for name, section, target in ((CUES["goal_home"], HOME, "cheer"),
+                                  (CUES["goal_away"], AWAY, "groan")):
+        _cue(show, name, at["goal"], last, target, hold=cheer, offset_mode="GIVEN",
+             offset=0, **_select("section", section))
+    lap = max(1, round(WAVE_LAP_SHARE * frames))
+    _cue(show, CUES["wave"], at["wave"], last, "wave", hold=WAVE_HOLD, offset_mode="GIVEN",
+         offset=0, timing="SWEEP", sweep_mode="ANGLE", sweep_centre=None,
+         sweep_speed=2 * math.pi * scene_fps(scene) / lap, sweep_start=WAVE_START_ANGLE,
+         sweep_laps=1, **_select("character", 0))
+    start, end = _action(HIT).frame_range
+    hit_frames = int(math.ceil(end - start - 1e-6)) + 1     # the whole clip, keys included
+    for k in range(hits):
+        _cue(show, f"{CUES['hit']} {k + 1}", at["hit"], last, f"hit{k}", action="UNIQUE",
+             hold=hit_frames, interrupt=True, **_select("hit", k + 1))
+    return tuple(c.name for c in show.cues if c.mute)
+
+
+def add_stand_camera(scene, size=(960, 540)):
+    """Add (or move) the "StandCamera": on the pitch looking up at the home stand where
+    the wave passes first, close enough that ``CAMERA_SPAN`` metres of seats fill the
+    frame height; it becomes the scene camera, and the render size ``size``."""
+    from mathutils import Vector
+
+    _, pos, section = _seats()
+    pos = pos.astype(np.float64)
+    stand = _camera_stand(pos, section)
+    pick = pos[stand] if stand.any() else pos
+    target = pick.mean(0) + np.array([0.0, 0.0, 0.9])
+    inward = -target[:2] / max(np.linalg.norm(target[:2]), 1e-6)   # to the pitch centre
+    dist = CAMERA_SPAN / 2 / math.tan(CAMERA_FOV / 2)
+    eye = target + np.r_[inward * dist, 0.35 * dist]
+    obj = bpy.data.objects.get(CAMERA)
+    if obj is None:
+        obj = bpy.data.objects.new(CAMERA, bpy.data.cameras.new(CAMERA))
+        scene.collection.objects.link(obj)
+    cam = obj.data
+    cam.type, cam.sensor_fit = "PERSP", "VERTICAL"
+    cam.lens = cam.sensor_height / 2 / math.tan(CAMERA_FOV / 2)
+    cam.clip_start, cam.clip_end = 0.5, 4 * dist + float(np.ptp(pos, 0).max())
+    obj.location = Vector(eye)
+    obj.rotation_euler = Vector(target - eye).to_track_quat("-Z", "Y").to_euler()
+    scene.camera = obj
+    scene.render.resolution_x, scene.render.resolution_y = size
+    scene.render.resolution_percentage = 100
+    return obj
+
+
+def stadium_config(scene, frames=240, size=(960, 540), progress=None, hits=6, slots=800,
+                   seed=5) -> Stadium:
+    """Author the stadium's crowd, show and camera (see the module doc) in a built
+    stadium scene and build its :class:`Stadium` for images of ``size`` pixels."""
+    from .cameras import camera_from_object
+    from .scene_config import config_from_scene
 
     setup_crowd(scene, hits=hits, slots=slots, seed=seed)
+    muted = setup_show(scene, frames)
+    cam = add_stand_camera(scene, size)
+    bpy.context.view_layer.update()                 # the camera's matrix_world
     cfg = config_from_scene(scene, progress)
-    seats = _obj("Seats")
-    n = len(seats.data.vertices)
+    n = len(_obj("Seats").data.vertices)
     if cfg.agent_count != n:
         raise CrowdError(f"stadium: {cfg.agent_count} agents from {n} seats")
-    section = np.zeros(n, np.int32)
-    seats.data.attributes["section"].data.foreach_get("value", section)
-    home = section == 0
-    # team colours, varied per agent (the random colours of the source as variation)
-    team = np.where(home[:, None], (0.85, 0.18, 0.15), (0.2, 0.35, 0.85))
-    cfg.agent_color = (0.6 * team + 0.4 * cfg.agent_color).astype(np.float32)
-    fan = np.array([d.skeleton == FAN for d in cfg.streams])[cfg.agent_stream]
-    pos = cfg.agent_position
-    centre = 0.5 * (pos.min(0) + pos.max(0))
-    angle = np.arctan2(pos[:, 1] - centre[1], pos[:, 0] - centre[0])
-    hit_clip = cfg.clips[HIT]                   # its length in crowd frames, keys included
-    hit_frames = int(math.ceil(hit_clip.frames_at(cfg.fps) - 1e-6)) + 1
-    return Stadium(cfg, angle, home, fan, tuple(f"hit{k}" for k in range(hits)), hit_frames)
+    return Stadium(cfg, camera_from_object(cam, size[0] / size[1]), muted)
 
 
-def author_stadium(blend, progress=None) -> Stadium:
-    """Open the built ``blend``, author its crowd (:func:`setup_crowd`), bake it with the
+def author_stadium(blend, frames=240, size=(960, 540), progress=None) -> Stadium:
+    """Open the built ``blend``, author its crowd, show and camera and bake it with the
     extension registered (:func:`stadium_config`; ``progress(done, total, message)``)
     and save the file with its Crowd settings. Returns the :class:`Stadium`."""
     from .registration import register, unregister
     bpy.ops.wm.open_mainfile(filepath=str(blend))
     register()
     try:
-        stadium = stadium_config(bpy.context.scene, progress=progress)
+        stadium = stadium_config(bpy.context.scene, frames, size, progress=progress)
         bpy.context.preferences.filepaths.save_version = 0  # no stadium.blend1 backup
         bpy.ops.wm.save_mainfile(filepath=str(blend))       # with its crowd settings
     finally:

@@ -3,10 +3,14 @@
 1. build the stadium scene (``sample_scenes/build_stadium.py``, in a child process
    because it resets Blender's session) with ``--agents`` seats;
 2. open it, author its crowd settings and bake its actions through the extension's
-   own code (:mod:`.stadium`), and save the crowd configuration next to it;
-3. run the stadium show (:mod:`.show`: goal, Mexican wave, hits, claps) once, render
-   preview frames headless with the GPU path as it runs (PNG, and MP4 when
-   imageio-ffmpeg is there) and record it (:mod:`crowd_addon.core.recording`);
+   own code (:mod:`crowd_addon.blender.stadium`), save the .blend and the crowd
+   configuration next to it: both hold everything the demo runs, the two characters
+   with its show (goal, Mexican wave, hits: scene data, ``scene.crowd.show``) and the
+   camera the frames are rendered through, the scene's frame range set to the run;
+3. run the crowd built from that configuration once (it runs its show itself: no
+   Python in the loop; the claps are the clap action's event tags, counted by the
+   crowd), render preview frames headless with the GPU path as it runs (PNG, and MP4
+   when imageio-ffmpeg is there) and record it (:mod:`crowd_addon.core.recording`);
 4. export that recording to ``stadium.usdc`` (UsdSkel): the same show, not simulated
    again;
 5. print a summary and write it as ``summary.json``.
@@ -23,7 +27,12 @@ from pathlib import Path
 
 from ..core.errors import CrowdError
 
-__all__ = ["run_demo"]
+__all__ = ["run_demo", "show_summary", "USD_COUNTS"]
+
+#: what the summary keeps of the USD export (``usd_export``): the counts a
+#: ``crowd export --blend`` of the saved file reports the same
+USD_COUNTS = ("frames", "agents", "shared_agents", "baked_agents", "moving_agents",
+              "offset_animations", "stream_animations", "characters", "files")
 
 try:    # the sample_scenes resource package beside crowd_addon (repository, wheel)
     SAMPLE_BUILDER = resources.files(".".join(__name__.split(".")[:-3] + ["sample_scenes"])) \
@@ -56,24 +65,32 @@ def _build_scene(path: Path, seats: int, log):
         raise CrowdError(f"building the stadium failed:\n{run.stderr.strip()[-2000:]}")
 
 
-def section_camera(stadium, aspect, span=16.0):
-    """A camera on the pitch looking up at the home stand where the wave passes first:
-    close enough that ``span`` metres of seats fill the frame."""
-    import numpy as np
+def show_summary(crowd) -> dict:
+    """What the show did, from the crowd's own counts: the cues' requests
+    (``crowd.show.stats``), the transitions served (``crowd.stats``) and the events
+    fired (``crowd.events``); ``cues``: per cue its frame, the agents it selects and
+    what became of its requests."""
+    from ..blender.stadium import CUES
 
-    from ..gpu.camera import Camera
-    pos = stadium.config.agent_position.astype(np.float64)
-    centre = 0.5 * (pos.min(0) + pos.max(0))
-    # seats near angle -pi/2 (the near long side), home first
-    near = np.abs(np.angle(np.exp(1j * (stadium.seat_angle + np.pi / 2)))) < 0.35
-    pick = pos[near & stadium.home] if (near & stadium.home).any() else pos
-    target = pick.mean(0) + np.array([0.0, 0.0, 0.9])
-    inward = centre[:2] - target[:2]
-    inward /= max(np.linalg.norm(inward), 1e-6)
-    fov = np.radians(50.0)
-    dist = span / 2 / np.tan(fov * aspect / 2) if aspect < 1 else span / 2 / np.tan(fov / 2)
-    eye = target + np.r_[inward * dist, 0.35 * dist]
-    return Camera(eye, target, fov, aspect, 0.5, 4 * dist + np.ptp(pos, 0).max())
+    stats = crowd.show.stats if crowd.show is not None else {}
+    cues = crowd.show.describe() if crowd.show is not None else []
+
+    def total(key, prefix=""):
+        return int(sum(s[key] for name, s in stats.items() if name.startswith(prefix)))
+
+    requested, queued, cut = total("agents"), total("queued"), total("cut")
+    fired, calls = crowd.events.fired, crowd.events.calls
+    return {"transitions_requested": requested, "started_at_once": requested - queued - cut,
+            "queued": queued, "cut": cut, "skipped": total("skipped"),
+            "transitions_served": int(crowd.stats["transitions_served"]),
+            "cheering": total("agents", CUES["goal_home"]),
+            "wave_agents": total("agents", CUES["wave"]),
+            "hits": total("agents", CUES["hit"] + " "),
+            "clap_agent_events": int(fired["clap"]), "clap_calls": int(calls["clap"]),
+            "events_fired": int(sum(fired.values())),
+            "cues": [{"name": c["name"], "frame": c["frame"], "action": c["action"],
+                      "target": c["target"], "selected": c["agents"], **stats[c["name"]]}
+                     for c in cues]}
 
 
 def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
@@ -95,38 +112,28 @@ def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
     t = time.perf_counter()
     from ..blender.stadium import author_stadium
     from ..core.config_io import save_config
-    log("authoring the crowd and baking its actions")
-    stadium = author_stadium(blend, progress=lambda d, n, m: _bar(d + 1, n, "bake"))
+    log("authoring the crowd and its show, baking its actions")
+    stadium = author_stadium(blend, frames, size,
+                             progress=lambda d, n, m: _bar(d + 1, n, "bake"))
     cfg = stadium.config
     save_config(cfg, out / "stadium_crowd.json")
     seconds["bake"] = time.perf_counter() - t
-
-    import numpy as np
+    if stadium.muted:
+        log(f"beats after the last of {frames} frames, muted: {', '.join(stadium.muted)}")
 
     from ..core.crowd import Crowd
     from ..core.recorder import Recorder
     from ..gpu.preview_render import render_preview
-    from .show import ShowPlan, StadiumShow
 
     log(f"simulating and rendering {frames} frames of {cfg.agent_count:,} agents")
     t = time.perf_counter()
-    crowd = Crowd(cfg, skinning="gpu")
-    # the wave starts just before the stand the camera looks at, so it passes early
-    show = StadiumShow(crowd, stadium.seat_angle, stadium.home, cheer="cheer", wave="wave",
-                       hits=stadium.hits, hit_frames=stadium.hit_frames,
-                       away_reaction="groan", actors=stadium.fan,
-                       plan=ShowPlan(wave_start_angle=-np.pi / 2 - 0.4))
+    crowd = Crowd(cfg, skinning="gpu")          # it runs its show (cfg.show) itself
     # the frames the preview shows, recorded as they are rendered
     recorder = Recorder(crowd, crowd.frame, crowd.frame + frames - 1) if usd else None
-
-    def before_step(crowd, frame):
-        if recorder is not None:
-            recorder.capture()                   # the frame just rendered
-        show.before_step(crowd, frame)
-
-    camera = section_camera(stadium, aspect=size[0] / size[1])
     preview = render_preview(crowd, out / "frames", frames, size=size, mp4=mp4,
-                             before_step=before_step, camera=camera,
+                             before_step=None if recorder is None else
+                             lambda crowd, frame: recorder.capture(),   # the frame shown
+                             camera=stadium.camera,
                              progress=lambda d, n: _bar(d, n, "render"))
     seconds["simulate_render"] = time.perf_counter() - t
     step_ms = crowd.stats["ms_total"] / max(crowd.stats["steps"], 1)
@@ -134,7 +141,8 @@ def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
                "uniques": len(cfg.uniques), "characters": len(cfg.skeletons),
                "frames": frames, "ms_per_step": round(step_ms, 3),
                "upload_bytes_per_frame": preview.upload_bytes,
-               "renderer": preview.device, **show.summary(),
+               "renderer": preview.device, **show_summary(crowd),
+               "muted_cues": list(stadium.muted),
                "pngs": len(preview.pngs), "mp4": preview.mp4}
 
     if usd:
@@ -146,7 +154,8 @@ def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
                            progress=lambda stage, d, n: _bar(d, n, stage))
         seconds["usd"] = time.perf_counter() - t
         summary.update(usd=str(res.path), usd_bytes=int(sum(res.files.values())),
-                       usd_baked_agents=res.baked_agents)
+                       usd_baked_agents=res.baked_agents,
+                       usd_export={k: getattr(res, k) for k in USD_COUNTS})
     seconds["total"] = time.perf_counter() - t0
     summary["seconds"] = {k: round(v, 2) for k, v in seconds.items()}
     with open(out / "summary.json", "w", encoding="utf-8") as f:

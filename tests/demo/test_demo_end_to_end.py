@@ -2,8 +2,10 @@
 
 Oracles: the PNG frames decoded back (not blank, changing where the wave passes),
 ``pxr`` opening and walking the exported stage (one agent prim per seat, UsdSkel
-bindings resolving), and the clap counts recomputed from the clip's tag times and
-each agent's offset (paper s.3.3) for the frames before the show moves anyone.
+bindings resolving), the clap counts recomputed from the clip's tag times and each
+agent's offset (paper s.3.3), and fresh processes given only the saved ``stadium.blend``
+(``crowd export --blend``, ``crowd preview --blend``): the show, the characters and the
+camera are scene data, so they write the demo's own stage and frames, byte for byte.
 """
 
 import json
@@ -21,7 +23,7 @@ pytest.importorskip("moderngl")
 pxr = pytest.importorskip("pxr")
 
 ROOT = Path(__file__).resolve().parents[2]
-AGENTS, FRAMES = 300, 50
+AGENTS, FRAMES = 300, 60
 
 
 def read_png(path):
@@ -57,18 +59,25 @@ def test_summary_reports_the_show(demo):
     s = json.loads((out / "summary.json").read_text())
     assert s["agents"] == AGENTS and s["characters"] == 2 and s["frames"] == FRAMES
     assert s["transitions_served"] > 0 and s["cheering"] > 0 and s["wave_agents"] > 0
-    assert s["clap_calls"] > 0
+    assert s["hits"] == 6                     # the hits interrupt the cheer: each plays
+    assert s["clap_calls"] > 0 and s["clap_agent_events"] >= s["clap_calls"]
+    # the beats are fractions of the run: wave, goal, hits at 20, 45, 70 of 240 frames
+    frames = {c["name"]: c["frame"] for c in s["cues"]}
+    assert frames["wave"] == 2 + FRAMES * 20 // 240 and s["muted_cues"] == []
+    assert frames["goal home"] == frames["goal away"] == 2 + FRAMES * 45 // 240
+    assert {frames[f"hit {k}"] for k in range(1, 7)} == {2 + FRAMES * 70 // 240}
     assert "transitions:" in run.stdout and "events fired" in run.stdout
+    assert "cues: goal home @" in run.stdout
 
 
 def test_frames_are_not_blank_and_change(demo):
     out, _ = demo
     pngs = sorted((out / "frames").glob("frame_*.png"))
     assert len(pngs) == FRAMES
-    # the wave starts at frame 20 just before the stand in view and passes it by ~35
-    before, during = (read_png(p).astype(np.int16) for p in (pngs[15], pngs[35]))
+    # frame 3: before any beat; frame 19: the stand in view cheers, the wave passes it
+    before, during = (read_png(p).astype(np.int16) for p in (pngs[2], pngs[18]))
     background = np.median(before.reshape(-1, 3), 0)
-    assert (np.abs(before - background).sum(-1) > 30).mean() > 0.01   # agents are drawn
+    assert (np.abs(before - background).sum(-1) > 30).mean() > 0.005   # agents are drawn
     changed = np.abs(during - before).sum(-1) > 30
     drawn = np.abs(before - background).sum(-1) > 30
     # agents standing up with their arms raised change a good part of the drawn area
@@ -96,11 +105,14 @@ import json, sys
 import numpy as np
 from crowd_addon.core import Crowd
 from crowd_addon.core.config_io import load_config
+from crowd_addon.core.show import Show
 cfg = load_config(sys.argv[1])
+assert cfg.show.cues                     # the configuration holds the show ...
+cfg.show = Show()                        # ... which moves the clappers: without it
 crowd = Crowd(cfg)
 got = {}
 crowd.on_event("clap", lambda n, f, ids: got.__setitem__(int(f), ids.tolist()))
-for _ in range(15):                      # the show starts moving agents at frame 20
+for _ in range(15):
     crowd.step()
 clip = cfg.clips["clap"]
 taus = [f for n, f in clip.events if n == "clap"]
@@ -130,3 +142,45 @@ def test_clap_events_match_the_agents_that_played_the_tag(demo):
     got = {int(k): v for k, v in r["got"].items()}
     expected = {int(k): v for k, v in r["expected"].items()}
     assert expected and got == expected
+
+
+@pytest.fixture(scope="module")
+def export_from_blend(demo):
+    """``crowd export --blend`` of the saved .blend in a fresh process, into a folder
+    of its own, under the demo's file name (the main layer names its layers)."""
+    out, _ = demo
+    usd = out / "again" / "stadium.usdc"
+    run = subprocess.run([sys.executable, "-m", "crowd_addon", "export", "--blend",
+                          str(out / "stadium.blend"), "--out", str(usd), "--json"],
+                         cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert run.returncode == 0, run.stderr[-3000:]
+    return usd, json.loads(run.stdout)          # stdout is the JSON object, only
+
+
+def test_export_of_the_saved_blend_is_the_demos_stage(demo, export_from_blend):
+    """The .blend holds the whole show: no --frames (the scene's range is the run), and
+    the same agents on the same animations as the demo's own export."""
+    out, _ = demo
+    usd, result = export_from_blend
+    summary = json.loads((out / "summary.json").read_text())
+    assert result["characters"] == 2 and result["frames"] == [1, FRAMES]
+    assert {k: result[k] for k in summary["usd_export"]} == summary["usd_export"]
+    assert result["baked_agents"] > 0               # the show moved agents
+    for rel in result["files"]:                     # main layer, characters, streams, agents
+        assert (usd.parent / rel).read_bytes() == (out / rel).read_bytes(), rel
+
+
+def test_preview_of_the_saved_blend_renders_the_demos_frames(demo):
+    """Through the scene camera the demo rendered with, the scene's frames."""
+    out, _ = demo
+    frames = out / "again_frames"
+    run = subprocess.run([sys.executable, "-m", "crowd_addon", "preview", "--blend",
+                          str(out / "stadium.blend"), "--out", str(frames), "--width", "320",
+                          "--height", "180", "--json"], cwd=ROOT, capture_output=True,
+                         text=True, timeout=600)
+    assert run.returncode == 0, run.stderr[-3000:]
+    result = json.loads(run.stdout)
+    assert result["camera"] == "StandCamera" and result["frames"] == [1, FRAMES]
+    for png in result["pngs"]:
+        name = Path(png).name
+        assert Path(png).read_bytes() == (out / "frames" / name).read_bytes(), name
