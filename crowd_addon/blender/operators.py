@@ -311,8 +311,8 @@ class CROWD_OT_item_add(_ListOperator, bpy.types.Operator):
             item.object = obj if obj is not None and obj not in rigs else None
         elif self.collection in ("cues", "reactions", "parameters"):
             item.name = _unique_name(items, self.collection[:-1].title())
-            if self.collection == "cues":
-                item.frame = context.scene.frame_current
+            if self.collection == "cues":       # a cue starts after the first frame
+                item.frame = max(context.scene.frame_current, context.scene.frame_start + 1)
         setattr(owner, index, len(items) - 1)
         return {"FINISHED"}
 

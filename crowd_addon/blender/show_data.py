@@ -47,9 +47,10 @@ def _cue(c, scene, depsgraph, cfg, placed, first, last) -> Cue:
     what = f"cue {c.name!r}"
     if not c.name.strip():
         raise CrowdError("a cue has no name (Crowd > Show > Cues)")
-    if c.timeline and not c.mute and not first <= c.frame <= last:
+    if c.timeline and not c.mute and not first < c.frame <= last:
         raise CrowdError(f"{what}: frame {c.frame} is outside the scene's frames "
-                         f"{first}..{last}")
+                         f"{first + 1}..{last} (the crowd starts at frame {first}; a cue "
+                         "starts from the next)")
     try:
         action = Action(
             c.action.lower(), c.target, duration=c.duration,

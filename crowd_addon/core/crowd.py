@@ -159,6 +159,8 @@ class Crowd:
                           np.where(st >= 0, st, cfg.agent_unique), cfg.agent_offset)
         self.uniques.start[:] = f0 - self.streams.max_offset + 1
         self.streams.clear_events()
+        self.events.fired.clear()          # counts since the last reset, like stats
+        self.events.calls.clear()
         self._events_fired = 0
         self._steps, self._ms_total = 0, 0.0
         for f in range(f0 - self.streams.max_offset + 1, f0 + 1):

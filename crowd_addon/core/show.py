@@ -430,6 +430,10 @@ class ShowRunner:
         a, what = cue.action, f"cue {cue.name!r}"
         c = self.crowd
         kind, ref = self._root(a.target, what)
+        start = c.config.start_frame
+        if cue.timeline and not cue.muted and cue.frame <= start:
+            raise CrowdError(f"{what}: frame {cue.frame} is not after the crowd's start frame "
+                             f"{start} (the first frame a cue can start at is {start + 1})")
         if a.kind == "stream" and kind != STREAM:
             raise CrowdError(f"{what}: {a.target!r} is a unique, not a stream")
         if a.kind == "unique" and kind != UNIQUE:

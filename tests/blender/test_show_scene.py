@@ -184,7 +184,7 @@ def test_a_keyframe_edit_makes_the_running_crowd_stale(scene):
     (lambda s: setattr(s.show.cues["goal"], "compare", 7),
      r"cue 'goal': the selection is empty"),
     (lambda s: setattr(s.show.cues["fall"], "frame", 400),
-     r"cue 'fall': frame 400 is outside the scene's frames 1..48"),
+     r"cue 'fall': frame 400 is outside the scene's frames 2..48"),
     (lambda s: setattr(s.show.cues["wave"], "sweep_speed", 0.0),
      r"cue 'wave': sweep: speed must be != 0"),
     (lambda s: setattr(s.show.cues["wave"], "source", "stands"),

@@ -77,7 +77,7 @@ def make_config() -> CrowdConfig:
     cfg.agent_unique[-4:] = 0
     cfg.show = Show(
         (Cue("goal", 8, Action("stream", "walk", 4, offset=2, hold=10), agents=np.arange(0, 90, 3)),
-         Cue("wave", 3, Action("stream", "wave_over", 2, offset="random", when_full="cut",
+         Cue("wave", 9, Action("stream", "wave_over", 2, offset="random", when_full="cut",
                                hold=6), sweep=Sweep((1.0, 2.0, 0.0), "angle", -2.5, 0.5, 2),
              seed=4),
          Cue("stand", 12, Action("stream", "walk_idle", 0), agents=np.arange(30, 40), spread=5,

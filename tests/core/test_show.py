@@ -241,14 +241,14 @@ def test_a_recording_of_a_show_rebuilds_its_poses():
 
 
 @pytest.mark.parametrize("make, message", [
-    (lambda: Cue("x", 1, Action("stream", "dance")), r"cue 'x': unknown stream or unique "
+    (lambda: Cue("x", 2, Action("stream", "dance")), r"cue 'x': unknown stream or unique "
                                                      r"'dance'"),
-    (lambda: Cue("x", 1, Action("stream", "hit")), r"cue 'x': 'hit' is a unique"),
-    (lambda: Cue("x", 1, Action("unique", "idle")), r"cue 'x': 'idle' is a stream"),
-    (lambda: Cue("x", 1, Action("stream", "idle"), agents=np.array([3, 99])),
+    (lambda: Cue("x", 2, Action("stream", "hit")), r"cue 'x': 'hit' is a unique"),
+    (lambda: Cue("x", 2, Action("unique", "idle")), r"cue 'x': 'idle' is a stream"),
+    (lambda: Cue("x", 2, Action("stream", "idle"), agents=np.array([3, 99])),
      r"cue 'x': agent 99 does not exist \(the crowd has 36 agents\)"),
-    (lambda: Cue("x", 1, Action("stream", "idle", offset=8)), r"cue 'x': offset 8 is outside"),
-    (lambda: Cue("x", 1, Action("trigger", "nope", name="go")), r"cue 'x': unknown stream"),
+    (lambda: Cue("x", 2, Action("stream", "idle", offset=8)), r"cue 'x': offset 8 is outside"),
+    (lambda: Cue("x", 2, Action("trigger", "nope", name="go")), r"cue 'x': unknown stream"),
 ])
 def test_bad_cues_are_named_when_the_crowd_is_built(make, message):
     with pytest.raises(CrowdError, match=message):
@@ -324,3 +324,19 @@ def test_parameter_tracks_hold_from_the_start_frame():
     crowd = Crowd(make_config(Show(tracks=(Track("mix", "w", 1, [1.0]),))))
     for offset in range(M):
         assert np.allclose(crowd.pose("mix", offset), crowd.pose("wave", offset), atol=1e-6)
+
+
+def test_a_cue_at_the_start_frame_is_named():
+    # before: accepted and never run (the crowd's first step is the frame after it)
+    with pytest.raises(CrowdError, match=r"cue 'early': frame 1 is not after the crowd's "
+                                         r"start frame 1"):
+        Crowd(make_config(Show((Cue("early", 1, Action("stream", "cheer")),))))
+
+
+def test_event_counts_start_again_with_a_reset():
+    crowd = Crowd(make_config())
+    crowd.advance_to(20)
+    fired = dict(crowd.events.fired)
+    crowd.advance_to(5)                       # back: reset and replay
+    crowd.advance_to(20)
+    assert dict(crowd.events.fired) == fired and sum(fired.values()) > 0
