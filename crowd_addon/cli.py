@@ -27,8 +27,8 @@ import argparse
 import os
 import sys
 
-from .cli_args import (add_shot_arguments, frame_number, int_at_least, parse_command, path_arg,
-                       positive_float, progress_printer)
+from .cli_args import (add_shot_arguments, add_trust_argument, frame_number, int_at_least,
+                       parse_command, path_arg, positive_float, progress_printer)
 from .core.errors import CrowdError
 
 __all__ = ["build_parser", "main"]
@@ -179,7 +179,7 @@ def _run_export(args) -> int:
         from .blender.cli_commands import export_blend
         config, result = export_blend(
             args.out, args.frames, blend=args.blend, scene=args.scene, agents=args.agents,
-            progress=progress_printer("crowd export"), on_bake=lambda done, total, message: print(
+            trust_scripts=args.trust_scripts, progress=progress_printer("crowd export"), on_bake=lambda done, total, message: print(
                 f"crowd export: {message}", file=sys.stderr, flush=True))
     if args.json:
         print(json.dumps({**dataclasses.asdict(result), "bytes": result.bytes}))
@@ -247,6 +247,7 @@ def _add_preview(subparsers) -> None:
                         "module through bpy) (default: %(default)s)")
     p.add_argument("--json", action="store_true",
                    help="print the summary as one JSON object")
+    add_trust_argument(p)
     p.set_defaults(handler=_run_preview)
 
 
@@ -267,7 +268,7 @@ def _run_preview(args) -> int:
         config, r, camera = preview_blend(
             args.out, args.frames, blend=args.blend, scene=args.scene, start=args.start,
             camera=args.camera, size=size, mp4=args.mp4, backend=args.backend,
-            progress=progress, on_bake=lambda done, total, message: print(
+            trust_scripts=args.trust_scripts, progress=progress, on_bake=lambda done, total, message: print(
                 f"crowd preview: {message}", file=sys.stderr, flush=True))
     else:
         from .core.config_io import load_config

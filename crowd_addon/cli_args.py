@@ -11,7 +11,7 @@ import re
 import sys
 
 __all__ = ["int_at_least", "positive_float", "frame_range", "frame_number", "path_arg",
-           "progress_printer", "add_shot_arguments", "parse_command"]
+           "progress_printer", "add_shot_arguments", "add_trust_argument", "parse_command"]
 
 #: The largest frame number in magnitude, as in configuration files (config_io.MAX_INT).
 MAX_FRAME = 2**31 - 1
@@ -113,6 +113,14 @@ def add_shot_arguments(parser) -> None:
                              "crowd has is an error (default: all)")
     parser.add_argument("--json", action="store_true",
                         help="print the summary as one JSON object")
+    add_trust_argument(parser)
+
+
+def add_trust_argument(parser) -> None:
+    """``--trust-scripts``: run a .blend's crowd script (docs/show.md)."""
+    parser.add_argument("--trust-scripts", action="store_true",
+                        help="run the .blend's crowd script (scene.crowd.show.script) even "
+                             "where Blender does not trust scripts in .blend files")
 
 
 def parse_command(parser, argv):

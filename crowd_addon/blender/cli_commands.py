@@ -102,6 +102,12 @@ def _flush_c_stdio():
         pass
 
 
+def _trust(trusted: bool):
+    if trusted:
+        from .show_data import trust_scripts
+        trust_scripts(True)
+
+
 def scene_frames(scene, frames=None) -> tuple:
     """``frames`` (first, last), or the scene's frame range when None."""
     return (scene.frame_start, scene.frame_end) if frames is None else tuple(frames)
@@ -109,7 +115,7 @@ def scene_frames(scene, frames=None) -> tuple:
 
 def export_blend(out: str, frames: tuple | None = None, *, blend: str | None = None,
                  scene: str | None = None, agents: int | None = None, progress=None,
-                 on_bake=None):
+                 on_bake=None, trust_scripts: bool = False):
     """Export the Crowd settings of a .blend's scene (:func:`open_scene`) as UsdSkel.
 
     ``out``, ``agents``, ``progress(stage, done, total)`` and ``on_bake(done, total,
@@ -117,11 +123,13 @@ def export_blend(out: str, frames: tuple | None = None, *, blend: str | None = N
     defaults to the scene's frame range. The folder of ``out`` is created when
     missing, and removed again when the export fails. Blender's own output goes to
     stderr (:func:`blender_output_to_stderr`). Returns ``(config, result)``: the baked
-    ``CrowdConfig`` and the ``ExportResult``.
+    ``CrowdConfig`` and the ``ExportResult``. ``trust_scripts``: run the scene's crowd
+    script even where scripts in .blend files are not trusted.
     """
     from ..core.files import folders_made
     from ..gpu.preview_render import writable_dir
     from .export import export_scene
+    _trust(trust_scripts)
     with blender_output_to_stderr():
         found = open_scene(blend, scene)
         folder = writable_dir(os.path.dirname(os.path.abspath(out)))
@@ -133,7 +141,8 @@ def export_blend(out: str, frames: tuple | None = None, *, blend: str | None = N
 def preview_blend(out: str, frames: int | None = None, *, blend: str | None = None,
                   scene: str | None = None, start: int | None = None,
                   camera: str | None = None, size=(960, 540), mp4: bool = False,
-                  backend: str = "moderngl", progress=None, on_bake=None):
+                  backend: str = "moderngl", progress=None, on_bake=None,
+                  trust_scripts: bool = False):
     """Render the Crowd settings of a .blend's scene (:func:`open_scene`) headless to
     PNG frames (:func:`crowd_addon.gpu.preview_render.render_preview`).
 
@@ -141,11 +150,13 @@ def preview_blend(out: str, frames: int | None = None, *, blend: str | None = No
     from there to the scene's end; ``camera`` names a camera object of the scene (default:
     the scene camera; with none, a camera framing the crowd). The camera, the frames
     and the output folder are checked before the bake. Blender's own output goes to
-    stderr. Returns ``(config, result, camera object name or None)``.
+    stderr. ``trust_scripts`` as :func:`export_blend`. Returns ``(config, result, camera
+    object name or None)``.
     """
     from ..gpu.preview_render import render_preview, writable_dir
     from .cameras import camera_from_object, find_camera
-    from .scene_config import config_from_scene
+    from .scene_config import build_crowd, config_from_scene
+    _trust(trust_scripts)
     with blender_output_to_stderr():
         found = open_scene(blend, scene)
         first = found.frame_start if start is None else int(start)
@@ -161,7 +172,10 @@ def preview_blend(out: str, frames: int | None = None, *, blend: str | None = No
             from .headless_gpu import init_headless_gpu
             init_headless_gpu()
         config = config_from_scene(found, on_bake)
-        result = render_preview(config, out, frames, start=first, size=size, mp4=mp4,
+        crowd, note = build_crowd(found, config)       # with the scene's crowd script
+        if note and on_bake is not None:
+            on_bake(1, 1, note)
+        result = render_preview(crowd, out, frames, start=first, size=size, mp4=mp4,
                                 backend=backend, progress=progress, camera=view)
     return config, result, None if obj is None else obj.name
 
@@ -197,7 +211,7 @@ def crowd_command(argv) -> int:
             raise CrowdError("no .blend is open (blender -b SCENE_BLEND -c crowd export ...)")
         _, result = export_blend(
             args.out, args.frames, scene=args.scene, agents=args.agents,
-            progress=progress_printer("crowd export"),
+            trust_scripts=args.trust_scripts, progress=progress_printer("crowd export"),
             on_bake=lambda done, total, message: print(
                 f"crowd export: {message}", file=sys.stderr, flush=True))
     except CrowdError as exc:

@@ -219,15 +219,26 @@ def run_here(scene, last):
 
 def test_a_fresh_process_exports_what_the_authoring_session_plays(scene, tmp_path):
     from pxr import Usd, UsdSkel
+
+    from crowd_addon.blender import show_data
     last = 40
-    crowd, poses, events = run_here(scene, last)
+    _script(scene, SCRIPT)                 # a crowd script's callback, trusted both sides
+    show_data.trust_scripts(True)
+    try:
+        crowd, poses, events = run_here(scene, last)
+        show_data.trust_scripts(False)
+        untrusted = run_here(scene, last)[1]
+    finally:
+        show_data.trust_scripts(False)
+    assert not np.array_equal(untrusted[last], poses[last])     # the script mattered
     stats = crowd.show.stats
     assert stats["goal"]["agents"] and stats["wave"]["agents"] and stats["fall"]["agents"]
     assert crowd.show.reactions["near clap"] > 0
     blend, out = tmp_path / "show.blend", tmp_path / "show.usdc"
     bpy.ops.wm.save_as_mainfile(filepath=str(blend))
     run = subprocess.run([sys.executable, "-m", "crowd_addon", "export", "--blend", str(blend),
-                          "--out", str(out), "--frames", f"1-{last}", "--json"], cwd=ROOT,
+                          "--out", str(out), "--frames", f"1-{last}", "--json",
+                          "--trust-scripts"], cwd=ROOT,
                          capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr[-3000:]
     result = json.loads(run.stdout.strip().splitlines()[-1])
@@ -328,3 +339,16 @@ def test_a_failing_crowd_script_is_named(scene, body, message):
             scene_config.build_crowd(scene, scene_config.config_from_scene(scene))
     finally:
         show_data.trust_scripts(False)
+
+
+def test_an_untrusted_export_says_its_script_did_not_run(scene, tmp_path):
+    _script(scene, SCRIPT)
+    blend = tmp_path / "show.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    run = subprocess.run([sys.executable, "-m", "crowd_addon", "export", "--blend", str(blend),
+                          "--out", str(tmp_path / "s.usdc"), "--frames", "1-4", "--json"],
+                         cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert "crowd script 'show.py' did not run: scripts in .blend files are not trusted" \
+        in run.stderr
+    json.loads(run.stdout)
