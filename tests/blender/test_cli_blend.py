@@ -12,7 +12,6 @@ import math
 import os
 import subprocess
 import sys
-import zlib
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +25,8 @@ from mathutils import Vector  # noqa: E402
 
 from crowd_addon.blender.cameras import camera_from_object, find_camera  # noqa: E402
 from crowd_addon.core.errors import CrowdError  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))   # tests/pngs.py
+from pngs import read_png  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 NX, NY, FIRST, LAST = 8, 6, 3, 8
@@ -89,22 +90,6 @@ def blend(tmp_path_factory):
 def crowd(*args, timeout=300):
     return subprocess.run([sys.executable, "-m", "crowd_addon", *map(str, args)], cwd=ROOT,
                           capture_output=True, text=True, timeout=timeout)
-
-
-def read_png(path):
-    """Decode an 8-bit RGB PNG as written by crowd_addon.gpu.png (filter 0 rows)."""
-    data = Path(path).read_bytes()
-    pos, idat, w, h = 8, b"", 0, 0
-    while pos < len(data):
-        n = int.from_bytes(data[pos:pos + 4], "big")
-        kind, body = data[pos + 4:pos + 8], data[pos + 8:pos + 8 + n]
-        if kind == b"IHDR":
-            w, h = int.from_bytes(body[:4], "big"), int.from_bytes(body[4:8], "big")
-        elif kind == b"IDAT":
-            idat += body
-        pos += 12 + n
-    raw = np.frombuffer(zlib.decompress(idat), np.uint8).reshape(h, 1 + 3 * w)
-    return raw[:, 1:].reshape(h, w, 3)
 
 
 # ------------------------------------------------------------------ the camera

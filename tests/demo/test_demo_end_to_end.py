@@ -12,7 +12,6 @@ import json
 import os
 import subprocess
 import sys
-import zlib
 from pathlib import Path
 
 import numpy as np
@@ -22,25 +21,11 @@ pytest.importorskip("bpy")
 pytest.importorskip("moderngl")
 pxr = pytest.importorskip("pxr")
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))   # tests/pngs.py
+from pngs import read_png  # noqa: E402
+
 ROOT = Path(__file__).resolve().parents[2]
 AGENTS, FRAMES = 300, 60
-
-
-def read_png(path):
-    """Decode an 8-bit RGB PNG (as written by crowd_addon.gpu.png, filter 0 rows)."""
-    data = Path(path).read_bytes()
-    pos, idat, w, h = 8, b"", 0, 0
-    while pos < len(data):
-        n = int.from_bytes(data[pos:pos + 4], "big")
-        kind, body = data[pos + 4:pos + 8], data[pos + 8:pos + 8 + n]
-        if kind == b"IHDR":
-            w, h = int.from_bytes(body[:4], "big"), int.from_bytes(body[4:8], "big")
-        elif kind == b"IDAT":
-            idat += body
-        pos += 12 + n
-    raw = np.frombuffer(zlib.decompress(idat), np.uint8).reshape(h, 1 + 3 * w)
-    assert (raw[:, 0] == 0).all(), "unexpected PNG filter"
-    return raw[:, 1:].reshape(h, w, 3)
 
 
 @pytest.fixture(scope="module")
