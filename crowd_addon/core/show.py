@@ -624,7 +624,13 @@ class ShowRunner:
         self._handles = []
 
     def describe(self) -> list:
-        """One dict per cue: ``name``, ``frame``, ``agents`` (how many it selects)."""
+        """One dict per cue: ``name``, ``frame``, ``agents`` (how many it selects);
+        worked out once (selections do not change), so a panel may ask every redraw."""
+        if getattr(self, "_described", None) is None:
+            self._described = self._describe()
+        return [dict(d) for d in self._described]
+
+    def _describe(self) -> list:
         out = []
         for i, cue in enumerate(self.show.cues):
             n = 0 if not cue.action.moves_agents else self._agents(cue, self._targets[i]).size
