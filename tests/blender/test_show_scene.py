@@ -352,3 +352,18 @@ def test_an_untrusted_export_says_its_script_did_not_run(scene, tmp_path):
     assert "crowd script 'show.py' did not run: scripts in .blend files are not trusted" \
         in run.stderr
     json.loads(run.stdout)
+
+
+def test_undoing_a_cue_edit_gives_the_same_crowd(scene):
+    _, want, events = run_here(scene, 30)
+    bpy.ops.ed.undo_push(message="show built")
+    scene.crowd.show.cues["goal"].compare = 2            # another team cheers
+    bpy.ops.ed.undo_push(message="cue edited")
+    _, edited, _ = run_here(bpy.context.scene, 30)
+    assert not np.array_equal(edited[30], want[30])
+    bpy.ops.ed.undo()
+    scene = bpy.context.scene
+    assert scene.crowd.show.cues["goal"].compare == 1
+    _, got, events_again = run_here(scene, 30)
+    assert events_again == events
+    assert all(np.array_equal(got[f], want[f]) for f in want)
