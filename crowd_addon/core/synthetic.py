@@ -14,7 +14,8 @@ from . import quaternion as quat
 from .clip import Clip
 from .skeleton import Skeleton
 
-__all__ = ["humanoid", "humanoid_mesh", "periodic_clip", "paper_config", "paper_stream_tree"]
+__all__ = ["humanoid", "humanoid_mesh", "spread_weights", "periodic_clip", "paper_config",
+           "paper_stream_tree"]
 
 
 def humanoid(name="fan", bones=82) -> Skeleton:
@@ -158,6 +159,19 @@ def humanoid_mesh(skeleton: Skeleton, sides=8, rings=4, name=None):
                                      np.concatenate(pos), np.concatenate(tris),
                                      np.concatenate(idx), np.concatenate(wts),
                                      bone_count=skeleton.bone_count)
+
+
+def spread_weights(skeleton: Skeleton, k: int, seed=0):
+    """The :func:`humanoid_mesh` body with every vertex weighted to the ``k`` bones whose
+    heads are nearest, by 1 / (distance + 5 cm)^2 with some noise (a smooth rig, as an
+    FBX export has): ``(positions, triangles, indices (V, k), weights (V, k))``."""
+    body = humanoid_mesh(skeleton)
+    heads = skeleton.bind_model[:, :3, 3]
+    d = np.linalg.norm(body.positions[:, None].astype(np.float64) - heads[None], axis=2)
+    idx = np.argsort(d, axis=1, kind="stable")[:, :k]
+    w = 1.0 / (np.take_along_axis(d, idx, 1) + 0.05) ** 2
+    w *= np.random.default_rng(seed).uniform(0.5, 1.5, w.shape)
+    return body.positions, body.triangles, idx, w
 
 
 def paper_stream_tree(s: int):

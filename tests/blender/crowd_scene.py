@@ -13,6 +13,8 @@ import numpy as np
 
 import bpy
 
+from crowd_addon.blender.operators import CROWD_OT_bake, BakeJob
+
 BONES = (  # name, parent, head, tail
     ("root", None, (0, 0, 0), (0, 0, 0.9)),
     ("spine", "root", (0, 0, 0.9), (0, 0, 1.4)),
@@ -210,3 +212,19 @@ def init_gpu():
     the extension's own one-time initialising render."""
     from crowd_addon.blender.headless_gpu import init_headless_gpu
     init_headless_gpu()
+
+
+class FakeBakeOperator:
+    """Stands in for the modal bake operator's instance (no event loop in background
+    mode): the operator's own ``modal``/``_end``/``_finish`` run against it, and what it
+    reports is kept in ``reports`` as ``(kinds, message)``."""
+
+    modal, _end, _finish = CROWD_OT_bake.modal, CROWD_OT_bake._end, CROWD_OT_bake._finish
+    _timer = None
+
+    def __init__(self, scene):
+        self._job = BakeJob(scene)
+        self.reports = []
+
+    def report(self, kind, message):
+        self.reports.append((set(kind), message))

@@ -18,7 +18,6 @@ import crowd_scene as cs  # noqa: E402
 from crowd_addon.blender import preview  # noqa: E402
 from crowd_addon.blender.armature import object_to_armature, proxy_mesh_from_object  # noqa: E402
 from crowd_addon.blender.bake import bake_actions  # noqa: E402
-from crowd_addon.blender.operators import CROWD_OT_bake, BakeJob  # noqa: E402
 from crowd_addon.core.clip import ClipBank  # noqa: E402
 from crowd_addon.core.skinning import skin_vertices, skinning_matrices  # noqa: E402
 
@@ -97,18 +96,6 @@ def test_more_than_eight_groups_keep_eight_and_say_so(scene, blend):
                            "strongest, renormalised, so they deform slightly differently",)
 
 
-class _FakeOperator:
-    """The bake operator's own methods on a stand-in (no event loop in background)."""
-
-    modal, _end, _finish = CROWD_OT_bake.modal, CROWD_OT_bake._end, CROWD_OT_bake._finish
-    _timer = None
-
-    def __init__(self, scene):
-        self._job = BakeJob(scene)
-        self.reports = []
-
-    def report(self, kind, message):
-        self.reports.append((set(kind), message))
 
 
 def test_the_bake_reports_the_mesh_and_how_many_vertices_lost_influences():
@@ -121,7 +108,7 @@ def test_the_bake_reports_the_mesh_and_how_many_vertices_lost_influences():
         cs.add_character(scene.crowd, rig, body)
         cs.add_stream(scene.crowd, "walk", walk)
         scene.crowd.max_offset = 8
-        op = _FakeOperator(scene)
+        op = cs.FakeBakeOperator(scene)
         timer = type("Event", (), {"type": "TIMER"})()
         try:
             while op.modal(bpy.context, timer) == {"RUNNING_MODAL"}:

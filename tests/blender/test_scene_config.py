@@ -303,7 +303,7 @@ def test_the_bake_reports_keys_too_far_apart(rig_scene):
     rig.animation_data.action = None
     cs.add_stream(scene.crowd, "spin", spin)
     timer = type("Event", (), {"type": "TIMER"})()
-    op = _FakeOperator(scene)
+    op = cs.FakeBakeOperator(scene)
     while op.modal(bpy.context, timer) == {"RUNNING_MODAL"}:
         pass
     warnings = [m for kind, m in op.reports if kind == {"WARNING"}]
@@ -355,20 +355,6 @@ def test_a_cancelled_bake_changes_nothing(rig_scene):
     assert sorted(job.config.clips) == ["idle", "walk"]
 
 
-class _FakeOperator:
-    """Stands in for the modal operator instance (no event loop in background mode):
-    the operator's own methods run against it."""
-
-    from crowd_addon.blender.operators import CROWD_OT_bake as _op
-    modal, _end, _finish = _op.modal, _op._end, _op._finish
-    _timer = None
-
-    def __init__(self, scene):
-        self._job = BakeJob(scene)
-        self.reports = []
-
-    def report(self, kind, message):
-        self.reports.append((set(kind), message))
 
 
 def test_the_modal_bake_steps_on_timer_events_and_cancels_on_esc(rig_scene):
@@ -376,16 +362,16 @@ def test_the_modal_bake_steps_on_timer_events_and_cancels_on_esc(rig_scene):
     cs.add_stream(scene.crowd, "walk", acts["walk"])
     cs.add_stream(scene.crowd, "idle", acts["idle"])
     timer, esc, mouse = (type("Event", (), {"type": t})() for t in ("TIMER", "ESC", "MOUSEMOVE"))
-    op = _FakeOperator(scene)
+    op = cs.FakeBakeOperator(scene)
     assert op.modal(bpy.context, mouse) == {"PASS_THROUGH"}
     assert op.modal(bpy.context, timer) == {"RUNNING_MODAL"}
     assert op.modal(bpy.context, esc) == {"CANCELLED"}
     assert preview.get(scene) is None and "cancelled" in op.reports[-1][1]
-    op = _FakeOperator(scene)
+    op = cs.FakeBakeOperator(scene)
     results = [op.modal(bpy.context, timer) for _ in range(5)]
     assert results == [{"RUNNING_MODAL"}] * 4 + [{"FINISHED"}]
     assert preview.get(scene).crowd.streams.count == 2 and "2 clips" in op.reports[-1][1]
     scene.crowd.characters[0].streams[1].nodes[0].action = None
-    op = _FakeOperator(scene)
+    op = cs.FakeBakeOperator(scene)
     assert op.modal(bpy.context, timer) == {"CANCELLED"}
     assert op.reports[-1] == ({"ERROR"}, "stream 'idle': node 'clip': no action chosen")

@@ -20,17 +20,7 @@ QUAD = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], np.float32)
 QUAD_TRI = np.array([[0, 1, 2], [0, 2, 3]])
 
 
-def spread(skeleton, k, seed=0):
-    """The humanoid body's vertices weighted to the ``k`` bones whose heads are nearest,
-    by 1 / (distance + 5 cm)^2 with some noise (a smooth rig, as an FBX export has):
-    ``(positions, triangles, indices (V, k), weights (V, k))``."""
-    body = synthetic.humanoid_mesh(skeleton)
-    heads = skeleton.bind_model[:, :3, 3]
-    d = np.linalg.norm(body.positions[:, None].astype(np.float64) - heads[None], axis=2)
-    idx = np.argsort(d, axis=1, kind="stable")[:, :k]
-    w = 1.0 / (np.take_along_axis(d, idx, 1) + 0.05) ** 2
-    w *= np.random.default_rng(seed).uniform(0.5, 1.5, w.shape)
-    return body.positions, body.triangles, idx, w
+spread = synthetic.spread_weights
 
 
 def exact(positions, idx, w, matrices):

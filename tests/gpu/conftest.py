@@ -28,17 +28,7 @@ def gl():
     ctx.release()
 
 
-def spread_influences(skeleton, k, seed=0):
-    """The humanoid body of ``skeleton`` with every vertex weighted to the ``k`` bones
-    whose heads are nearest, by 1 / (distance + 5 cm)^2 with some noise (a smooth rig,
-    as an FBX export has): ``(positions, triangles, indices (V, k), weights (V, k))``."""
-    body = sy.humanoid_mesh(skeleton)
-    heads = skeleton.bind_model[:, :3, 3]
-    d = np.linalg.norm(body.positions[:, None].astype(np.float64) - heads[None], axis=2)
-    idx = np.argsort(d, axis=1, kind="stable")[:, :k]
-    w = 1.0 / (np.take_along_axis(d, idx, 1) + 0.05) ** 2
-    w *= np.random.default_rng(seed).uniform(0.5, 1.5, w.shape)
-    return body.positions, body.triangles, idx, w
+spread_influences = sy.spread_weights
 
 
 def make_config(M=8, streams=3, agents=24, NT=4, bones=24, max_texture_size=16384,
