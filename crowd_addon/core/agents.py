@@ -121,8 +121,9 @@ class AgentIndex:
             self.key_count = int(keys.max()) + 1
             self._rebuild()
             return
+        new = np.unique(agents[~self.stale[agents]])
         self.stale[agents] = True
-        self.overlay = np.union1d(self.overlay, agents)
+        self.overlay = np.concatenate([self.overlay, new])
         if self.overlay.size > max(256, self.keys.shape[0] // 64):
             self._rebuild()
 

@@ -174,9 +174,9 @@ class PoseStorage:
         rows = np.unique(np.asarray(rows, np.int64))
         if rows.size == 0:
             return
-        breaks = np.flatnonzero(np.diff(rows) != 1) + 1
-        for run in np.split(rows, breaks):
-            self.mark_dirty(run[0], run.size)
+        first = np.flatnonzero(np.r_[True, np.diff(rows) != 1])
+        counts = np.diff(np.r_[first, rows.size])
+        self._dirty.extend(zip(rows[first].tolist(), counts.tolist()))
 
     def mark(self) -> int:
         """A bookmark for :meth:`bytes_since`."""

@@ -14,7 +14,6 @@ tells the caller which happened to each agent.
 
 from __future__ import annotations
 
-from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -24,7 +23,7 @@ from .agents import STREAM, TRANSITION, UNIQUE
 from .config import WHEN_FULL
 from .errors import CrowdError
 
-__all__ = ["TransitionSlots", "TransitionResult", "MAX_DURATION"]
+__all__ = ["TransitionSlots", "TransitionResult", "RequestQueue", "MAX_DURATION"]
 
 #: The longest transition, in frames (2**31 - 1: frame arithmetic stays in int64).
 MAX_DURATION = 2 ** 31 - 1
@@ -43,6 +42,100 @@ class TransitionResult:
     cut: np.ndarray
 
 
+class RequestQueue:
+    """Waiting transition requests, first in first out, at most one per agent (a new
+    request of a waiting agent replaces its old one and goes to the back).
+
+    Kept in arrays so that queueing, withdrawing and serving thousands of agents is a
+    few numpy calls: each agent's request lives in per-agent arrays with its ticket
+    (the arrival number), and a growing list of (ticket, agent) in arrival order is
+    read from its head; entries whose ticket is no longer the agent's are withdrawn
+    requests and are skipped.
+    """
+
+    def __init__(self, agents: int):
+        self._ticket = np.full(agents, -1, np.int64)      # -1: not waiting
+        self._kind = np.zeros(agents, np.int8)
+        self._ref = np.zeros(agents, np.int64)
+        self._offset = np.zeros(agents, np.int64)
+        self._length = np.zeros(agents, np.int64)
+        self._line = np.zeros((2, 64), np.int64)          # (ticket, agent) by arrival
+        self._head = self._tail = 0
+        self._count = 0
+        self._issued = 0                                  # tickets handed out so far
+
+    def __len__(self) -> int:
+        return self._count
+
+    def __bool__(self) -> bool:
+        return self._count > 0
+
+    def __iter__(self):
+        return iter(self.agents().tolist())
+
+    def _live(self):
+        """Positions (in the line) of the live entries, in arrival order."""
+        tickets, agents = self._line[:, self._head:self._tail]
+        return np.flatnonzero(self._ticket[agents] == tickets)
+
+    def agents(self) -> np.ndarray:
+        """(k,) int64 waiting agents, first in first."""
+        return self._line[1, self._head:self._tail][self._live()].copy()
+
+    def items(self) -> list:
+        """``[(agent, (kind, ref, offset, length))]`` in queue order (for inspection)."""
+        a = self.agents()
+        return [(int(i), (int(k), int(r), int(o), int(n))) for i, k, r, o, n in zip(
+            a, self._kind[a], self._ref[a], self._offset[a], self._length[a])]
+
+    def clear(self):
+        self._ticket[:] = -1
+        self._head = self._tail = self._count = 0
+
+    def withdraw(self, agents: np.ndarray):
+        """Forget the waiting requests of ``agents`` (unique ids); others are ignored."""
+        if self._count:
+            waiting = agents[self._ticket[agents] >= 0]
+            self._ticket[waiting] = -1
+            self._count -= int(waiting.size)
+            if self._count == 0:
+                self._head = self._tail = 0
+
+    def push(self, agents, kind, ref, offset, length):
+        """Queue ``agents`` (unique ids, none of them waiting) in this order."""
+        k = int(agents.size)
+        if self._tail + k > self._line.shape[1]:     # full: keep the live entries only
+            live = self._line[:, self._head:self._tail][:, self._live()]
+            m = live.shape[1]
+            line = np.zeros((2, max(64, 2 * (m + k))), np.int64)
+            line[:, :m] = live
+            self._line, self._head, self._tail = line, 0, m
+        tickets = self._issued + np.arange(k, dtype=np.int64)
+        self._issued += k
+        self._line[0, self._tail:self._tail + k] = tickets
+        self._line[1, self._tail:self._tail + k] = agents
+        self._tail += k
+        self._ticket[agents] = tickets
+        self._kind[agents] = kind
+        self._ref[agents] = ref
+        self._offset[agents] = offset
+        self._length[agents] = length
+        self._count += k
+
+    def pop(self, n: int) -> tuple:
+        """The ``n`` oldest requests as arrays ``(agents, kind, ref, offset, length)``,
+        removed from the queue."""
+        live = self._live()[:n]
+        agents = self._line[1, self._head + live]
+        self._head = self._head + int(live[-1]) + 1 if live.size else self._head
+        self._ticket[agents] = -1
+        self._count -= int(agents.size)
+        if self._count == 0:
+            self._head = self._tail = 0
+        return (agents, self._kind[agents].copy(), self._ref[agents].copy(),
+                self._offset[agents].copy(), self._length[agents].copy())
+
+
 class TransitionSlots:
     """Slot arrays (all ``(NT, ...)``), the request queue and the request policy.
 
@@ -54,7 +147,7 @@ class TransitionSlots:
     t0, length : (NT,) start frame and length L in frames.
     start_pose : (NT, B, 10) float32 StartP.
     pose : (NT, B, 10) float32 the slot's current pose P.
-    queue : agent id -> (kind, ref, offset, length) of waiting requests, FIFO.
+    queue : the :class:`RequestQueue` of waiting requests.
     when_full : the default policy, ``"queue"`` or ``"cut"``.
 
     ``begin(slots, agents, kind, ref, offsets, length)`` is the crowd's: it takes the
@@ -76,7 +169,7 @@ class TransitionSlots:
         self.length = np.ones(n, np.int64)
         self.start_pose = sqt.identity_pose((n, bones))
         self.pose = sqt.identity_pose((n, bones))
-        self.queue = OrderedDict()
+        self.queue = RequestQueue(agents.count)
         self.served = 0
         self.cuts = 0
 
@@ -87,7 +180,7 @@ class TransitionSlots:
         return np.flatnonzero(self.active)
 
     def queued_agents(self) -> np.ndarray:
-        return np.fromiter(self.queue.keys(), np.int64, len(self.queue))
+        return self.queue.agents()
 
     # ------------------------------------------------------------------ policy
     def check_request(self, duration, when_full) -> tuple:
@@ -116,34 +209,39 @@ class TransitionSlots:
         ref = np.broadcast_to(np.asarray(ref, np.int64), np.shape(agents))
         agents, first = np.unique(agents, return_index=True)
         offsets, ref = offsets[first], ref[first]
-        for a in agents.tolist():
-            self.queue.pop(a, None)
+        self.queue.withdraw(agents)
         if self.count == 0:          # nothing could ever serve a queue: switch at once
             policy = "cut"
-        self.serve_queue()           # first in, first out: the waiting go first
         if length == 0:
+            self.serve_queue()       # first in, first out: the waiting go first
             self.cut(agents, kind, ref, offsets)
             empty = np.zeros(0, np.int64)
             return TransitionResult(empty, empty, empty, agents)
+        # the waiting go first (FIFO), then these agents: agents already blending keep
+        # their slot, the others take what is left; all start in one batch
+        free = self.free_slots()
+        waiting = self.queue.pop(min(free.size, len(self.queue)))
+        w_slots, free = free[:waiting[0].size], free[waiting[0].size:]
         in_slot = self.agents.kind[agents] == TRANSITION
         reuse_agents = agents[in_slot]
         reuse_slots = self.agents.ref[reuse_agents]
         rest = agents[~in_slot]
-        free = self.free_slots()
         take = min(free.size, rest.size)
         all_agents = np.concatenate([reuse_agents, rest[:take]])
         all_slots = np.concatenate([reuse_slots, free[:take]]).astype(np.int64)
         overflow = rest[take:]
-        if all_slots.size:
+        if w_slots.size or all_slots.size:
             at = np.searchsorted(agents, all_agents)
-            self._begin(all_slots, all_agents, kind, ref[at], offsets[at], length)
+            mine = (all_agents, kind, ref[at], offsets[at], length)
+            self._begin(np.concatenate([w_slots, all_slots]),
+                        *(np.concatenate([w, np.broadcast_to(m, all_agents.shape)])
+                          for w, m in zip(waiting, mine)))
         queued = cut = np.zeros(0, np.int64)
         if overflow.size:
             at = np.searchsorted(agents, overflow)
             ov_off, ov_ref = offsets[at], ref[at]
             if policy == "queue":
-                for a, r, o in zip(overflow.tolist(), ov_ref.tolist(), ov_off.tolist()):
-                    self.queue[a] = (kind, r, o, length)
+                self.queue.push(overflow, kind, ov_ref, ov_off, length)
                 queued = overflow
             else:
                 self.cut(overflow, kind, ov_ref, ov_off)
@@ -167,10 +265,7 @@ class TransitionSlots:
         n = min(free.size, len(self.queue))
         if n == 0:
             return 0
-        served = [self.queue.popitem(last=False) for _ in range(n)]
-        agents = np.fromiter((a for a, _ in served), np.int64, n)
-        kind, ref, off, length = (np.array(col, np.int64)
-                                  for col in zip(*(req for _, req in served)))
+        agents, kind, ref, off, length = self.queue.pop(n)
         self._begin(free[:n], agents, kind, ref, off, length)    # all at once, in order
         return n
 
