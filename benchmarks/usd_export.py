@@ -89,7 +89,7 @@ def run_export(agents: int, frames: int, react: float, directory: str) -> dict:
     return {"agents": agents, "frames": frames, "seconds": seconds,
             "simulate_s": r.seconds["simulate"], "author_s": r.seconds["author"],
             "write_s": r.seconds["write"], "bytes": r.bytes, "files": len(r.files),
-            "shared_agents": r.shared_agents, "baked_agents": r.baked_agents,
+            "shared_agents": r.shared_agents, "clip_agents": r.clip_agents, "blend_frames": r.blend_frames,
             "offset_animations": r.offset_animations,
             "stream_animations": r.stream_animations,
             "bytes_per_animation_frame": per_anim_frame,
@@ -236,7 +236,7 @@ def main() -> None:
             print(f"{agents:>6,} agents x {frames} frames: {r['seconds']:6.1f} s "
                   f"(simulate {r['simulate_s']:.1f}, author {r['author_s']:.1f}, write "
                   f"{r['write_s']:.1f}), {r['bytes'] / 1e6:8.1f} MB, "
-                  f"{r['baked_agents']:,} baked agents, "
+                  f"{r['clip_agents']:,} agents on clips ({r['blend_frames']:,} blend frames), "
                   f"{r['offset_animations']:,} offset animations, peak RSS "
                   f"{r['peak_rss_mb'] / 1e3:.1f} GB; "
                   f"{100 * r['bytes_vs_per_agent_baked']:.2f} % of per-agent baked "

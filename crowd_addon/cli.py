@@ -171,15 +171,16 @@ def _run_export(args) -> int:
         crowd = Crowd(config, skinning="gpu")           # checks the agents' references
         folder = writable_dir(os.path.dirname(os.path.abspath(args.out)))
         with folders_made(folder):                      # gone again if the export fails
-            check_export(config, args.out, args.agents)     # before simulating the shot
+            check_export(config, args.out, args.agents, args.layout)   # before simulating
             progress = progress_printer("crowd export")
             shot = record(crowd, *args.frames, progress=progress)
-            result = export_crowd(shot, args.out, agents=args.agents, progress=progress)
+            result = export_crowd(shot, args.out, agents=args.agents, progress=progress,
+                                  layout=args.layout)
     else:                       # the scene's Crowd settings, baked as the panel does
         from .blender.cli_commands import export_blend
         config, result = export_blend(
             args.out, args.frames, blend=args.blend, scene=args.scene, agents=args.agents,
-            trust_scripts=args.trust_scripts, progress=progress_printer("crowd export"), on_bake=lambda done, total, message: print(
+            layout=args.layout, trust_scripts=args.trust_scripts, progress=progress_printer("crowd export"), on_bake=lambda done, total, message: print(
                 f"crowd export: {message}", file=sys.stderr, flush=True))
     if args.json:
         print(json.dumps({**dataclasses.asdict(result), "bytes": result.bytes}))
@@ -191,7 +192,8 @@ def _run_export(args) -> int:
         f"  frames {result.frames[0]}-{result.frames[1]} at {config.fps:g} fps, "
         f"{result.agents:,} agents: {result.shared_agents:,} on "
         f"{result.offset_animations:,} shared offset animations, "
-        f"{result.baked_agents:,} with their own animation, {result.moving_agents:,} moving",
+        f"{result.clip_agents:,} changing animation on value clips ({result.blend_frames:,} "
+        f"blend frames), {result.moving_agents:,} moving",
         f"  {result.stream_animations:,} stream animations, {result.characters} "
         f"character{'s' if result.characters != 1 else ''}",
         f"  {s['total']:.1f} s (simulate {s['simulate']:.1f} s, author "

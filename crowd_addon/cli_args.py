@@ -1,7 +1,7 @@
 """Argument converters and progress printing shared by the two command lines: the
 headless ``crowd`` program (:mod:`crowd_addon.cli`) and Blender's ``-c crowd``
-command (:mod:`crowd_addon.blender.cli_commands`). A leaf module: it imports nothing
-else of this project, so both may use it without a cycle."""
+command (:mod:`crowd_addon.blender.cli_commands`). It imports nothing of this project
+but core's vocabulary (``USD_LAYOUTS``), so both may use it without a cycle."""
 
 from __future__ import annotations
 
@@ -9,6 +9,8 @@ import argparse
 import math
 import re
 import sys
+
+from .core.config import USD_LAYOUTS
 
 __all__ = ["int_at_least", "positive_float", "frame_range", "frame_number", "path_arg",
            "progress_printer", "add_shot_arguments", "add_trust_argument", "parse_command"]
@@ -98,7 +100,7 @@ def progress_printer(prefix: str):
 
 def add_shot_arguments(parser) -> None:
     """The options every ``export`` command shares: ``--scene``, ``--out``, ``--frames``
-    (None when not given), ``--agents`` and ``--json``."""
+    (None when not given), ``--agents``, ``--layout`` and ``--json``."""
     parser.add_argument("--scene", default=None, metavar="NAME",
                         help="scene of the .blend (default: the active scene)")
     parser.add_argument("--out", required=True, type=path_arg, metavar="SHOT_USD",
@@ -111,6 +113,10 @@ def add_shot_arguments(parser) -> None:
     parser.add_argument("--agents", type=int_at_least(1), default=None, metavar="N",
                         help="export only the first N agents (ids 0..N-1); more than the "
                              "crowd has is an error (default: all)")
+    parser.add_argument("--layout", choices=USD_LAYOUTS, default=USD_LAYOUTS[0],
+                        help="instanced (default): agents are instanceable, renderers "
+                             "share each character; blender: agents are not instanceable, "
+                             "so Blender's own USD import plays their animation")
     parser.add_argument("--json", action="store_true",
                         help="print the summary as one JSON object")
     add_trust_argument(parser)

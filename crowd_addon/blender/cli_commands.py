@@ -115,11 +115,11 @@ def scene_frames(scene, frames=None) -> tuple:
 
 def export_blend(out: str, frames: tuple | None = None, *, blend: str | None = None,
                  scene: str | None = None, agents: int | None = None, progress=None,
-                 on_bake=None, trust_scripts: bool = False):
+                 on_bake=None, trust_scripts: bool = False, layout: str = "instanced"):
     """Export the Crowd settings of a .blend's scene (:func:`open_scene`) as UsdSkel.
 
-    ``out``, ``agents``, ``progress(stage, done, total)`` and ``on_bake(done, total,
-    message)`` are those of :func:`.export.export_scene`; ``frames`` (first, last)
+    ``out``, ``agents``, ``layout``, ``progress(stage, done, total)`` and ``on_bake(done,
+    total, message)`` are those of :func:`.export.export_scene`; ``frames`` (first, last)
     defaults to the scene's frame range. The folder of ``out`` is created when
     missing, and removed again when the export fails. Blender's own output goes to
     stderr (:func:`blender_output_to_stderr`). Returns ``(config, result)``: the baked
@@ -135,7 +135,7 @@ def export_blend(out: str, frames: tuple | None = None, *, blend: str | None = N
         folder = writable_dir(os.path.dirname(os.path.abspath(out)))
         with folders_made(folder):
             return export_scene(found, out, scene_frames(found, frames), agents=agents,
-                                progress=progress, on_bake=on_bake)
+                                progress=progress, on_bake=on_bake, layout=layout)
 
 
 def preview_blend(out: str, frames: int | None = None, *, blend: str | None = None,

@@ -18,9 +18,10 @@ import time
 from numbers import Integral
 
 import bpy
-from bpy.props import BoolProperty, IntProperty, StringProperty
+from bpy.props import BoolProperty, EnumProperty, IntProperty, StringProperty
 from bpy_extras.io_utils import ExportHelper
 
+from ..core.config import USD_LAYOUTS
 from ..core.errors import CrowdError
 from . import preview, scene_config
 
@@ -59,14 +60,14 @@ def check_export(scene, path, frames) -> tuple:
 
 
 def export_scene(scene, path, frames, agents=None, progress=None, on_bake=None,
-                 depsgraph=None):
+                 depsgraph=None, layout="instanced"):
     """Bake ``scene``'s Crowd settings and export the shot to ``path`` in one call
     (:func:`export_steps` run to the end).
 
     Parameters
     ----------
     scene : a scene with Crowd settings (``scene.crowd``, the extension registered).
-    path, agents : as :func:`crowd_addon.usd.export_crowd`; frames : ``(first, last)``
+    path, agents, layout : as :func:`crowd_addon.usd.export_crowd`; frames : ``(first, last)``
         (:func:`check_export`).
     progress : optional ``progress(stage, done, total)`` after each recorded frame
         (``"simulate"``) and each step of the writing.
@@ -81,7 +82,7 @@ def export_scene(scene, path, frames, agents=None, progress=None, on_bake=None,
     written then); the scene is not changed. An exception raised by a callback stops
     the export the same way.
     """
-    steps = export_steps(scene, path, frames, agents, depsgraph)
+    steps = export_steps(scene, path, frames, agents, depsgraph, layout)
     try:
         while True:
             try:
@@ -97,7 +98,7 @@ def export_scene(scene, path, frames, agents=None, progress=None, on_bake=None,
         steps.close()                   # a raising callback: the export is dropped
 
 
-def export_steps(scene, path, frames, agents=None, depsgraph=None):
+def export_steps(scene, path, frames, agents=None, depsgraph=None, layout="instanced"):
     """The export of :func:`export_scene` as a generator, one unit of work per
     ``next()``: returns ``(config, result)`` (``StopIteration.value``).
 
@@ -113,10 +114,13 @@ def export_steps(scene, path, frames, agents=None, depsgraph=None):
     previous export at ``path`` is left as it was, the scene is unchanged.
     """
     frames = check_export(scene, path, frames)
-    return _export_steps(scene, path, frames, agents, depsgraph)
+    if layout not in USD_LAYOUTS:
+        raise CrowdError(f"export: layout must be one of {', '.join(USD_LAYOUTS)}, got "
+                         f"{layout!r}")
+    return _export_steps(scene, path, frames, agents, depsgraph, layout)
 
 
-def _export_steps(scene, path, frames, agents, depsgraph):
+def _export_steps(scene, path, frames, agents, depsgraph, layout):
     from ..core.crowd import Crowd
     from ..core.recorder import Recorder
     from ..usd.export import check_export as check_output
@@ -134,7 +138,7 @@ def _export_steps(scene, path, frames, agents, depsgraph):
             yield "bake", done, total, message
     finally:
         bake.close()
-    check_output(config, path, agents)
+    check_output(config, path, agents, layout)
     crowd, note = scene_config.build_crowd(scene, config)
     if note:
         yield "bake", 1, 1, note
@@ -142,7 +146,7 @@ def _export_steps(scene, path, frames, agents, depsgraph):
     while not recorder.finished:
         recorder.step()
         yield "simulate", recorder.done, recorder.total, "simulate"
-    writing = write_steps(recorder.finish(), path, agents)
+    writing = write_steps(recorder.finish(), path, agents, layout)
     try:
         while True:
             try:
@@ -158,8 +162,8 @@ class ExportJob:
     """A scene's export (:func:`export_steps`) run a slice of time at a time, for the
     modal operator; :meth:`cancel` drops it and nothing is written."""
 
-    def __init__(self, scene, path, frames, agents=None, depsgraph=None):
-        self.steps = export_steps(scene, path, frames, agents, depsgraph)
+    def __init__(self, scene, path, frames, agents=None, depsgraph=None, layout="instanced"):
+        self.steps = export_steps(scene, path, frames, agents, depsgraph, layout)
         self.stage, self.done, self.total, self.message = "bake", 0, 1, "starting"
         self.config = self.result = None
 
@@ -203,7 +207,8 @@ def _size(n: int) -> str:
 
 #: progress bar share (out of 1000) of the bake and of each export stage
 _SPANS = {"bake": (0, 300), "simulate": (300, 700), "characters": (700, 720),
-          "streams": (720, 820), "agent animations": (820, 980), "layout": (980, 1000)}
+          "streams": (720, 800), "clips": (800, 860), "agent animations": (860, 980),
+          "layout": (980, 1000)}
 
 
 def _progress(stage, done, total):
@@ -243,6 +248,13 @@ class CROWD_OT_export_usd(bpy.types.Operator, ExportHelper):
                            description="Last frame, inclusive")
     agents: IntProperty(name="Agents", default=0, min=0,
                         description="Export only the first N agents (0: all)")
+    layout: EnumProperty(
+        name="Layout", default="instanced",
+        items=[("instanced", "Instanced", "Agents are instanceable: renderers share each "
+                "character (usdview, Houdini, Omniverse, render delegates)"),
+               ("blender", "Blender", "Agents are not instanceable, so Blender's own USD "
+                "import plays their animation")],
+        description="How the agents are laid out in the stage")
     interactive: BoolProperty(
         default=False, options={"HIDDEN", "SKIP_SAVE"},
         description="Run step by step on a timer after the file browser (Esc cancels); "
@@ -281,6 +293,7 @@ class CROWD_OT_export_usd(bpy.types.Operator, ExportHelper):
         col.prop(self, "frame_start")
         col.prop(self, "frame_end")
         layout.prop(self, "agents")
+        layout.prop(self, "layout")
 
     def execute(self, context):
         """From the file browser (after invoke): start the modal export. From a script:
@@ -293,7 +306,8 @@ class CROWD_OT_export_usd(bpy.types.Operator, ExportHelper):
         if self.interactive and _event_loop(context):
             try:
                 # the depsgraph is looked up when the agents are placed, as the bake does
-                self._job = ExportJob(scene, path, frames, agents=self.agents or None)
+                self._job = ExportJob(scene, path, frames, agents=self.agents or None,
+                                      layout=self.layout)
             except CrowdError as e:
                 return self._fail(e)
             wm.progress_begin(0, 1000)
@@ -311,7 +325,7 @@ class CROWD_OT_export_usd(bpy.types.Operator, ExportHelper):
             _config, result = export_scene(
                 scene, path, frames, agents=self.agents or None, progress=update,
                 on_bake=lambda done, total, _what: update("bake", done, total),
-                depsgraph=context.evaluated_depsgraph_get())
+                depsgraph=context.evaluated_depsgraph_get(), layout=self.layout)
         except CrowdError as e:
             return self._fail(e)
         finally:

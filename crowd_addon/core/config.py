@@ -17,10 +17,16 @@ from .controllers import Controller
 from .errors import CrowdError
 from .show import Show
 
-__all__ = ["AnimationDef", "CrowdConfig", "validate_config", "WHEN_FULL", "MAX_TREE_DEPTH"]
+__all__ = ["AnimationDef", "CrowdConfig", "validate_config", "WHEN_FULL", "MAX_TREE_DEPTH",
+           "USD_LAYOUTS"]
 
 #: What a transition request does when every slot is busy: wait, or switch at once.
 WHEN_FULL = ("queue", "cut")
+#: How a USD export lays its agents out (docs/usd_export.md): ``instanced`` (renderers
+#: share each character's prototype) or ``blender`` (not instanceable, which Blender's
+#: USD importer needs to animate them). Here so that the command line and the panel
+#: offer the choice without importing pxr.
+USD_LAYOUTS = ("instanced", "blender")
 #: The deepest controller tree (levels below the root) a crowd accepts.
 MAX_TREE_DEPTH = 64
 

@@ -107,6 +107,12 @@ class Recording:
         return (count == 1) & (self.segment_kind[np.cumsum(count) - 1] == STREAM)
 
     @cached_property
+    def unique_skeleton(self) -> np.ndarray:
+        """(U,) int64 skeleton index of each unique."""
+        names = list(self.config.skeletons)
+        return np.array([names.index(d.skeleton) for d in self.config.uniques], np.int64)
+
+    @cached_property
     def moving(self) -> np.ndarray:
         """(N,) bool: position or heading changed during the shot."""
         return np.bincount(self.move_agent, minlength=self.agent_count) > 0
@@ -124,7 +130,13 @@ class Recording:
         computed them: ``(k, B, 10)`` float32 for one frame, ``(T, k, B, 10)`` for a
         (T,) array of frames."""
         frame, agents, shape = self._pairs(frames, agents)
-        seg = self._find(0, frame, agents)
+        out = self.pair_poses(frame, agents)
+        return out.reshape(shape + out.shape[1:])
+
+    def pair_poses(self, frame, agent) -> np.ndarray:
+        """``(n, B, 10)`` float32 pose of each ``(frame[i], agent[i])`` pair ((n,) int64
+        arrays, frames inside the shot)."""
+        seg = self._find(0, frame, agent)
         kind, ref = self.segment_kind[seg], self.segment_ref[seg]
         out = self._poses(frame, kind, ref, self.segment_offset[seg])
         m = np.flatnonzero(kind == TRANSITION)
@@ -134,7 +146,7 @@ class Recording:
                                  self.target_offset[t])
             s = np.clip((f - self.t0[t]) / self.length[t], 0.0, 1.0)
             out[m] = sqt.blend2(self.start_pose[t], target, s.astype(np.float32))
-        return out.reshape(shape + out.shape[1:])
+        return out
 
     def agent_transforms(self, frames, agents=None) -> tuple:
         """``(position (..., k, 3) float32, heading (..., k) float32)`` of ``agents`` at

@@ -31,7 +31,7 @@ __all__ = ["run_demo", "show_summary", "USD_COUNTS"]
 
 #: what the summary keeps of the USD export (``usd_export``): the counts a
 #: ``crowd export --blend`` of the saved file reports the same
-USD_COUNTS = ("frames", "agents", "shared_agents", "baked_agents", "moving_agents",
+USD_COUNTS = ("frames", "agents", "shared_agents", "clip_agents", "blend_frames", "moving_agents",
               "offset_animations", "stream_animations", "characters", "files")
 
 try:    # the sample_scenes resource package beside crowd_addon (repository, wheel)
@@ -154,7 +154,7 @@ def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
                            progress=lambda stage, d, n: _bar(d, n, stage))
         seconds["usd"] = time.perf_counter() - t
         summary.update(usd=str(res.path), usd_bytes=int(sum(res.files.values())),
-                       usd_baked_agents=res.baked_agents,
+                       usd_clip_agents=res.clip_agents,
                        usd_export={k: getattr(res, k) for k in USD_COUNTS})
     seconds["total"] = time.perf_counter() - t0
     summary["seconds"] = {k: round(v, 2) for k, v in seconds.items()}

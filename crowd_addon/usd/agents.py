@@ -13,8 +13,9 @@
                 rel skel:animationSource -> an offset animation, or
                                             /Crowd/AgentAnimations/agent_<id>
                 xformOp:translate (position), xformOp:rotateZ (heading, degrees)
-        def Scope "AgentAnimations"   (in the sublayer agents.<ext>, one baked
-                                       SkelAnimation per agent that is not static)
+        def Scope "AgentAnimations"   (in the sublayer agents.<ext>: per agent that
+                                       is not static, a SkelAnimation whose value
+                                       clips read streams, uniques and blends)
 
 A layer offset ``+O`` maps stage time ``F`` to the stream layer's time ``F - O``: the
 stream head ``O`` frames ago, which is what an agent at offset ``O`` shows. Agents
@@ -27,7 +28,6 @@ from __future__ import annotations
 import numpy as np
 from pxr import Gf, Sdf, Vt
 
-from .animation import author_animation
 from .layers import apply_api, attribute, define, relationship
 
 __all__ = ["ROOT", "author_offset_animations", "author_agents", "author_agent_animations",
@@ -36,8 +36,6 @@ __all__ = ["ROOT", "author_offset_animations", "author_agents", "author_agent_an
 ROOT = "Crowd"
 _T = Sdf.ValueTypeNames
 _ORDER = Vt.TokenArray(["xformOp:translate", "xformOp:rotateZ"])
-#: agents' own animations are baked this many at a time (bounds memory)
-_CHUNK = 64
 #: agent prims authored per step of the export
 _LAYOUT_CHUNK = 4096
 
@@ -69,7 +67,8 @@ def author_offset_animations(root: Sdf.PrimSpec, shot, stream_names, stream_asse
     return paths
 
 
-def author_agents(root: Sdf.PrimSpec, shot, names, character_assets, sources):
+def author_agents(root: Sdf.PrimSpec, shot, names, character_assets, sources,
+                  instanceable=True):
     """The agent prims: a generator yielding ``("layout", done, total)`` after each
     batch of agents.
 
@@ -80,6 +79,7 @@ def author_agents(root: Sdf.PrimSpec, shot, names, character_assets, sources):
     names : prim name per exported agent.
     character_assets : asset path per skeleton index.
     sources : ``skel:animationSource`` target (Sdf.Path) per exported agent.
+    instanceable : whether the agent prims are instanceable.
     """
     with Sdf.ChangeBlock():
         parent = define(root, "Agents", "Scope")
@@ -91,7 +91,7 @@ def author_agents(root: Sdf.PrimSpec, shot, names, character_assets, sources):
         with Sdf.ChangeBlock():
             for name, skel, source, position, heading in agents[a:a + _LAYOUT_CHUNK]:
                 prim = define(parent, name, "SkelRoot")
-                prim.instanceable = True
+                prim.instanceable = instanceable
                 prim.referenceList.Prepend(refs[skel])
                 apply_api(prim, "SkelBindingAPI")
                 relationship(prim, "skel:animationSource", source)
@@ -119,24 +119,24 @@ def _author_moves(parent, shot, names, moving):
             layer.SetTimeSample(r_path, f, float(degrees[k, j]))
 
 
-def author_agent_animations(layer: Sdf.Layer, shot, names, joints_of):
-    """Each non-static agent's own SkelAnimation over the shot, under
-    ``/Crowd/AgentAnimations`` in ``layer``: a generator yielding ``("agent
-    animations", done, total)`` after each batch of agents and returning their paths
-    (in agent order). ``joints_of`` maps a skeleton index to its joint tokens."""
+def author_agent_animations(layer: Sdf.Layer, shot, names, joints_of, clips):
+    """Each non-static agent's ``SkelAnimation`` under ``/Crowd/AgentAnimations`` in
+    ``layer``: its joints and its value clips (``clips``, one dictionary per such agent,
+    :func:`~.clips.clip_sets`), no poses of its own. A generator yielding ``("agent
+    animations", done, total)`` after each batch and returning their paths (in agent
+    order)."""
     own = np.flatnonzero(~shot.static)
     with Sdf.ChangeBlock():
         crowd = Sdf.PrimSpec(layer, ROOT, Sdf.SpecifierOver)
         parent = define(crowd, "AgentAnimations", "Scope")
     paths = []
-    for a in range(0, own.size, _CHUNK):
-        chunk = own[a:a + _CHUNK]
-        poses = shot.agent_poses(chunk)
+    for a in range(0, own.size, _LAYOUT_CHUNK):
         with Sdf.ChangeBlock():
-            for j, i in enumerate(chunk.tolist()):
-                prim = define(parent, names[i])
-                author_animation(prim, joints_of[int(shot.agent_skeleton[i])], poses[:, j],
-                                 shot.frames)
+            for j, i in enumerate(own[a:a + _LAYOUT_CHUNK].tolist()):
+                prim = define(parent, names[i], "SkelAnimation")
+                attribute(prim, "joints", _T.TokenArray,
+                          joints_of[int(shot.agent_skeleton[i])], uniform=True)
+                prim.SetInfo("clips", clips[a + j])
                 paths.append(prim.path)
-        yield "agent animations", a + chunk.size, own.size
+        yield "agent animations", min(a + _LAYOUT_CHUNK, own.size), own.size
     return paths

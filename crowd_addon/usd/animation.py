@@ -1,10 +1,11 @@
 """``SkelAnimation`` prims from local SQT poses over time.
 
-One function writes every baked animation of the export: a stream's timeline (in
-its own layer) and an agent's own animation. A channel that is the same at every
-frame (often ``scales``, and ``translations`` of skeletons without root motion) is
-authored once as a default value instead of per-frame samples; readers see the
-same value at every time either way.
+One function writes every animation of the export: a stream's timeline, a unique's,
+and the blend bank (each in its own layer). A channel that is the same at every frame
+(often ``scales``, and ``translations`` of skeletons without root motion) is authored
+as one time sample, which readers hold at every time; not as a default value, because
+value clips (through which agents that change read these layers) contribute time
+samples only.
 
 Types follow the UsdSkel schema: ``translations`` ``float3[]``, ``rotations``
 ``quatf[]``, ``scales`` ``half3[]`` (so non-unit scales keep ~3 significant digits).
@@ -38,7 +39,8 @@ def author_animation(prim: Sdf.PrimSpec, joints, poses: np.ndarray, times) -> in
 
     Returns
     -------
-    int, the number of time samples authored (0 for a fully constant animation).
+    int, the number of time samples authored for channels that change (0 for a
+    fully constant animation).
     """
     prim.typeName = "SkelAnimation"
     attribute(prim, "joints", _T.TokenArray, joints, uniform=True)
@@ -47,11 +49,10 @@ def author_animation(prim: Sdf.PrimSpec, joints, poses: np.ndarray, times) -> in
     samples = 0
     for (name, type_name, to_vt), data in zip(
             _CHANNELS, convert.sqt_components(poses[:, :len(joints)])):
-        spec = attribute(prim, name, type_name)
+        path = attribute(prim, name, type_name).path
         if (data == data[:1]).all():
-            spec.default = to_vt(data[0])
+            layer.SetTimeSample(path, times[0], to_vt(data[0]))     # held at every time
             continue
-        path = spec.path
         for k, t in enumerate(times):
             layer.SetTimeSample(path, t, to_vt(data[k]))
         samples += len(times)

@@ -27,21 +27,31 @@ from dataclasses import dataclass
 import numpy as np
 from pxr import Sdf, Vt
 
-from ..core.config import validate_config
+from ..core.config import USD_LAYOUTS, validate_config
 from ..core.errors import CrowdError
 from ..core.recording import Recording
 from .agents import (ROOT, agent_names, author_agent_animations, author_agents,
                      author_offset_animations)
 from .animation import author_animation
 from .character import character_layer
+from .clips import PRIM, bank_layer, bank_layout, clip_sets, manifest_layer
 from .files import ExportFiles
 from .layers import new_layer
 from .naming import unique_identifiers
-from .shot import Shot
+from .shot import STREAM, UNIQUE, Shot
 
-__all__ = ["export_crowd", "export_steps", "check_export", "ExportResult", "FORMAT_VERSION"]
+__all__ = ["export_crowd", "export_steps", "check_export", "check_layout", "ExportResult",
+           "FORMAT_VERSION", "LAYOUTS"]
 
-FORMAT_VERSION = "1.0"
+FORMAT_VERSION = "1.1"
+LAYOUTS = USD_LAYOUTS
+
+
+def check_layout(layout) -> str:
+    if layout not in LAYOUTS:
+        raise CrowdError(f"export: layout must be one of {', '.join(LAYOUTS)}, got "
+                         f"{layout!r}")
+    return layout
 
 
 @dataclass(frozen=True)
@@ -54,8 +64,10 @@ class ExportResult:
     files : dict, file (relative to the main layer's directory) -> bytes.
     frames : (first, last) shot frames.
     agents : agents exported; shared_agents : those on a shared offset animation;
-        baked_agents : those with their own animation; moving_agents : those whose
-        transform is time-sampled.
+        clip_agents : those that change what they play, on value clips (none is baked
+        over the whole shot); blend_frames : the frames of their blends, the only
+        poses written per agent; moving_agents : those whose transform is
+        time-sampled.
     offset_animations, stream_animations, characters : prims/layers written.
     seconds : dict ``simulate`` (the recording's), ``author``, ``write``, ``total``
         (wall clock).
@@ -69,7 +81,8 @@ class ExportResult:
     frames: tuple
     agents: int
     shared_agents: int
-    baked_agents: int
+    clip_agents: int
+    blend_frames: int
     moving_agents: int
     offset_animations: int
     stream_animations: int
@@ -82,7 +95,7 @@ class ExportResult:
         return int(sum(self.files.values()))
 
 
-def export_crowd(recording, path, agents=None, progress=None) -> ExportResult:
+def export_crowd(recording, path, agents=None, progress=None, layout="instanced") -> ExportResult:
     """Write ``recording`` to UsdSkel in one call (:func:`export_steps` to the end).
 
     Parameters
@@ -92,7 +105,10 @@ def export_crowd(recording, path, agents=None, progress=None) -> ExportResult:
     agents : None (all) or N, the first N agents (ids ``0 .. N-1``); more than the
         recording has is an error.
     progress : optional ``progress(stage, done, total)``: ``characters``, ``streams``,
-        ``agent animations``, ``layout``.
+        ``clips``, ``agent animations``, ``layout``.
+    layout : ``"instanced"`` (default: agents are instanceable, so renderers share
+        each character's prototype) or ``"blender"`` (agents are not instanceable:
+        Blender's USD importer animates them only then); :data:`LAYOUTS`.
 
     Raises
     ------
@@ -100,7 +116,7 @@ def export_crowd(recording, path, agents=None, progress=None) -> ExportResult:
     export at ``path`` is left as it was. An exception raised by ``progress`` stops
     the export the same way.
     """
-    steps = export_steps(recording, path, agents)
+    steps = export_steps(recording, path, agents, layout)
     try:
         while True:
             try:
@@ -113,24 +129,26 @@ def export_crowd(recording, path, agents=None, progress=None) -> ExportResult:
         steps.close()
 
 
-def export_steps(recording, path, agents=None):
+def export_steps(recording, path, agents=None, layout="instanced"):
     """The export of :func:`export_crowd` as a generator yielding ``(stage, done,
     total)`` after each unit of work and returning the :class:`ExportResult`
-    (``StopIteration.value``). The recording, ``path`` and ``agents`` are checked
-    when it is called (CrowdError). Closed before it is done, it removes its
+    (``StopIteration.value``). The recording, ``path``, ``agents`` and ``layout`` are
+    checked when it is called (CrowdError). Closed before it is done, it removes its
     temporary files: nothing is written, a previous export is left as it was."""
     if not isinstance(recording, Recording):
         raise CrowdError(f"export: expected a Recording (crowd_addon.core.recording), got "
                          f"{type(recording).__name__}")
+    check_layout(layout)
     ids = _agent_ids(agents, recording.agent_count)
     meshes = _meshes(recording.config, recording.agent_skeleton[ids])
-    return _steps(recording, ids, meshes, ExportFiles(path))
+    return _steps(recording, ids, meshes, ExportFiles(path), layout)
 
 
-def check_export(config, path, agents=None) -> None:
+def check_export(config, path, agents=None, layout="instanced") -> None:
     """Check, before recording ``config``'s shot, what :func:`export_steps` would
-    refuse: the output (extension, folder, writable), the agent count and a proxy mesh
-    for every exported agent's skeleton. Raises CrowdError."""
+    refuse: the output (extension, folder, writable), the agent count, the layout and
+    a proxy mesh for every exported agent's skeleton. Raises CrowdError."""
+    check_layout(layout)
     validate_config(config)
     with ExportFiles(path):
         pass
@@ -143,7 +161,7 @@ def check_export(config, path, agents=None) -> None:
     _meshes(config, np.where(st >= 0, of_stream[st], of_unique[un]))
 
 
-def _steps(rec, ids, meshes, files):
+def _steps(rec, ids, meshes, files, layout):
     t0 = time.perf_counter()
     out = _Output(files)
     with files:
@@ -151,19 +169,22 @@ def _steps(rec, ids, meshes, files):
         joints_of, char_assets = _write_characters(out, rec, meshes)
         yield "characters", len(meshes), len(meshes)
         stream_names, stream_assets = yield from _write_streams(out, rec, shot, joints_of)
+        clip_assets = yield from _write_clip_layers(out, rec, shot, joints_of, stream_names,
+                                                    stream_assets)
         names = agent_names(ids)
-        own_paths = yield from _write_own_animations(out, shot, names, joints_of)
+        own_paths = yield from _write_own_animations(out, shot, names, joints_of, clip_assets)
         yield "layout", 0, ids.size
         layer = new_layer(files.format, rec.fps, rec.first, rec.last, default_prim=ROOT,
                           comment="crowd shot written by crowd_addon.usd")
-        layer.customLayerData = {"crowd": _settings(rec, shot)}
+        layer.customLayerData = {"crowd": _settings(rec, shot, layout)}
         if own_paths:
             layer.subLayerPaths.append(files.asset_path("agents"))
         with Sdf.ChangeBlock():
             root = Sdf.PrimSpec(layer, ROOT, Sdf.SpecifierDef, "Xform")
             offsets = author_offset_animations(root, shot, stream_names, stream_assets)
         yield from author_agents(root, shot, names, char_assets,
-                                 _sources(shot, offsets, own_paths))
+                                 _sources(shot, offsets, own_paths),
+                                 instanceable=layout == "instanced")
         out.save(layer)
         files.commit()
     author = time.perf_counter() - t0 - out.write
@@ -172,7 +193,8 @@ def _steps(rec, ids, meshes, files):
     return ExportResult(
         path=files.path, layers_dir=files.layers_dir, files=dict(files.written),
         frames=(rec.first, rec.last), agents=int(ids.size),
-        shared_agents=int(shot.static.sum()), baked_agents=int((~shot.static).sum()),
+        shared_agents=int(shot.static.sum()), clip_agents=int((~shot.static).sum()),
+        blend_frames=int(sum(b.frames for b in clip_assets[1].values())),
         moving_agents=int(shot.moving.sum()), offset_animations=len(offsets),
         stream_animations=len(stream_assets), characters=len(char_assets),
         seconds=seconds, events=_events(rec, ids))
@@ -216,28 +238,68 @@ def _write_characters(out, rec, meshes) -> tuple:
 
 
 def _write_streams(out, rec, shot, joints_of):
-    """One layer per stream a static agent plays (a step each); returns ``(prim names
-    of all streams, {stream: asset path})``."""
+    """One layer per stream an agent plays (a step each); returns ``(prim names of all
+    streams, {stream: asset path})``."""
     names = unique_identifiers(rec.stream_names, casefold=True)
-    used = np.unique(shot.stream[shot.static]).tolist()
+    p = shot.pieces
+    used = np.union1d(shot.stream[shot.static], p.ref[p.kind == STREAM]).tolist()
     assets = {}
     for j, s in enumerate(used):
-        out.save(_stream_layer(rec, shot, s, names[s],
-                               joints_of[int(rec.stream_skeleton[s])], out.files.format),
+        out.save(_stream_layer(rec, shot, s, joints_of[int(rec.stream_skeleton[s])],
+                               out.files.format),
                  f"streams/{names[s]}")
         assets[s] = out.files.asset_path(f"streams/{names[s]}")
         yield "streams", j + 1, len(used)
     return names, assets
 
 
-def _write_own_animations(out, shot, names, joints_of):
-    """The sublayer of agents' own animations (none if every agent is static), a step
-    per batch of agents; returns their prim paths."""
+def _write_clip_layers(out, rec, shot, joints_of, stream_names, stream_assets):
+    """What the agents that change read through value clips, besides the streams: a
+    layer per unique played, a blend bank per skeleton that blends, and the clips'
+    manifest (a step each). Returns ``({key: asset path relative to the agents
+    layer}, {skeleton: BankLayout})`` (nothing when every agent is static)."""
+    if shot.static.all():
+        return {}, {}
+    files, p = out.files, shot.pieces
+    assets = {("stream", s): files.layer_path(f"streams/{stream_names[s]}")
+              for s in stream_assets}
+    uniques = np.unique(p.ref[p.kind == UNIQUE]).tolist()
+    names = unique_identifiers(rec.unique_names, casefold=True)
+    banks = bank_layout(shot)
+    skeleton_names = unique_identifiers(list(rec.config.skeletons), casefold=True)
+    total = len(uniques) + len(banks) + 1
+    for j, u in enumerate(uniques):
+        layer = new_layer(files.format, rec.fps, rec.first, rec.last, default_prim=PRIM,
+                          comment=f"crowd unique {rec.unique_names[u]!r}: its pose at "
+                                  "each shot frame")
+        with Sdf.ChangeBlock():
+            prim = Sdf.PrimSpec(layer, PRIM, Sdf.SpecifierDef, "SkelAnimation")
+            author_animation(prim, joints_of[int(rec.unique_skeleton[u])],
+                             rec.unique_poses[:, u], rec.frames)
+        out.save(layer, f"uniques/{names[u]}")
+        assets["unique", u] = files.layer_path(f"uniques/{names[u]}")
+        yield "clips", j + 1, total
+    for j, (k, layout) in enumerate(banks.items()):
+        out.save(bank_layer(shot, layout, joints_of[k], files.format, skeleton_names[k]),
+                 f"blends/{skeleton_names[k]}")
+        assets["blend", k] = files.layer_path(f"blends/{skeleton_names[k]}")
+        yield "clips", len(uniques) + j + 1, total
+    out.save(manifest_layer(files.format, rec.fps), "manifest")
+    assets["manifest"] = files.layer_path("manifest")
+    yield "clips", total, total
+    return assets, banks
+
+
+def _write_own_animations(out, shot, names, joints_of, clip_assets):
+    """The sublayer of the animations of agents that change (none if every agent is
+    static), a step per batch of agents; returns their prim paths."""
     if shot.static.all():
         return []
+    assets, banks = clip_assets
     layer = new_layer(out.files.format, shot.fps, shot.first, shot.last,
-                      comment="own animations of agents that are not static")
-    paths = yield from author_agent_animations(layer, shot, names, joints_of)
+                      comment="animations of agents that change: value clips")
+    paths = yield from author_agent_animations(layer, shot, names, joints_of,
+                                               clip_sets(shot, assets, banks))
     out.save(layer, "agents")
     return paths
 
@@ -267,14 +329,14 @@ def _meshes(config, agent_skeleton) -> dict:
     return out
 
 
-def _stream_layer(rec, shot, s, prim_name, joints, fmt):
+def _stream_layer(rec, shot, s, joints, fmt):
     frames = rec.stream_frames
     name = rec.stream_names[s]
-    layer = new_layer(fmt, rec.fps, frames[0], frames[-1], default_prim=prim_name,
+    layer = new_layer(fmt, rec.fps, frames[0], frames[-1], default_prim=PRIM,
                       comment=f"crowd stream {name!r}: the head's pose at each frame")
     events = shot.stream_events(s)
     with Sdf.ChangeBlock():
-        prim = Sdf.PrimSpec(layer, prim_name, Sdf.SpecifierDef, "SkelAnimation")
+        prim = Sdf.PrimSpec(layer, PRIM, Sdf.SpecifierDef, "SkelAnimation")
         prim.customData = {"crowd": {
             "stream": name, "streamIndex": int(s),
             "eventNames": Vt.StringArray([n for n, _ in events]),
@@ -290,10 +352,10 @@ def _sources(shot, offsets, own_paths) -> list:
             for k, st in zip(keys.tolist(), shot.static.tolist())]
 
 
-def _settings(rec, shot) -> dict:
+def _settings(rec, shot, layout) -> dict:
     cfg = rec.config
     return {"M": int(rec.max_offset), "NT": int(cfg.transition_slots), "fps": float(rec.fps),
             "seed": int(cfg.seed), "streams": len(rec.stream_names),
             "uniques": len(rec.unique_names), "agents": int(shot.agents.size),
             "firstFrame": int(rec.first), "lastFrame": int(rec.last),
-            "writer": "crowd_addon.usd", "version": FORMAT_VERSION}
+            "writer": "crowd_addon.usd", "version": FORMAT_VERSION, "layout": layout}

@@ -90,6 +90,11 @@ class ExportFiles:
         layer, as written in references and sublayers."""
         return f"./{self.layers_name}/{name}{self.ext}"
 
+    def layer_path(self, name: str) -> str:
+        """Asset path of layer ``name`` relative to another layer of the folder (as the
+        value clips in the agents layer name the layers they read)."""
+        return f"./{name}{self.ext}"
+
     def save(self, layer, name: str | None = None) -> int:
         """Write ``layer`` as layer ``name`` of the folder, or as the main layer when
         ``name`` is None; returns its size in bytes."""

@@ -2,15 +2,43 @@
 layout needs them (pure numpy, no pxr).
 
 An agent is *static* when it plays one ``(stream, offset)`` for the whole shot: it
-shares an offset animation. Every other agent (a transition, a cut, a unique at some
-frame) gets its own animation, its poses rebuilt from the recording.
+shares an offset animation. Every other agent plays a sequence of :class:`Pieces`:
+stretches of the shot on a stream at an offset, on a unique, or blending (a
+transition); only the blending frames are its own, rebuilt from the recording.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from functools import cached_property
+
 import numpy as np
 
-__all__ = ["Shot"]
+from ..core.agents import STREAM, TRANSITION, UNIQUE
+
+__all__ = ["Shot", "Pieces", "STREAM", "UNIQUE", "TRANSITION"]
+
+
+@dataclass(frozen=True)
+class Pieces:
+    """What the non-static agents play, piece by piece, sorted by (agent, frame); each
+    piece covers shot frames ``start .. end - 1`` and (k,) arrays hold:
+
+    agent : position of the agent in :attr:`Shot.agents`; start, end : int64 frames;
+    kind : STREAM (``ref`` a stream at ``offset``), UNIQUE (``ref`` a unique) or
+    TRANSITION (its frames are the agent's own blend); ref, offset : int64.
+    """
+
+    agent: np.ndarray
+    start: np.ndarray
+    end: np.ndarray
+    kind: np.ndarray
+    ref: np.ndarray
+    offset: np.ndarray
+
+    @property
+    def count(self) -> int:
+        return int(self.agent.size)
 
 
 class Shot:
@@ -46,6 +74,33 @@ class Shot:
         """``(frames, k, B, 10)`` float32 local poses of agents ``which`` (positions in
         :attr:`agents`) at every shot frame."""
         return self.recording.agent_poses(self.frames, self.agents[which])
+
+    @cached_property
+    def pieces(self) -> Pieces:
+        """The recording's segments of the non-static agents cut to the shot."""
+        rec = self.recording
+        pos = np.full(rec.agent_count, -1, np.int64)
+        pos[self.agents] = np.arange(self.agents.size)
+        seg = np.flatnonzero(pos[rec.segment_agent] >= 0)
+        seg = seg[~self.static[pos[rec.segment_agent[seg]]]]
+        agent = rec.segment_agent[seg]
+        frame = rec.segment_frame[seg]
+        same = np.r_[agent[1:] == agent[:-1], False]
+        end = np.where(same, np.r_[frame[1:], 0], rec.last + 1)
+        start = np.maximum(frame, rec.first)
+        keep = start < end
+        seg = seg[keep]
+        return Pieces(pos[agent[keep]], start[keep], end[keep],
+                      rec.segment_kind[seg].astype(np.int64), rec.segment_ref[seg],
+                      rec.segment_offset[seg])
+
+    def piece_poses(self, pieces) -> np.ndarray:
+        """``(sum of lengths, B, 10)`` float32 poses of the frames of ``pieces`` (indices
+        into :attr:`pieces`), piece after piece."""
+        p = self.pieces
+        n = p.end[pieces] - p.start[pieces]
+        frame = np.repeat(p.start[pieces] - np.cumsum(n) + n, n) + np.arange(int(n.sum()))
+        return self.recording.pair_poses(frame, np.repeat(self.agents[p.agent[pieces]], n))
 
     def agent_transforms(self, which) -> tuple:
         """``(position (frames, k, 3), heading (frames, k))`` float32 of agents ``which``."""

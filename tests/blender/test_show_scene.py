@@ -244,7 +244,7 @@ def test_a_fresh_process_exports_what_the_authoring_session_plays(scene, tmp_pat
     result = json.loads(run.stdout.strip().splitlines()[-1])
     assert Counter({(n, f): k for n, f, k in result["events"]}) == \
         Counter({(n, f): k for n, f, k in events if f >= 1}) != Counter()
-    assert result["baked_agents"] > 0
+    assert result["clip_agents"] > 0
     stage = Usd.Stage.Open(str(out))
     cache, pred = UsdSkel.Cache(), Usd.TraverseInstanceProxies()
     worst = 0.0

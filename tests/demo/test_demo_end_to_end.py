@@ -150,7 +150,7 @@ def test_export_of_the_saved_blend_is_the_demos_stage(demo, export_from_blend):
     summary = json.loads((out / "summary.json").read_text())
     assert result["characters"] == 2 and result["frames"] == [1, FRAMES]
     assert {k: result[k] for k in summary["usd_export"]} == summary["usd_export"]
-    assert result["baked_agents"] > 0               # the show moved agents
+    assert result["clip_agents"] > 0               # the show moved agents
     for rel in result["files"]:                     # main layer, characters, streams, agents
         assert (usd.parent / rel).read_bytes() == (out / rel).read_bytes(), rel
 

@@ -80,6 +80,10 @@ MOVING = {7, 8}
 
 @pytest.fixture(scope="module")
 def oracle():
+    return core_truth()
+
+
+def core_truth():
     """Core's truth per shot frame: local poses (N, B, 10), positions, headings,
     ``(kind, ref, offset)`` per agent (N, 3), and every event delivered to each agent
     as ``(agent, name, frame)``."""

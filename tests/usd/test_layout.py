@@ -62,7 +62,8 @@ def test_every_layer_shares_units_axis_and_time(shot):
         "shot.usda", "shot.layers/v1/agents.usda", "shot.layers/v1/characters/fan.usda",
         "shot.layers/v1/characters/kid.usda", "shot.layers/v1/streams/idle.usda",
         "shot.layers/v1/streams/cheer_loud.usda", "shot.layers/v1/streams/wave.usda",
-        "shot.layers/v1/streams/kid_play.usda"}
+        "shot.layers/v1/streams/kid_play.usda", "shot.layers/v1/uniques/solo.usda",
+        "shot.layers/v1/blends/fan.usda", "shot.layers/v1/manifest.usda"}
     for name, size in result.files.items():
         file = path.parent / name
         assert file.stat().st_size == size
@@ -112,7 +113,7 @@ def test_exactly_the_agents_that_change_get_their_own_animation(shot, stage, ora
     own = {a for a in range(N)
            if animation_source(stage, a).HasPrefix("/Crowd/AgentAnimations")}
     assert own == DYNAMIC
-    assert shot[0].baked_agents == len(DYNAMIC)
+    assert shot[0].clip_agents == len(DYNAMIC)
     assert shot[0].shared_agents == N - len(DYNAMIC)
 
 
@@ -151,7 +152,7 @@ def test_stream_event_tags_are_what_agents_receive(stage, oracle):
 def test_stream_layers_cover_every_offset(shot):
     path = shot[1].parent / "shot.layers/v1/streams/idle.usda"
     layer = Sdf.Layer.FindOrOpen(str(path))
-    times = layer.ListTimeSamplesForPath("/idle.rotations")
+    times = layer.ListTimeSamplesForPath("/Animation.rotations")
     assert (min(times), max(times), len(times)) == (FIRST - M + 1, LAST, LAST - FIRST + M)
 
 

@@ -15,7 +15,7 @@ from crowd_addon.core.skinning import model_matrices, skin_vertices, skinning_ma
 from .conftest import DYNAMIC, FIRST, LAST, MOVING, make_config
 
 RTOL = 1e-5
-FRAMES = [FIRST, 5, 8, 11, LAST]
+FRAMES = list(range(FIRST, LAST + 1))      # every time sample, both sides of every switch
 STATIC = [0, 5, 10, 12, 21, 40, 45, 9]           # several streams and offsets, a kid
 AGENTS = STATIC + sorted(DYNAMIC) + sorted(MOVING)
 

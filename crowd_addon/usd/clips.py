@@ -1,0 +1,117 @@
+"""Agents that change what they play: value clips over shared layers, not baked copies.
+
+An agent that is not static plays a sequence of pieces (:class:`~.shot.Pieces`): a
+stream at an offset, a unique, or a blend. Its ``SkelAnimation`` holds no poses; a
+``clips`` set (UsdClipsAPI) picks, piece by piece, the layer that has them:
+
+- a stream piece reads the stream's layer (the same one the shared offset animations
+  reference) at ``F - O``;
+- a unique piece reads the unique's layer at ``F``;
+- a blend piece reads its frames from the *blend bank* of its skeleton, one layer in
+  which every blend of the shot has its own stretch of time.
+
+So a transition costs its blending frames once, and the agent's steady stretches
+stay shared. Every clip layer holds its animation at :data:`PRIM` and authors every
+channel as time samples (clips contribute time samples only; a constant channel is
+one sample). Pieces switch at half frames (``start - 0.5``): every whole frame lies
+inside one piece, so readers that sample whole frames (Blender's importer) and
+UsdSkel agree exactly there.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from pxr import Sdf, Vt
+
+from .animation import author_animation
+from .layers import attribute, define, new_layer
+from .shot import STREAM, TRANSITION, UNIQUE
+
+__all__ = ["PRIM", "BankLayout", "bank_layout", "bank_layer", "manifest_layer", "clip_sets"]
+
+#: the animation prim of every layer a clip reads (streams, uniques, blend banks)
+PRIM = "Animation"
+#: empty frames between two blends in a bank (no sample is shared across blends)
+GAP = 1
+_T = Sdf.ValueTypeNames
+
+
+class BankLayout:
+    """Where the blends of one skeleton live in its bank: ``pieces`` (indices into the
+    shot's pieces) and ``base`` (bank time of each one's first frame)."""
+
+    def __init__(self, pieces: np.ndarray, lengths: np.ndarray):
+        self.pieces = pieces
+        self.base = np.cumsum(lengths + GAP) - (lengths + GAP)
+        self.times = np.repeat(self.base - np.cumsum(lengths) + lengths, lengths) + \
+            np.arange(int(lengths.sum()))
+        self.frames = int(lengths.sum())
+
+
+def bank_layout(shot) -> dict:
+    """``{skeleton index: BankLayout}`` of the shot's blend pieces."""
+    p = shot.pieces
+    blend = np.flatnonzero(p.kind == TRANSITION)
+    skel = shot.agent_skeleton[p.agent[blend]]
+    return {int(k): BankLayout(blend[skel == k], (p.end - p.start)[blend[skel == k]])
+            for k in np.unique(skel).tolist()}
+
+
+def bank_layer(shot, layout: BankLayout, joints, fmt, name: str):
+    """The blend bank of one skeleton: its blends' frames at their bank times."""
+    times = layout.times
+    layer = new_layer(fmt, shot.fps, float(times[0]) if times.size else 0.0,
+                      float(times[-1]) if times.size else 0.0, default_prim=PRIM,
+                      comment=f"crowd blends of {name!r}: each blend's frames in a stretch "
+                              "of its own; agents read them through value clips")
+    with Sdf.ChangeBlock():
+        prim = define(layer, PRIM, "SkelAnimation")
+        author_animation(prim, joints, shot.piece_poses(layout.pieces), times)
+    return layer
+
+
+def manifest_layer(fmt, fps: float):
+    """The clips' manifest: which attributes the clips provide (values in the clips)."""
+    layer = new_layer(fmt, fps, 0.0, 0.0, default_prim=PRIM,
+                      comment="value clip manifest of the crowd's animations")
+    prim = define(layer, PRIM, "SkelAnimation")
+    for name, type_name in (("translations", _T.Float3Array), ("rotations", _T.QuatfArray),
+                            ("scales", _T.Half3Array)):
+        attribute(prim, name, type_name)
+    return layer
+
+
+def clip_sets(shot, assets, banks) -> list:
+    """One ``clips`` dictionary per non-static agent (in agent order).
+
+    ``assets``: ``{("stream", s) | ("unique", u) | ("blend", skeleton) | "manifest":
+    asset path}`` relative to the layer the dictionaries are authored in; ``banks``:
+    :func:`bank_layout`'s result.
+    """
+    p = shot.pieces
+    clip_time = np.where(p.kind == STREAM, p.start - p.offset, p.start).astype(np.float64)
+    for layout in banks.values():
+        clip_time[layout.pieces] = layout.base
+    key = [("stream" if k == STREAM else "unique" if k == UNIQUE else "blend",
+            int(r) if k != TRANSITION else int(s))
+           for k, r, s in zip(p.kind.tolist(), p.ref.tolist(),
+                              shot.agent_skeleton[p.agent].tolist())]
+    manifest = Sdf.AssetPath(assets["manifest"])
+    bounds = np.flatnonzero(np.r_[True, p.agent[1:] != p.agent[:-1], True])
+    start, end = p.start.astype(np.float64) - 0.5, p.end.astype(np.float64) - 0.5
+    out = []
+    for a, b in zip(bounds[:-1].tolist(), bounds[1:].tolist()):
+        used = list(dict.fromkeys(key[a:b]))
+        index = [used.index(k) for k in key[a:b]]
+        times, active = [], []
+        for j in range(a, b):
+            c = clip_time[j]
+            times += [(start[j], c - 0.5), (end[j], c + (end[j] - start[j]) - 0.5)]
+            active.append((start[j], float(index[j - a])))
+        out.append({"default": {
+            "assetPaths": Sdf.AssetPathArray([assets[k] for k in used]),
+            "primPath": f"/{PRIM}",
+            "active": Vt.Vec2dArray(active),
+            "times": Vt.Vec2dArray(times),
+            "manifestAssetPath": manifest}})
+    return out

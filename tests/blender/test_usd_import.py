@@ -1,0 +1,113 @@
+"""Blender's own USD importer on our export: with ``layout="blender"`` every agent plays
+its animation in Blender, vertex for vertex what core computes.
+
+The shot is the USD tests' (tests/usd/conftest.py: two characters, streams, a unique,
+blends, a queued request, a cut, moving agents; M = 8, NT = 3). It is exported with the
+Blender layout, imported with ``bpy.ops.wm.usd_import`` into an empty scene, and at
+every shot frame (so on both sides of every clip switch) each agent's evaluated mesh in
+world space is compared with core's skinning of the same agent at the same frame, with
+its transform. Control: the instanced layout imports in bind pose, as the docs say.
+"""
+
+import os
+import sys
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from usd.conftest import (DYNAMIC, FAN_AGENTS, FIRST, KID_AGENTS, LAST, MOVING,  # noqa: E402
+                          core_truth, make_config, recording)
+
+from crowd_addon.core.skinning import skin_vertices, skinning_matrices  # noqa: E402
+
+TOLERANCE = 1e-4          # metres
+N = FAN_AGENTS + KID_AGENTS
+
+
+def import_agents(path, instancing=False) -> dict:
+    """Import ``path`` into an empty scene: agent id -> its mesh object."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    bpy.ops.wm.usd_import(filepath=str(path), support_scene_instancing=instancing)
+    out = {}
+    for obj in bpy.data.objects:
+        if obj.type != "MESH":
+            continue
+        holder = obj
+        while holder is not None and not holder.name.startswith("agent_"):
+            holder = holder.parent
+        assert holder is not None, f"{obj.name} is not under an agent"
+        out[int(holder.name.split("_")[1].split(".")[0])] = obj
+    return out
+
+
+def world_vertices(obj) -> np.ndarray:
+    ev = obj.evaluated_get(bpy.context.evaluated_depsgraph_get())
+    mesh = ev.to_mesh()
+    co = np.empty(len(mesh.vertices) * 3, np.float32)
+    mesh.vertices.foreach_get("co", co)
+    ev.to_mesh_clear()
+    m = np.array(ev.matrix_world, np.float64)
+    return co.reshape(-1, 3) @ m[:3, :3].T + m[:3, 3]
+
+
+def core_vertices(truth, frame, agent) -> np.ndarray:
+    cfg = make_config()
+    s, u = cfg.agent_stream[agent], cfg.agent_unique[agent]
+    name = cfg.streams[s].skeleton if s >= 0 else cfg.uniques[u].skeleton
+    skeleton, mesh = cfg.skeletons[name], cfg.meshes[name][0]
+    pose = truth["poses"][frame][agent:agent + 1]
+    v = skin_vertices(mesh.positions, mesh.bone_indices, mesh.bone_weights,
+                      skinning_matrices(pose, skeleton))[0].astype(np.float64)
+    c, s_ = np.cos(truth["heading"][frame][agent]), np.sin(truth["heading"][frame][agent])
+    rot = np.array([[c, -s_, 0], [s_, c, 0], [0, 0, 1]])
+    return v @ rot.T + truth["position"][frame][agent]
+
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory):
+    from crowd_addon.usd import export_crowd
+
+    folder = tmp_path_factory.mktemp("blender_layout")
+    rec = recording()
+    return {layout: export_crowd(rec, folder / f"{layout}.usdc", layout=layout).path
+            for layout in ("blender", "instanced")}
+
+
+@pytest.fixture(scope="module")
+def truth():
+    return core_truth()
+
+
+def test_blender_layout_imports_every_agent_animated_as_core(exported, truth):
+    agents = import_agents(exported["blender"])
+    assert sorted(agents) == list(range(N))
+    scene = bpy.context.scene
+    worst = 0.0
+    for frame in range(FIRST, LAST + 1):
+        scene.frame_set(frame)
+        for a, obj in agents.items():
+            err = float(np.abs(world_vertices(obj) - core_vertices(truth, frame, a)).max())
+            assert err < TOLERANCE, (a, frame, err)
+            worst = max(worst, err)
+    print(f"worst vertex error {worst:.2e} m over {LAST - FIRST + 1} frames x {N} agents")
+    # the shot really moves them: agents that change and agents that stand still differ
+    scene.frame_set(FIRST)
+    before = {a: world_vertices(agents[a]) for a in sorted(DYNAMIC | MOVING)}
+    scene.frame_set(LAST)
+    assert all(np.abs(world_vertices(agents[a]) - before[a]).max() > 1e-3 for a in before)
+
+
+def test_instanced_layout_is_what_blender_does_not_animate(exported, truth):
+    """The control: Blender imports instanceable agents without their skeletons' motion
+    (why the Blender layout exists); if a Blender release fixes this, this test says so."""
+    agents = import_agents(exported["instanced"])
+    scene = bpy.context.scene
+    still = []
+    for a in sorted(set(range(N)) - MOVING)[:6]:
+        scene.frame_set(FIRST)
+        v0 = world_vertices(agents[a])
+        scene.frame_set(LAST)
+        still.append(np.abs(world_vertices(agents[a]) - v0).max() < 1e-6)
+    assert all(still)
