@@ -3,7 +3,9 @@
 256 streams (clips, 2-way blends, additive layers, state machines driven by
 triggers), M = 60, 82 bones, 300 frames, synthetic clips and proxy mesh; a
 simulation makes a small share of the crowd react three times in the shot (30-frame
-blends to another stream), so those agents get their own baked animation.
+blends to another stream), so those agents play value clips; and a transition-heavy
+case (``transition_heavy``): every agent blends once, over 12 frames at a random frame,
+to another stream.
 
 Prints, for 2,000 and 65,000 agents (``--agents``): export time (the shot recorded
 once, then written: simulate / author / write), peak memory, bytes, and bytes
@@ -14,7 +16,11 @@ an NLA strip shifted by its offset (run in a child process; scaled per agent-fra
 and the ratios of time and bytes per agent. Ends with one JSON line.
 
     .venv/bin/python benchmarks/usd_export.py [--quick] [--agents N ...] [--frames F]
-        [--blender-agents 24] [--blender-frames 60] [--react 0.005] [--keep DIR]
+        [--heavy-agents N] [--blender-agents 24] [--blender-frames 60] [--react 0.005]
+        [--keep DIR]
+
+Each export runs in a child process of its own, so its peak memory (``peak_mb``) is
+its own.
 """
 
 from __future__ import annotations
@@ -40,6 +46,8 @@ from crowd_addon.core.synthetic import humanoid_mesh, paper_config  # noqa: E402
 STREAMS, M, BONES, SLOTS, FRAMES = 256, 60, 82, 800, 300
 FIRST = 1
 REACT_AT = (60, 150, 240)            # shot-relative frames of the crowd's reactions
+HEAVY_BLEND = 12                     # the transition-heavy case: 12-frame blends, and
+HEAVY_SLOTS = 4096                   # slots for the ~2,600 agents blending at once
 
 
 def build(agents: int, streams: int = STREAMS) -> CrowdConfig:
@@ -71,22 +79,57 @@ def reactions(share: float, seed: int = 7):
     return on_frame
 
 
-def run_export(agents: int, frames: int, react: float, directory: str) -> dict:
-    """Record the shot once (a crowd that skins nothing) and write it."""
+def every_agent_once(agents: int, frames: int, seed: int = 11):
+    """``on_frame``: every agent blends once to another stream over
+    :data:`HEAVY_BLEND` frames, at a random frame of the shot."""
+    rng = np.random.default_rng(seed)
+    when = rng.integers(0, frames, agents)
+    order = np.argsort(when, kind="stable")
+    starts = np.searchsorted(when[order], np.arange(frames + 1))
+
+    def on_frame(crowd, frame):
+        rel = frame - FIRST
+        if 0 <= rel < frames and starts[rel] < starts[rel + 1]:
+            who = np.sort(order[starts[rel]:starts[rel + 1]])
+            now = crowd.view.agents.ref[who]
+            crowd.transition_to_streamed(who, (now + 1 + rng.integers(0, STREAMS - 1, who.size))
+                                         % STREAMS, HEAVY_BLEND)
+    return on_frame
+
+
+def run_case(case: str, agents: int, frames: int, react: float, directory: str) -> dict:
+    """One export in a child process, so its peak memory is its own."""
+    run = subprocess.run([sys.executable, __file__, "--export-worker", case, str(agents),
+                          str(frames), str(react), directory],
+                         capture_output=True, text=True, timeout=3000)
+    if run.returncode != 0:
+        raise RuntimeError(f"export {case} failed ({run.returncode}):\n"
+                           f"{run.stdout[-2000:]}{run.stderr[-3000:]}")
+    return json.loads(run.stdout.strip().splitlines()[-1])
+
+
+def run_export(case: str, agents: int, frames: int, react: float, directory: str) -> dict:
+    """Record the shot once (a crowd that skins nothing) and write it: ``steady`` (a
+    share of the crowd reacts three times) or ``transition_heavy`` (every agent blends
+    once, :func:`every_agent_once`, with slots enough that none waits)."""
     from crowd_addon.core import Crowd
     from crowd_addon.core.recorder import record
     from crowd_addon.usd import export_crowd
 
     cfg = build(agents)
+    if case == "transition_heavy":
+        cfg.transition_slots = HEAVY_SLOTS
+        on_frame = every_agent_once(agents, frames)
+    else:
+        on_frame = reactions(react)
     t = time.perf_counter()
-    shot = record(Crowd(cfg, skinning="gpu"), FIRST, FIRST + frames - 1,
-                  on_frame=reactions(react))
+    shot = record(Crowd(cfg, skinning="gpu"), FIRST, FIRST + frames - 1, on_frame=on_frame)
     r = export_crowd(shot, os.path.join(directory, "shot.usdc"))
     seconds = time.perf_counter() - t
     stream_bytes = sum(v for k, v in r.files.items() if "/streams/" in k)
     per_anim_frame = stream_bytes / (r.stream_animations * (frames + M - 1))
     per_agent_baked = per_anim_frame * frames * agents
-    return {"agents": agents, "frames": frames, "seconds": seconds,
+    return {"case": case, "agents": agents, "frames": frames, "seconds": seconds,
             "simulate_s": r.seconds["simulate"], "author_s": r.seconds["author"],
             "write_s": r.seconds["write"], "bytes": r.bytes, "files": len(r.files),
             "shared_agents": r.shared_agents, "clip_agents": r.clip_agents, "blend_frames": r.blend_frames,
@@ -219,26 +262,37 @@ def main() -> None:
     ap.add_argument("--blender-agents", type=int, default=24)
     ap.add_argument("--blender-frames", type=int, default=60)
     ap.add_argument("--keep", metavar="DIR", help="write the exports here and keep them")
+    ap.add_argument("--heavy-agents", type=int, default=65000, metavar="N",
+                    help="agents of the transition-heavy case (default 65000; 0 skips it)")
     ap.add_argument("--blender-worker", nargs=2, help=argparse.SUPPRESS)
+    ap.add_argument("--export-worker", nargs=5, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.blender_worker:
         blender_worker(*args.blender_worker)
         return
-    sizes = [(2000, 30)] if args.quick else [(n, args.frames) for n in args.agents]
+    if args.export_worker:
+        case, agents, frames, react, directory = args.export_worker
+        print(json.dumps(run_export(case, int(agents), int(frames), float(react), directory)))
+        return
+    sizes = [("steady", 2000, 30)] if args.quick else \
+        [("steady", n, args.frames) for n in args.agents]
+    if args.heavy_agents:
+        sizes.append(("transition_heavy", 2000 if args.quick else args.heavy_agents,
+                      30 if args.quick else args.frames))
     base = args.keep or tempfile.mkdtemp(prefix="usd_bench_")
     exports = []
     try:
-        for agents, frames in sizes:
-            d = os.path.join(base, f"{agents}")
+        for case, agents, frames in sizes:
+            d = os.path.join(base, f"{case}_{agents}")
             os.makedirs(d, exist_ok=True)
-            r = run_export(agents, frames, args.react, d)
+            r = run_case(case, agents, frames, args.react, d)
             exports.append(r)
-            print(f"{agents:>6,} agents x {frames} frames: {r['seconds']:6.1f} s "
+            print(f"{case:>16} {agents:>6,} agents x {frames} frames: {r['seconds']:6.1f} s "
                   f"(simulate {r['simulate_s']:.1f}, author {r['author_s']:.1f}, write "
                   f"{r['write_s']:.1f}), {r['bytes'] / 1e6:8.1f} MB, "
                   f"{r['clip_agents']:,} agents on clips ({r['blend_frames']:,} blend frames), "
                   f"{r['offset_animations']:,} offset animations, peak RSS "
-                  f"{r['peak_rss_mb'] / 1e3:.1f} GB; "
+                  f"{r['peak_rss_mb'] / 1e3:.2f} GB; "
                   f"{100 * r['bytes_vs_per_agent_baked']:.2f} % of per-agent baked "
                   f"({r['per_agent_baked_bytes'] / 1e9:.1f} GB)", flush=True)
             if not args.keep:
@@ -259,13 +313,26 @@ def main() -> None:
         print(f"{r['agents']:>6,} agents: per agent {r['time_per_agent_vs_blender']:.4f}x "
               f"Blender's time (it would take ~{r['blender_estimate_s'] / 3600:.1f} h) and "
               f"{r['bytes_per_agent_vs_blender']:.4f}x its bytes")
-    big = [r for r in exports if r["agents"] == 65000]
+    big = [r for r in exports if r["agents"] == 65000 and r["case"] == "steady"]
+    heavy = [r for r in exports if r["case"] == "transition_heavy"]
     figures = {"config": {"streams": STREAMS, "M": M, "bones": BONES, "frames": FRAMES,
-                          "react_share": args.react},
+                          "react_share": args.react, "heavy_blend": HEAVY_BLEND,
+                          "heavy_slots": HEAVY_SLOTS},
                "exports": exports, "blender_baseline": bb,
                "target_65k_under_60s": bool(big and big[0]["seconds"] < 60),
                "target_bytes_under_5pct": bool(big and big[0]["bytes_vs_per_agent_baked"]
                                                < 0.05)}
+    if heavy:
+        h = heavy[0]
+        figures["transition_heavy"] = {
+            "agents": h["agents"], "frames": h["frames"], "seconds": round(h["seconds"], 2),
+            "bytes": h["bytes"], "bytes_vs_per_agent_baked": h["bytes_vs_per_agent_baked"],
+            "peak_mb": round(h["peak_rss_mb"], 1), "clip_agents": h["clip_agents"],
+            "blend_frames": h["blend_frames"]}
+        print(f"transition heavy: {h['agents']:,} agents each blending once over "
+              f"{HEAVY_BLEND} frames: {h['seconds']:.1f} s (target <= 10 s), "
+              f"{100 * h['bytes_vs_per_agent_baked']:.2f} % of per-agent baking (target "
+              f"<= 6 %), peak {h['peak_rss_mb']:.0f} MB")
     print(json.dumps(figures))
 
 

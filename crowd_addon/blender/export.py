@@ -207,7 +207,8 @@ def _size(n: int) -> str:
 
 #: progress bar share (out of 1000) of the bake and of each export stage
 _SPANS = {"bake": (0, 300), "simulate": (300, 700), "characters": (700, 720),
-          "streams": (720, 800), "clips": (800, 860), "agent animations": (860, 980),
+          "streams": (720, 800), "uniques": (800, 810), "blends": (810, 860),
+          "agent animations": (860, 980),
           "layout": (980, 1000)}
 
 
@@ -248,7 +249,7 @@ class CROWD_OT_export_usd(bpy.types.Operator, ExportHelper):
                            description="Last frame, inclusive")
     agents: IntProperty(name="Agents", default=0, min=0,
                         description="Export only the first N agents (0: all)")
-    layout: EnumProperty(
+    usd_layout: EnumProperty(
         name="Layout", default="instanced",
         items=[("instanced", "Instanced", "Agents are instanceable: renderers share each "
                 "character (usdview, Houdini, Omniverse, render delegates)"),
@@ -293,7 +294,7 @@ class CROWD_OT_export_usd(bpy.types.Operator, ExportHelper):
         col.prop(self, "frame_start")
         col.prop(self, "frame_end")
         layout.prop(self, "agents")
-        layout.prop(self, "layout")
+        layout.prop(self, "usd_layout")
 
     def execute(self, context):
         """From the file browser (after invoke): start the modal export. From a script:
@@ -307,7 +308,7 @@ class CROWD_OT_export_usd(bpy.types.Operator, ExportHelper):
             try:
                 # the depsgraph is looked up when the agents are placed, as the bake does
                 self._job = ExportJob(scene, path, frames, agents=self.agents or None,
-                                      layout=self.layout)
+                                      layout=self.usd_layout)
             except CrowdError as e:
                 return self._fail(e)
             wm.progress_begin(0, 1000)
@@ -325,7 +326,7 @@ class CROWD_OT_export_usd(bpy.types.Operator, ExportHelper):
             _config, result = export_scene(
                 scene, path, frames, agents=self.agents or None, progress=update,
                 on_bake=lambda done, total, _what: update("bake", done, total),
-                depsgraph=context.evaluated_depsgraph_get(), layout=self.layout)
+                depsgraph=context.evaluated_depsgraph_get(), layout=self.usd_layout)
         except CrowdError as e:
             return self._fail(e)
         finally:

@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 from pxr import Sdf, Vt
 
-from .animation import author_animation
+from .animation import author_samples, define_animation
 from .layers import attribute, define, new_layer
 from .shot import STREAM, TRANSITION, UNIQUE
 
@@ -33,6 +33,8 @@ __all__ = ["PRIM", "BankLayout", "bank_layout", "bank_layer", "manifest_layer", 
 PRIM = "Animation"
 #: empty frames between two blends in a bank (no sample is shared across blends)
 GAP = 1
+#: blends whose poses are rebuilt and written at a time
+_BANK_CHUNK = 2048
 _T = Sdf.ValueTypeNames
 
 
@@ -58,7 +60,9 @@ def bank_layout(shot) -> dict:
 
 
 def bank_layer(shot, layout: BankLayout, joints, fmt, name: str):
-    """The blend bank of one skeleton: its blends' frames at their bank times."""
+    """The blend bank of one skeleton: its blends' frames at their bank times. A
+    generator yielding ``(done, total)`` blends after each batch (their poses are
+    rebuilt a batch at a time, so memory stays bounded) and returning the layer."""
     times = layout.times
     layer = new_layer(fmt, shot.fps, float(times[0]) if times.size else 0.0,
                       float(times[-1]) if times.size else 0.0, default_prim=PRIM,
@@ -66,7 +70,16 @@ def bank_layer(shot, layout: BankLayout, joints, fmt, name: str):
                               "of its own; agents read them through value clips")
     with Sdf.ChangeBlock():
         prim = define(layer, PRIM, "SkelAnimation")
-        author_animation(prim, joints, shot.piece_poses(layout.pieces), times)
+        define_animation(prim, joints)
+    n = len(joints)
+    lengths = shot.pieces.end[layout.pieces] - shot.pieces.start[layout.pieces]
+    first = np.r_[0, np.cumsum(lengths)]
+    for a in range(0, layout.pieces.size, _BANK_CHUNK):
+        b = min(a + _BANK_CHUNK, layout.pieces.size)
+        with Sdf.ChangeBlock():
+            author_samples(prim, shot.piece_poses(layout.pieces[a:b])[:, :n],
+                           times[first[a]:first[b]])
+        yield b, layout.pieces.size
     return layer
 
 

@@ -105,7 +105,7 @@ def export_crowd(recording, path, agents=None, progress=None, layout="instanced"
     agents : None (all) or N, the first N agents (ids ``0 .. N-1``); more than the
         recording has is an error.
     progress : optional ``progress(stage, done, total)``: ``characters``, ``streams``,
-        ``clips``, ``agent animations``, ``layout``.
+        ``uniques``, ``blends``, ``agent animations``, ``layout``.
     layout : ``"instanced"`` (default: agents are instanceable, so renderers share
         each character's prototype) or ``"blender"`` (agents are not instanceable:
         Blender's USD importer animates them only then); :data:`LAYOUTS`.
@@ -255,8 +255,8 @@ def _write_streams(out, rec, shot, joints_of):
 
 def _write_clip_layers(out, rec, shot, joints_of, stream_names, stream_assets):
     """What the agents that change read through value clips, besides the streams: a
-    layer per unique played, a blend bank per skeleton that blends, and the clips'
-    manifest (a step each). Returns ``({key: asset path relative to the agents
+    layer per unique played (a step each), a blend bank per skeleton that blends (a
+    step per batch of blends) and the clips' manifest. Returns ``({key: asset path relative to the agents
     layer}, {skeleton: BankLayout})`` (nothing when every agent is static)."""
     if shot.static.all():
         return {}, {}
@@ -267,7 +267,6 @@ def _write_clip_layers(out, rec, shot, joints_of, stream_names, stream_assets):
     names = unique_identifiers(rec.unique_names, casefold=True)
     banks = bank_layout(shot)
     skeleton_names = unique_identifiers(list(rec.config.skeletons), casefold=True)
-    total = len(uniques) + len(banks) + 1
     for j, u in enumerate(uniques):
         layer = new_layer(files.format, rec.fps, rec.first, rec.last, default_prim=PRIM,
                           comment=f"crowd unique {rec.unique_names[u]!r}: its pose at "
@@ -278,15 +277,19 @@ def _write_clip_layers(out, rec, shot, joints_of, stream_names, stream_assets):
                              rec.unique_poses[:, u], rec.frames)
         out.save(layer, f"uniques/{names[u]}")
         assets["unique", u] = files.layer_path(f"uniques/{names[u]}")
-        yield "clips", j + 1, total
-    for j, (k, layout) in enumerate(banks.items()):
-        out.save(bank_layer(shot, layout, joints_of[k], files.format, skeleton_names[k]),
-                 f"blends/{skeleton_names[k]}")
+        yield "uniques", j + 1, len(uniques)
+    for k, layout in banks.items():
+        bank = bank_layer(shot, layout, joints_of[k], files.format, skeleton_names[k])
+        while True:
+            try:
+                done, n = next(bank)
+            except StopIteration as stop:
+                out.save(stop.value, f"blends/{skeleton_names[k]}")
+                break
+            yield "blends", done, n
         assets["blend", k] = files.layer_path(f"blends/{skeleton_names[k]}")
-        yield "clips", len(uniques) + j + 1, total
     out.save(manifest_layer(files.format, rec.fps), "manifest")
     assets["manifest"] = files.layer_path("manifest")
-    yield "clips", total, total
     return assets, banks
 
 

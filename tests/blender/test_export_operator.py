@@ -118,6 +118,16 @@ def test_custom_range_agent_limit_and_text_format(scene, tmp_path):
     assert all(f.suffix == ".usda" for f in (tmp_path / "part.layers").rglob("*.*"))
 
 
+def test_the_blender_layout_from_the_operator(scene, tmp_path):
+    path = tmp_path / "for_blender.usdc"
+    assert bpy.ops.crowd.export_usd(filepath=str(path), usd_layout="blender") == {"FINISHED"}
+    from pxr import Usd
+    stage = Usd.Stage.Open(str(path))
+    agents = stage.GetPrimAtPath("/Crowd/Agents").GetChildren()
+    assert len(agents) == 30 and not any(p.IsInstanceable() for p in agents)
+    assert stage.GetRootLayer().customLayerData["crowd"]["layout"] == "blender"
+
+
 def test_scene_range_wins_over_start_and_end_unless_turned_off(scene, tmp_path):
     path = tmp_path / "scene_range.usdc"
     scene.frame_start, scene.frame_end = 2, 6
@@ -349,6 +359,7 @@ class _ModalExport:
 
     def __init__(self, path, **props):
         self.filepath, self.use_scene_range, self.agents = str(path), True, 0
+        self.usd_layout = "instanced"
         self.frame_start, self.frame_end, self.interactive = 1, 250, True
         for k, v in props.items():
             setattr(self, k, v)

@@ -54,6 +54,28 @@ def test_first_n_agents_as_json(config_path, tmp_path, capsys):
     assert out.read_text().startswith("#usda")
 
 
+def test_blender_layout_agents_are_not_instances(config_path, tmp_path, capsys):
+    out = tmp_path / "shot.usdc"
+    assert main(["export", "--config", str(config_path), "--out", str(out),
+                 "--frames", "2-9", "--layout", "blender", "--json"]) == 0
+    json.loads(capsys.readouterr().out)
+    stage = Usd.Stage.Open(str(out))
+    agents = stage.GetPrimAtPath("/Crowd/Agents").GetChildren()
+    assert len(agents) == FAN_AGENTS + KID_AGENTS
+    assert not any(p.IsInstance() or p.IsInstanceable() for p in agents)
+    assert stage.GetRootLayer().customLayerData["crowd"]["layout"] == "blender"
+
+
+def test_an_unknown_layout_is_refused_before_anything_runs(config_path, tmp_path):
+    from crowd_addon.core import CrowdError
+    from crowd_addon.usd import check_export
+
+    with pytest.raises(CrowdError, match="layout must be one of instanced, blender, got "
+                                         "'maya'"):
+        check_export(make_config(), tmp_path / "shot.usdc", layout="maya")
+    assert not list(tmp_path.iterdir())
+
+
 @pytest.mark.parametrize("extra, message", [
     (["--agents", "1000"], "crowd export: error: export: 1000 agents requested but the "
                            "crowd has 46"),
