@@ -5,8 +5,9 @@ driven by the same simulation.
 Two characters (24- and 26-bone humanoids, so poses are padded to the larger one),
 three streams (a clip, a 2-way blend, a state machine driven by a trigger), one
 unique, M = 8, NT = 3 (so one request waits in the queue). During the shot, agents
-blend to another stream, blend to the unique, are cut to another (stream, offset),
-queue for a slot, and move; one agent plays the unique from the start.
+blend to another stream (also from the first frame, and on the last one), blend to the
+unique, are cut to another (stream, offset), queue for a slot, and move; one agent
+plays the unique from the start.
 """
 
 from __future__ import annotations
@@ -60,6 +61,10 @@ def simulate(crowd, frame):
     """The shot's simulation: on_frame(crowd, frame) before the step into ``frame``."""
     if frame == 1:
         crowd.transition_to_streamed([9], "idle", 1, offset=2)     # done before FIRST
+    if frame == FIRST:
+        crowd.transition_to_streamed([11], "idle", 3)               # blends from FIRST
+    if frame == LAST:
+        crowd.transition_to_streamed([12], "cheer.loud", 4, offset=6)   # on LAST only
     if frame == 4:
         crowd.transition_to_streamed([1, 2], "cheer.loud", 4, offset=3)
     if frame == 5:
@@ -74,7 +79,7 @@ def simulate(crowd, frame):
 
 
 #: agents whose animation is not one (stream, offset) during FIRST..LAST
-DYNAMIC = {1, 2, 3, 4, 6, UNIQUE_FROM_START}
+DYNAMIC = {1, 2, 3, 4, 6, 11, 12, UNIQUE_FROM_START}
 MOVING = {7, 8}
 
 
