@@ -114,6 +114,7 @@ class Recorder:
             segment_kind=seg[2], segment_ref=seg[3], segment_offset=seg[4],
             start_pose=tr[0], t0=tr[1], length=tr[2], target_kind=tr[3], target_ref=tr[4],
             target_offset=tr[5], position=self._position0, heading=self._heading0,
+            color=self._color0,
             move_agent=mv[0], move_frame=mv[1], move_position=mv[2],
             move_heading=mv[3], events=tuple(self._events),
             stream_events=tuple(self._stream_events.columns(order_by=2)),
@@ -136,6 +137,7 @@ class Recorder:
         a = v.agents
         self._position0 = np.array(a.position, np.float32)
         self._heading0 = np.array(a.heading, np.float32)
+        self._color0 = np.array(a.color, np.float32)
         self._position, self._heading = self._position0.copy(), self._heading0.copy()
         # what each agent plays now: kind, stream/unique/slot, offset, and a
         # transition's t0, length, target kind, ref, offset (to tell a new one)

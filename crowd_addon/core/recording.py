@@ -46,7 +46,8 @@ class Recording:
     frame), every agent from ``first``: kind STREAM (``ref`` stream at ``offset``),
     UNIQUE (``ref`` unique) or TRANSITION (``ref`` a row of: ``start_pose`` (K2, B, 10)
     float32 StartP, ``t0``, ``length``, ``target_kind``/``_ref``/``_offset`` (K2,)).
-    position (N, 3), heading (N,) float32 at ``first``; move_* (K3,): a new position
+    position (N, 3), heading (N,) float32 and color (N, 3) float32 RGB at ``first``;
+    move_* (K3,): a new position
     and heading from ``move_frame`` on, sorted by (agent, frame).
     events : ``(name, frame, agent ids)`` per event fired while recording, in order.
     stream_events : ``(stream, name, frame)`` (k,) arrays of the tags the heads
@@ -78,6 +79,7 @@ class Recording:
     target_offset: np.ndarray
     position: np.ndarray
     heading: np.ndarray
+    color: np.ndarray
     move_agent: np.ndarray
     move_frame: np.ndarray
     move_position: np.ndarray

@@ -13,6 +13,8 @@
                 rel skel:animationSource -> an offset animation, or
                                             /Crowd/AgentAnimations/agent_<id>
                 xformOp:translate (position), xformOp:rotateZ (heading, degrees)
+                primvars:displayColor (constant: the agent's colour, inherited
+                                       by the character's mesh)
         def Scope "AgentAnimations"   (in the sublayer agents.<ext>: per agent that
                                        is not static, a SkelAnimation whose value
                                        clips read streams, uniques and blends)
@@ -86,10 +88,10 @@ def author_agents(root: Sdf.PrimSpec, shot, names, character_assets, sources,
     refs = {k: Sdf.Reference(a) for k, a in character_assets.items()}
     degrees = np.degrees(shot.heading.astype(np.float64)).tolist()
     agents = list(zip(names, shot.agent_skeleton.tolist(), sources, shot.position.tolist(),
-                      degrees))
+                      degrees, shot.color.tolist()))
     for a in range(0, len(agents), _LAYOUT_CHUNK):
         with Sdf.ChangeBlock():
-            for name, skel, source, position, heading in agents[a:a + _LAYOUT_CHUNK]:
+            for name, skel, source, position, heading, color in agents[a:a + _LAYOUT_CHUNK]:
                 prim = define(parent, name, "SkelRoot")
                 prim.instanceable = instanceable
                 prim.referenceList.Prepend(refs[skel])
@@ -98,6 +100,8 @@ def author_agents(root: Sdf.PrimSpec, shot, names, character_assets, sources,
                 attribute(prim, "xformOp:translate", _T.Float3, Gf.Vec3f(*position))
                 attribute(prim, "xformOp:rotateZ", _T.Double, heading)
                 attribute(prim, "xformOpOrder", _T.TokenArray, _ORDER, uniform=True)
+                attribute(prim, "primvars:displayColor", _T.Color3fArray,
+                          Vt.Vec3fArray([Gf.Vec3f(*color)]), interpolation="constant")
         yield "layout", min(a + _LAYOUT_CHUNK, len(agents)), len(agents)
     moving = np.flatnonzero(shot.moving)
     if moving.size:

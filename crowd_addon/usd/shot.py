@@ -49,7 +49,8 @@ class Shot:
     recording : the Recording; first, last, fps, max_offset : its own.
     agents : (n,) int64 ids; agent_skeleton : (n,) int64 skeleton index per agent.
     static : (n,) bool; stream, offset : (n,) int64 of static agents (-1 otherwise).
-    position : (n, 3) float32, heading : (n,) float32 radians at ``first``.
+    position : (n, 3) float32, heading : (n,) float32 radians, color : (n, 3) float32
+    RGB, at ``first``.
     moving : (n,) bool, position or heading changed during the shot.
     """
 
@@ -64,6 +65,7 @@ class Shot:
         self.stream = np.where(self.static, ref, -1).astype(np.int64)
         self.offset = np.where(self.static, off, -1).astype(np.int64)
         self.position, self.heading = rec.position[ids], rec.heading[ids]
+        self.color = rec.color[ids]
         self.moving = rec.moving[ids]
 
     @property

@@ -8,7 +8,7 @@ from pxr import Sdf, Usd, UsdGeom, UsdSkel, UsdValidation
 
 from crowd_addon.core.agents import STREAM
 
-from .conftest import DYNAMIC, FIRST, FAN_AGENTS, KID_AGENTS, LAST, MOVING
+from .conftest import DYNAMIC, FIRST, FAN_AGENTS, KID_AGENTS, LAST, MOVING, make_config
 
 N = FAN_AGENTS + KID_AGENTS
 M = 8
@@ -161,3 +161,16 @@ def test_the_result_lists_the_events_the_agents_heard(shot, oracle):
     got = Counter({(name, frame): n for name, frame, n in shot[0].events})
     expected = Counter((name, frame) for _agent, name, frame in oracle["events"])
     assert got == expected and sum(got.values()) > 20
+
+
+def test_each_agent_colour_reaches_its_mesh_as_an_inherited_primvar(stage):
+    """``primvars:displayColor`` on the agent (constant) is what its instanced mesh
+    inherits: the crowd's per-agent colour, as render delegates read it."""
+    colors = make_config().agent_color
+    for a in (0, 7, 39, FAN_AGENTS, N - 1):
+        agent = agent_prim(stage, a)
+        (mesh,) = [p for p in Usd.PrimRange(agent, Usd.TraverseInstanceProxies())
+                   if p.IsA(UsdGeom.Mesh)]
+        primvar = UsdGeom.PrimvarsAPI(mesh).FindPrimvarWithInheritance("displayColor")
+        assert primvar.GetInterpolation() == UsdGeom.Tokens.constant
+        np.testing.assert_array_equal(np.array(primvar.Get())[0], colors[a])
