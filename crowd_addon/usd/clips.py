@@ -7,8 +7,9 @@ stream at an offset, a unique, or a blend. Its ``SkelAnimation`` holds no poses;
 - a stream piece reads the stream's layer (the same one the shared offset animations
   reference) at ``F - O``;
 - a unique piece reads the unique's layer at ``F``;
-- a blend piece reads its frames from the *blend bank* of its skeleton, one layer in
-  which every blend of the shot has its own stretch of time.
+- a blend piece reads its frames from a *blend bank* of its skeleton, a layer in
+  which each blend has its own stretch of time (a skeleton's blends fill as many
+  banks as :data:`BANK_FRAMES` needs, so each is written and freed in turn).
 
 So a transition costs its blending frames once, and the agent's steady stretches
 stay shared. Every clip layer holds its animation at :data:`PRIM` and authors every
@@ -27,7 +28,8 @@ from .animation import author_samples, define_animation
 from .layers import attribute, define, new_layer
 from .shot import STREAM, TRANSITION, UNIQUE
 
-__all__ = ["PRIM", "BankLayout", "bank_layout", "bank_layer", "manifest_layer", "clip_sets"]
+__all__ = ["PRIM", "BANK_FRAMES", "BankLayout", "bank_layout", "bank_layer", "manifest_layer",
+           "clip_sets"]
 
 #: the animation prim of every layer a clip reads (streams, uniques, blend banks)
 PRIM = "Animation"
@@ -35,51 +37,68 @@ PRIM = "Animation"
 GAP = 1
 #: blends whose poses are rebuilt and written at a time
 _BANK_CHUNK = 2048
+#: frames a bank layer holds at most (~110 MB of 82-bone poses); more go to the next
+BANK_FRAMES = 65536
 _T = Sdf.ValueTypeNames
 
 
 class BankLayout:
-    """Where the blends of one skeleton live in its bank: ``pieces`` (indices into the
-    shot's pieces) and ``base`` (bank time of each one's first frame)."""
+    """One bank layer: blends of skeleton ``skeleton`` (``pieces``, indices into the
+    shot's pieces), numbered ``part`` among that skeleton's banks, each at bank time
+    ``base`` (its first frame); ``times`` every frame's bank time, blend after blend."""
 
-    def __init__(self, pieces: np.ndarray, lengths: np.ndarray):
-        self.pieces = pieces
+    def __init__(self, skeleton: int, part: int, pieces: np.ndarray, lengths: np.ndarray):
+        self.skeleton, self.part, self.pieces = skeleton, part, pieces
+        self.lengths = lengths
         self.base = np.cumsum(lengths + GAP) - (lengths + GAP)
         self.times = np.repeat(self.base - np.cumsum(lengths) + lengths, lengths) + \
             np.arange(int(lengths.sum()))
         self.frames = int(lengths.sum())
 
+    @property
+    def key(self) -> tuple:
+        return ("blend", self.skeleton, self.part)
 
-def bank_layout(shot) -> dict:
-    """``{skeleton index: BankLayout}`` of the shot's blend pieces."""
+
+def bank_layout(shot, frames_per_bank: int | None = None) -> list:
+    """The shot's blend pieces laid out in banks: per skeleton, consecutive blends go
+    to one bank layer until it holds ``frames_per_bank`` (default :data:`BANK_FRAMES`)
+    frames, so a layer is written and freed before the next is built. Returns the
+    :class:`BankLayout` list."""
+    frames_per_bank = frames_per_bank or BANK_FRAMES
     p = shot.pieces
     blend = np.flatnonzero(p.kind == TRANSITION)
     skel = shot.agent_skeleton[p.agent[blend]]
-    return {int(k): BankLayout(blend[skel == k], (p.end - p.start)[blend[skel == k]])
-            for k in np.unique(skel).tolist()}
+    out = []
+    for k in np.unique(skel).tolist():
+        mine = blend[skel == k]
+        lengths = (p.end - p.start)[mine]
+        part = (np.cumsum(lengths) - lengths) // frames_per_bank
+        for j, q in enumerate(np.unique(part).tolist()):
+            out.append(BankLayout(int(k), j, mine[part == q], lengths[part == q]))
+    return out
 
 
 def bank_layer(shot, layout: BankLayout, joints, fmt, name: str):
-    """The blend bank of one skeleton: its blends' frames at their bank times. A
-    generator yielding ``(done, total)`` blends after each batch (their poses are
-    rebuilt a batch at a time, so memory stays bounded) and returning the layer."""
+    """One bank: its blends' frames at their bank times. A generator yielding the
+    blends written so far after each batch (their poses are rebuilt a batch at a time)
+    and returning the layer."""
     times = layout.times
-    layer = new_layer(fmt, shot.fps, float(times[0]) if times.size else 0.0,
-                      float(times[-1]) if times.size else 0.0, default_prim=PRIM,
-                      comment=f"crowd blends of {name!r}: each blend's frames in a stretch "
-                              "of its own; agents read them through value clips")
+    layer = new_layer(fmt, shot.fps, float(times[0]), float(times[-1]), default_prim=PRIM,
+                      comment=f"crowd blends of {name!r} (bank {layout.part}): each blend's "
+                              "frames in a stretch of its own; agents read them through "
+                              "value clips")
     with Sdf.ChangeBlock():
         prim = define(layer, PRIM, "SkelAnimation")
         define_animation(prim, joints)
     n = len(joints)
-    lengths = shot.pieces.end[layout.pieces] - shot.pieces.start[layout.pieces]
-    first = np.r_[0, np.cumsum(lengths)]
+    first = np.r_[0, np.cumsum(layout.lengths)]
     for a in range(0, layout.pieces.size, _BANK_CHUNK):
         b = min(a + _BANK_CHUNK, layout.pieces.size)
         with Sdf.ChangeBlock():
             author_samples(prim, shot.piece_poses(layout.pieces[a:b])[:, :n],
                            times[first[a]:first[b]])
-        yield b, layout.pieces.size
+        yield b
     return layer
 
 
@@ -97,18 +116,18 @@ def manifest_layer(fmt, fps: float):
 def clip_sets(shot, assets, banks) -> list:
     """One ``clips`` dictionary per non-static agent (in agent order).
 
-    ``assets``: ``{("stream", s) | ("unique", u) | ("blend", skeleton) | "manifest":
-    asset path}`` relative to the layer the dictionaries are authored in; ``banks``:
+    ``assets``: ``{("stream", s) | ("unique", u) | BankLayout.key | "manifest": asset
+    path}`` relative to the layer the dictionaries are authored in; ``banks``:
     :func:`bank_layout`'s result.
     """
     p = shot.pieces
     clip_time = np.where(p.kind == STREAM, p.start - p.offset, p.start).astype(np.float64)
-    for layout in banks.values():
-        clip_time[layout.pieces] = layout.base
-    key = [("stream" if k == STREAM else "unique" if k == UNIQUE else "blend",
-            int(r) if k != TRANSITION else int(s))
-           for k, r, s in zip(p.kind.tolist(), p.ref.tolist(),
-                              shot.agent_skeleton[p.agent].tolist())]
+    key = [("stream" if k == STREAM else "unique", int(r))
+           for k, r in zip(p.kind.tolist(), p.ref.tolist())]
+    for bank in banks:
+        clip_time[bank.pieces] = bank.base
+        for j in bank.pieces.tolist():
+            key[j] = bank.key
     manifest = Sdf.AssetPath(assets["manifest"])
     bounds = np.flatnonzero(np.r_[True, p.agent[1:] != p.agent[:-1], True])
     start, end = p.start.astype(np.float64) - 0.5, p.end.astype(np.float64) - 0.5

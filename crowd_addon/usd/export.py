@@ -194,7 +194,7 @@ def _steps(rec, ids, meshes, files, layout):
         path=files.path, layers_dir=files.layers_dir, files=dict(files.written),
         frames=(rec.first, rec.last), agents=int(ids.size),
         shared_agents=int(shot.static.sum()), clip_agents=int((~shot.static).sum()),
-        blend_frames=int(sum(b.frames for b in clip_assets[1].values())),
+        blend_frames=int(sum(b.frames for b in clip_assets[1])),
         moving_agents=int(shot.moving.sum()), offset_animations=len(offsets),
         stream_animations=len(stream_assets), characters=len(char_assets),
         seconds=seconds, events=_events(rec, ids))
@@ -255,11 +255,11 @@ def _write_streams(out, rec, shot, joints_of):
 
 def _write_clip_layers(out, rec, shot, joints_of, stream_names, stream_assets):
     """What the agents that change read through value clips, besides the streams: a
-    layer per unique played (a step each), a blend bank per skeleton that blends (a
-    step per batch of blends) and the clips' manifest. Returns ``({key: asset path relative to the agents
-    layer}, {skeleton: BankLayout})`` (nothing when every agent is static)."""
+    layer per unique played (a step each), the blend banks (a step per batch of
+    blends) and the clips' manifest. Returns ``({key: asset path relative to the
+    agents layer}, [BankLayout])`` (nothing when every agent is static)."""
     if shot.static.all():
-        return {}, {}
+        return {}, []
     files, p = out.files, shot.pieces
     assets = {("stream", s): files.layer_path(f"streams/{stream_names[s]}")
               for s in stream_assets}
@@ -278,16 +278,20 @@ def _write_clip_layers(out, rec, shot, joints_of, stream_names, stream_assets):
         out.save(layer, f"uniques/{names[u]}")
         assets["unique", u] = files.layer_path(f"uniques/{names[u]}")
         yield "uniques", j + 1, len(uniques)
-    for k, layout in banks.items():
-        bank = bank_layer(shot, layout, joints_of[k], files.format, skeleton_names[k])
+    blends, done = sum(b.pieces.size for b in banks), 0
+    for bank in banks:
+        name = f"blends/{skeleton_names[bank.skeleton]}_{bank.part}"
+        writing = bank_layer(shot, bank, joints_of[bank.skeleton], files.format,
+                             skeleton_names[bank.skeleton])
         while True:
             try:
-                done, n = next(bank)
+                n = next(writing)
             except StopIteration as stop:
-                out.save(stop.value, f"blends/{skeleton_names[k]}")
+                out.save(stop.value, name)
                 break
-            yield "blends", done, n
-        assets["blend", k] = files.layer_path(f"blends/{skeleton_names[k]}")
+            yield "blends", done + n, blends
+        done += bank.pieces.size
+        assets[bank.key] = files.layer_path(name)
     out.save(manifest_layer(files.format, rec.fps), "manifest")
     assets["manifest"] = files.layer_path("manifest")
     return assets, banks

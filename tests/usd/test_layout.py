@@ -63,7 +63,7 @@ def test_every_layer_shares_units_axis_and_time(shot):
         "shot.layers/v1/characters/kid.usda", "shot.layers/v1/streams/idle.usda",
         "shot.layers/v1/streams/cheer_loud.usda", "shot.layers/v1/streams/wave.usda",
         "shot.layers/v1/streams/kid_play.usda", "shot.layers/v1/uniques/solo.usda",
-        "shot.layers/v1/blends/fan.usda", "shot.layers/v1/manifest.usda"}
+        "shot.layers/v1/blends/fan_0.usda", "shot.layers/v1/manifest.usda"}
     for name, size in result.files.items():
         file = path.parent / name
         assert file.stat().st_size == size

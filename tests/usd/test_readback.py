@@ -109,3 +109,28 @@ def test_skinned_points_match_core(bindings, oracle, frame):
         agent = agent_matrix(oracle["position"][frame][a], oracle["heading"][frame][a])
         core = core @ agent[:3, :3].T + agent[:3, 3]
         assert rel_err(usd, core) < RTOL, (a, frame)
+
+
+def test_blends_split_over_several_banks_read_back_the_same(tmp_path, oracle, monkeypatch):
+    """Banks hold at most ``BANK_FRAMES`` frames; with 3 the shot's blends fill several
+    layers, and every agent that changes still reads core's pose at every frame."""
+    from crowd_addon.usd import clips, export_crowd
+
+    from .conftest import recording
+
+    monkeypatch.setattr(clips, "BANK_FRAMES", 3)
+    result = export_crowd(recording(), tmp_path / "banks.usda")
+    banks = sorted(f for f in result.files if "/blends/" in f)
+    assert len(banks) >= 3, banks
+    stage = Usd.Stage.Open(str(result.path))
+    cache, pred = UsdSkel.Cache(), Usd.TraverseInstanceProxies()
+    for a in sorted(DYNAMIC):
+        root = UsdSkel.Root(stage.GetPrimAtPath(f"/Crowd/Agents/agent_{a:02d}"))
+        cache.Populate(root, pred)
+        (binding,) = cache.ComputeSkelBindings(root, pred)
+        query = cache.GetSkelQuery(binding.GetSkeleton())
+        skeleton, _ = skeleton_of(a)
+        for frame in FRAMES:
+            local = np.array(query.ComputeJointLocalTransforms(frame)).transpose(0, 2, 1)
+            expected = sqt.pose_to_matrices(oracle["poses"][frame][a, :skeleton.bone_count])
+            assert rel_err(local, expected) < RTOL, (a, frame)
