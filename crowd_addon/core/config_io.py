@@ -45,7 +45,7 @@ from .controllers import (Blend2, BlendMask, BlendSpace2D, ClipPlayer, Layer, St
                           StateTransition)
 from .errors import CrowdError
 from .files import file_mode
-from .mesh import ProxyMesh
+from .mesh import Look, ProxyMesh
 from .show import Action, Cue, Reaction, Show, Sweep, Track
 from .skeleton import Skeleton
 
@@ -53,7 +53,7 @@ __all__ = ["FORMAT", "VERSION", "save_config", "load_config", "register_kind",
            "unregister_kind", "controller_kinds", "ControllerKind", "Encoder", "Decoder"]
 
 FORMAT = "crowd_addon.config"
-VERSION = (1, 2)            # (major, minor): readers accept any minor of their major
+VERSION = (1, 3)            # (major, minor): readers accept any minor of their major
 _REQUIRED = object()
 
 
@@ -437,6 +437,8 @@ _SETTINGS = (  # manifest key = CrowdConfig attribute, JSON type, default (None:
 _MESH_ARRAYS = {"positions": ("f", (None, 3)), "normals": ("f", (None, 3)),
                 "triangles": ("iu", (None, 3)), "bone_indices": ("iu", (None, None)),
                 "bone_weights": ("f", (None, None))}
+#: Optional arrays of a mesh level: how it looks (texture coordinates, look per triangle).
+_LOOK_ARRAYS = {"uvs": ("f", (None, 3, 2)), "material": ("iu", (None,))}
 #: Influence columns a mesh level may store (ProxyMesh: 4, or 8 past four a vertex).
 _INFLUENCE_WIDTHS = (4, 8)
 _AGENTS = (("stream", "iu", 1), ("unique", "iu", 1), ("offset", "iu", 1),
@@ -477,7 +479,10 @@ def _encode_config(cfg: CrowdConfig) -> tuple:
         e = enc.at("meshes", i)
         m["meshes"].append({"skeleton": skel, "levels": [
             {"name": lv.name, **{k: e.at("levels", j).array(getattr(lv, k), k)
-                                 for k in _MESH_ARRAYS}}
+                                 for k in (*_MESH_ARRAYS, *_LOOK_ARRAYS)
+                                 if getattr(lv, k) is not None},
+             "looks": [{"name": k.name, "color": list(k.color), "texture": k.texture}
+                       for k in lv.looks]}
             for j, lv in enumerate(levels)]})
     e = enc.at("agents")
     m["agents"] = {"count": cfg.agent_count}
@@ -680,9 +685,22 @@ def _decode_config(m: dict, dec: Decoder) -> CrowdConfig:
                     raise dl.at(k).error(f"array {lv[k]['array']!r} has shape "
                                          f"{arrays[k].shape}, expected (*, 4) or (*, 8)",
                                          dl.npz_file)
+            for k, (kinds, shape) in _LOOK_ARRAYS.items():
+                if lv.get(k) is not None:
+                    arrays[k] = dl.array(lv, k, kinds, shape)
+            looks = []
+            for n, look in enumerate(dl.items(lv, "looks", "object", [])):
+                dk = dl.at("looks", n)
+                try:
+                    looks.append(Look(dk.get(look, "name", "name"),
+                                      tuple(dk.items(look, "color", "number")),
+                                      dk.get(look, "texture", "str", "")))
+                except CrowdError as e:
+                    raise dk.error(str(e)) from None
             try:
                 levels.append(ProxyMesh(dl.get(lv, "name", "name"), skel,
-                                        bone_count=cfg.skeletons[skel].bone_count, **arrays))
+                                        bone_count=cfg.skeletons[skel].bone_count,
+                                        looks=tuple(looks), **arrays))
             except CrowdError as e:
                 raise dl.error(str(e)) from None
         if not levels:

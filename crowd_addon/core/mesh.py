@@ -6,7 +6,9 @@ eight bone influences with weights that sum to 1, stored four wide, or eight wid
 for a mesh where some vertex has more than four), the form both GPU backends and the
 USD writer consume. :func:`build_lods` makes cheaper versions for far
 agents by vertex clustering, keeping each cluster's most central vertex (and so its
-influences exactly), so an LOD deforms like the full mesh.
+influences exactly), so an LOD deforms like the full mesh. A mesh may carry how it
+looks: texture coordinates per triangle corner and a :class:`Look` (material) per
+triangle, which LODs keep for the triangles they keep.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ import numpy as np
 
 from .errors import CrowdError
 
-__all__ = ["ProxyMesh", "vertex_normals", "build_lods", "INFLUENCES", "MAX_INFLUENCES"]
+__all__ = ["ProxyMesh", "Look", "vertex_normals", "build_lods", "INFLUENCES", "MAX_INFLUENCES"]
 
 #: Influence columns of a mesh whose vertices have at most four bones (the GPU vertex
 #: format's first ``uvec4``/``vec4`` pair).
@@ -26,6 +28,33 @@ INFLUENCES = 4
 #: eight columns (a second attribute pair on the GPU); past eight, the strongest eight.
 MAX_INFLUENCES = 8
 _WIDTHS = (INFLUENCES, MAX_INFLUENCES)
+
+
+@dataclass(frozen=True)
+class Look:
+    """A material of a proxy mesh as exports draw it: ``name``, ``color`` the base
+    colour (r, g, b, a) in 0..1 (linear), and ``texture`` an image file for the base
+    colour (``""`` for none), read through the mesh's texture coordinates."""
+
+    name: str
+    color: tuple = (0.8, 0.8, 0.8, 1.0)
+    texture: str = ""
+
+    def __post_init__(self):
+        if not isinstance(self.name, str) or not self.name:
+            raise CrowdError(f"look {self.name!r}: a name is needed")
+        try:
+            color = tuple(float(c) for c in self.color)
+        except (TypeError, ValueError):
+            raise CrowdError(f"look {self.name!r}: color must be 4 numbers (r, g, b, a), "
+                             f"got {self.color!r}") from None
+        if len(color) != 4 or not all(np.isfinite(color)) or min(color) < 0 or max(color) > 1:
+            raise CrowdError(f"look {self.name!r}: color must be 4 numbers in 0..1 "
+                             f"(r, g, b, a), got {self.color!r}")
+        if not isinstance(self.texture, str):
+            raise CrowdError(f"look {self.name!r}: texture must be a file path or \"\", "
+                             f"got {self.texture!r}")
+        object.__setattr__(self, "color", color)
 
 
 @dataclass(frozen=True, eq=False)
@@ -47,6 +76,9 @@ class ProxyMesh:
     notes : remarks for the user about how the mesh was made (``from_influences``
         names the vertices that had more than eight influences), like
         ``BakeResult.notes``.
+    uvs : (T, 3, 2) float32 texture coordinates of each triangle's corners, or None.
+    material : (T,) uint16 index into ``looks`` per triangle, or None (all the first).
+    looks : the mesh's :class:`Look` s (empty: no material).
 
     Build from any number of influences per vertex with :meth:`from_influences`.
     """
@@ -60,6 +92,9 @@ class ProxyMesh:
     normals: np.ndarray = None
     bone_count: int | None = None
     notes: tuple = ()
+    uvs: np.ndarray = None
+    material: np.ndarray = None
+    looks: tuple = ()
 
     def __post_init__(self):
         what = f"mesh {self.name!r}"
@@ -107,6 +142,42 @@ class ProxyMesh:
         object.__setattr__(self, "bone_weights", w)
         object.__setattr__(self, "normals", normals)
         object.__setattr__(self, "notes", tuple(str(n) for n in self.notes))
+        self._check_looks(what, tri.shape[0])
+
+    def _check_looks(self, what, t):
+        looks = tuple(self.looks)
+        if not all(isinstance(k, Look) for k in looks):
+            raise CrowdError(f"{what}: looks must be Look objects, got {looks!r}")
+        names = [k.name for k in looks]
+        if len(set(names)) != len(names):
+            raise CrowdError(f"{what}: two looks are named the same ({names})")
+        if self.uvs is not None:
+            uvs = np.ascontiguousarray(self.uvs, np.float32)
+            if uvs.shape != (t, 3, 2):
+                raise CrowdError(f"{what}: uvs must be ({t}, 3, 2) (per triangle corner), "
+                                 f"got {uvs.shape}")
+            if not np.isfinite(uvs).all():
+                bad = int(np.argmax(~np.isfinite(uvs).reshape(t, -1).all(1)))
+                raise CrowdError(f"{what}: uvs of triangle {bad} are not finite")
+            object.__setattr__(self, "uvs", uvs)
+        if self.material is not None:
+            mat = np.asarray(self.material)
+            if mat.shape != (t,) or not np.issubdtype(mat.dtype, np.integer):
+                raise CrowdError(f"{what}: material must be ({t},) integers (a look per "
+                                 f"triangle), got {mat.dtype} {mat.shape}")
+            if mat.size and (mat.min() < 0 or mat.max() >= max(len(looks), 1)):
+                bad = int(np.argmax((mat < 0) | (mat >= len(looks))))
+                raise CrowdError(f"{what}: triangle {bad} uses look {int(mat[bad])}, but the "
+                                 f"mesh has {len(looks)} look(s)")
+            object.__setattr__(self, "material", np.ascontiguousarray(mat, np.uint16))
+        object.__setattr__(self, "looks", looks)
+
+    def looks_of(self, triangles) -> dict:
+        """What a mesh made of ``triangles`` (indices of this mesh's) keeps of how it
+        looks: ``uvs``, ``material`` and ``looks`` keyword arguments for ProxyMesh."""
+        return {"uvs": None if self.uvs is None else self.uvs[triangles],
+                "material": None if self.material is None else self.material[triangles],
+                "looks": self.looks}
 
     @property
     def vertex_count(self) -> int:
@@ -128,7 +199,7 @@ class ProxyMesh:
 
     @classmethod
     def from_influences(cls, name, skeleton, positions, triangles, indices, weights,
-                        normals=None, bone_count=None) -> "ProxyMesh":
+                        normals=None, bone_count=None, **looks) -> "ProxyMesh":
         """Keep each vertex's influences (its eight strongest) renormalised to sum 1.
 
         ``indices``/``weights`` are (V, K) for any K (pad unused entries with weight 0).
@@ -137,7 +208,8 @@ class ProxyMesh:
         strongest: :attr:`notes` then says how many (the mesh deforms slightly
         differently from a skinning that blends them all, as Blender's does). A vertex
         with no positive weight is an error naming it: a skinned crowd has no sensible
-        place for it (Blender would leave it at the object origin's rest).
+        place for it (Blender would leave it at the object origin's rest). ``looks``:
+        the ``uvs``, ``material`` and ``looks`` fields.
         """
         idx = np.asarray(indices, np.int64)
         w = np.asarray(weights, np.float64)
@@ -173,7 +245,7 @@ class ProxyMesh:
         top_w /= total[:, None]
         top_i = np.where(top_w > 0, top_i, 0)
         return cls(name, skeleton, positions, triangles, top_i, top_w.astype(np.float32),
-                   normals, bone_count, notes)
+                   normals, bone_count, notes, **looks)
 
 
 def _finite(a, what, field):
@@ -271,10 +343,16 @@ def card_lod(mesh: ProxyMesh, name: str | None = None) -> ProxyMesh:
     head = int(np.argmax(np.bincount(mesh.bone_indices[top].ravel(),
                                      mesh.bone_weights[top].ravel())))
     bones = np.where(pos[:, 2] > z0, head, 0)[:, None]
+    look = {}
+    if mesh.looks:                   # the card shows the look that covers most area
+        area = np.linalg.norm(np.cross(p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]]), axis=1)
+        mat = np.zeros(t.shape[0], np.int64) if mesh.material is None else mesh.material
+        main = int(np.argmax(np.bincount(mat, area, len(mesh.looks))))
+        look = {"material": np.full(4, main), "looks": mesh.looks}
     return ProxyMesh.from_influences(
         name or f"{mesh.name}.card", mesh.skeleton, pos,
         np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]]), bones, np.ones((8, 1)),
-        None, mesh.bone_count)
+        None, mesh.bone_count, **look)
 
 
 def _cluster(mesh: ProxyMesh, cell: float, name: str):
@@ -295,12 +373,13 @@ def _cluster(mesh: ProxyMesh, cell: float, name: str):
     tri = tri[keep]
     if tri.shape[0] == 0:
         return None
-    tri = np.unique(np.sort(tri, 1), axis=0, return_index=True)[1]
-    tri = cluster[mesh.triangles.astype(np.int64)][keep][np.sort(tri)]
+    kept = np.flatnonzero(keep)[np.sort(np.unique(np.sort(tri, 1), axis=0,
+                                                  return_index=True)[1])]
+    tri = cluster[mesh.triangles.astype(np.int64)][kept]
     used = np.unique(tri)
     remap = np.full(n, -1, np.int64)
     remap[used] = np.arange(used.size)
     src = rep[used]
     return ProxyMesh(name, mesh.skeleton, mesh.positions[src], remap[tri],
                      mesh.bone_indices[src], mesh.bone_weights[src], mesh.normals[src],
-                     mesh.bone_count)
+                     mesh.bone_count, **mesh.looks_of(kept))
