@@ -11,7 +11,14 @@
                                                    (vertex, elementSize = the mesh's
                                                    influence width: 4, or 8),
                                                    primvars:skel:geomBindTransform = identity,
-                                                   skel:skeleton -> Skeleton
+                                                   skel:skeleton -> Skeleton,
+                                                   primvars:st (faceVarying) when the
+                                                   mesh has texture coordinates,
+                                                   material:binding (one look) or a
+                                                   GeomSubset per look
+        def Scope "Looks"                          a Material per look: UsdPreviewSurface
+                                                   with the base colour, or an
+                                                   UsdUVTexture of the image read at st
 
 ``bindTransforms`` are the joints' model-space (skeleton-space) bind matrices, the
 inverse of core's ``Skeleton.inverse_bind``, so UsdSkel's skinning transform
@@ -26,7 +33,7 @@ from pxr import Gf, Sdf, Vt
 
 from ..core import pose as sqt
 from . import convert
-from .layers import apply_api, attribute, define, new_layer, relationship
+from .layers import apply_api, attribute, connect, define, new_layer, relationship
 from .naming import joint_paths, unique_identifiers
 
 __all__ = ["character_layer", "SKELETON_PRIM"]
@@ -35,10 +42,11 @@ SKELETON_PRIM = "Skeleton"
 _T = Sdf.ValueTypeNames
 
 
-def character_layer(skeleton, mesh, fmt: str, fps: float, root_name: str):
+def character_layer(skeleton, mesh, fmt: str, fps: float, root_name: str, textures=None):
     """The character layer of ``skeleton`` (core Skeleton) drawn with ``mesh`` (core
     ProxyMesh), its SkelRoot named ``root_name``; returns ``(layer, joints)`` with the
-    joint path tokens (shared by every animation of this skeleton)."""
+    joint path tokens (shared by every animation of this skeleton). ``textures`` maps
+    a look's texture to the asset path the layer names it by (default: as it is)."""
     layer = new_layer(fmt, fps, 0, 0, default_prim=root_name,
                       comment=f"crowd character {skeleton.name!r}")
     joints = Vt.TokenArray(joint_paths(skeleton.bone_names, skeleton.parents))
@@ -53,7 +61,8 @@ def character_layer(skeleton, mesh, fmt: str, fps: float, root_name: str):
                   convert.matrices(np.linalg.inv(skeleton.inverse_bind)), uniform=True)
         attribute(skel, "restTransforms", _T.Matrix4dArray,
                   convert.matrices(sqt.pose_to_matrices(skeleton.bind_pose)), uniform=True)
-        _mesh(root, mesh, root.path.AppendChild(SKELETON_PRIM))
+        prim = _mesh(root, mesh, root.path.AppendChild(SKELETON_PRIM))
+        _looks(root, prim, mesh, textures or {})
     return layer, joints
 
 
@@ -78,3 +87,66 @@ def _mesh(root, mesh, skeleton_path):
               convert.floats(mesh.bone_weights), interpolation="vertex", elementSize=width)
     attribute(prim, "primvars:skel:geomBindTransform", _T.Matrix4d, Gf.Matrix4d(1.0))
     relationship(prim, "skel:skeleton", skeleton_path)
+    if mesh.uvs is not None:
+        attribute(prim, "primvars:st", _T.TexCoord2fArray,
+                  Vt.Vec2fArray.FromNumpy(mesh.uvs.reshape(-1, 2)), interpolation="faceVarying")
+    return prim
+
+
+def _looks(root, prim, mesh, textures):
+    """A Material per look under ``Looks``, bound to the mesh (one look) or to a
+    GeomSubset of its triangles per look."""
+    if not mesh.looks:
+        return
+    scope = define(root, "Looks", "Scope")
+    names = unique_identifiers([k.name for k in mesh.looks])
+    materials = [_material(scope, name, look, mesh.uvs is not None,
+                           textures.get(look.texture, look.texture))
+                 for name, look in zip(names, mesh.looks)]
+    if len(materials) == 1:
+        _bind(prim, materials[0])
+        return
+    which = np.zeros(mesh.triangle_count, np.int64) if mesh.material is None else \
+        mesh.material.astype(np.int64)
+    attribute(prim, "subsetFamily:materialBind:familyType", _T.Token, "nonOverlapping",
+              uniform=True)
+    for k, (name, material) in enumerate(zip(names, materials)):
+        faces = np.flatnonzero(which == k)
+        if not faces.size:
+            continue
+        subset = define(prim, name, "GeomSubset")
+        attribute(subset, "elementType", _T.Token, "face", uniform=True)
+        attribute(subset, "familyName", _T.Token, "materialBind", uniform=True)
+        attribute(subset, "indices", _T.IntArray, convert.ints(faces))
+        _bind(subset, material)
+
+
+def _material(scope, name, look, has_uvs, texture):
+    """``Material "<name>"``: a UsdPreviewSurface of the look's base colour and
+    opacity; its texture, when it has one and the mesh has texture coordinates, feeds
+    the diffuse colour instead."""
+    material = define(scope, name, "Material")
+    shader = define(material, "PreviewSurface", "Shader")
+    attribute(shader, "info:id", _T.Token, "UsdPreviewSurface", uniform=True)
+    color = attribute(shader, "inputs:diffuseColor", _T.Color3f, Gf.Vec3f(*look.color[:3]))
+    attribute(shader, "inputs:opacity", _T.Float, float(look.color[3]))
+    attribute(shader, "inputs:roughness", _T.Float, 0.6)
+    surface = attribute(shader, "outputs:surface", _T.Token)
+    connect(attribute(material, "outputs:surface", _T.Token), surface)
+    if look.texture and has_uvs:
+        reader = define(material, "st", "Shader")
+        attribute(reader, "info:id", _T.Token, "UsdPrimvarReader_float2", uniform=True)
+        attribute(reader, "inputs:varname", _T.String, "st")
+        st = attribute(reader, "outputs:result", _T.Float2)
+        image = define(material, "BaseColor", "Shader")
+        attribute(image, "info:id", _T.Token, "UsdUVTexture", uniform=True)
+        attribute(image, "inputs:file", _T.Asset, Sdf.AssetPath(texture))
+        attribute(image, "inputs:fallback", _T.Float4, Gf.Vec4f(*look.color))
+        connect(attribute(image, "inputs:st", _T.Float2), st)
+        connect(color, attribute(image, "outputs:rgb", _T.Float3))
+    return material
+
+
+def _bind(prim, material):
+    apply_api(prim, "MaterialBindingAPI")
+    relationship(prim, "material:binding", material.path)

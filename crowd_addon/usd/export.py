@@ -21,6 +21,7 @@ All or nothing: see :mod:`.files`.
 
 from __future__ import annotations
 
+import os
 import time
 from dataclasses import dataclass
 
@@ -222,16 +223,18 @@ class _Output:
 
 
 def _write_characters(out, rec, meshes) -> tuple:
-    """One layer per skeleton in ``meshes``; returns ``(joints_of, asset_of)`` keyed by
-    skeleton index."""
+    """One layer per skeleton in ``meshes``, and a copy of each texture their looks use
+    (``textures/``, so the export stands on its own on another machine); returns
+    ``(joints_of, asset_of)`` keyed by skeleton index."""
     cfg = rec.config
     skeleton_names = list(cfg.skeletons)
     ids = sorted(meshes)
     file_names = unique_identifiers([skeleton_names[k] for k in ids], casefold=True)
+    textures = _copy_textures(out.files, [meshes[k] for k in ids])
     joints_of, asset_of = {}, {}
     for k, name in zip(ids, file_names):
         layer, joints_of[k] = character_layer(cfg.skeletons[skeleton_names[k]], meshes[k],
-                                              out.files.format, rec.fps, name)
+                                              out.files.format, rec.fps, name, textures)
         out.save(layer, f"characters/{name}")
         asset_of[k] = out.files.asset_path(f"characters/{name}")
     return joints_of, asset_of
@@ -311,6 +314,20 @@ def _write_own_animations(out, shot, names, joints_of, clip_assets):
     return paths
 
 
+def _copy_textures(files, meshes) -> dict:
+    """Copy every texture of the meshes' looks into ``textures/``; returns look
+    texture -> its asset path from a character layer."""
+    sources = list(dict.fromkeys(look.texture for m in meshes for look in m.looks
+                                 if look.texture and m.uvs is not None))
+    stems = [os.path.splitext(os.path.basename(p)) for p in sources]
+    names = unique_identifiers([stem for stem, _ in stems], casefold=True)
+    out = {}
+    for source, name, (_, ext) in zip(sources, names, stems):
+        files.copy(os.path.abspath(source), f"textures/{name}{ext.lower()}")
+        out[source] = f"../textures/{name}{ext.lower()}"
+    return out
+
+
 def _agent_ids(agents, count) -> np.ndarray:
     if count == 0:
         raise CrowdError("export: the crowd has no agents")
@@ -332,6 +349,10 @@ def _meshes(config, agent_skeleton) -> dict:
         if not levels:
             raise CrowdError(f"export: skeleton {skeleton_names[k]!r} has no proxy mesh "
                              "(CrowdConfig.add_mesh); its agents cannot be drawn")
+        for look in levels[0].looks:
+            if look.texture and not os.path.isfile(look.texture):
+                raise CrowdError(f"export: look {look.name!r} of mesh {levels[0].name!r} "
+                                 f"uses texture {look.texture!r}, which is not a file")
         out[k] = levels[0]
     return out
 

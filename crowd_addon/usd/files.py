@@ -114,6 +114,19 @@ class ExportFiles:
         self.written[key] = os.path.getsize(target)
         return self.written[key]
 
+    def copy(self, source: str, name: str) -> int:
+        """Copy the file ``source`` into the folder as ``name`` (e.g. ``"textures/skin.png"``);
+        returns its size in bytes."""
+        target = os.path.join(self._tmp, "layers", *name.split("/"))
+        key = f"{self.layers_name}/{name}"
+        try:
+            os.makedirs(os.path.dirname(target), exist_ok=True)
+            shutil.copyfile(source, target)
+        except OSError as e:
+            raise CrowdError(f"{self.path}: cannot copy {source} to {key}: {e}") from None
+        self.written[key] = os.path.getsize(target)
+        return self.written[key]
+
     def commit(self) -> None:
         """Move the finished export into place (see the module docstring)."""
         staged = os.path.join(self._tmp, "layers")

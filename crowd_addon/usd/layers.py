@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from pxr import Sdf
 
-__all__ = ["new_layer", "define", "attribute", "relationship", "apply_api"]
+__all__ = ["new_layer", "define", "attribute", "relationship", "apply_api", "connect"]
 
 _API_OPS = {}
 
@@ -60,8 +60,19 @@ def relationship(prim: Sdf.PrimSpec, name: str, target) -> Sdf.RelationshipSpec:
 
 
 def apply_api(prim: Sdf.PrimSpec, schema: str) -> None:
-    """``prepend apiSchemas = ["<schema>"]`` (one shared list op per schema)."""
-    op = _API_OPS.get(schema)
+    """Add ``schema`` to the prim's ``prepend apiSchemas`` (one shared list op per list
+    of schemas, so 65k agents do not build 65k of them)."""
+    items = tuple(prim.GetInfo("apiSchemas").prependedItems) if prim.HasInfo("apiSchemas") \
+        else ()
+    if schema in items:
+        return
+    items += (schema,)
+    op = _API_OPS.get(items)
     if op is None:
-        op = _API_OPS[schema] = Sdf.TokenListOp.Create(prependedItems=[schema])
+        op = _API_OPS[items] = Sdf.TokenListOp.Create(prependedItems=list(items))
     prim.SetInfo("apiSchemas", op)
+
+
+def connect(attr: Sdf.AttributeSpec, source: Sdf.AttributeSpec) -> None:
+    """``attr`` reads ``source`` (a shading connection)."""
+    attr.connectionPathList.explicitItems = [source.path]
