@@ -25,6 +25,7 @@ from ..core.armature_math import (check_hierarchy, relative_to_parent, rest_skel
 from ..core.errors import CrowdError
 from ..core.mesh import ProxyMesh
 from ..core.skeleton import Skeleton
+from .looks import mesh_looks
 
 __all__ = ["skeleton_from_armature", "check_skeleton", "skeleton_and_rest", "matrices",
            "object_to_armature", "proxy_mesh_from_object"]
@@ -141,7 +142,8 @@ def proxy_mesh_from_object(mesh_obj, armature_obj, skeleton: Skeleton | None = N
     come from vertex groups named after deform bones (others are ignored, as the
     Armature modifier does). Up to eight a vertex are kept exactly; a vertex with more
     keeps its eight strongest (it then differs slightly from Blender, which blends
-    them all) and the mesh's ``notes`` say how many vertices that was.
+    them all) and the mesh's ``notes`` say how many vertices that was. The active UV
+    map and the material slots come along (:func:`.looks.mesh_looks`).
     """
     _checked(mesh_obj, "MESH", "mesh")
     _armature(armature_obj)
@@ -174,6 +176,9 @@ def proxy_mesh_from_object(mesh_obj, armature_obj, skeleton: Skeleton | None = N
             weights.append(g.weight)
     idx, wt = vertex_influences(counts, np.array(groups, np.int64),
                                 np.array(weights, np.float64), bone_of_group)
+    loops = np.empty(tris.size, np.int32)
+    me.loop_triangles.foreach_get("loops", loops)
     return ProxyMesh.from_influences(name or mesh_obj.name, skeleton.name, pos,
                                      tris.reshape(-1, 3), idx, wt,
-                                     bone_count=skeleton.bone_count)
+                                     bone_count=skeleton.bone_count,
+                                     **mesh_looks(mesh_obj, me, loops.reshape(-1, 3)))

@@ -1,0 +1,116 @@
+"""A character's UV map and materials, from the .blend to the USD and back into Blender.
+
+The body's UV map is made checkable on its own: every loop's UV is its vertex's (x, y).
+It wears two materials, a Principled BSDF with a red base colour and one whose base
+colour is an image texture. The oracle at the end is Blender's own USD importer: the
+imported agent shows the same UV map (still each vertex's (x, y)), the same base
+colour, and a texture that is the same image, copied beside the export.
+"""
+
+import os
+import sys
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+sys.path.insert(0, os.path.dirname(__file__))
+import crowd_scene as cs  # noqa: E402
+
+from crowd_addon.blender import preview  # noqa: E402
+from crowd_addon.blender.armature import proxy_mesh_from_object  # noqa: E402
+
+RED = (0.7, 0.1, 0.1, 1.0)
+
+
+@pytest.fixture(scope="module", autouse=True)
+def extension():
+    with cs.registered():
+        yield
+        preview.stop_all()
+
+
+def principled(name, color=None, image=None):
+    mat = bpy.data.materials.new(name)
+    mat.use_nodes = True
+    bsdf = mat.node_tree.nodes["Principled BSDF"]
+    if color is not None:
+        bsdf.inputs["Base Color"].default_value = color
+    if image is not None:
+        tex = mat.node_tree.nodes.new("ShaderNodeTexImage")
+        tex.image = image
+        mat.node_tree.links.new(tex.outputs["Color"], bsdf.inputs["Base Color"])
+    return mat
+
+
+@pytest.fixture
+def dressed(tmp_path):
+    """A scene whose one character wears a UV map and two materials."""
+    preview.stop_all()
+    scene = cs.reset()
+    scene.frame_end = 6
+    rig = cs.make_armature()
+    walk = cs.make_action(rig, "walk", seed=1)
+    body = cs.make_proxy(rig)
+    me = body.data
+    uv = me.uv_layers.new(name="UVMap")
+    co = np.array([v.co[:] for v in me.vertices])
+    vert = np.array([lp.vertex_index for lp in me.loops])
+    uv.uv.foreach_set("vector", co[vert, :2].astype(np.float32).ravel())
+    image = bpy.data.images.new("skin", 4, 4)
+    image.filepath_raw = str(tmp_path / "skin.png")
+    image.file_format = "PNG"
+    image.save()
+    for mat in (principled("Shirt", RED), principled("Skin", image=image)):
+        me.materials.append(mat)
+    for poly in me.polygons:
+        poly.material_index = poly.index % 2
+    s = scene.crowd
+    s.max_offset = 4
+    cs.add_stream(cs.add_character(s, rig, body), "walk", walk)
+    src = s.agent_sources.add()
+    src.name, src.object = "seats", cs.make_seats(3, 2)
+    return scene, rig, body, tmp_path / "skin.png"
+
+
+def test_the_proxy_mesh_takes_the_uv_map_and_the_materials(dressed):
+    _, rig, body, png = dressed
+    mesh = proxy_mesh_from_object(body, rig)
+    corners = mesh.positions[mesh.triangles.astype(np.int64)]        # (T, 3, 3)
+    np.testing.assert_allclose(mesh.uvs, corners[:, :, :2], atol=1e-6)
+    assert [k.name for k in mesh.looks] == ["Shirt", "Skin"]
+    assert mesh.looks[0].color == pytest.approx(RED) and not mesh.looks[0].texture
+    assert mesh.looks[1].texture == str(png)
+    # each triangle wears its polygon's material (quads: two triangles each)
+    polygon = np.array([lt.polygon_index for lt in body.data.loop_triangles])
+    assert (mesh.material == polygon % 2).all()
+
+
+def test_blenders_importer_shows_the_same_uvs_and_materials(dressed, tmp_path):
+    scene, _, _, png = dressed
+    out = tmp_path / "export" / "looks.usdc"
+    os.makedirs(out.parent)
+    assert bpy.ops.crowd.export_usd(filepath=str(out), usd_layout="blender") == {"FINISHED"}
+    copied = out.parent / "looks.layers" / "v1" / "textures" / "skin.png"
+    assert copied.read_bytes() == png.read_bytes()
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    bpy.ops.wm.usd_import(filepath=str(out))
+    meshes = [o for o in bpy.data.objects if o.type == "MESH"]
+    assert len(meshes) == 6
+    for obj in meshes[:2]:
+        me = obj.data
+        co = np.array([v.co[:] for v in me.vertices])
+        vert = np.array([lp.vertex_index for lp in me.loops])
+        uv = np.empty(len(me.loops) * 2, np.float32)
+        me.uv_layers.active.uv.foreach_get("vector", uv)
+        np.testing.assert_allclose(uv.reshape(-1, 2), co[vert, :2], atol=1e-6)
+        names = [m.name.split(".")[0] for m in me.materials]
+        assert names == ["Shirt", "Skin"]
+        shirt, skin = (m.node_tree.nodes["Principled BSDF"] for m in me.materials)
+        assert tuple(shirt.inputs["Base Color"].default_value) == pytest.approx(RED, abs=1e-6)
+        (link,) = skin.inputs["Base Color"].links
+        assert link.from_node.type == "TEX_IMAGE"
+        assert os.path.realpath(bpy.path.abspath(link.from_node.image.filepath)) == \
+            os.path.realpath(copied)
+        polygon_material = np.array([p.material_index for p in me.polygons])
+        assert set(polygon_material.tolist()) == {0, 1}
