@@ -42,11 +42,15 @@ SKELETON_PRIM = "Skeleton"
 _T = Sdf.ValueTypeNames
 
 
-def character_layer(skeleton, mesh, fmt: str, fps: float, root_name: str, textures=None):
+def character_layer(skeleton, mesh, fmt: str, fps: float, root_name: str, textures=None,
+                    proxy=None):
     """The character layer of ``skeleton`` (core Skeleton) drawn with ``mesh`` (core
     ProxyMesh), its SkelRoot named ``root_name``; returns ``(layer, joints)`` with the
     joint path tokens (shared by every animation of this skeleton). ``textures`` maps
-    a look's texture to the asset path the layer names it by (default: as it is)."""
+    a look's texture to the asset path the layer names it by (default: as it is).
+    ``proxy``: a lighter mesh (an LOD) written beside it with ``purpose = "proxy"``,
+    the full mesh then having ``purpose = "render"``: viewers such as usdview draw the
+    proxy, renders the full mesh."""
     layer = new_layer(fmt, fps, 0, 0, default_prim=root_name,
                       comment=f"crowd character {skeleton.name!r}")
     joints = Vt.TokenArray(joint_paths(skeleton.bone_names, skeleton.parents))
@@ -61,15 +65,20 @@ def character_layer(skeleton, mesh, fmt: str, fps: float, root_name: str, textur
                   convert.matrices(np.linalg.inv(skeleton.inverse_bind)), uniform=True)
         attribute(skel, "restTransforms", _T.Matrix4dArray,
                   convert.matrices(sqt.pose_to_matrices(skeleton.bind_pose)), uniform=True)
-        prim = _mesh(root, mesh, root.path.AppendChild(SKELETON_PRIM))
-        _looks(root, prim, mesh, textures or {})
+        materials = _materials(root, mesh, textures or {})
+        meshes = [(mesh, "render" if proxy is not None else None)]
+        if proxy is not None:
+            meshes.append((proxy, "proxy"))
+        names = unique_identifiers([m.name for m, _ in meshes] + [SKELETON_PRIM, "Looks"])
+        for (m, purpose), name in zip(meshes, names):
+            prim = _mesh(root, m, name, root.path.AppendChild(SKELETON_PRIM))
+            if purpose:
+                attribute(prim, "purpose", _T.Token, purpose, uniform=True)
+            _bind_looks(prim, m, materials)
     return layer, joints
 
 
-def _mesh(root, mesh, skeleton_path):
-    (name,) = unique_identifiers([mesh.name])
-    if name == SKELETON_PRIM:
-        name = f"{name}_mesh"
+def _mesh(root, mesh, name, skeleton_path):
     prim = define(root, name, "Mesh")
     apply_api(prim, "SkelBindingAPI")
     attribute(prim, "points", _T.Point3fArray, convert.vec3f(mesh.positions))
@@ -93,16 +102,23 @@ def _mesh(root, mesh, skeleton_path):
     return prim
 
 
-def _looks(root, prim, mesh, textures):
-    """A Material per look under ``Looks``, bound to the mesh (one look) or to a
-    GeomSubset of its triangles per look."""
+def _materials(root, mesh, textures) -> list:
+    """A Material per look of ``mesh`` under ``Looks``: ``[(name, material spec)]``."""
     if not mesh.looks:
-        return
+        return []
     scope = define(root, "Looks", "Scope")
     names = unique_identifiers([k.name for k in mesh.looks])
-    materials = [_material(scope, name, look, mesh.uvs is not None,
-                           textures.get(look.texture, look.texture))
-                 for name, look in zip(names, mesh.looks)]
+    return [(name, _material(scope, name, look, mesh.uvs is not None,
+                             textures.get(look.texture, look.texture)))
+            for name, look in zip(names, mesh.looks)]
+
+
+def _bind_looks(prim, mesh, named_materials):
+    """Bind the looks' materials to the mesh (one look) or to a GeomSubset of its
+    triangles per look."""
+    if not named_materials:
+        return
+    names, materials = zip(*named_materials)
     if len(materials) == 1:
         _bind(prim, materials[0])
         return

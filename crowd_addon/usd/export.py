@@ -46,6 +46,9 @@ __all__ = ["export_crowd", "export_steps", "check_export", "check_layout", "Expo
 
 FORMAT_VERSION = "1.1"
 LAYOUTS = USD_LAYOUTS
+#: the lightest LOD of a character with at least this many triangles is written as its
+#: proxy (``purpose = "proxy"``, what usdview draws); the far cards are too crude
+PROXY_MIN_TRIANGLES = 32
 
 
 def check_layout(layout) -> str:
@@ -223,18 +226,22 @@ class _Output:
 
 
 def _write_characters(out, rec, meshes) -> tuple:
-    """One layer per skeleton in ``meshes``, and a copy of each texture their looks use
-    (``textures/``, so the export stands on its own on another machine); returns
-    ``(joints_of, asset_of)`` keyed by skeleton index."""
+    """One layer per skeleton in ``meshes`` (its full mesh, and its lightest LOD as a
+    proxy), and a copy of each texture their looks use (``textures/``, so the export
+    stands on its own on another machine); returns ``(joints_of, asset_of)`` keyed by
+    skeleton index."""
     cfg = rec.config
     skeleton_names = list(cfg.skeletons)
     ids = sorted(meshes)
     file_names = unique_identifiers([skeleton_names[k] for k in ids], casefold=True)
-    textures = _copy_textures(out.files, [meshes[k] for k in ids])
+    textures = _copy_textures(out.files, [meshes[k][0] for k in ids])
     joints_of, asset_of = {}, {}
     for k, name in zip(ids, file_names):
-        layer, joints_of[k] = character_layer(cfg.skeletons[skeleton_names[k]], meshes[k],
-                                              out.files.format, rec.fps, name, textures)
+        levels = meshes[k]
+        proxies = [m for m in levels[1:] if m.triangle_count >= PROXY_MIN_TRIANGLES]
+        layer, joints_of[k] = character_layer(cfg.skeletons[skeleton_names[k]], levels[0],
+                                              out.files.format, rec.fps, name, textures,
+                                              proxies[-1] if proxies else None)
         out.save(layer, f"characters/{name}")
         asset_of[k] = out.files.asset_path(f"characters/{name}")
     return joints_of, asset_of
@@ -341,7 +348,7 @@ def _agent_ids(agents, count) -> np.ndarray:
 
 
 def _meshes(config, agent_skeleton) -> dict:
-    """Proxy mesh (LOD 0) per skeleton index in ``agent_skeleton``."""
+    """Proxy mesh levels (LOD 0 first) per skeleton index in ``agent_skeleton``."""
     skeleton_names = list(config.skeletons)
     out = {}
     for k in np.unique(agent_skeleton).tolist():
@@ -353,7 +360,7 @@ def _meshes(config, agent_skeleton) -> dict:
             if look.texture and not os.path.isfile(look.texture):
                 raise CrowdError(f"export: look {look.name!r} of mesh {levels[0].name!r} "
                                  f"uses texture {look.texture!r}, which is not a file")
-        out[k] = levels[0]
+        out[k] = levels
     return out
 
 

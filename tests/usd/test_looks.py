@@ -120,3 +120,43 @@ def test_a_missing_texture_is_refused_before_anything_runs(tmp_path):
                                          r"'.*gone\.png', which is not a file"):
         check_export(cfg, tmp_path / "shot.usdc")
     assert not list(tmp_path.iterdir())
+
+
+def test_the_lightest_lod_is_the_characters_proxy(tmp_path):
+    """With LODs, the character holds its full mesh (purpose render) and its lightest
+    LOD that is not a card (purpose proxy), both skinned: UsdSkel skins the proxy as
+    core skins that LOD."""
+    from pxr import UsdSkel
+
+    from crowd_addon.core.skinning import skin_vertices, skinning_matrices
+    from crowd_addon.usd import export_crowd
+
+    from .conftest import FIRST, core_truth
+
+    cfg = make_config()
+    full = cfg.meshes["fan"][0]
+    cfg.meshes.pop("fan")
+    cfg.add_mesh(full, lods=(0.5, 0.25, "card"))
+    levels = cfg.meshes["fan"]
+    export_crowd(recording(cfg), tmp_path / "shot.usda")
+    stage = Usd.Stage.Open(str(tmp_path / "shot.usda"))
+    assert usdchecker(stage) == []
+    agent = stage.GetPrimAtPath("/Crowd/Agents/agent_05")
+    meshes = {UsdGeom.Imageable(p).ComputePurpose(): p
+              for p in Usd.PrimRange(agent, Usd.TraverseInstanceProxies()) if p.IsA(UsdGeom.Mesh)}
+    assert set(meshes) == {UsdGeom.Tokens.render, UsdGeom.Tokens.proxy}
+    assert len(meshes["proxy"].GetAttribute("points").Get()) == levels[2].vertex_count
+    assert len(meshes["render"].GetAttribute("points").Get()) == full.vertex_count
+    cache = UsdSkel.Cache()
+    root = UsdSkel.Root(agent)
+    cache.Populate(root, Usd.TraverseInstanceProxies())
+    (binding,) = cache.ComputeSkelBindings(root, Usd.TraverseInstanceProxies())
+    query = cache.GetSkelQuery(binding.GetSkeleton())
+    (target,) = [t for t in binding.GetSkinningTargets() if t.GetPrim() == meshes["proxy"]]
+    points = UsdGeom.Mesh(meshes["proxy"]).GetPointsAttr().Get(FIRST)
+    assert target.ComputeSkinnedPoints(query.ComputeSkinningTransforms(FIRST), points, FIRST)
+    pose = core_truth()["poses"][FIRST][5:6]
+    lod = levels[2]
+    core = skin_vertices(lod.positions, lod.bone_indices, lod.bone_weights,
+                         skinning_matrices(pose, cfg.skeletons["fan"]))[0]
+    np.testing.assert_allclose(np.array(points), core, atol=1e-5)
