@@ -21,7 +21,6 @@ import bpy
 from bpy.props import BoolProperty, EnumProperty, IntProperty, StringProperty
 from bpy_extras.io_utils import ExportHelper
 
-from ..core.config import USD_LAYOUTS
 from ..core.errors import CrowdError
 from . import preview, scene_config
 
@@ -113,10 +112,9 @@ def export_steps(scene, path, frames, agents=None, depsgraph=None, layout="insta
     export: close returns once its temporary files are removed; nothing is written, a
     previous export at ``path`` is left as it was, the scene is unchanged.
     """
+    from ..usd.export import check_layout
     frames = check_export(scene, path, frames)
-    if layout not in USD_LAYOUTS:
-        raise CrowdError(f"export: layout must be one of {', '.join(USD_LAYOUTS)}, got "
-                         f"{layout!r}")
+    check_layout(layout)
     return _export_steps(scene, path, frames, agents, depsgraph, layout)
 
 

@@ -26,7 +26,7 @@ from pxr import Sdf, Vt
 
 from .animation import author_samples, define_animation
 from .layers import attribute, define, new_layer
-from .shot import STREAM, TRANSITION, UNIQUE
+from .shot import STREAM, TRANSITION
 
 __all__ = ["PRIM", "BANK_FRAMES", "BankLayout", "bank_layout", "bank_layer", "manifest_layer",
            "clip_sets"]
