@@ -129,10 +129,11 @@ class CpuSkinning(_Mode):
 
     def slot_starting(self, slots, agents, start_poses):
         """Before ``agents`` enter ``slots``: the slot shows exactly the agent's current
-        rows until the next step."""
+        rows, and its pose is StartP, until the next step blends it."""
         st = self._crowd.storage
         st.rows[st.slot_base + slots] = self._crowd.agent_rows(agents)
         st.mark_rows_dirty(st.slot_base + slots)
+        self._crowd.slots.pose[slots] = start_poses
 
     def slot_poses(self, slots) -> np.ndarray:
         """The slots' pose array ``(NT, B, 10)``, ``slots`` up to date (blended by the

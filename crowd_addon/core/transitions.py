@@ -146,7 +146,8 @@ class TransitionSlots:
     target_kind, target_ref, target_offset : (NT,) the animation blended to.
     t0, length : (NT,) start frame and length L in frames.
     start_pose : (NT, B, 10) float32 StartP.
-    pose : (NT, B, 10) float32 the slot's current pose P.
+    pose : (NT, B, 10) float32 the slot's pose P as last blended on the CPU (every active
+        slot's with CPU skinning; with GPU skinning only those a CPU read evaluated).
     queue : the :class:`RequestQueue` of waiting requests.
     when_full : the default policy, ``"queue"`` or ``"cut"``.
 
@@ -280,7 +281,6 @@ class TransitionSlots:
         self.t0[slots] = frame
         self.length[slots] = length
         self.start_pose[slots] = start_pose
-        self.pose[slots] = start_pose
         self.served += len(slots)
         self.agents.set_animation(agents, TRANSITION, slots)
 
