@@ -5,8 +5,8 @@ driven by the same simulation.
 Two characters (24- and 26-bone humanoids, so poses are padded to the larger one),
 three streams (a clip, a 2-way blend, a state machine driven by a trigger), one
 unique, M = 8, NT = 3 (so one request waits in the queue). During the shot, agents
-blend to another stream (also from the first frame, and on the last one), blend to the
-unique, are cut to another (stream, offset), queue for a slot, and move; one agent
+blend to another stream (also from the first frame, and on the last one, and again
+while blending), blend to the unique, are cut to another (stream, offset), queue for a slot, and move; one agent
 plays the unique from the start.
 """
 
@@ -70,6 +70,8 @@ def simulate(crowd, frame):
     if frame == 5:
         crowd.transition_to_unique([3], "solo", 3)
         crowd.transition_to_streamed([6], "idle", 5)                # queued: NT = 3
+    if frame == 6:
+        crowd.transition_to_streamed([2], "idle", 3)                # mid-blend: reuses its slot
     if frame == 7:
         crowd.transition_to_streamed([4], "cheer.loud", 0, offset=5)   # a cut
         crowd.set_trigger("wave", "go")
