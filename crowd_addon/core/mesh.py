@@ -13,7 +13,7 @@ triangle, which LODs keep for the triangles they keep.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -267,6 +267,11 @@ def vertex_normals(positions: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     return n.astype(np.float32)
 
 
+#: Automatic LODs keep at least this many triangles: a body is not decimated below a
+#: shape that still reads as one (a 72-triangle body once became a 4-triangle
+#: tetrahedron), and a body already this light keeps its triangles at every level.
+MIN_LOD_TRIANGLES = 32
+
 CARD = "card"
 """A ``build_lods`` / ``CrowdConfig.add_mesh`` level: the :func:`card_lod` of the mesh."""
 
@@ -280,7 +285,10 @@ def build_lods(mesh: ProxyMesh, ratios=(0.25, 0.06)) -> list:
     target; each cell is represented by its vertex nearest the cell's mean, with
     that vertex's own position, normal and influences (all of them: a mesh stored
     eight wide gives eight-wide LODs); triangles that collapse are dropped. LODs never
-    have more triangles than the level before.
+    have more triangles than the level before, nor fewer than
+    :data:`MIN_LOD_TRIANGLES`: a level whose target is below it aims at it, and where
+    the level before is already that light, or clustering cannot stay above it, the
+    level is a copy of the level before (named as its own level).
     """
     lods = [mesh]
     for k, ratio in enumerate(ratios, start=1):
@@ -292,8 +300,11 @@ def build_lods(mesh: ProxyMesh, ratios=(0.25, 0.06)) -> list:
             continue
         if not 0 < ratio < 1:
             raise CrowdError(f"mesh {mesh.name!r}: LOD ratio {ratio} must be in (0, 1)")
-        target = max(1, int(round(mesh.triangle_count * ratio)))
+        target = max(MIN_LOD_TRIANGLES, int(round(mesh.triangle_count * ratio)))
         prev = lods[-1]
+        if prev.triangle_count <= target:     # light enough already: keep its triangles
+            lods.append(replace(prev, name=f"{mesh.name}.lod{k}"))
+            continue
         lo, hi = np.log(1e-4), np.log(float(np.ptp(mesh.positions, 0).max()) + 1e-6)
         best = None
         for _ in range(24):
@@ -310,7 +321,9 @@ def build_lods(mesh: ProxyMesh, ratios=(0.25, 0.06)) -> list:
             else:
                 lo = mid
         if best is None:
-            best = _cluster(prev, np.exp(hi), f"{mesh.name}.lod{k}") or prev
+            best = _cluster(prev, np.exp(hi), f"{mesh.name}.lod{k}")
+        if best is None or best.triangle_count < MIN_LOD_TRIANGLES:
+            best = replace(prev, name=f"{mesh.name}.lod{k}")
         lods.append(best)
     return lods
 

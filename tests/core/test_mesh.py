@@ -164,3 +164,21 @@ def test_card_is_the_last_lod_and_the_default_far_level():
     levels = cfg.add_mesh(synthetic.humanoid_mesh(sk))
     assert [lv.name.rsplit(".", 1)[-1] for lv in levels[1:]] == ["lod1", "lod2", "card"]
     assert len(cfg.lod_distances) == len(levels) - 1
+
+
+@pytest.mark.parametrize("bones, sides, rings", [(24, 8, 4), (12, 4, 3), (12, 3, 2), (5, 3, 2)])
+def test_automatic_lods_never_decimate_below_a_body(bones, sides, rings):
+    """A light body is not crushed (a 72-triangle body once became a 4-triangle
+    tetrahedron): decimated levels keep MIN_LOD_TRIANGLES, and a body already that
+    light keeps its own triangles; only the explicit card is smaller."""
+    from crowd_addon.core.mesh import MIN_LOD_TRIANGLES
+
+    m = synthetic.humanoid_mesh(synthetic.humanoid("s", bones), sides=sides, rings=rings)
+    lods = build_lods(m, (0.25, 0.06, CARD))
+    tris = [lv.triangle_count for lv in lods]
+    assert [lv.name for lv in lods] == ["s_body", "s_body.lod1", "s_body.lod2", "s_body.card"]
+    assert all(a >= b for a, b in zip(tris, tris[1:]))
+    assert min(tris[:3]) >= min(MIN_LOD_TRIANGLES, m.triangle_count), tris
+    if m.triangle_count <= MIN_LOD_TRIANGLES:
+        assert tris[:3] == [m.triangle_count] * 3
+    assert tris[3] == 4
