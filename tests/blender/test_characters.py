@@ -239,9 +239,13 @@ def test_user_lod_meshes_replace_the_automatic_levels(two):
     assert levels[3].name.endswith(".card") and levels[3].vertex_count == 8
     for level, obj in zip(levels, (fan.body, near, far)):
         np.testing.assert_allclose(level.positions, co(obj), atol=1e-6)
-    # the kid keeps the automatic levels (decimated, fewer triangles)
+    # the kid keeps the automatic levels: its light body (84 triangles) is not
+    # decimated below MIN_LOD_TRIANGLES
+    from crowd_addon.core.mesh import MIN_LOD_TRIANGLES
     kid = cfg.meshes["Kid"]
-    assert len(kid) == 4 and kid[1].triangle_count < kid[0].triangle_count
+    assert [lv.name for lv in kid[1:3]] == ["KidBody.lod1", "KidBody.lod2"] and len(kid) == 4
+    assert kid[0].triangle_count >= kid[1].triangle_count >= kid[2].triangle_count
+    assert kid[2].triangle_count >= MIN_LOD_TRIANGLES
     # one LOD mesh serves both levels; cards off leaves them out
     fan.lods.remove(1)
     scene.crowd.lod_cards = False
