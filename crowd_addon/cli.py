@@ -237,10 +237,12 @@ def _add_preview(subparsers) -> None:
     p.add_argument("--start", type=frame_number, default=None, metavar="F",
                    help="first frame (default: the configuration's start frame, the "
                         "scene's for a .blend)")
-    p.add_argument("--width", type=int_at_least(1), default=960,
-                   help="image width in pixels (default: %(default)s)")
-    p.add_argument("--height", type=int_at_least(1), default=540,
-                   help="image height in pixels (default: %(default)s)")
+    p.add_argument("--width", type=int_at_least(1), default=None,
+                   help="image width in pixels (default: the scene's render resolution "
+                        "with --blend, else 960)")
+    p.add_argument("--height", type=int_at_least(1), default=None,
+                   help="image height in pixels (default: the scene's render resolution "
+                        "with --blend, else 540)")
     p.add_argument("--mp4", action="store_true",
                    help="also write preview.mp4 (H.264 at the crowd's fps; needs an even "
                         "width and height)")
@@ -282,6 +284,7 @@ def _run_preview(args) -> int:
             raise CrowdError("--frames N is required with --config (a .blend gives its "
                              "scene's frame range)")
         config, camera = load_config(args.config), None
+        size = (args.width or 960, args.height or 540)
         if args.backend == "blender":       # bpy runs in background mode: wake its GPU
             from .blender.headless_gpu import init_headless_gpu
             init_headless_gpu()

@@ -140,7 +140,7 @@ def export_blend(out: str, frames: tuple | None = None, *, blend: str | None = N
 
 def preview_blend(out: str, frames: int | None = None, *, blend: str | None = None,
                   scene: str | None = None, start: int | None = None,
-                  camera: str | None = None, size=(960, 540), mp4: bool = False,
+                  camera: str | None = None, size=(None, None), mp4: bool = False,
                   backend: str = "moderngl", progress=None, on_bake=None,
                   trust_scripts: bool = False):
     """Render the Crowd settings of a .blend's scene (:func:`open_scene`) headless to
@@ -148,8 +148,9 @@ def preview_blend(out: str, frames: int | None = None, *, blend: str | None = No
 
     ``start`` defaults to the scene's start frame and ``frames`` (a count) to the frames
     from there to the scene's end; ``camera`` names a camera object of the scene (default:
-    the scene camera; with none, a camera framing the crowd). The camera, the frames
-    and the output folder are checked before the bake. Blender's own output goes to
+    the scene camera; with none, a camera framing the crowd); ``size`` (width, height)
+    in pixels, either None for the scene's render resolution (its percentage applied).
+    The camera, the frames and the output folder are checked before the bake. Blender's own output goes to
     stderr. ``trust_scripts`` as :func:`export_blend`. Returns ``(config, result, camera
     object name or None)``.
     """
@@ -165,6 +166,7 @@ def preview_blend(out: str, frames: int | None = None, *, blend: str | None = No
             if frames < 1:
                 raise CrowdError(f"--start {first} is after scene {found.name!r}'s last "
                                  f"frame {found.frame_end}; give --frames")
+        size = scene_size(found, size)
         obj = find_camera(found, camera)
         view = None if obj is None else camera_from_object(obj, size[0] / size[1])
         writable_dir(out)
@@ -178,6 +180,15 @@ def preview_blend(out: str, frames: int | None = None, *, blend: str | None = No
         result = render_preview(crowd, out, frames, start=first, size=size, mp4=mp4,
                                 backend=backend, progress=progress, camera=view)
     return config, result, None if obj is None else obj.name
+
+
+def scene_size(scene, size=(None, None)) -> tuple:
+    """``size`` with a None width or height taken from ``scene``'s render resolution
+    (``resolution_x/y`` times ``resolution_percentage``)."""
+    r = scene.render
+    pct = r.resolution_percentage / 100.0
+    return tuple(int(v) if v is not None else max(1, int(round(full * pct)))
+                 for v, full in zip(size, (r.resolution_x, r.resolution_y)))
 
 
 # ------------------------------------------------------------- blender -c crowd
@@ -211,7 +222,7 @@ def crowd_command(argv) -> int:
             raise CrowdError("no .blend is open (blender -b SCENE_BLEND -c crowd export ...)")
         _, result = export_blend(
             args.out, args.frames, scene=args.scene, agents=args.agents,
-            trust_scripts=args.trust_scripts, progress=progress_printer("crowd export"),
+            layout=args.layout, trust_scripts=args.trust_scripts, progress=progress_printer("crowd export"),
             on_bake=lambda done, total, message: print(
                 f"crowd export: {message}", file=sys.stderr, flush=True))
     except CrowdError as exc:

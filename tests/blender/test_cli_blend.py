@@ -196,6 +196,21 @@ def test_preview_renders_the_scene_frames_through_its_camera(blend, tmp_path, ca
     assert cols.max() - cols.min() > 0.7 * (min(x1, W) - max(x0, 0))
 
 
+def test_preview_takes_the_scenes_render_resolution(blend, tmp_path):
+    """No --width/--height: the scene's resolution at its percentage; one given wins."""
+    bpy.ops.wm.open_mainfile(filepath=str(blend))
+    render = bpy.context.scene.render
+    render.resolution_x, render.resolution_y, render.resolution_percentage = 320, 180, 50
+    small = tmp_path / "small.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(small), copy=True)
+    for extra, size in (([], [160, 90]), (["--width", 200], [200, 90])):
+        out = tmp_path / f"res{len(extra)}"
+        run = crowd("preview", "--blend", small, "--out", out, "--frames", 1, "--json", *extra)
+        assert run.returncode == 0, run.stderr[-3000:]
+        assert json.loads(run.stdout)["size"] == size
+        assert read_png(out / f"frame_{FIRST:04d}.png").shape[:2] == (size[1], size[0])
+
+
 def test_a_camera_looking_away_sees_no_agent(blend, tmp_path):
     out = tmp_path / "away"
     run = crowd("preview", "--blend", blend, "--out", out, "--frames", 1, "--width", W,

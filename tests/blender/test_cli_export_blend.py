@@ -29,6 +29,8 @@ from crowd_addon.blender.cli_commands import crowd_command
 # what `blender -b scene.blend -c crowd export ...` runs
 rc = crowd_command(["export", "--out", sys.argv[3], "--frames", "1-12"])
 print("RC", rc)
+rc = crowd_command(["export", "--out", sys.argv[4], "--frames", "1-3", "--layout", "blender"])
+print("RC", rc)
 """
 
 
@@ -37,10 +39,11 @@ def crowd_blend(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("cli_blend")
     blend, usd = tmp / "crowd.blend", tmp / "from_cli_command.usdc"
     run = subprocess.run([sys.executable, "-c", PREPARE,
-                          str(ROOT / "sample_scenes" / "stadium.blend"), str(blend), str(usd)],
+                          str(ROOT / "sample_scenes" / "stadium.blend"), str(blend), str(usd),
+                          str(tmp / "for_blender.usdc")],
                          cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr[-2000:]
-    assert "RC 0" in run.stdout, run.stdout[-2000:] + run.stderr[-2000:]
+    assert run.stdout.count("RC 0") == 2, run.stdout[-2000:] + run.stderr[-2000:]
     return tmp, blend, usd
 
 
@@ -53,6 +56,14 @@ def agents_in(path):
 def test_registered_crowd_command_exports_the_open_scene(crowd_blend):
     _, _, usd = crowd_blend
     assert agents_in(usd) == 2000
+
+
+def test_the_crowd_command_takes_the_layout(crowd_blend):
+    from pxr import Usd
+    tmp, _, _ = crowd_blend
+    stage = Usd.Stage.Open(str(tmp / "for_blender.usdc"))
+    agents = stage.GetPrimAtPath("/Crowd/Agents").GetChildren()
+    assert len(agents) == 2000 and not any(p.IsInstanceable() for p in agents)
 
 
 def test_python_m_export_with_blend(crowd_blend):
