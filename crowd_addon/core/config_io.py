@@ -146,6 +146,12 @@ class Encoder:
         a = np.ascontiguousarray(value)
         if a.dtype.kind not in "biuf":
             raise enc.error(f"cannot save an array of dtype {a.dtype}")
+        if a.dtype.kind == "f" and a.size:
+            with np.errstate(invalid="ignore"):
+                huge = np.isfinite(a) & (np.abs(a) > MAX_NUMBER)
+            if huge.any():
+                raise enc.error(f"cannot save {float(a[huge][0]):g}: values must be at most "
+                                f"{MAX_NUMBER:g} in magnitude (no reader would load them)")
         self.arrays[enc.path] = a
         return {"array": enc.path, "dtype": a.dtype.name, "shape": list(a.shape)}
 
@@ -278,6 +284,14 @@ class Decoder:
             expected = tuple("*" if s is None else s for s in shape)
             raise self.error(f"array {name!r} has shape {tuple(a.shape)}, expected "
                              f"{expected}".replace("'*'", "*"), self.npz_file)
+        if a.dtype.kind == "f" and a.size:      # NaN and inf: named by their owners
+            with np.errstate(invalid="ignore"):
+                bad = np.isfinite(a) & (np.abs(a) > MAX_NUMBER)
+            if bad.any():
+                at = tuple(int(i) for i in np.argwhere(bad)[0])
+                raise self.error(f"array {name!r} holds {float(a[at]):g} at {list(at)}: "
+                                 f"values must be at most {MAX_NUMBER:g} in magnitude",
+                                 self.npz_file)
         return a
 
     def bone_weights(self, d: dict, key: str):

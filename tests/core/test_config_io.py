@@ -474,10 +474,25 @@ def test_bad_keys_are_rejected_like_authoring(saved):
         load_config(saved)
 
 
+def test_huge_array_values_are_named(saved):
+    """A position of 1e30 metres is finite but overflows everything downstream."""
+    def arrays(a):
+        a["agents.position"][7, 2] = 1e30
+    rewrite(saved, arrays=arrays)
+    with pytest.raises(CrowdError, match=r"agents\.position: array 'agents\.position' holds "
+                                         r"1e\+30 at \[7, 2\]: values must be at most 1e\+09"):
+        load_config(saved)
+
+
 def test_save_refuses_what_json_cannot_hold(tmp_path):
     cfg = make_config()
     cfg.fps = float("nan")
     with pytest.raises(CrowdError, match=r"settings\.fps: cannot save the non-finite"):
+        save_config(cfg, tmp_path / "crowd.json")
+    cfg = make_config()
+    cfg.agent_position[3, 0] = 2e9
+    with pytest.raises(CrowdError, match=r"agents\.position: cannot save 2e\+09: values must "
+                                         r"be at most 1e\+09"):
         save_config(cfg, tmp_path / "crowd.json")
     cfg = make_config()
     cfg.clips["renamed"] = cfg.clips.pop("walk")
