@@ -125,8 +125,8 @@ def _author_moves(parent, shot, names, moving):
 
 def author_agent_animations(layer: Sdf.Layer, shot, names, joints_of, clips):
     """Each non-static agent's ``SkelAnimation`` under ``/Crowd/AgentAnimations`` in
-    ``layer``: its joints and its value clips (``clips``, one dictionary per such agent,
-    :func:`~.clips.clip_sets`), no poses of its own. A generator yielding ``("agent
+    ``layer``: its joints and its value clips (``clips``, an iterable of one dictionary
+    per such agent, :func:`~.clips.clip_sets`), no poses of its own. A generator yielding ``("agent
     animations", done, total)`` after each batch and returning their paths (in agent
     order)."""
     own = np.flatnonzero(~shot.static)
@@ -134,13 +134,14 @@ def author_agent_animations(layer: Sdf.Layer, shot, names, joints_of, clips):
         crowd = Sdf.PrimSpec(layer, ROOT, Sdf.SpecifierOver)
         parent = define(crowd, "AgentAnimations", "Scope")
     paths = []
+    clips = iter(clips)
     for a in range(0, own.size, _LAYOUT_CHUNK):
         with Sdf.ChangeBlock():
-            for j, i in enumerate(own[a:a + _LAYOUT_CHUNK].tolist()):
+            for i in own[a:a + _LAYOUT_CHUNK].tolist():
                 prim = define(parent, names[i], "SkelAnimation")
                 attribute(prim, "joints", _T.TokenArray,
                           joints_of[int(shot.agent_skeleton[i])], uniform=True)
-                prim.SetInfo("clips", clips[a + j])
+                prim.SetInfo("clips", next(clips))
                 paths.append(prim.path)
         yield "agent animations", min(a + _LAYOUT_CHUNK, own.size), own.size
     return paths

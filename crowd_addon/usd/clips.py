@@ -113,8 +113,9 @@ def manifest_layer(fmt, fps: float):
     return layer
 
 
-def clip_sets(shot, assets, banks) -> list:
-    """One ``clips`` dictionary per non-static agent (in agent order).
+def clip_sets(shot, assets, banks):
+    """One ``clips`` dictionary per non-static agent, in agent order (a generator, so
+    the work is spread over the export's steps).
 
     ``assets``: ``{("stream", s) | ("unique", u) | BankLayout.key | "manifest": asset
     path}`` relative to the layer the dictionaries are authored in; ``banks``:
@@ -131,7 +132,6 @@ def clip_sets(shot, assets, banks) -> list:
     manifest = Sdf.AssetPath(assets["manifest"])
     bounds = np.flatnonzero(np.r_[True, p.agent[1:] != p.agent[:-1], True])
     start, end = p.start.astype(np.float64) - 0.5, p.end.astype(np.float64) - 0.5
-    out = []
     for a, b in zip(bounds[:-1].tolist(), bounds[1:].tolist()):
         used = list(dict.fromkeys(key[a:b]))
         index = [used.index(k) for k in key[a:b]]
@@ -140,10 +140,9 @@ def clip_sets(shot, assets, banks) -> list:
             c = clip_time[j]
             times += [(start[j], c - 0.5), (end[j], c + (end[j] - start[j]) - 0.5)]
             active.append((start[j], float(index[j - a])))
-        out.append({"default": {
+        yield {"default": {
             "assetPaths": Sdf.AssetPathArray([assets[k] for k in used]),
             "primPath": f"/{PRIM}",
             "active": Vt.Vec2dArray(active),
             "times": Vt.Vec2dArray(times),
-            "manifestAssetPath": manifest}})
-    return out
+            "manifestAssetPath": manifest}}
