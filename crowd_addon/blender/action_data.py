@@ -21,6 +21,7 @@ from ..core.clip_sampling import marker_events, sample_times
 from ..core.errors import CrowdError
 from ..core.fcurve import BEZIER, LINEAR, CurveSet, check_finite
 from ..core.pose_channels import CHANNELS, channel_targets
+from .compat import action_slots, assigned_slot, fcurve_owner
 
 __all__ = ["BoneCurve", "ActionSource", "resolve_slot", "action_fcurves", "read_action"]
 
@@ -81,7 +82,7 @@ def resolve_slot(action, armature_obj, slot=None):
     ``slot``: an ``ActionSlot`` or its identifier. Otherwise the armature's assigned
     slot when it plays this action, else the only object slot with F-curves.
     """
-    slots = getattr(action, "slots", None)
+    slots = action_slots(action)
     if slots is None:
         if slot is not None:
             raise CrowdError(f"action {action.name!r} has no slots (legacy action); "
@@ -94,10 +95,10 @@ def resolve_slot(action, armature_obj, slot=None):
         raise CrowdError(f"action {action.name!r} has no slot {slot!r}; it has "
                          f"{[s.identifier for s in slots]}")
     ad = armature_obj.animation_data
-    if ad is not None and ad.action == action and ad.action_slot is not None:
-        return ad.action_slot
+    if ad is not None and ad.action == action and assigned_slot(ad) is not None:
+        return assigned_slot(ad)
     usable = [s for s in slots if s.target_id_type in ("OBJECT", "UNSPECIFIED")
-              and _has_fcurves(_fcurve_owner(action, s))]
+              and _has_fcurves(fcurve_owner(action, s))]
     if len(usable) == 1:
         return usable[0]
     if not usable:
@@ -108,25 +109,12 @@ def resolve_slot(action, armature_obj, slot=None):
 
 def action_fcurves(action, slot) -> list:
     """The F-curves of ``slot`` in ``action`` (all F-curves of a legacy action)."""
-    owner = _fcurve_owner(action, slot)
+    owner = fcurve_owner(action, slot)
     return [] if owner is None else list(owner.fcurves)
 
 
 def _has_fcurves(owner) -> bool:
     return owner is not None and len(owner.fcurves) > 0
-
-
-def _fcurve_owner(action, slot):
-    """What holds the F-curves of ``slot``: its channelbag, or the legacy action
-    itself (``owner.fcurves``, ``owner.groups``), or None."""
-    if slot is None:
-        return action
-    for layer in action.layers:
-        for strip in layer.strips:
-            bag = strip.channelbag(slot)
-            if bag is not None:
-                return bag
-    return None
 
 
 def _is_cyclic(fc) -> bool:
@@ -222,7 +210,7 @@ def read_action(armature_obj, skeleton, action, fps: float, scene_fps: float,
     """
     name = action.name
     slot = resolve_slot(action, armature_obj, slot)
-    owner = _fcurve_owner(action, slot)
+    owner = fcurve_owner(action, slot)
     fcs = [] if owner is None else list(owner.fcurves)
     selected, reason = [], None
     if fcs:

@@ -43,6 +43,7 @@ from ..core.pose_channels import CHANNEL_WIDTH, CHANNELS, RigChannels, local_sqt
 from ..core.skeleton import Skeleton
 from .action_data import read_action
 from .armature import matrices, skeleton_and_rest
+from .compat import assigned_slot, play
 
 __all__ = ["BakeResult", "bake_actions", "fast_path_blocker"]
 
@@ -273,7 +274,7 @@ class _Playback:
         self.saved = dict(
             frame=self.scene.frame_current, subframe=self.scene.frame_subframe,
             had_ad=ad is not None, action=ad.action if ad else None,
-            slot=getattr(ad, "action_slot", None) if ad else None,
+            slot=assigned_slot(ad) if ad else None,
             use_nla=ad.use_nla if ad else True, pose=pose,
             pose_position=obj.data.pose_position)
 
@@ -285,9 +286,7 @@ class _Playback:
         obj = self.obj
         ad = obj.animation_data or obj.animation_data_create()
         ad.use_nla = False
-        ad.action = src.action
-        if src.slot is not None:
-            ad.action_slot = src.slot
+        play(ad, src.action, src.slot)
         obj.data.pose_position = "POSE"
         pbs = obj.pose.bones
         order = [pbs.find(n) for n in self.skeleton.bone_names]
@@ -308,9 +307,7 @@ class _Playback:
             return False
         obj = self.obj
         ad = obj.animation_data
-        ad.action = s["action"]
-        if s["action"] is not None and s["slot"] is not None:
-            ad.action_slot = s["slot"]
+        play(ad, s["action"], s["slot"] if s["action"] is not None else None)
         ad.use_nla = s["use_nla"]
         if not s["had_ad"]:
             obj.animation_data_clear()

@@ -18,6 +18,7 @@ from ..core.show import (Action, Cue, Reaction, Show, Sweep, Track, select_fract
                          select_inside, select_value)
 from .action_data import action_fcurves
 from .agents import _attribute, _group_members
+from .compat import action_slots, assigned_slot
 
 __all__ = ["show_from_scene", "selected_agents", "parameter_values", "show_fingerprint",
            "run_script", "scripts_trusted", "trust_scripts"]
@@ -142,8 +143,8 @@ def _fcurve(scene, path):
     ad = scene.animation_data
     if ad is None or ad.action is None:
         return None
-    slot = getattr(ad, "action_slot", None)
-    if slot is None and getattr(ad.action, "slots", None) is not None:
+    slot = assigned_slot(ad)
+    if slot is None and action_slots(ad.action) is not None:
         return None
     for fc in action_fcurves(ad.action, slot):
         if fc.data_path == path and not fc.mute:

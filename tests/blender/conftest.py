@@ -12,9 +12,8 @@ import pytest
 
 try:
     import bpy
-    from bpy_extras import anim_utils
 except ImportError:                 # tests here that need no Blender still run
-    bpy = anim_utils = None
+    bpy = None
 
 # (name, head, tail, roll, parent, connected): rolled bones, a connected chain,
 # rest orientations far from the axes, and a second branch
@@ -48,10 +47,10 @@ def build_rig(scene, spec=RIG, name="Rig", location=(0.0, 0.0, 0.0), rotation=(0
 
 
 def new_action(name, slot_name="Rig"):
-    """A slotted action with one object slot; returns (action, slot, channelbag)."""
-    action = bpy.data.actions.new(name)
-    slot = action.slots.new("OBJECT", slot_name)
-    return action, slot, anim_utils.action_ensure_channelbag_for_slot(action, slot)
+    """An action for F-curves on this Blender: ``(action, slot, owner)`` (a slotted
+    action's object slot and channelbag; on 4.2-4.3 ``(action, None, action)``)."""
+    from crowd_addon.blender.compat import new_action as make
+    return make(name, slot_name)
 
 
 def add_curve(bag, path, index, frames, values, ipo="BEZIER", handles=None):
@@ -74,9 +73,8 @@ def add_curve(bag, path, index, frames, values, ipo="BEZIER", handles=None):
 
 
 def play(obj, action, slot):
-    ad = obj.animation_data or obj.animation_data_create()
-    ad.action = action
-    ad.action_slot = slot
+    from crowd_addon.blender import compat
+    compat.play(obj.animation_data or obj.animation_data_create(), action, slot)
 
 
 def pose_at(scene, obj, names, frame):

@@ -254,9 +254,18 @@ def test_loop_not_a_whole_number_of_frames_is_resampled(scene, blend):
 
 def test_slot_selection(scene, blend):
     """A two-slot action: the armature's assigned slot is baked by default, another
-    slot by identifier, and without an assignment the choice must be explicit."""
+    slot by identifier, and without an assignment the choice must be explicit. On
+    Blender 4.2-4.3 (no slots) asking for a slot is the error."""
+    from crowd_addon.blender.compat import SLOTTED_ACTIONS
     obj = blend.build_rig(scene)
     action, slot_a, bag_a = blend.new_action("Two")
+    if not SLOTTED_ACTIONS:
+        blend.add_curve(bag_a, 'pose.bones["leg"].location', 2, np.array([1.0, 10.0]),
+                        np.array([0.0, 1.0]))
+        with pytest.raises(CrowdError, match=r"action 'Two' has no slots \(legacy action\); "
+                                             "cannot pick slot 'OBNope'"):
+            bake_actions(obj, [(action, "OBNope")], fps=24)
+        return
     slot_b = action.slots.new("OBJECT", "Other")
     from bpy_extras import anim_utils
     bag_b = anim_utils.action_ensure_channelbag_for_slot(action, slot_b)

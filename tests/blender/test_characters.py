@@ -91,9 +91,10 @@ def _blender_pose(scene, rig, action, frame, names):
     from mathutils import Matrix
     for pb in rig.pose.bones:
         pb.matrix_basis = Matrix.Identity(4)
+    from crowd_addon.blender import compat
     ad = rig.animation_data or rig.animation_data_create()
-    ad.action = action
-    ad.action_slot = action.slots[0]
+    slots = compat.action_slots(action)
+    compat.play(ad, action, slots[0] if slots else None)
     scene.frame_set(int(frame))
     out = np.array([np.array(rig.pose.bones[n].matrix) for n in names])
     ad.action = None

@@ -1,0 +1,62 @@
+"""What differs between the Blender releases the extension supports (4.2 LTS to 5.x),
+in one place.
+
+Actions: Blender 4.4 made actions *slotted*: an action has ``slots``, its F-curves
+live in a channelbag per slot (``action.layers[0].strips[0].channelbag(slot)``) and an
+ID plays a slot (``AnimData.action_slot``). Blender 4.2 and 4.3 have *legacy* actions:
+``action.fcurves``, no slots. Everything here takes a slot that is None for a legacy
+action, so callers need not know which Blender runs.
+"""
+
+from __future__ import annotations
+
+import bpy
+
+__all__ = ["SLOTTED_ACTIONS", "action_slots", "fcurve_owner", "assigned_slot", "play",
+           "new_action"]
+
+#: Whether this Blender has slotted actions (4.4+).
+SLOTTED_ACTIONS = "slots" in bpy.types.Action.bl_rna.properties
+
+
+def action_slots(action):
+    """The action's slots, or None for a legacy action (Blender 4.2-4.3)."""
+    return getattr(action, "slots", None)
+
+
+def fcurve_owner(action, slot):
+    """What holds the F-curves of ``slot`` (``owner.fcurves``, ``owner.groups``): its
+    channelbag, the legacy action itself for ``slot`` None, or None when the slot has
+    no channelbag."""
+    if slot is None:
+        return action
+    for layer in action.layers:
+        for strip in layer.strips:
+            bag = strip.channelbag(slot)
+            if bag is not None:
+                return bag
+    return None
+
+
+def assigned_slot(anim_data):
+    """The slot ``anim_data`` plays (None on legacy Blender or when none is)."""
+    return getattr(anim_data, "action_slot", None)
+
+
+def play(anim_data, action, slot=None):
+    """``anim_data`` plays ``action`` (and ``slot``, on Blender with slots)."""
+    anim_data.action = action
+    if slot is not None:
+        anim_data.action_slot = slot
+
+
+def new_action(name: str, slot_name: str = "Rig", id_type: str = "OBJECT"):
+    """A new action ready for F-curves: ``(action, slot, owner)`` with one ``id_type``
+    slot and its channelbag on Blender 4.4+, ``(action, None, action)`` on 4.2-4.3;
+    ``owner.fcurves.new(path, index=i)`` adds curves either way."""
+    action = bpy.data.actions.new(name)
+    if not SLOTTED_ACTIONS:
+        return action, None, action
+    from bpy_extras import anim_utils
+    slot = action.slots.new(id_type, slot_name)
+    return action, slot, anim_utils.action_ensure_channelbag_for_slot(action, slot)
