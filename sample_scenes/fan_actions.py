@@ -15,6 +15,7 @@ from dataclasses import dataclass, replace
 
 import bpy
 
+from crowd_addon.blender.compat import fcurve_ensure
 from fan_pose import Arm, Pose, PoseSolver, both, quaternion_track
 
 __all__ = ["ActionSpec", "ACTIONS", "SEAT", "STAND", "author_actions"]
@@ -149,7 +150,7 @@ ACTIONS = (
 def _write_curves(action, rig, path, index_values, frames, group):
     """Key ``path[i]`` at ``frames`` with ``index_values[i]`` (one list per array index)."""
     for index, values in enumerate(index_values):
-        fc = action.fcurve_ensure_for_datablock(rig, path, index=index, group_name=group)
+        fc = fcurve_ensure(action, rig, path, index, group)
         points = fc.keyframe_points
         points.add(len(frames))
         points.foreach_set("co", [c for f, v in zip(frames, values) for c in (f, v)])

@@ -23,6 +23,8 @@ import bpy
 import numpy as np
 from mathutils import Vector
 
+from crowd_addon.blender.compat import action_slots, fcurve_ensure, first_fcurves
+
 __all__ = ["BVH_PATH", "build_mocap"]
 
 BVH_PATH = Path("/usr/share/assimp/models/BVH/01_01.bvh")
@@ -49,10 +51,10 @@ def _import(path: Path, collection):
     return bpy.context.view_layer.objects.active
 
 
-def _channels(action, slot):
+def _channels(action):
     """{(data_path, index): (frames, values)} of an action's F-curves, as arrays."""
     out = {}
-    for fc in action.layers[0].strips[0].channelbag(slot).fcurves:
+    for fc in first_fcurves(action):
         co = np.empty(2 * len(fc.keyframe_points), np.float64)
         fc.keyframe_points.foreach_get("co", co)
         out[(fc.data_path, fc.array_index)] = co.reshape(-1, 2)
@@ -65,7 +67,7 @@ def _resampled_action(rig, name, imported):
     Quaternion tracks are made sign-continuous (the importer converts each frame
     separately, so consecutive keys may sit in opposite hemispheres).
     """
-    channels = _channels(imported, imported.slots[0])
+    channels = _channels(imported)
     source_frames = next(iter(channels.values()))[:, 0]  # all channels share them
     picks = np.nonzero((source_frames >= WINDOW[0]) & (source_frames <= WINDOW[1]))[0][::STEP]
     action = bpy.data.actions.new(name)
@@ -81,7 +83,7 @@ def _resampled_action(rig, name, imported):
             values *= np.concatenate([[1.0], np.where(np.cumsum(flips) % 2, -1.0, 1.0)])[:, None]
         group = path.split('"')[1]
         for i in range(values.shape[1]):
-            fc = action.fcurve_ensure_for_datablock(rig, path, index=i, group_name=group)
+            fc = fcurve_ensure(action, rig, path, i, group)
             fc.keyframe_points.add(len(frames))
             fc.keyframe_points.foreach_set("co", np.column_stack([frames, values[:, i]]).ravel())
             fc.keyframe_points.foreach_set("interpolation", [_LINEAR] * len(frames))
@@ -106,8 +108,7 @@ def _in_place(rig, action, frames, root):
     drift[:, 2] = 0.0
     to_local = rig.data.bones[root].matrix_local.to_3x3().inverted()
     shift = np.array([to_local @ Vector(d) for d in drift])
-    slot = action.slots[0]
-    for fc in action.layers[0].strips[0].channelbag(slot).fcurves:
+    for fc in first_fcurves(action):
         if fc.data_path == f'pose.bones["{root}"].location':
             co = np.empty(2 * len(frames))
             fc.keyframe_points.foreach_get("co", co)
@@ -165,7 +166,8 @@ def build_mocap(collection, path: Path = BVH_PATH, rig_name="MocapRig",
     root = rig.data.bones[0].name
     action, frames = _resampled_action(rig, action_name, imported)
     bpy.data.actions.remove(imported)
-    action.slots[0].name_display = rig_name
+    if action_slots(action):
+        action.slots[0].name_display = rig_name
     _in_place(rig, action, frames, root)
     _jump_markers(rig, action, frames, root)
     action.use_fake_user = True

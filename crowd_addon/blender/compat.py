@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import bpy
 
-__all__ = ["SLOTTED_ACTIONS", "action_slots", "fcurve_owner", "assigned_slot", "play",
-           "new_action"]
+__all__ = ["SLOTTED_ACTIONS", "action_slots", "fcurve_owner", "first_fcurves",
+           "assigned_slot", "play", "new_action", "fcurve_ensure"]
 
 #: Whether this Blender has slotted actions (4.4+).
 SLOTTED_ACTIONS = "slots" in bpy.types.Action.bl_rna.properties
@@ -38,6 +38,13 @@ def fcurve_owner(action, slot):
     return None
 
 
+def first_fcurves(action):
+    """The F-curves of the action's first slot (all of a legacy action's)."""
+    slots = action_slots(action)
+    owner = fcurve_owner(action, slots[0] if slots else None)
+    return [] if owner is None else owner.fcurves
+
+
 def assigned_slot(anim_data):
     """The slot ``anim_data`` plays (None on legacy Blender or when none is)."""
     return getattr(anim_data, "action_slot", None)
@@ -48,6 +55,18 @@ def play(anim_data, action, slot=None):
     anim_data.action = action
     if slot is not None:
         anim_data.action_slot = slot
+
+
+def fcurve_ensure(action, datablock, path: str, index: int, group: str):
+    """The F-curve of ``path[index]`` animating ``datablock`` in ``action`` (made, in
+    F-curve group ``group``, when missing). On Blender 4.4+ the action's slot for the
+    datablock is made and assigned as needed."""
+    if SLOTTED_ACTIONS:
+        return action.fcurve_ensure_for_datablock(datablock, path, index=index,
+                                                  group_name=group)
+    found = action.fcurves.find(path, index=index)
+    return found if found is not None else action.fcurves.new(path, index=index,
+                                                              action_group=group)
 
 
 def new_action(name: str, slot_name: str = "Rig", id_type: str = "OBJECT"):

@@ -124,6 +124,7 @@ def test_offsets_streams_and_colours_from_attributes(scene):
     # an offset outside 0..M-1 names the source, the point and the attribute
     off[5] = 30
     me.attributes["offset"].data.foreach_set("value", off)
+    me.update()                      # as an edit in the UI tags it (Blender 4.2 needs it)
     bpy.context.view_layer.update()
     with pytest.raises(CrowdError, match=r"agent source 'seats'.*5.*offset 30.*'offset'"):
         _agents(scene, src)

@@ -314,9 +314,9 @@ def test_bad_actions_name_the_fault_and_bake_nothing(scene, blend, case, message
 @pytest.mark.parametrize("method", ["auto", "frame_set"])
 def test_cancel_returns_nothing_and_changes_nothing(scene, blend, method):
     obj = blend.build_rig(scene)
-    first, _, _ = blend.rig_action(obj, name="First")
+    first, slot, _ = blend.rig_action(obj, name="First")
     second, _, _ = blend.rig_action(obj, name="Second", seed=1)
-    blend.play(obj, first, first.slots[0])
+    blend.play(obj, first, slot)
     scene.frame_set(3)
     pose = np.array([np.array(pb.matrix_basis) for pb in obj.pose.bones])
     seen = []

@@ -18,7 +18,10 @@ ROOT = Path(__file__).resolve().parents[2]
 
 PREPARE = r"""
 import sys, bpy
+sys.path.insert(0, "sample_scenes")
+from build_stadium import build_stadium
 from crowd_addon import register
+build_stadium(sys.argv[1], log=None)       # for the Blender that runs (4.2 cannot read 5.0's)
 bpy.ops.wm.open_mainfile(filepath=sys.argv[1])
 register()
 from crowd_addon.blender.stadium import setup_crowd
@@ -39,7 +42,7 @@ def crowd_blend(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("cli_blend")
     blend, usd = tmp / "crowd.blend", tmp / "from_cli_command.usdc"
     run = subprocess.run([sys.executable, "-c", PREPARE,
-                          str(ROOT / "sample_scenes" / "stadium.blend"), str(blend), str(usd),
+                          str(tmp / "stadium.blend"), str(blend), str(usd),
                           str(tmp / "for_blender.usdc")],
                          cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr[-2000:]

@@ -280,6 +280,7 @@ def test_generate_agents_reselects_the_cues_of_the_new_agents(scene):
     seats = bpy.data.objects["Seats"]
     with bpy.context.temp_override(object=seats):
         seats.data.attributes["team"].data.foreach_set("value", [1] * N)
+    seats.data.update()              # as an edit in the UI tags it (Blender 4.2 needs it)
     assert bpy.ops.crowd.generate_agents() == {"FINISHED"}
     pv = preview.get(scene)
     assert pv.crowd.show.describe()[0]["agents"] == N

@@ -51,7 +51,9 @@ def _play(rig_name, action_name):
     rig = bpy.data.objects[rig_name]
     action = bpy.data.actions[action_name]
     rig.animation_data.action = action
-    assert rig.animation_data.action_slot is not None, f"{action_name}: no slot assigned"
+    from crowd_addon.blender.compat import SLOTTED_ACTIONS, assigned_slot
+    assert not SLOTTED_ACTIONS or assigned_slot(rig.animation_data) is not None, \
+        f"{action_name}: no slot assigned"
     return rig, action
 
 
