@@ -1,5 +1,5 @@
 """``python -m crowd_addon <command> ...``: see :mod:`crowd_addon.cli`."""
 
-from .cli import main
+from .cli import console
 
-raise SystemExit(main())
+raise SystemExit(console())

@@ -426,5 +426,19 @@ def main(argv=None) -> int:
         return 2
 
 
+def console(argv=None) -> int:
+    """The ``crowd`` program: :func:`main`, then out. A process that loaded the bpy
+    module leaves with ``os._exit`` once its output is flushed: bpy 4.2 LTS crashes
+    (SIGSEGV) in its C++ teardown at exit after our property groups were registered,
+    when every file is already written, which would turn a finished run into a failed
+    exit status. ``main`` itself returns normally (for callers in Python)."""
+    code = main(argv)
+    if "bpy" in sys.modules:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    return code
+
+
 if __name__ == "__main__":          # python -m crowd_addon.cli (as python -m crowd_addon)
-    raise SystemExit(main())
+    raise SystemExit(console())
