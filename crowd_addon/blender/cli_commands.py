@@ -126,11 +126,11 @@ def export_blend(out: str, frames: tuple | None = None, *, blend: str | None = N
     ``CrowdConfig`` and the ``ExportResult``. ``trust_scripts``: run the scene's crowd
     script even where scripts in .blend files are not trusted.
     """
-    from ..core.files import folders_made
-    from ..gpu.preview_render import writable_dir
-    from .export import export_scene
-    _trust(trust_scripts)
-    with blender_output_to_stderr():
+    with blender_output_to_stderr():        # from the import of bpy on (5.2 logs then)
+        from ..core.files import folders_made
+        from ..gpu.preview_render import writable_dir
+        from .export import export_scene
+        _trust(trust_scripts)
         found = open_scene(blend, scene)
         folder = writable_dir(os.path.dirname(os.path.abspath(out)))
         with folders_made(folder):
@@ -150,15 +150,15 @@ def preview_blend(out: str, frames: int | None = None, *, blend: str | None = No
     from there to the scene's end; ``camera`` names a camera object of the scene (default:
     the scene camera; with none, a camera framing the crowd); ``size`` (width, height)
     in pixels, either None for the scene's render resolution (its percentage applied).
-    The camera, the frames and the output folder are checked before the bake. Blender's own output goes to
-    stderr. ``trust_scripts`` as :func:`export_blend`. Returns ``(config, result, camera
+    The camera, the frames and the output folder are checked before the bake.
+    Blender's own output goes to stderr. ``trust_scripts`` as :func:`export_blend`. Returns ``(config, result, camera
     object name or None)``.
     """
-    from ..gpu.preview_render import render_preview, writable_dir
-    from .cameras import camera_from_object, find_camera
-    from .scene_config import build_crowd, config_from_scene
-    _trust(trust_scripts)
-    with blender_output_to_stderr():
+    with blender_output_to_stderr():        # from the import of bpy on (5.2 logs then)
+        from ..gpu.preview_render import render_preview, writable_dir
+        from .cameras import camera_from_object, find_camera
+        from .scene_config import build_crowd, config_from_scene
+        _trust(trust_scripts)
         found = open_scene(blend, scene)
         first = found.frame_start if start is None else int(start)
         if frames is None:

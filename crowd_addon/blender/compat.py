@@ -17,6 +17,10 @@ __all__ = ["SLOTTED_ACTIONS", "action_slots", "fcurve_owner", "first_fcurves",
 
 #: Whether this Blender has slotted actions (4.4+).
 SLOTTED_ACTIONS = "slots" in bpy.types.Action.bl_rna.properties
+#: Whether ``Action.fcurve_ensure_for_datablock`` takes a group name (5.0+).
+_GROUP_NAME = SLOTTED_ACTIONS and "group_name" in [
+    p.identifier for p in bpy.types.Action.bl_rna.functions[
+        "fcurve_ensure_for_datablock"].parameters]
 
 
 def action_slots(action):
@@ -61,9 +65,11 @@ def fcurve_ensure(action, datablock, path: str, index: int, group: str):
     """The F-curve of ``path[index]`` animating ``datablock`` in ``action`` (made, in
     F-curve group ``group``, when missing). On Blender 4.4+ the action's slot for the
     datablock is made and assigned as needed."""
-    if SLOTTED_ACTIONS:
+    if _GROUP_NAME:
         return action.fcurve_ensure_for_datablock(datablock, path, index=index,
                                                   group_name=group)
+    if SLOTTED_ACTIONS:                                 # 4.4-4.5: no group name
+        return action.fcurve_ensure_for_datablock(datablock, path, index=index)
     found = action.fcurves.find(path, index=index)
     return found if found is not None else action.fcurves.new(path, index=index,
                                                               action_group=group)
@@ -76,6 +82,7 @@ def new_action(name: str, slot_name: str = "Rig", id_type: str = "OBJECT"):
     action = bpy.data.actions.new(name)
     if not SLOTTED_ACTIONS:
         return action, None, action
-    from bpy_extras import anim_utils
     slot = action.slots.new(id_type, slot_name)
-    return action, slot, anim_utils.action_ensure_channelbag_for_slot(action, slot)
+    layer = action.layers.new("Layer")
+    strip = layer.strips.new(type="KEYFRAME")
+    return action, slot, strip.channelbag(slot, ensure=True)

@@ -267,8 +267,7 @@ def test_slot_selection(scene, blend):
             bake_actions(obj, [(action, "OBNope")], fps=24)
         return
     slot_b = action.slots.new("OBJECT", "Other")
-    from bpy_extras import anim_utils
-    bag_b = anim_utils.action_ensure_channelbag_for_slot(action, slot_b)
+    bag_b = action.layers[0].strips[0].channelbag(slot_b, ensure=True)
     frames = np.array([1.0, 10.0])
     blend.add_curve(bag_a, 'pose.bones["leg"].location', 2, frames, np.array([0.0, 1.0]))
     blend.add_curve(bag_b, 'pose.bones["leg"].location', 2, frames, np.array([0.0, -1.0]))

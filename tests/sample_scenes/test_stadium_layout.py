@@ -70,7 +70,9 @@ def test_loop_points_are_continuous_and_normals_outward():
     np.testing.assert_allclose(np.linalg.norm(normals, axis=1), 1.0)
     tangent = np.diff(points, axis=0)
     assert np.abs(np.einsum("ij,ij->i", tangent, normals[:-1])).max() < 1e-2 * (s[1] - s[0])
-    assert np.all(np.cross(tangent, normals[:-1]) < 0)  # counter-clockwise, normal outward
+    # counter-clockwise, normal outward: the 2-D cross product (numpy 2 has no 2-D cross)
+    z = tangent[:, 0] * normals[:-1, 1] - tangent[:, 1] * normals[:-1, 0]
+    assert np.all(z < 0)
 
 
 def test_headings_face_the_pitch_centre_and_sections_split_the_east_end():
