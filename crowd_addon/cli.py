@@ -384,13 +384,18 @@ def _add_build_extension(subparsers) -> None:
                    help="folder for the zip (default: %(default)s)")
     p.add_argument("--split-platforms", action="store_true",
                    help="one zip per platform instead of one for all")
+    p.add_argument("--wheels", type=path_arg, metavar="DIR", default=None,
+                   help="take the wheels from this folder only, without network (every "
+                        "platform and Python must be there; default: download into "
+                        "build/wheels when missing)")
     p.set_defaults(handler=_run_build_extension)
 
 
 def _run_build_extension(args) -> int:
     from .packaging import build_extension
 
-    for z in build_extension(args.out, split_platforms=args.split_platforms,
+    for z in build_extension(args.out, wheel_cache=args.wheels, offline=args.wheels is not None,
+                             split_platforms=args.split_platforms,
                              progress=lambda m: print(f"crowd build-extension: {m}",
                                                       file=sys.stderr, flush=True)):
         print(z)

@@ -54,10 +54,15 @@ def extension_tool() -> str:
     return found[-1]
 
 
-def fetch_wheels(cache_dir, progress=print) -> list:
+def fetch_wheels(cache_dir, progress=print, download=True) -> list:
     """Download the wheels for every (platform, Python) into ``cache_dir`` (kept
-    between builds); returns their paths. Raises CrowdError naming what is missing."""
-    os.makedirs(cache_dir, exist_ok=True)
+    between builds); returns their paths. With ``download`` False nothing is
+    downloaded: the folder must hold them all. Raises CrowdError naming what is
+    missing."""
+    if download:
+        os.makedirs(cache_dir, exist_ok=True)
+    elif not os.path.isdir(cache_dir):
+        raise CrowdError(f"--wheels {cache_dir}: no such folder")
     for platform, tags in PLATFORMS.items():
         for py in PYTHONS:
             for req in WHEELS:
@@ -67,6 +72,11 @@ def fetch_wheels(cache_dir, progress=print) -> list:
                         if any(t in os.path.basename(w) for t in tags)]
                 if have:
                     continue
+                if not download:
+                    raise CrowdError(f"--wheels {cache_dir}: no {req} wheel for {platform} / "
+                                     f"Python {py} (tags {', '.join(tags)}); fill the folder "
+                                     "where there is network (a build's build/wheels, or pip "
+                                     "download --only-binary=:all:)")
                 progress(f"downloading {req} for {platform}, Python {py}")
                 cmd = [sys.executable, "-m", "pip", "download", "-q",
                        "--disable-pip-version-check", req, "--only-binary=:all:",
@@ -98,8 +108,10 @@ def _manifest_with_wheels(text: str, wheels: list) -> str:
 
 
 def build_extension(out_dir, wheel_cache=None, source=REPO_ROOT, progress=print,
-                    split_platforms=False) -> list:
-    """Build the extension zip(s) into ``out_dir``; returns the zip paths."""
+                    split_platforms=False, offline=False) -> list:
+    """Build the extension zip(s) into ``out_dir``; returns the zip paths. The wheels
+    come from ``wheel_cache`` (default ``build/wheels``), downloaded into it when
+    missing, or with ``offline`` only from it (no network)."""
     out_dir = os.path.abspath(out_dir)
     if os.path.lexists(out_dir) and not os.path.isdir(out_dir):
         raise CrowdError(f"{out_dir}: exists and is not a folder (--out names the folder "
@@ -110,7 +122,7 @@ def build_extension(out_dir, wheel_cache=None, source=REPO_ROOT, progress=print,
         raise CrowdError(f"{out_dir}: cannot make the output folder ({e.strerror or e})") \
             from None
     wheel_cache = wheel_cache or os.path.join(source, "build", "wheels")
-    wheels = fetch_wheels(wheel_cache, progress)
+    wheels = fetch_wheels(wheel_cache, progress, download=not offline)
     tool = extension_tool()
     with tempfile.TemporaryDirectory(prefix="crowd_ext_") as stage:
         pkg = os.path.join(stage, "crowd_animation")

@@ -79,3 +79,33 @@ def test_out_naming_an_existing_file_is_refused(tmp_path):
     assert run.returncode == 2, run.stderr[-2000:]
     assert "exists and is not a folder" in run.stderr and "Traceback" not in run.stderr
     assert target.read_text() == "mine"
+
+
+def test_wheels_folder_builds_without_network(extension_zip, tmp_path, monkeypatch):
+    """--wheels DIR: the wheels come from the folder alone (pip is never run), and a
+    folder missing one names the wheel, platform and Python."""
+    import shutil
+    import zipfile
+
+    from crowd_addon.core.errors import CrowdError
+
+    cache = os.path.join(packaging.REPO_ROOT, "build", "wheels")   # filled by extension_zip
+    local = tmp_path / "wheels"
+    shutil.copytree(cache, local)
+    real_run = subprocess.run
+
+    def no_pip(cmd, *a, **kw):
+        assert "pip" not in cmd, "a --wheels build must not download"
+        return real_run(cmd, *a, **kw)
+    monkeypatch.setattr(packaging.subprocess, "run", no_pip)
+    (built,) = packaging.build_extension(tmp_path / "dist", wheel_cache=str(local),
+                                         offline=True, progress=lambda *_: None)
+    with zipfile.ZipFile(built) as z, zipfile.ZipFile(extension_zip) as ref:
+        assert sorted(n for n in z.namelist() if n.startswith("wheels/")) == \
+            sorted(n for n in ref.namelist() if n.startswith("wheels/"))
+    for w in local.glob("moderngl-*cp313*win_amd64.whl"):
+        w.unlink()
+    with pytest.raises(CrowdError, match=r"no moderngl==5\.13\.0 wheel for windows-x64 / "
+                                         r"Python 3\.13"):
+        packaging.build_extension(tmp_path / "dist2", wheel_cache=str(local), offline=True,
+                                  progress=lambda *_: None)
