@@ -39,9 +39,7 @@ FAST = ("core", "test_layering.py")
 REQUIRE_ALL = "CROWD_REQUIRE_ALL"
 #: The only skips allowed under CROWD_REQUIRE_ALL: node id -> the skip's reason.
 ALLOWED_SKIPS = {
-    # cannot run as root, who writes into read-only folders (the tests run as root here)
-    "tests/blender/test_export_operator.py::test_read_only_folder_is_reported":
-        "root writes into read-only folders",
+    # none today: node id -> reason, for a test that truly cannot run in CI
 }
 
 _status = {}

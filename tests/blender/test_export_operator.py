@@ -187,18 +187,30 @@ def test_failed_export_keeps_the_previous_one(scene, tmp_path):
     assert after == before and listing(tmp_path) == ["shot.layers", "shot.usdc"]
 
 
-@pytest.mark.skipif(hasattr(os, "geteuid") and os.geteuid() == 0,
-                    reason="root writes into read-only folders")
-def test_read_only_folder_is_reported(scene, tmp_path):
-    folder = tmp_path / "locked"
-    folder.mkdir()
-    folder.chmod(0o555)
+def test_read_only_folder_is_reported(scene):
+    """A folder the user may not write in. Root writes anywhere, so as root (CI) the
+    export runs for this call with the effective user id of nobody, in a folder that
+    nobody may reach but not write in."""
+    import shutil
+    import tempfile
+    base = tempfile.mkdtemp(prefix="crowd_locked_")
+    os.chmod(base, 0o755)
+    folder = os.path.join(base, "locked")
+    os.mkdir(folder, 0o555)
+    as_root = hasattr(os, "geteuid") and os.geteuid() == 0
     try:
-        with pytest.raises(RuntimeError, match="cannot write in"):
-            bpy.ops.crowd.export_usd(filepath=str(folder / "shot.usdc"))
+        if as_root:
+            os.seteuid(65534)
+        try:
+            with pytest.raises(RuntimeError, match="cannot write in"):
+                bpy.ops.crowd.export_usd(filepath=os.path.join(folder, "shot.usdc"))
+        finally:
+            if as_root:
+                os.seteuid(0)
         assert listing(folder) == []
     finally:
-        folder.chmod(0o755)
+        os.chmod(folder, 0o755)
+        shutil.rmtree(base)
 
 
 @pytest.mark.skipif(not os.path.isdir("/sys/kernel"), reason="needs Linux sysfs")
