@@ -249,6 +249,10 @@ def _add_preview(subparsers) -> None:
     p.add_argument("--backend", choices=BACKENDS, default="moderngl",
                    help="renderer: moderngl (headless EGL) or blender (Blender's gpu "
                         "module through bpy) (default: %(default)s)")
+    p.add_argument("--samples", type=int_at_least(0), default=4, metavar="N",
+                   help="multisample anti-aliasing, samples a pixel, moderngl backend "
+                        "(Blender's gpu module has no multisampled offscreen image); 0: "
+                        "none (default: %(default)s)")
     p.add_argument("--json", action="store_true",
                    help="print the summary as one JSON object")
     add_trust_argument(p)
@@ -272,7 +276,7 @@ def _run_preview(args) -> int:
         config, r, camera = preview_blend(
             args.out, args.frames, blend=args.blend, scene=args.scene, start=args.start,
             camera=args.camera, size=size, mp4=args.mp4, backend=args.backend,
-            trust_scripts=args.trust_scripts, progress=progress, on_bake=lambda done, total, message: print(
+            samples=args.samples, trust_scripts=args.trust_scripts, progress=progress, on_bake=lambda done, total, message: print(
                 f"crowd preview: {message}", file=sys.stderr, flush=True))
     else:
         from .core.config_io import load_config
@@ -289,7 +293,8 @@ def _run_preview(args) -> int:
             from .blender.headless_gpu import init_headless_gpu
             init_headless_gpu()
         r = render_preview(config, args.out, args.frames, start=args.start, size=size,
-                           mp4=args.mp4, backend=args.backend, progress=progress)
+                           mp4=args.mp4, backend=args.backend, progress=progress,
+                           samples=args.samples)
     s = r.seconds
     if args.json:
         print(json.dumps({

@@ -1,5 +1,8 @@
-/* Simple lit shading: Lambert from one directional light plus ambient, in the
- * agent's colour (u_light = (direction towards the light, ambient)). */
+/* Lit shading of the crowd and its scene, in the surface's colour:
+ * u_light = (direction towards the light, ambient). Lambert from the light (the
+ * scene's sun) plus a soft hemisphere ambient: surfaces facing the sky get the full
+ * ambient level, those facing the ground a third of it, so undersides and backs read
+ * as shaded instead of flat. */
 
 void main()
 {
@@ -8,5 +11,6 @@ void main()
     n = -n;
   }
   float diffuse = max(dot(n, normalize(u_light.xyz)), 0.0);
-  frag_color = vec4(v_color * (u_light.w + (1.0 - u_light.w) * diffuse), 1.0);
+  float sky = mix(1.0 / 3.0, 1.0, 0.5 + 0.5 * n.z);
+  frag_color = vec4(v_color * (u_light.w * sky + (1.0 - u_light.w) * diffuse), 1.0);
 }

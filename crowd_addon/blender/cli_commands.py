@@ -142,22 +142,25 @@ def preview_blend(out: str, frames: int | None = None, *, blend: str | None = No
                   scene: str | None = None, start: int | None = None,
                   camera: str | None = None, size=(None, None), mp4: bool = False,
                   backend: str = "moderngl", progress=None, on_bake=None,
-                  trust_scripts: bool = False):
+                  trust_scripts: bool = False, samples: int = 4):
     """Render the Crowd settings of a .blend's scene (:func:`open_scene`) headless to
-    PNG frames (:func:`crowd_addon.gpu.preview_render.render_preview`).
+    PNG frames (:func:`crowd_addon.gpu.preview_render.render_preview`), drawn in the
+    scene's own geometry and lit by its sun (:mod:`.scene_geometry`).
 
     ``start`` defaults to the scene's start frame and ``frames`` (a count) to the frames
     from there to the scene's end; ``camera`` names a camera object of the scene (default:
     the scene camera; with none, a camera framing the crowd); ``size`` (width, height)
     in pixels, either None for the scene's render resolution (its percentage applied).
     The camera, the frames and the output folder are checked before the bake.
-    Blender's own output goes to stderr. ``trust_scripts`` as :func:`export_blend`. Returns ``(config, result, camera
-    object name or None)``.
+    Blender's own output goes to stderr. ``trust_scripts`` as :func:`export_blend`;
+    ``samples``: anti-aliasing of the moderngl backend. Returns ``(config, result,
+    camera object name or None)``.
     """
     with blender_output_to_stderr():        # from the import of bpy on (5.2 logs then)
         from ..gpu.preview_render import render_preview, writable_dir
         from .cameras import camera_from_object, find_camera
         from .scene_config import build_crowd, config_from_scene
+        from .scene_geometry import scene_geometry, scene_light
         _trust(trust_scripts)
         found = open_scene(blend, scene)
         first = found.frame_start if start is None else int(start)
@@ -178,7 +181,9 @@ def preview_blend(out: str, frames: int | None = None, *, blend: str | None = No
         if note and on_bake is not None:
             on_bake(1, 1, note)
         result = render_preview(crowd, out, frames, start=first, size=size, mp4=mp4,
-                                backend=backend, progress=progress, camera=view)
+                                backend=backend, progress=progress, camera=view,
+                                scene=scene_geometry(found), light=scene_light(found),
+                                samples=samples)
     return config, result, None if obj is None else obj.name
 
 

@@ -80,11 +80,14 @@ CAMERA_SPAN, CAMERA_FOV = 16.0, math.radians(50.0)   # metres of seats in view, 
 @dataclass
 class Stadium:
     """A stadium crowd ready to run: the config (its show included), the camera the
-    demo renders through and the beats muted because they fall after the run."""
+    demo renders through, the beats muted because they fall after the run, and the
+    stadium itself (bowl, pitch) with its sun as the renderers draw them."""
 
     config: CrowdConfig
     camera: object                  # crowd_addon.gpu.camera.Camera
     muted: tuple = ()
+    scene: object = None            # crowd_addon.gpu.scene_geometry.SceneGeometry
+    light: tuple | None = None      # the renderers' light from the scene's sun
 
 
 def _obj(name):
@@ -304,6 +307,7 @@ def stadium_config(scene, frames=240, size=(960, 540), progress=None, hits=6, sl
     stadium scene and build its :class:`Stadium` for images of ``size`` pixels."""
     from .cameras import camera_from_object
     from .scene_config import config_from_scene
+    from .scene_geometry import scene_geometry, scene_light
 
     setup_crowd(scene, hits=hits, slots=slots, seed=seed)
     muted = setup_show(scene, frames)
@@ -313,7 +317,8 @@ def stadium_config(scene, frames=240, size=(960, 540), progress=None, hits=6, sl
     n = len(_obj("Seats").data.vertices)
     if cfg.agent_count != n:
         raise CrowdError(f"stadium: {cfg.agent_count} agents from {n} seats")
-    return Stadium(cfg, camera_from_object(cam, size[0] / size[1]), muted)
+    return Stadium(cfg, camera_from_object(cam, size[0] / size[1]), muted,
+                   scene_geometry(scene), scene_light(scene))
 
 
 def author_stadium(blend, frames=240, size=(960, 540), progress=None) -> Stadium:

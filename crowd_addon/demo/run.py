@@ -133,7 +133,8 @@ def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
     preview = render_preview(crowd, out / "frames", frames, size=size, mp4=mp4,
                              before_step=None if recorder is None else
                              lambda crowd, frame: recorder.capture(),   # the frame shown
-                             camera=stadium.camera,
+                             camera=stadium.camera, scene=stadium.scene,
+                             light=stadium.light,
                              progress=lambda d, n: _bar(d, n, "render"))
     seconds["simulate_render"] = time.perf_counter() - t
     step_ms = crowd.stats["ms_total"] / max(crowd.stats["steps"], 1)

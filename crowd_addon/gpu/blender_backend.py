@@ -34,7 +34,8 @@ from ..core.pose_storage import TextureRegion
 from .blender_gpu import (CROWD_CAPTURE, UPLOAD_INTS, float_texture, program, read_buffer,
                           set_if_used, use_program)
 from .frame_plan import DRAW_SAMPLERS, SKIN_SAMPLERS, TextureSpec
-from .programs import CROWD_DRAW, ROW_UPLOAD, SKIN_ROWS, UPLOAD_GROUP, for_influences
+from .programs import (CROWD_DRAW, ROW_UPLOAD, SCENE_DRAW, SKIN_ROWS, UPLOAD_GROUP,
+                       for_influences)
 from .renderer import CrowdRenderer
 from .texture_region import stage_rows
 
@@ -199,6 +200,22 @@ class BlenderGPURenderer(CrowdRenderer):
         shader = program(self.gpu, for_influences(CROWD_DRAW, n), {"INFLUENCES": n})
         self._bind(shader, CROWD_DRAW, draw.uniforms, self.textures["lists"])
         mesh.triangles.draw_instanced(shader, instance_count=draw.instances)
+
+    def _create_scene(self, geometry):
+        fmt = self.gpu.types.GPUVertFormat()
+        for name in ("pos", "nor", "col"):
+            fmt.attr_add(id=name, comp_type="F32", len=3, fetch_mode="FLOAT")
+        vbo = self.gpu.types.GPUVertBuf(fmt, geometry.positions.shape[0])
+        for name, values in (("pos", geometry.positions), ("nor", geometry.normals),
+                             ("col", geometry.colors)):
+            vbo.attr_fill(name, values)
+        return self.gpu.types.GPUBatch(type="TRIS", buf=vbo)
+
+    def _draw_scene(self, scene, uniforms):
+        shader = program(self.gpu, SCENE_DRAW)
+        use_program(self.gpu, shader)
+        self._set_uniforms(shader, SCENE_DRAW, uniforms)
+        scene.draw(shader)
 
     def _capture(self, mesh, capture) -> np.ndarray:
         gpu = self.gpu

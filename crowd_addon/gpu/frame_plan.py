@@ -27,7 +27,7 @@ from .proxies import copies_per_instance, crowd_proxies
 from .skeleton_data import batch_image, fill_batch, skeleton_image
 
 __all__ = ["FramePlan", "FrameStats", "TextureSpec", "SkinningWork", "Draw", "Capture",
-           "DRAW_SAMPLERS", "SKIN_SAMPLERS"]
+           "DRAW_SAMPLERS", "SKIN_SAMPLERS", "gl_matrix"]
 
 #: Sampler of the draw program -> name of the texture it reads.
 DRAW_SAMPLERS = {"pose_tex": "pose", "agent_tex": "agents", "agent_list_tex": "lists"}
@@ -233,7 +233,7 @@ class FramePlan:
     def draws(self, view_projection, light) -> list:
         """One :class:`Draw` per (skeleton, LOD) group of the current draw lists."""
         common = {"u_pose_layout": self.pose_layout, "u_pose_regions": self.pose_regions(),
-                  "u_view_proj": _matrix(view_projection),
+                  "u_view_proj": gl_matrix(view_projection),
                   "u_light": tuple(float(v) for v in light)}
         out = []
         for g in self.lists.groups:
@@ -269,10 +269,10 @@ class FramePlan:
                        TextureRegion(0, 0, width, ids.shape[0], ids),
                        {"u_pose_layout": self.pose_layout,
                         "u_pose_regions": self.pose_regions(),
-                        "u_view_proj": _matrix(np.eye(4)),
+                        "u_view_proj": gl_matrix(np.eye(4)),
                         "u_draw": (0, int(agents.size), count, 1)})
 
 
-def _matrix(m) -> tuple:
+def gl_matrix(m) -> tuple:
     """A (4, 4) matrix as 16 floats in column-major order (GLSL ``mat4``)."""
     return tuple(float(v) for v in np.asarray(m, np.float64).T.reshape(-1))

@@ -17,7 +17,7 @@ import numpy as np
 from ..core.errors import CrowdError
 from .assembler import gl_sources
 from .frame_plan import DRAW_SAMPLERS, SKIN_SAMPLERS, TextureSpec
-from .programs import CROWD_DRAW, SKIN_ROWS, for_influences
+from .programs import CROWD_DRAW, SCENE_DRAW, SKIN_ROWS, for_influences
 from .renderer import CrowdRenderer
 
 __all__ = ["ModernGLRenderer", "GL_VERSION"]
@@ -59,12 +59,14 @@ class ModernGLRenderer(CrowdRenderer):
     size : (width, height) of the offscreen image in pixels.
     light, culling : see :class:`~.renderer.CrowdRenderer`.
     owns_context : release ``ctx`` with the renderer.
+    samples : multisample anti-aliasing of the offscreen image: samples a pixel (0 or 1:
+        none; more than the GL allows: its most), resolved by :meth:`read_image`.
     """
 
     MAX_ROW_WRITES = 1024       # a few hundred small writes cost less than whole blocks
 
     def __init__(self, view, ctx, size=(640, 360), light=(0.4, -0.6, 0.8, 0.35),
-                 culling=True, owns_context=False):
+                 culling=True, owns_context=False, samples=0):
         import moderngl
         self._mgl = moderngl
         if ctx.version_code < GL_VERSION:
@@ -73,9 +75,15 @@ class ModernGLRenderer(CrowdRenderer):
         self.ctx, self._owns_context = ctx, bool(owns_context)
         self.size = (int(size[0]), int(size[1]))
         self._programs = {}
-        self._attachments = (ctx.renderbuffer(self.size, 4), ctx.depth_renderbuffer(self.size))
+        self.samples = min(int(samples), ctx.info["GL_MAX_SAMPLES"]) if samples > 1 else 0
+        self._attachments = (ctx.renderbuffer(self.size, 4, samples=self.samples),
+                             ctx.depth_renderbuffer(self.size, samples=self.samples))
         self.fbo = ctx.framebuffer(color_attachments=[self._attachments[0]],
                                    depth_attachment=self._attachments[1])
+        self._resolved = None               # the single-sample image read_image reads
+        if self.samples:
+            self._attachments += (ctx.renderbuffer(self.size, 4),)
+            self._resolved = ctx.framebuffer(color_attachments=[self._attachments[2]])
         super().__init__(view, ctx.info["GL_MAX_TEXTURE_SIZE"], light, culling)
 
     # ------------------------------------------------------------------ contexts
@@ -192,12 +200,31 @@ class ModernGLRenderer(CrowdRenderer):
         ids.release()
         return result
 
+    def _create_scene(self, geometry):
+        prog = self._program(SCENE_DRAW, {})
+        vbo = self.ctx.buffer(geometry.interleaved().tobytes())
+        return vbo, self.ctx.vertex_array(prog, [(vbo, "3f 3f 3f", "pos", "nor", "col")])
+
+    def _draw_scene(self, scene, uniforms):
+        _set_uniforms(scene[1].program, uniforms)
+        scene[1].render(self._mgl.TRIANGLES)
+
+    def _release_scene(self):
+        if self._scene is not None:
+            for obj in reversed(self._scene):
+                obj.release()
+        self._scene = None
+
     def _read_texture(self, texture) -> np.ndarray:
         return np.frombuffer(texture.read(), np.float32)
 
     def read_image(self) -> np.ndarray:
         w, h = self.size
-        data = self.fbo.read(components=4, alignment=1)
+        fbo = self.fbo
+        if self._resolved is not None:
+            self.ctx.copy_framebuffer(self._resolved, self.fbo)
+            fbo = self._resolved
+        data = fbo.read(components=4, alignment=1)
         return np.frombuffer(data, np.uint8).reshape(h, w, 4)[::-1].copy()
 
     def finish(self):
@@ -210,7 +237,7 @@ class ModernGLRenderer(CrowdRenderer):
     def _release(self):
         """Free the GL objects, and the context when :meth:`standalone` made it (an
         attached context belongs to its owner and stays)."""
-        objects = [*self.textures.values(), self.fbo, *self._attachments,
+        objects = [*self.textures.values(), self.fbo, self._resolved, *self._attachments,
                    *self._programs.values()]
         for m in self.meshes.values():
             objects += m.objects()

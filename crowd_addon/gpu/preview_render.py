@@ -126,7 +126,8 @@ def _mp4_writer(path, size, fps):
 
 def render_preview(config, out_dir, frames: int, start: int | None = None,
                    size=(960, 540), mp4: bool = False, backend: str = "moderngl",
-                   progress=None, before_step=None, camera=None) -> PreviewResult:
+                   progress=None, before_step=None, camera=None, scene=None,
+                   light=None, samples: int = 4) -> PreviewResult:
     """Render ``frames`` frames of ``config`` (a ``CrowdConfig``) from ``start``
     (default: its start frame) into ``out_dir``; ``progress(done, total)`` is called
     after each frame. Raises ``CrowdError`` on bad input before writing anything.
@@ -134,7 +135,10 @@ def render_preview(config, out_dir, frames: int, start: int | None = None,
     ``config`` may also be a built ``Crowd`` (rendered from where it is, e.g. with GPU
     transitions); ``before_step(crowd, frame)`` is called before each step with the
     frame about to be evaluated (the simulation driving the crowd); ``camera``
-    replaces the framing camera."""
+    replaces the framing camera. ``scene``: a :class:`~.scene_geometry.SceneGeometry`
+    drawn around the crowd with the same camera, light and depth; ``light``: the
+    renderers' ``(x, y, z, ambient)`` (None: their default); ``samples``: multisample
+    anti-aliasing of the moderngl backend (0: none)."""
     w, h = (int(v) for v in size)
     crowd = config if isinstance(config, Crowd) else None
     config = crowd.config if crowd is not None else config
@@ -145,7 +149,10 @@ def render_preview(config, out_dir, frames: int, start: int | None = None,
     if start is not None:
         crowd.reset(int(start))
     seconds["simulate"] += time.perf_counter() - t0
-    renderer = make_renderer(crowd.view, backend, (w, h))
+    options = {} if light is None else {"light": light}
+    if backend == "moderngl":
+        options["samples"] = int(samples)
+    renderer = make_renderer(crowd.view, backend, (w, h), **options)
     device = renderer.device
     camera = camera or frame_crowd(crowd, aspect=w / h)
     mp4_path = out / "preview.mp4" if mp4 else None
@@ -153,6 +160,7 @@ def render_preview(config, out_dir, frames: int, start: int | None = None,
     made = _missing_folders(out)
     pngs, uploads, first, writer, done = [], [], crowd.frame, None, False
     try:
+        renderer.set_scene(scene)
         output_dir(out)
         writer = _mp4_writer(partial, (w, h), config.fps) if mp4 else None
         for i in range(int(frames)):

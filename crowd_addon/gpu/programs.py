@@ -14,7 +14,7 @@ from dataclasses import dataclass, replace
 from functools import lru_cache
 from importlib import resources
 
-__all__ = ["SHADER_DIR", "Interface", "ProgramSpec", "CROWD_DRAW", "SKIN_ROWS",
+__all__ = ["SHADER_DIR", "Interface", "ProgramSpec", "CROWD_DRAW", "SCENE_DRAW", "SKIN_ROWS",
            "ROW_UPLOAD", "AGENT_TEXELS", "SKIN_GROUP", "UPLOAD_GROUP", "WIDE_INPUTS",
            "for_influences"]
 
@@ -92,6 +92,18 @@ CROWD_DRAW = ProgramSpec(
               (2, "INT_2D", "agent_list_tex")),
     fragment_out=((0, "VEC4", "frag_color"),),
     defines=("INFLUENCES",),
+)
+
+#: The scene around the crowd (:class:`~.scene_geometry.SceneGeometry`): plain
+#: world-space triangles, lit by the crowd's own fragment stage.
+SCENE_DRAW = ProgramSpec(
+    name="scene_draw",
+    vertex=("scene_vert.glsl",),
+    fragment=CROWD_DRAW.fragment,
+    vertex_in=((0, "VEC3", "pos"), (1, "VEC3", "nor"), (2, "VEC3", "col")),
+    interfaces=CROWD_DRAW.interfaces,
+    push_constants=(("MAT4", "u_view_proj"), ("VEC4", "u_light")),
+    fragment_out=CROWD_DRAW.fragment_out,
 )
 
 #: The vertex inputs a skinning program adds for meshes of five to eight influences a

@@ -13,6 +13,8 @@ A backend (:mod:`.moderngl_backend`, :mod:`.blender_backend`) subclasses
 * ``_bind_target(target, clear)`` -- a context manager: bind and clear a draw
   target, set the draw state, yield the viewport's height in pixels, restore;
 * ``_draw(mesh, draw)`` -- one instanced call (:class:`~.frame_plan.Draw`);
+* ``_create_scene(geometry)`` / ``_draw_scene(scene, uniforms)`` -- the GPU form of
+  a :class:`~.scene_geometry.SceneGeometry` and its draw (:data:`~.programs.SCENE_DRAW`);
 * ``_capture(mesh, capture)`` -- world positions of the crowd's vertex stage
   (:class:`~.frame_plan.Capture`) as ``(n, V, 3)`` float32;
 * ``_read_texture(texture)`` -- a float texture's texels, flat float32;
@@ -28,7 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .frame_plan import FramePlan, FrameStats
+from .frame_plan import FramePlan, FrameStats, gl_matrix
 
 __all__ = ["CrowdRenderer", "BACKGROUND"]
 
@@ -57,6 +59,8 @@ class CrowdRenderer:
         ``lists``; with GPU skinning ``local`` and ``skeletons``).
     meshes : ``{(skeleton, lod): mesh}``.
     stats : :class:`~.frame_plan.FrameStats` of the last sync and render.
+    scene : the :class:`~.scene_geometry.SceneGeometry` drawn under the crowd, or None
+        (:meth:`set_scene`).
     """
 
     #: Most regions of agent rows written a frame (None: one per run of changed agents).
@@ -68,6 +72,7 @@ class CrowdRenderer:
         self.culling = bool(culling)
         self.light = tuple(float(v) for v in light)
         self.stats = FrameStats()
+        self.scene, self._scene = None, None
         self.plan = FramePlan(view, max_texture_size, max_int)
         self.textures = {s.name: self._create_texture(s)
                          for s in self.plan.take_initial_textures()}
@@ -99,16 +104,29 @@ class CrowdRenderer:
         self.stats = s
         return s
 
+    def set_scene(self, geometry) -> None:
+        """Draw ``geometry`` (a :class:`~.scene_geometry.SceneGeometry`, or None for no
+        scene) under the crowd in every later :meth:`render`: same camera, same light,
+        same depth buffer. A viewport that draws its scene itself needs none."""
+        self._release_scene()
+        if geometry is not None and geometry.triangle_count:
+            self._scene = self._create_scene(geometry)
+        self.scene = geometry
+
     def render(self, camera, target=None, clear=BACKGROUND) -> FrameStats:
         """Draw the crowd as seen by ``camera`` (anything with ``view_projection``
         (4, 4), OpenGL clip space) into ``target`` (the backend's framebuffer type;
         None: this renderer's offscreen image, or for a renderer without one the
-        framebuffer bound now). LODs follow the target's viewport height. ``clear``:
-        RGBA to clear colour and depth to first, None to draw over what is there."""
+        framebuffer bound now), over its scene when one is set (:meth:`set_scene`).
+        LODs follow the target's viewport height. ``clear``: RGBA to clear colour and
+        depth to first, None to draw over what is there (its depth hides agents)."""
         vp = np.asarray(camera.view_projection, np.float64)
         s = self.stats
         s.draws = s.instances = s.vertices = 0
         with self._bind_target(target, clear) as pixels_high:
+            if self._scene is not None:
+                self._draw_scene(self._scene, {"u_view_proj": gl_matrix(vp),
+                                               "u_light": self.light})
             for region in self.plan.regroup(vp, pixels_high, self.culling):
                 s.list_bytes += self._write_ints(self.textures["lists"], region)
             for draw in self.plan.draws(vp, self.light):
@@ -132,6 +150,7 @@ class CrowdRenderer:
 
     def release(self):
         """Free this renderer's GPU objects."""
+        self._release_scene()
         self._release()
         self.textures, self.meshes = {}, {}
 
@@ -159,6 +178,17 @@ class CrowdRenderer:
 
     def _capture(self, mesh, capture) -> np.ndarray:
         raise NotImplementedError
+
+    def _create_scene(self, geometry):
+        raise NotImplementedError
+
+    def _draw_scene(self, scene, uniforms):
+        raise NotImplementedError
+
+    def _release_scene(self):
+        """Free the scene's GPU objects (a backend whose objects free themselves with
+        their Python wrappers only drops them)."""
+        self._scene = None
 
     def _read_texture(self, texture) -> np.ndarray:
         raise NotImplementedError

@@ -61,12 +61,11 @@ def test_frames_are_not_blank_and_change(demo):
     assert len(pngs) == FRAMES
     # frame 3: before any beat; frame 19: the stand in view cheers, the wave passes it
     before, during = (read_png(p).astype(np.int16) for p in (pngs[2], pngs[18]))
-    background = np.median(before.reshape(-1, 3), 0)
-    assert (np.abs(before - background).sum(-1) > 30).mean() > 0.005   # agents are drawn
+    # the stadium lit by its sun around the crowd: many colours, not a flat fill
+    assert len(np.unique(before.reshape(-1, 3), axis=0)) > 200
+    # agents standing up with their arms raised change a good part of the image
     changed = np.abs(during - before).sum(-1) > 30
-    drawn = np.abs(before - background).sum(-1) > 30
-    # agents standing up with their arms raised change a good part of the drawn area
-    assert changed.sum() > 0.2 * drawn.sum()
+    assert changed.mean() > 0.01
     if (out / "frames" / "preview.mp4").exists():
         assert (out / "frames" / "preview.mp4").stat().st_size > 1000
 
