@@ -370,6 +370,7 @@ def _run_demo(args) -> int:
                                                               s["muted_cues"] else "")
                                for c in s["cues"]),
         f"  {s['pngs']} PNG frames" + (f", {s['mp4']}" if s['mp4'] else "")
+        + f", contact sheet {s['contact_sheet']}"
         + (f", {s['usd']} ({s['usd_bytes']:,} B)" if "usd" in s else "")]))
     return 0
 

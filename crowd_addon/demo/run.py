@@ -9,8 +9,10 @@
    camera the frames are rendered through, the scene's frame range set to the run;
 3. run the crowd built from that configuration once (it runs its show itself: no
    Python in the loop; the claps are the clap action's event tags, counted by the
-   crowd), render preview frames headless with the GPU path as it runs (PNG, and MP4
-   when imageio-ffmpeg is there) and record it (:mod:`crowd_addon.core.recording`);
+   crowd), render preview frames headless with the GPU path as it runs, in the
+   stadium's own geometry and sun (PNG, MP4 when imageio-ffmpeg is there, and
+   ``contact_sheet.png``: six frames spread over the run), and record it
+   (:mod:`crowd_addon.core.recording`);
 4. export that recording to ``stadium.usdc`` (UsdSkel): the same show, not simulated
    again;
 5. print a summary and write it as ``summary.json``.
@@ -27,7 +29,10 @@ from pathlib import Path
 
 from ..core.errors import CrowdError
 
-__all__ = ["run_demo", "show_summary", "USD_COUNTS"]
+__all__ = ["run_demo", "show_summary", "USD_COUNTS", "SHEET_FRAMES"]
+
+#: frames on the demo's contact sheet (``contact_sheet.png``), spread over the run
+SHEET_FRAMES = 6
 
 #: what the summary keeps of the USD export (``usd_export``): the counts a
 #: ``crowd export --blend`` of the saved file reports the same
@@ -123,11 +128,14 @@ def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
 
     from ..core.crowd import Crowd
     from ..core.recorder import Recorder
+    from ..gpu.contact_sheet import ContactSheet, sheet_frames
+    from ..gpu.png import write_png
     from ..gpu.preview_render import render_preview
 
     log(f"simulating and rendering {frames} frames of {cfg.agent_count:,} agents")
     t = time.perf_counter()
     crowd = Crowd(cfg, skinning="gpu")          # it runs its show (cfg.show) itself
+    sheet = ContactSheet(sheet_frames(crowd.frame, crowd.frame + frames - 1, SHEET_FRAMES))
     # the frames the preview shows, recorded as they are rendered
     recorder = Recorder(crowd, crowd.frame, crowd.frame + frames - 1) if usd else None
     preview = render_preview(crowd, out / "frames", frames, size=size, mp4=mp4,
@@ -135,7 +143,9 @@ def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
                              lambda crowd, frame: recorder.capture(),   # the frame shown
                              camera=stadium.camera, scene=stadium.scene,
                              light=stadium.light,
-                             progress=lambda d, n: _bar(d, n, "render"))
+                             progress=lambda d, n: _bar(d, n, "render"),
+                             on_image=sheet.offer)
+    write_png(out / "contact_sheet.png", sheet.image())
     seconds["simulate_render"] = time.perf_counter() - t
     step_ms = crowd.stats["ms_total"] / max(crowd.stats["steps"], 1)
     summary = {"agents": cfg.agent_count, "streams": len(cfg.streams),
@@ -144,7 +154,8 @@ def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
                "upload_bytes_per_frame": preview.upload_bytes,
                "renderer": preview.device, **show_summary(crowd),
                "muted_cues": list(stadium.muted),
-               "pngs": len(preview.pngs), "mp4": preview.mp4}
+               "pngs": len(preview.pngs), "mp4": preview.mp4,
+               "contact_sheet": str(out / "contact_sheet.png")}
 
     if usd:
         from ..usd.export import export_crowd

@@ -127,7 +127,7 @@ def _mp4_writer(path, size, fps):
 def render_preview(config, out_dir, frames: int, start: int | None = None,
                    size=(960, 540), mp4: bool = False, backend: str = "moderngl",
                    progress=None, before_step=None, camera=None, scene=None,
-                   light=None, samples: int = 4) -> PreviewResult:
+                   light=None, samples: int = 4, on_image=None) -> PreviewResult:
     """Render ``frames`` frames of ``config`` (a ``CrowdConfig``) from ``start``
     (default: its start frame) into ``out_dir``; ``progress(done, total)`` is called
     after each frame. Raises ``CrowdError`` on bad input before writing anything.
@@ -138,7 +138,8 @@ def render_preview(config, out_dir, frames: int, start: int | None = None,
     replaces the framing camera. ``scene``: a :class:`~.scene_geometry.SceneGeometry`
     drawn around the crowd with the same camera, light and depth; ``light``: the
     renderers' ``(x, y, z, ambient)`` (None: their default); ``samples``: multisample
-    anti-aliasing of the moderngl backend (0: none)."""
+    anti-aliasing of the moderngl backend (0: none); ``on_image(frame, image)`` is
+    given each frame's ``(H, W, 3)`` uint8 image (e.g. a contact sheet)."""
     w, h = (int(v) for v in size)
     crowd = config if isinstance(config, Crowd) else None
     config = crowd.config if crowd is not None else config
@@ -179,6 +180,8 @@ def render_preview(config, out_dir, frames: int, start: int | None = None,
                                       _PNG_LEVEL)))
             if writer is not None:
                 writer.send(image)
+            if on_image is not None:
+                on_image(crowd.frame, image)
             t4 = time.perf_counter()
             for k, dt in zip(("simulate", "sync", "render", "write"),
                              (t1 - t, t2 - t1, t3 - t2, t4 - t3)):

@@ -168,3 +168,20 @@ def test_preview_of_the_saved_blend_renders_the_demos_frames(demo):
     for png in result["pngs"]:
         name = Path(png).name
         assert Path(png).read_bytes() == (out / "frames" / name).read_bytes(), name
+
+
+def test_contact_sheet_holds_six_frames_of_the_run(demo):
+    from crowd_addon.gpu.contact_sheet import ContactSheet, sheet_frames
+    out, _ = demo
+    s = json.loads((out / "summary.json").read_text())
+    sheet = read_png(out / "contact_sheet.png")
+    # six 160 x 90 cells (the frames halved), three a row, 4 pixels apart
+    assert sheet.shape == (2 * 94 + 4, 3 * 164 + 4, 3)
+    shot = [int(p.stem.split("_")[1]) for p in sorted((out / "frames").glob("frame_*.png"))]
+    frames = sheet_frames(shot[0], shot[-1], 6)
+    assert len(frames) == 6 and frames[0] == shot[0] and frames[-1] == shot[-1]
+    expected = ContactSheet(frames)
+    for f in frames:
+        expected.offer(f, read_png(out / "frames" / f"frame_{f:04d}.png"))
+    assert np.array_equal(sheet, expected.image())
+    assert s["contact_sheet"] == str(out / "contact_sheet.png")
