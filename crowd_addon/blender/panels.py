@@ -101,6 +101,7 @@ class CROWD_PT_main(_Panel, bpy.types.Panel):
         row.operator("crowd.preview_toggle", text="Preview", icon="HIDE_OFF",
                      depress=pv is not None)
         layout.operator("crowd.export_usd", text="Export USD...", icon="EXPORT")
+        layout.prop(s, "render_crowd", icon="RESTRICT_RENDER_OFF")
         if pv is None:
             err = preview.last_error(scene)
             if err:
@@ -112,7 +113,11 @@ class CROWD_PT_main(_Panel, bpy.types.Panel):
                        f"{c.uniques.count} uniques, "
                        f"{len(c.config.clips)} clips")
         box.label(text=f"frame {c.frame}: step {pv.step_ms:.2f} ms, draw {pv.draw_ms:.2f} ms")
-        for text in (pv.status(), pv.draw_error):
+        if s.render_crowd and pv.render_stats is not None:
+            r = pv.render_stats
+            box.label(text=f"Render Crowd: {r.poses:,} pose meshes for {r.agents:,} agents, "
+                           f"{r.ms:.1f} ms a frame")
+        for text in (pv.status(), pv.draw_error, pv.render_error):
             if text:
                 box.label(text=text, icon="ERROR")
 

@@ -39,6 +39,7 @@ log = logging.getLogger("crowd_addon.preview")
 
 __all__ = ["Preview", "start", "stop", "stop_all", "get", "check", "last_error", "draw_scene",
            "draw_handle", "on_frame_change", "on_depsgraph_update", "on_undo",
+           "render_crowd_changed",
            "on_load_pre", "on_load_post"]
 
 
@@ -58,6 +59,9 @@ class Preview:
     renderer: object = None
     draw_error: str = ""
     script_note: str = ""          # why the scene's crowd script did not run
+    render_frame: int | None = None    # the frame the Render Crowd data shows
+    render_stats: object = None        # render_crowd.RenderStats of the last sync
+    render_error: str = ""
 
     @property
     def handle(self):
@@ -225,6 +229,41 @@ def _advance(scene, pv):
         return
     if pv.crowd.frame != before:
         pv.step_ms = (time.perf_counter() - t0) * 1e3 / abs(pv.crowd.frame - before)
+    _sync_render(scene, pv)
+
+
+def _sync_render(scene, pv, force=False):
+    """Bring the Render Crowd data to the crowd's frame when the switch is on (once a
+    frame: its own edits must not make the depsgraph handler sync again)."""
+    if not scene.crowd.render_crowd or (pv.render_frame == pv.crowd.frame and not force):
+        return
+    from . import render_crowd
+    with suspended():
+        try:
+            pv.render_stats = render_crowd.sync(scene, pv.crowd)
+            pv.render_error = ""
+        except Exception as e:  # noqa: BLE001 - a frame change never takes Blender down
+            pv.render_error = f"Render Crowd: {e}"
+    pv.render_frame = pv.crowd.frame
+
+
+def render_crowd_changed(scene) -> None:
+    """The Render Crowd switch changed: make the render data now, or remove it."""
+    from . import render_crowd
+    pv = _PREVIEWS.get(scene.name)
+    if scene.crowd.render_crowd:
+        if pv is not None:
+            _sync_render(scene, pv, force=True)
+            return
+        try:                                # the render data follows the preview's crowd
+            start(scene)
+        except CrowdError as e:
+            _ERRORS[scene.name] = f"Render Crowd needs the preview, which cannot start: {e}"
+    else:
+        with suspended():
+            render_crowd.remove(scene)
+        if pv is not None:
+            pv.render_frame, pv.render_stats, pv.render_error = None, None, ""
 
 
 @bpy.app.handlers.persistent
@@ -266,9 +305,11 @@ def on_load_pre(*_):
 
 @bpy.app.handlers.persistent
 def on_load_post(*_):
-    """Rebuild the previews the loaded file had running, or stop them with the reason."""
+    """Rebuild the previews the loaded file had running (or whose crowd renders: Render
+    Crowd follows the preview), or stop them with the reason."""
     for scene in bpy.data.scenes:
-        if getattr(scene, "crowd", None) is None or not scene.crowd.preview_enabled:
+        s = getattr(scene, "crowd", None)
+        if s is None or not (s.preview_enabled or s.render_crowd):
             continue
         try:
             start(scene)

@@ -210,6 +210,11 @@ _LOD_VIEW = ("as seen in a 1080-pixel-high view with a 40° field of view (small
              "switch sooner, zoomed-in ones later)")
 
 
+def _render_crowd_changed(settings, context):
+    from . import preview
+    preview.render_crowd_changed(settings.id_data)
+
+
 class CROWD_PG_settings(PropertyGroup):
     characters: CollectionProperty(type=CROWD_PG_character)
     active_character_index: IntProperty()
@@ -254,6 +259,11 @@ class CROWD_PG_settings(PropertyGroup):
                           description="Cues, reactions and animated parameters "
                                       "(docs/show.md)")
     active_source_index: IntProperty()
+    render_crowd: BoolProperty(
+        name="Render Crowd", default=False, update=_render_crowd_changed,
+        description="Make the previewed crowd ordinary Blender data (shared pose meshes "
+                    "instanced on a points object by Geometry Nodes) so F12, viewport "
+                    "renders and playblasts show it; updated on every frame change")
     preview_enabled: BoolProperty(
         name="Preview", default=False, options=set(),
         description="Whether the viewport preview runs (restarted after a file load)")
@@ -288,7 +298,8 @@ def _values(struct, skip):
 _UI_ONLY = {"active_character_index", "active_lod_index", "active_stream_index",
             "active_unique_index", "active_source_index", "active_node_index",
             "active_input_index", "active_transition_index", "preview_enabled",
-            "active_cue_index", "active_reaction_index", "active_parameter_index"}
+            "active_cue_index", "active_reaction_index", "active_parameter_index",
+            "render_crowd"}
 
 
 def settings_fingerprint(settings) -> int:

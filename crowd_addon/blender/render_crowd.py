@@ -1,0 +1,270 @@
+"""The crowd in Blender's own renders: the *Render Crowd* switch.
+
+F12 (Workbench, EEVEE, Cycles), viewport renders and playblasts know nothing of the
+preview's GPU drawing, so with ``scene.crowd.render_crowd`` on the crowd is also made
+of ordinary Blender data, with the paper's sharing kept:
+
+* one **pose mesh** per pose in use: a (skeleton, level of detail, pose texture row)
+  triple. Agents of a stream at the same offset read the same row, so they share one
+  mesh; an agent in a transition or playing a unique has a row of its own. Each pose
+  mesh is the level's proxy (its triangles, UVs and materials) skinned on the CPU by
+  core (:func:`crowd_addon.core.skinning.skin_vertices`) and written with one bulk
+  ``foreach_set``. The meshes hang on objects ``CrowdPose.000000 ...`` of the
+  collection :data:`POSES`, which is not linked to the scene (only instanced);
+* one **points object** (:data:`POINTS`): a vertex per agent at its position, with
+  point attributes ``crowd_pose`` (the index of its pose object), ``crowd_heading``
+  (radians about +Z) and ``crowd_color`` (its tint, readable in materials through an
+  Attribute node of type *Instancer*), and a Geometry Nodes modifier that puts the
+  picked pose object on every point (*Instance on Points* with *Pick Instance*
+  from a *Collection Info* of :data:`POSES`, whose children come in name order).
+
+:func:`sync` brings all of it to the crowd's current frame; the preview calls it
+after every step while the switch is on. The level of detail follows the scene
+camera at the render resolution with the crowd's own LOD distances, as the GPU
+preview would draw through that camera. Cost per frame: skinning the pose meshes in
+use (not the agents) and a ``foreach_set`` each, plus three point attributes.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+import bpy
+
+from ..core.errors import CrowdError
+from ..core.skinning import skin_vertices
+from ..gpu.draw_lists import lod_levels, view_distances
+
+__all__ = ["POINTS", "POSES", "NODE_GROUP", "RenderStats", "sync", "remove", "agent_lods"]
+
+POINTS = "Crowd Render"
+POSES = "Crowd Poses"
+NODE_GROUP = "Crowd Render Instances"
+_POSE_PREFIX = "CrowdPose."
+
+
+@dataclass
+class RenderStats:
+    """What the last :func:`sync` made: ``agents``, ``poses`` (pose meshes in use),
+    ``vertices`` (skinned vertices written) and ``ms`` (wall time)."""
+
+    agents: int = 0
+    poses: int = 0
+    vertices: int = 0
+    ms: float = 0.0
+
+
+def agent_lods(crowd, scene) -> np.ndarray:
+    """``(N,)`` level of detail of each agent seen through ``scene``'s camera at its
+    render resolution (every agent's finest level when the scene has no camera)."""
+    from .cameras import camera_from_object
+    from .cli_commands import scene_size
+
+    levels = np.array([len(crowd.config.meshes.get(s.name, ())) for s in crowd.view.skeletons])
+    skel = crowd.view.agent_skeleton
+    if scene.camera is None or scene.camera.type != "CAMERA":
+        return np.zeros(crowd.agents.count, np.int64)
+    w, h = scene_size(scene)
+    camera = camera_from_object(scene.camera, w / h)
+    d = view_distances(crowd.agents.position, camera.view_projection, h)
+    return lod_levels(d, crowd.config.lod_distances, levels[skel]).astype(np.int64)
+
+
+def _node_group():
+    """The Geometry Nodes group: Instance on Points picking ``crowd_pose`` from the
+    pose collection, turned by ``crowd_heading``."""
+    group = bpy.data.node_groups.get(NODE_GROUP)
+    if group is not None:
+        return group
+    group = bpy.data.node_groups.new(NODE_GROUP, "GeometryNodeTree")
+    group.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    group.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    nodes, links = group.nodes, group.links
+    inp, out = nodes.new("NodeGroupInput"), nodes.new("NodeGroupOutput")
+    coll = nodes.new("GeometryNodeCollectionInfo")
+    coll.inputs["Collection"].default_value = _poses_collection()
+    coll.inputs["Separate Children"].default_value = True
+    coll.inputs["Reset Children"].default_value = True
+    coll.transform_space = "ORIGINAL"
+    pose = nodes.new("GeometryNodeInputNamedAttribute")
+    pose.data_type = "INT"
+    pose.inputs["Name"].default_value = "crowd_pose"
+    heading = nodes.new("GeometryNodeInputNamedAttribute")
+    heading.data_type = "FLOAT"
+    heading.inputs["Name"].default_value = "crowd_heading"
+    euler = nodes.new("ShaderNodeCombineXYZ")
+    inst = nodes.new("GeometryNodeInstanceOnPoints")
+    inst.inputs["Pick Instance"].default_value = True
+    links.new(inp.outputs[0], inst.inputs["Points"])
+    links.new(coll.outputs[0], inst.inputs["Instance"])
+    links.new(pose.outputs["Attribute"], inst.inputs["Instance Index"])
+    links.new(heading.outputs["Attribute"], euler.inputs["Z"])
+    links.new(euler.outputs[0], inst.inputs["Rotation"])
+    links.new(inst.outputs[0], out.inputs[0])
+    return group
+
+
+def _poses_collection():
+    coll = bpy.data.collections.get(POSES)
+    return coll if coll is not None else bpy.data.collections.new(POSES)
+
+
+def _points_object(scene, count: int):
+    """The points object with ``count`` vertices and its modifier, linked to ``scene``."""
+    obj = bpy.data.objects.get(POINTS)
+    if obj is None:
+        obj = bpy.data.objects.new(POINTS, bpy.data.meshes.new(POINTS))
+    if obj.type != "MESH":
+        raise CrowdError(f"object {POINTS!r} exists and is not a mesh; rename it to use "
+                         "Render Crowd")
+    if obj.name not in scene.collection.objects:
+        scene.collection.objects.link(obj)
+    mesh = obj.data
+    if len(mesh.vertices) != count:
+        mesh.clear_geometry()
+        mesh.vertices.add(count)
+    for name, kind, domain in (("crowd_pose", "INT", "POINT"),
+                               ("crowd_heading", "FLOAT", "POINT"),
+                               ("crowd_color", "FLOAT_COLOR", "POINT")):
+        if mesh.attributes.get(name) is None:
+            mesh.attributes.new(name, kind, domain)
+    mod = obj.modifiers.get("Crowd Instances")
+    if mod is None:
+        mod = obj.modifiers.new("Crowd Instances", "NODES")
+    if mod.node_group is None:
+        mod.node_group = _node_group()
+    return obj
+
+
+def _mesh_for(proxy, name: str):
+    """A new Blender mesh of ``proxy`` (a core ``ProxyMesh``) in its bind pose: its
+    triangles, its UVs and the materials its looks name (when they exist)."""
+    mesh = bpy.data.meshes.new(name)
+    v, t = proxy.vertex_count, proxy.triangles.shape[0]
+    mesh.vertices.add(v)
+    mesh.vertices.foreach_set("co", np.ascontiguousarray(proxy.positions, np.float32).ravel())
+    mesh.loops.add(3 * t)
+    mesh.loops.foreach_set("vertex_index", proxy.triangles.astype(np.int32).ravel())
+    mesh.polygons.add(t)
+    mesh.polygons.foreach_set("loop_start", np.arange(0, 3 * t, 3, dtype=np.int32))
+    mesh.polygons.foreach_set("loop_total", np.full(t, 3, np.int32))
+    for look in proxy.looks:
+        mesh.materials.append(bpy.data.materials.get(look.name))
+    if proxy.material is not None and proxy.looks:
+        mesh.polygons.foreach_set("material_index", proxy.material.astype(np.int32))
+    if proxy.uvs is not None:
+        layer = mesh.uv_layers.new(name="UVMap")
+        layer.data.foreach_set("uv", np.ascontiguousarray(proxy.uvs, np.float32).ravel())
+    mesh.update()
+    mesh.validate()
+    return mesh
+
+
+def _pose_meshes(proxy, skel: int, lod: int, count: int) -> list:
+    """``count`` pose meshes of one (skeleton, LOD) topology, reused frame to frame
+    (found by name, so they survive undo and file loads)."""
+    out = []
+    for i in range(count):
+        name = f"CrowdPoseMesh.{skel}.{lod}.{i:06d}"
+        mesh = bpy.data.meshes.get(name)
+        if mesh is None or len(mesh.vertices) != proxy.vertex_count:
+            if mesh is not None:
+                bpy.data.meshes.remove(mesh)
+            mesh = _mesh_for(proxy, name)
+        out.append(mesh)
+    return out
+
+
+def _pose_object(j: int, mesh, coll):
+    """Pose object ``j`` showing ``mesh``, in ``coll``."""
+    name = f"{_POSE_PREFIX}{j:06d}"
+    obj = bpy.data.objects.get(name)
+    if obj is not None and obj.type != "MESH":
+        bpy.data.objects.remove(obj)
+        obj = None
+    if obj is None:
+        obj = bpy.data.objects.new(name, mesh)
+    elif obj.data is not mesh:
+        obj.data = mesh
+    if coll.objects.get(name) is None:
+        coll.objects.link(obj)
+    return obj
+
+
+def sync(scene, crowd) -> RenderStats:
+    """Make the render data (see the module docstring) show ``crowd`` at its current
+    frame; returns :class:`RenderStats`."""
+    t0 = time.perf_counter()
+    n = crowd.agents.count
+    skel = np.asarray(crowd.view.agent_skeleton, np.int64)
+    lod = agent_lods(crowd, scene)
+    rows = np.asarray(crowd.view.agent_rows_index(), np.int64)
+    skeletons = crowd.view.skeletons
+    drawn = np.array([bool(crowd.config.meshes.get(s.name)) for s in skeletons])[skel] \
+        if n else np.zeros(0, bool)
+    key = (rows * len(skeletons) + skel) * 16 + lod
+    keys, first, pose_of_agent = np.unique(np.where(drawn, key, -1), return_index=True,
+                                           return_inverse=True)
+    real = keys >= 0
+    stats = RenderStats(agents=int(drawn.sum()))
+    # pose objects 0..P-1 in key order; an agent without a mesh points past them all
+    poses = int(real.sum())
+    offset = int((~real).sum())                 # the -1 key sorts first
+    pose_index = np.where(drawn, pose_of_agent.reshape(-1) - offset, poses).astype(np.int32)
+    coll = _poses_collection()
+    for k in np.unique(skel[drawn]):
+        levels = crowd.config.meshes[skeletons[k].name]
+        for level in np.unique(lod[drawn & (skel == k)]):
+            sel = np.flatnonzero(real & (((keys // 16) % len(skeletons)) == k)
+                                 & ((keys % 16) == level))
+            agents = first[sel]
+            proxy = levels[int(level)]
+            verts = skin_vertices(proxy.positions, proxy.bone_indices, proxy.bone_weights,
+                                  crowd.view.agent_rows(agents)).astype(np.float32)
+            meshes = _pose_meshes(proxy, int(k), int(level), agents.size)
+            for j, mesh, co in zip(sel - offset, meshes, verts):
+                mesh.vertices.foreach_set("co", co.ravel())
+                mesh.update()
+                _pose_object(int(j), mesh, coll)
+            stats.vertices += verts.shape[0] * verts.shape[1]
+    last = f"{_POSE_PREFIX}{poses:06d}"
+    for obj in [o for o in coll.objects if o.name >= last]:     # poses no longer in use
+        coll.objects.unlink(obj)
+    points = _points_object(scene, n)
+    me = points.data
+    me.vertices.foreach_set("co", np.ascontiguousarray(crowd.agents.position, np.float32)
+                            .ravel())
+    me.attributes["crowd_pose"].data.foreach_set("value", pose_index)
+    me.attributes["crowd_heading"].data.foreach_set(
+        "value", np.ascontiguousarray(crowd.agents.heading, np.float32))
+    color = np.ones((n, 4), np.float32)
+    color[:, :3] = crowd.agents.color
+    me.attributes["crowd_color"].data.foreach_set("color", color.ravel())
+    me.update()
+    stats.poses = poses
+    stats.ms = (time.perf_counter() - t0) * 1e3
+    return stats
+
+
+def remove(scene) -> None:
+    """Take the render data away: the points object, the pose objects and meshes, the
+    collection and the node group."""
+    obj = bpy.data.objects.get(POINTS)
+    if obj is not None:
+        mesh = obj.data
+        bpy.data.objects.remove(obj)
+        if mesh is not None and mesh.users == 0:
+            bpy.data.meshes.remove(mesh)
+    coll = bpy.data.collections.get(POSES)
+    if coll is not None:
+        for o in list(coll.objects):
+            bpy.data.objects.remove(o)
+        bpy.data.collections.remove(coll)
+    for mesh in [m for m in bpy.data.meshes if m.name.startswith("CrowdPoseMesh.")]:
+        bpy.data.meshes.remove(mesh)
+    group = bpy.data.node_groups.get(NODE_GROUP)
+    if group is not None:
+        bpy.data.node_groups.remove(group)

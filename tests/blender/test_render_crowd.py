@@ -1,0 +1,216 @@
+"""Render Crowd: the previewed crowd as Blender data that Blender's own renders show.
+
+Oracles: core's CPU skinning of every agent (``skin_vertices`` on the crowd's own rows,
+turned and placed) against the instances Blender's depsgraph evaluates from the
+Geometry Nodes points object; the preview's own drawing (the ``gpu``-module renderer
+through the scene camera) against a Workbench F12 render of the same frame, still and
+in an animation render.
+"""
+
+import os
+import sys
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+sys.path.insert(0, os.path.dirname(__file__))
+import crowd_scene as cs  # noqa: E402
+
+from crowd_addon.blender import preview, render_crowd  # noqa: E402
+from crowd_addon.blender.cameras import camera_from_object  # noqa: E402
+from crowd_addon.core import Crowd  # noqa: E402
+from crowd_addon.core.skinning import skin_vertices  # noqa: E402
+from crowd_addon.gpu.backends import make_renderer  # noqa: E402
+
+SIZE = (160, 120)
+
+
+@pytest.fixture(scope="module", autouse=True)
+def extension():
+    with cs.registered():
+        yield
+        preview.stop_all()
+
+
+@pytest.fixture
+def crowd_scene():
+    """Six by five agents of one walking stream (M = 8: eight shared poses), a camera
+    over them, the templates hidden from renders, Render Crowd on at frame 9."""
+    preview.stop_all()
+    scene = cs.reset()
+    rig = cs.make_armature()
+    walk = cs.make_action(rig, "walk", seed=1, amplitude=1.0)
+    s = scene.crowd
+    s.max_offset, s.seed = 8, 3
+    body = cs.make_proxy(rig)
+    cs.add_stream(cs.add_character(s, rig, body), "walk", walk)
+    src = s.agent_sources.add()
+    src.name, src.object = "seats", cs.make_seats(6, 5, spacing=1.5)
+    src.heading_mode, src.heading = "FIXED", 0.4
+    s.lod_near, s.lod_far, s.lod_card = 500.0, 600.0, 700.0
+    for obj in (rig, body):
+        obj.hide_render = True
+    cam = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
+    cam.location = (3.75, -8.0, 6.0)
+    cam.rotation_euler = (np.radians(55), 0.0, 0.0)
+    scene.collection.objects.link(cam)
+    scene.camera = cam
+    r = scene.render
+    r.resolution_x, r.resolution_y, r.resolution_percentage = *SIZE, 100
+    assert bpy.ops.crowd.bake() == {"FINISHED"}
+    scene.frame_set(9)
+    s.render_crowd = True
+    pv = preview.get(scene)
+    assert pv.render_error == "" and pv.render_frame == 9
+    return scene, pv
+
+
+def _instances(scene):
+    """{agent: world vertices (V, 3)} of the evaluated Render Crowd instances."""
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    out = {}
+    for inst in depsgraph.object_instances:
+        if inst.is_instance and inst.parent is not None and \
+                inst.parent.original.name == render_crowd.POINTS:
+            mesh = inst.object.data
+            co = np.empty(3 * len(mesh.vertices), np.float32)
+            mesh.vertices.foreach_get("co", co)
+            m = np.array(inst.matrix_world, np.float64)
+            out[inst.persistent_id[0]] = co.reshape(-1, 3) @ m[:3, :3].T + m[:3, 3]
+    return out
+
+
+def _core_world(crowd):
+    """Every agent's proxy skinned by core on the CPU, turned and placed: (N, V, 3)."""
+    mesh = crowd.config.meshes["Rig"][0]
+    local = skin_vertices(mesh.positions, mesh.bone_indices, mesh.bone_weights,
+                          crowd.agent_rows())
+    h = crowd.agents.heading.astype(np.float64)[:, None]
+    c, s = np.cos(h), np.sin(h)
+    x, y = local[..., 0], local[..., 1]
+    return np.stack([c * x - s * y, s * x + c * y, local[..., 2]], -1) + \
+        crowd.agents.position.astype(np.float64)[:, None]
+
+
+def _check_instances(scene, crowd):
+    got = _instances(scene)
+    assert sorted(got) == list(range(crowd.agents.count))
+    expected = _core_world(crowd)
+    err = max(float(np.abs(got[i] - expected[i]).max()) for i in got)
+    assert err < 1e-5, f"instances differ from core's skinning by {err:.3g} m"
+
+
+def test_instances_are_cores_skinning_with_one_mesh_per_shared_pose(crowd_scene):
+    scene, pv = crowd_scene
+    _check_instances(scene, pv.crowd)
+    rows = pv.crowd.view.agent_rows_index()
+    assert pv.render_stats.poses == len(np.unique(rows)) == 8       # shared, not 30
+    assert len(bpy.data.collections[render_crowd.POSES].objects) == 8
+    scene.frame_set(10)                                             # follows the frame
+    assert pv.render_frame == 10
+    _check_instances(scene, pv.crowd)
+    # an agent in a transition has a pose of its own
+    pv.crowd.transition_to_streamed([4], "walk", 6, offset=3)
+    scene.frame_set(11)
+    assert pv.render_stats.poses == len(np.unique(pv.crowd.view.agent_rows_index())) == 9
+    _check_instances(scene, pv.crowd)
+
+
+def test_switching_off_removes_the_render_data(crowd_scene):
+    scene, pv = crowd_scene
+    scene.crowd.render_crowd = False
+    assert bpy.data.objects.get(render_crowd.POINTS) is None
+    assert bpy.data.collections.get(render_crowd.POSES) is None
+    assert not [m for m in bpy.data.meshes if m.name.startswith("CrowdPoseMesh.")]
+    assert not [o for o in bpy.data.objects if o.name.startswith("CrowdPose.")]
+    scene.crowd.render_crowd = True                       # and back, at once
+    _check_instances(scene, pv.crowd)
+
+
+def _preview_alpha(scene, crowd, frame=None):
+    """Coverage of the preview's own drawing of ``crowd``'s state at ``frame`` (default:
+    its own; drawn from a crowd of its own) through the scene camera, rows top-down."""
+    cs.init_gpu()
+    twin = Crowd(crowd.config, skinning="gpu")
+    twin.reset(crowd.frame if frame is None else frame)
+    r = make_renderer(twin.view, "blender", SIZE)
+    try:
+        r.sync()
+        r.render(camera_from_object(scene.camera, SIZE[0] / SIZE[1]),
+                 clear=(0.0, 0.0, 0.0, 0.0))
+        return r.read_image()[..., 3] > 0
+    finally:
+        r.release()
+
+
+def _load_alpha(path):
+    img = bpy.data.images.load(str(path))
+    try:
+        px = np.empty(SIZE[0] * SIZE[1] * 4, np.float32)
+        img.pixels.foreach_get(px)
+    finally:
+        bpy.data.images.remove(img)
+    return px.reshape(SIZE[1], SIZE[0], 4)[::-1, :, 3] > 0.5       # rows top-down
+
+
+def _workbench(scene, path, animation=False):
+    r = scene.render
+    r.engine, r.film_transparent = "BLENDER_WORKBENCH", True
+    r.image_settings.file_format, r.image_settings.color_mode = "PNG", "RGBA"
+    r.filepath = str(path)
+    bpy.ops.render.render(write_still=not animation, animation=animation)
+
+
+def _overlap(a, b):
+    return (a & b).sum() / max((a | b).sum(), 1)
+
+
+def test_f12_shows_the_crowd_where_the_preview_draws_it(crowd_scene, tmp_path):
+    scene, pv = crowd_scene
+    _workbench(scene, tmp_path / "still.png")
+    rendered = _load_alpha(tmp_path / "still.png")
+    drawn = _preview_alpha(scene, pv.crowd)
+    assert drawn.sum() > 300
+    assert _overlap(rendered, drawn) > 0.9, _overlap(rendered, drawn)
+
+
+def test_an_animation_render_follows_the_crowd_frame_by_frame(crowd_scene, tmp_path):
+    scene, pv = crowd_scene
+    scene.frame_start, scene.frame_end = 12, 13
+    _workbench(scene, tmp_path / "anim_", animation=True)
+    assert pv.crowd.frame == scene.frame_current == 9     # the render puts the frame back
+    for frame in (12, 13):
+        img = _load_alpha(tmp_path / f"anim_{frame:04d}.png")
+        assert _overlap(img, _preview_alpha(scene, pv.crowd, frame)) > 0.9, frame
+    first, last = (_load_alpha(tmp_path / f"anim_{f:04d}.png") for f in (12, 13))
+    assert (first != last).sum() > 20                    # the render moved with the crowd
+    _check_instances(scene, pv.crowd)
+
+
+
+def test_a_saved_file_renders_its_crowd_after_loading(crowd_scene, tmp_path):
+    """What a command-line render (``blender -b shot.blend -a``) relies on: the file
+    comes back with its crowd following the frame."""
+    scene, _ = crowd_scene
+    path = str(tmp_path / "shot.blend")
+    scene.crowd.preview_enabled = False          # only the render switch is saved on
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    preview.stop_all()
+    bpy.ops.wm.open_mainfile(filepath=path)
+    scene = bpy.context.scene
+    pv = preview.get(scene)
+    assert pv is not None and scene.crowd.render_crowd
+    scene.frame_set(12)
+    assert pv.render_frame == 12
+    _check_instances(scene, pv.crowd)
+
+
+def test_switching_on_without_a_preview_starts_it(crowd_scene):
+    scene, _ = crowd_scene
+    scene.crowd.render_crowd = False
+    preview.stop(scene)
+    scene.crowd.render_crowd = True
+    pv = preview.get(scene)
+    assert pv is not None and pv.render_frame == scene.frame_current
+    _check_instances(scene, pv.crowd)
