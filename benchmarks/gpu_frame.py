@@ -25,6 +25,10 @@ that deep in a 540-pixel image); LODs off: the full mesh for every agent. Prints
 * the scene pass: 65,000 agents with LODs drawn alone and inside a stadium-like scene
   (a ground plane and 24 terraces around the crowd, ~9k triangles, more than the
   demo's 5,436), interleaved; the extra time over the crowd alone (target <= 25%);
+* with the ``bpy`` module, the Render Crowd path (``crowd_addon.blender.render_crowd``:
+  pose meshes skinned on the CPU and written into Blender meshes for F12) at 2,000 and
+  65,000 agents through the camera above: the first sync (meshes made) and the
+  median of the next frames, with the pose meshes in use;
 
 then one line of JSON with the figures.
 
@@ -317,6 +321,51 @@ def scene_cost(backend, size, rounds, rng) -> dict:
     return res
 
 
+def render_crowd_cost(agents, size, rng, count=3) -> dict | None:
+    """ms of ``render_crowd.sync`` for the crowd of :func:`build` (LODs on) seen by
+    :func:`frame_crowd`'s camera as the scene camera; None without ``bpy``."""
+    try:
+        import bpy
+        from mathutils import Vector
+    except ImportError:
+        return None
+    from crowd_addon.blender import render_crowd
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    crowd = build(agents, True)
+    view = frame_crowd(crowd, aspect=size[0] / size[1])
+    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    cam.data.sensor_fit = "VERTICAL"
+    cam.data.lens = cam.data.sensor_height / 2 / np.tan(view.fov_y / 2)
+    cam.data.clip_start, cam.data.clip_end = view.near, view.far
+    cam.location = Vector(view.eye)
+    cam.rotation_euler = (Vector(view.target) - Vector(view.eye)).to_track_quat(
+        "-Z", "Y").to_euler()
+    scene.collection.objects.link(cam)
+    scene.camera = cam
+    scene.render.resolution_x, scene.render.resolution_y = size
+    scene.render.resolution_percentage = 100
+    bpy.context.view_layer.update()
+    try:
+        for _ in range(40):                               # fill the slots
+            request(crowd, rng)
+            crowd.step()
+        t = time.perf_counter()
+        first = render_crowd.sync(scene, crowd)
+        first_ms = (time.perf_counter() - t) * 1e3
+        times = []
+        for _ in range(count):
+            request(crowd, rng)
+            crowd.step()
+            t = time.perf_counter()
+            stats = render_crowd.sync(scene, crowd)
+            times.append((time.perf_counter() - t) * 1e3)
+    finally:
+        render_crowd.remove(scene)
+    return {"first_ms": first_ms, "ms": statistics.median(times), "poses": stats.poses,
+            "first_poses": first.poses, "vertices": stats.vertices}
+
+
 # ------------------------------------------------------------------------- main
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -356,6 +405,16 @@ def main(argv=None):
           f"{sc['scene_ms']:.1f} ms inside a {sc['triangles']:,}-triangle stadium: "
           f"{sc['overhead']:+.1%} ({'met' if sc['overhead'] <= 0.25 else 'NOT met'}, "
           f"target <= +25%)", flush=True)
+    rc = {}
+    for agents in (2_000, 65_000):
+        res = render_crowd_cost(agents, size, rng, 2 if args.quick else 3)
+        if res is None:
+            print("  Render Crowd: needs the bpy module, not measured")
+            break
+        rc[agents] = res
+        print(f"  Render Crowd at {agents:,} agents: {res['ms']:,.0f} ms a frame for "
+              f"{res['poses']:,} pose meshes ({res['vertices']:,} skinned vertices); first "
+              f"frame {res['first_ms']:,.0f} ms (meshes made)", flush=True)
     print(json.dumps({
         "backend": backend, "device": device, "size": list(size),
         "prototype_vertices_per_s": proto, "draw_only_vertices_per_s": raw,
@@ -369,7 +428,8 @@ def main(argv=None):
         "bytes_ratio": round(ratio, 4), "fps_65k_lod": round(fps, 2),
         "fps_65k_lod_with_step": round(fps_all, 2), "fps_target_met": fps >= 10,
         "scene_pass_ms_65k": round(sc["scene_ms"], 2),
-        "scene_pass_overhead": round(sc["overhead"], 4)}))
+        "scene_pass_overhead": round(sc["overhead"], 4),
+        "render_crowd_ms": {str(a): round(v["ms"], 1) for a, v in rc.items()} or None}))
 
 
 if __name__ == "__main__":

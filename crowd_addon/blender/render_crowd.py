@@ -44,6 +44,7 @@ POINTS = "Crowd Render"
 POSES = "Crowd Poses"
 NODE_GROUP = "Crowd Render Instances"
 _POSE_PREFIX = "CrowdPose."
+_MESH_PREFIX = "CrowdPoseMesh."
 
 
 @dataclass
@@ -163,35 +164,45 @@ def _mesh_for(proxy, name: str):
     return mesh
 
 
-def _pose_meshes(proxy, skel: int, lod: int, count: int) -> list:
-    """``count`` pose meshes of one (skeleton, LOD) topology, reused frame to frame
-    (found by name, so they survive undo and file loads)."""
-    out = []
-    for i in range(count):
-        name = f"CrowdPoseMesh.{skel}.{lod}.{i:06d}"
-        mesh = bpy.data.meshes.get(name)
-        if mesh is None or len(mesh.vertices) != proxy.vertex_count:
-            if mesh is not None:
-                bpy.data.meshes.remove(mesh)
-            mesh = _mesh_for(proxy, name)
-        out.append(mesh)
-    return out
+class _Existing:
+    """The pose meshes, pose objects and collection members there are now, by name,
+    read in one pass each (a lookup by name in ``bpy.data`` walks the list: thousands
+    of them a frame cost more than the skinning)."""
 
+    def __init__(self, coll):
+        self.coll = coll
+        self.meshes = {m.name: m for m in bpy.data.meshes if m.name.startswith(_MESH_PREFIX)}
+        self.objects = {o.name: o for o in bpy.data.objects if o.name.startswith(_POSE_PREFIX)}
+        self.linked = set(coll.objects.keys())
 
-def _pose_object(j: int, mesh, coll):
-    """Pose object ``j`` showing ``mesh``, in ``coll``."""
-    name = f"{_POSE_PREFIX}{j:06d}"
-    obj = bpy.data.objects.get(name)
-    if obj is not None and obj.type != "MESH":
-        bpy.data.objects.remove(obj)
-        obj = None
-    if obj is None:
-        obj = bpy.data.objects.new(name, mesh)
-    elif obj.data is not mesh:
-        obj.data = mesh
-    if coll.objects.get(name) is None:
-        coll.objects.link(obj)
-    return obj
+    def meshes_for(self, proxy, skel: int, lod: int, count: int) -> list:
+        """``count`` pose meshes of one (skeleton, LOD) topology, reused frame to frame."""
+        out = []
+        for i in range(count):
+            name = f"{_MESH_PREFIX}{skel}.{lod}.{i:06d}"
+            mesh = self.meshes.get(name)
+            if mesh is None or len(mesh.vertices) != proxy.vertex_count:
+                if mesh is not None:
+                    bpy.data.meshes.remove(mesh)
+                mesh = self.meshes[name] = _mesh_for(proxy, name)
+            out.append(mesh)
+        return out
+
+    def show(self, j: int, mesh) -> None:
+        """Pose object ``j`` shows ``mesh`` and is in the pose collection."""
+        name = f"{_POSE_PREFIX}{j:06d}"
+        obj = self.objects.get(name)
+        if obj is not None and obj.type != "MESH":
+            bpy.data.objects.remove(obj)
+            self.linked.discard(name)
+            obj = None
+        if obj is None:
+            obj = self.objects[name] = bpy.data.objects.new(name, mesh)
+        elif obj.data != mesh:
+            obj.data = mesh
+        if name not in self.linked:
+            self.coll.objects.link(obj)
+            self.linked.add(name)
 
 
 def sync(scene, crowd) -> RenderStats:
@@ -215,6 +226,7 @@ def sync(scene, crowd) -> RenderStats:
     offset = int((~real).sum())                 # the -1 key sorts first
     pose_index = np.where(drawn, pose_of_agent.reshape(-1) - offset, poses).astype(np.int32)
     coll = _poses_collection()
+    existing = _Existing(coll)
     for k in np.unique(skel[drawn]):
         levels = crowd.config.meshes[skeletons[k].name]
         for level in np.unique(lod[drawn & (skel == k)]):
@@ -224,15 +236,16 @@ def sync(scene, crowd) -> RenderStats:
             proxy = levels[int(level)]
             verts = skin_vertices(proxy.positions, proxy.bone_indices, proxy.bone_weights,
                                   crowd.view.agent_rows(agents)).astype(np.float32)
-            meshes = _pose_meshes(proxy, int(k), int(level), agents.size)
+            meshes = existing.meshes_for(proxy, int(k), int(level), agents.size)
             for j, mesh, co in zip(sel - offset, meshes, verts):
                 mesh.vertices.foreach_set("co", co.ravel())
                 mesh.update()
-                _pose_object(int(j), mesh, coll)
+                existing.show(int(j), mesh)
             stats.vertices += verts.shape[0] * verts.shape[1]
     last = f"{_POSE_PREFIX}{poses:06d}"
-    for obj in [o for o in coll.objects if o.name >= last]:     # poses no longer in use
-        coll.objects.unlink(obj)
+    for name in [n for n in existing.linked if n >= last]:      # poses no longer in use
+        coll.objects.unlink(existing.objects[name] if name in existing.objects
+                            else coll.objects[name])
     points = _points_object(scene, n)
     me = points.data
     me.vertices.foreach_set("co", np.ascontiguousarray(crowd.agents.position, np.float32)
@@ -251,20 +264,15 @@ def sync(scene, crowd) -> RenderStats:
 
 def remove(scene) -> None:
     """Take the render data away: the points object, the pose objects and meshes, the
-    collection and the node group."""
-    obj = bpy.data.objects.get(POINTS)
-    if obj is not None:
-        mesh = obj.data
-        bpy.data.objects.remove(obj)
-        if mesh is not None and mesh.users == 0:
-            bpy.data.meshes.remove(mesh)
-    coll = bpy.data.collections.get(POSES)
-    if coll is not None:
-        for o in list(coll.objects):
-            bpy.data.objects.remove(o)
-        bpy.data.collections.remove(coll)
-    for mesh in [m for m in bpy.data.meshes if m.name.startswith("CrowdPoseMesh.")]:
-        bpy.data.meshes.remove(mesh)
-    group = bpy.data.node_groups.get(NODE_GROUP)
-    if group is not None:
-        bpy.data.node_groups.remove(group)
+    collection and the node group (one batch: removing thousands of IDs one by one
+    walks Blender's lists each time)."""
+    ids = [o for o in bpy.data.objects if o.name == POINTS or o.name.startswith(_POSE_PREFIX)]
+    points = bpy.data.objects.get(POINTS)
+    if points is not None and points.type == "MESH":
+        ids.append(points.data)
+    ids += [m for m in bpy.data.meshes if m.name.startswith(_MESH_PREFIX)]
+    for name, data in ((POSES, bpy.data.collections), (NODE_GROUP, bpy.data.node_groups)):
+        if data.get(name) is not None:
+            ids.append(data[name])
+    if ids:
+        bpy.data.batch_remove(ids)
