@@ -51,8 +51,8 @@ DEFAULT_SEATS = 2000
 PAPER_SEATS = 65000
 FPS = 30
 
-_COLOURS = {"concrete": (0.55, 0.55, 0.52, 1.0), "home": (0.70, 0.08, 0.08, 1.0),
-            "away": (0.08, 0.22, 0.70, 1.0), "pitch": (0.12, 0.45, 0.12, 1.0),
+_COLOURS = {"concrete": (0.55, 0.55, 0.52, 1.0), "home": (0.30, 0.09, 0.09, 1.0),
+            "away": (0.08, 0.13, 0.32, 1.0), "pitch": (0.12, 0.45, 0.12, 1.0),
             "apron": (0.09, 0.30, 0.10, 1.0)}
 
 
@@ -209,7 +209,7 @@ def build_stadium(path, seats=DEFAULT_SEATS, bvh=mocap.BVH_PATH, log=print):
     say(f"laying out {seats} seats")
     seat_layout = layout.layout_seats(bowl, int(seats))
     stadium = _collection(scene, "Stadium")
-    stand_rows = max(seat_layout.rows, bowl.min_rows)
+    stand_rows = seat_layout.rows + 1       # a full stand: its seated rows and one behind
     say(f"building stands: {seat_layout.rows} seated rows of {stand_rows}")
     stands = _build_stands(bowl, stand_rows, stadium)
     _build_pitch(bowl, stadium)

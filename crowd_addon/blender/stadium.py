@@ -74,7 +74,12 @@ WAVE_START_ANGLE = -math.pi / 2 - 0.4
 #: cue names (the demo's summary reads their stats)
 CUES = {"goal_home": "goal home", "goal_away": "goal away", "wave": "wave", "hit": "hit"}
 CAMERA = "StandCamera"
-CAMERA_SPAN, CAMERA_FOV = 16.0, math.radians(50.0)   # metres of seats in view, vertical
+#: where the camera stands, in metres from the middle of the home stand's front row:
+#: out over the pitch, along the stand, up; and how far along the stand it looks. The
+#: stand's depth and height are added on (see add_stand_camera), so a 65,000-seat
+#: stand is seen whole from further away.
+CAMERA_OUT, CAMERA_SIDE, CAMERA_UP, CAMERA_LOOK = 14.0, 26.0, 6.0, 8.0
+CAMERA_FOV = math.radians(40.0)                  # vertical
 
 
 @dataclass
@@ -272,19 +277,27 @@ def setup_show(scene, frames: int):
 
 
 def add_stand_camera(scene, size=(960, 540)):
-    """Add (or move) the "StandCamera": on the pitch looking up at the home stand where
-    the wave passes first, close enough that ``CAMERA_SPAN`` metres of seats fill the
-    frame height; it becomes the scene camera, and the render size ``size``."""
+    """Add (or move) the "StandCamera": out over the pitch in front of the home stand
+    where the wave passes first, off to one side and looking along it, so the stand
+    recedes into the distance with its rows of fans and the bowl behind (``CAMERA_*``
+    plus the stand's depth and height); it becomes the scene camera, and the render
+    size ``size``."""
     from mathutils import Vector
 
     _, pos, section = _seats()
     pos = pos.astype(np.float64)
     stand = _camera_stand(pos, section)
     pick = pos[stand] if stand.any() else pos
-    target = pick.mean(0) + np.array([0.0, 0.0, 0.9])
-    inward = -target[:2] / max(np.linalg.norm(target[:2]), 1e-6)   # to the pitch centre
-    dist = CAMERA_SPAN / 2 / math.tan(CAMERA_FOV / 2)
-    eye = target + np.r_[inward * dist, 0.35 * dist]
+    centre = pick.mean(0)
+    reach = max(float(np.linalg.norm(centre[:2])), 1.0)        # stand to pitch centre
+    inward = -centre[:2] / reach
+    along = np.array([-inward[1], inward[0]])
+    dist = pick[:, :2] @ -inward                                # out from the pitch
+    front = pick[dist <= dist.min() + 0.5].mean(0)              # the front row's middle
+    depth, height = float(np.ptp(dist)), float(np.ptp(pick[:, 2]))
+    eye = front + np.r_[inward * (CAMERA_OUT + 0.5 * depth) + along * (CAMERA_SIDE + depth),
+                        CAMERA_UP + 0.6 * height]
+    target = front + np.r_[along * CAMERA_LOOK - inward * 0.3 * depth, 0.5 * height]
     obj = bpy.data.objects.get(CAMERA)
     if obj is None:
         obj = bpy.data.objects.new(CAMERA, bpy.data.cameras.new(CAMERA))
@@ -292,7 +305,8 @@ def add_stand_camera(scene, size=(960, 540)):
     cam = obj.data
     cam.type, cam.sensor_fit = "PERSP", "VERTICAL"
     cam.lens = cam.sensor_height / 2 / math.tan(CAMERA_FOV / 2)
-    cam.clip_start, cam.clip_end = 0.5, 4 * dist + float(np.ptp(pos, 0).max())
+    cam.clip_start, cam.clip_end = 0.5, 2 * float(np.linalg.norm(eye - target)) + \
+        2 * float(np.ptp(pos, 0).max())
     obj.location = Vector(eye)
     obj.rotation_euler = Vector(target - eye).to_track_quat("-Z", "Y").to_euler()
     scene.camera = obj

@@ -154,9 +154,16 @@ def _load_alpha(path):
     return px.reshape(SIZE[1], SIZE[0], 4)[::-1, :, 3] > 0.5       # rows top-down
 
 
-def _workbench(scene, path, animation=False):
+def _eevee():
+    """EEVEE's engine name in this Blender (4.2-4.5: BLENDER_EEVEE_NEXT)."""
+    engines = {e.identifier for e in
+               bpy.types.RenderSettings.bl_rna.properties["engine"].enum_items}
+    return "BLENDER_EEVEE_NEXT" if "BLENDER_EEVEE_NEXT" in engines else "BLENDER_EEVEE"
+
+
+def _workbench(scene, path, animation=False, engine="BLENDER_WORKBENCH"):
     r = scene.render
-    r.engine, r.film_transparent = "BLENDER_WORKBENCH", True
+    r.engine, r.film_transparent = engine, True
     r.image_settings.file_format, r.image_settings.color_mode = "PNG", "RGBA"
     r.filepath = str(path)
     bpy.ops.render.render(write_still=not animation, animation=animation)
@@ -166,9 +173,10 @@ def _overlap(a, b):
     return (a & b).sum() / max((a | b).sum(), 1)
 
 
-def test_f12_shows_the_crowd_where_the_preview_draws_it(crowd_scene, tmp_path):
+@pytest.mark.parametrize("engine", ["BLENDER_WORKBENCH", "EEVEE"])
+def test_f12_shows_the_crowd_where_the_preview_draws_it(crowd_scene, tmp_path, engine):
     scene, pv = crowd_scene
-    _workbench(scene, tmp_path / "still.png")
+    _workbench(scene, tmp_path / "still.png", engine=_eevee() if engine == "EEVEE" else engine)
     rendered = _load_alpha(tmp_path / "still.png")
     drawn = _preview_alpha(scene, pv.crowd)
     assert drawn.sum() > 300
