@@ -186,7 +186,7 @@ class Prototype:
         self.ibo = ctx.buffer(buf.indices.tobytes())
         self.ivbo = ctx.buffer(inst.tobytes())
         self.vao = ctx.vertex_array(
-            self.prog, [(self.vbo, "3f 3f 4u2 4f", "pos", "nor", "bone_idx", "bone_w"),
+            self.prog, [(self.vbo, "3f 3f 4u2 4f 4x", "pos", "nor", "bone_idx", "bone_w"),
                         (self.ivbo, "4f/i", "agent")], self.ibo, index_element_size=4)
         self.fbo = ctx.framebuffer(color_attachments=[ctx.renderbuffer(size, 4)],
                                    depth_attachment=ctx.depth_renderbuffer(size))

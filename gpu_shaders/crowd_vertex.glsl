@@ -1,12 +1,25 @@
-/* The crowd vertex: the current vertex (`pos`, `nor`, `bone_idx`, `bone_w`, and with
+/* The crowd vertex: the current vertex (`pos`, `nor`, `bone_idx`, `bone_w`, `col`, and with
  * INFLUENCES > 4 `bone_idx2`, `bone_w2`: programs.for_influences declares them) of agent
  * `agent_id` skinned from its pose row (paper Eq. 1) and placed in the world --
  * rotated by the agent's heading about +Z, then moved to its position -- into the
- * stage outputs v_world, v_normal, v_color. One function for every vertex stage that
+ * stage outputs v_world, v_normal, v_color. The colour is the vertex's material colour
+ * `col` tinted by the agent's colour where that material is unsaturated (white, grey:
+ * a shirt takes the team colour, skin and dyed cloth keep theirs; a mesh without
+ * materials is white, so the agent's colour alone). One function for every vertex stage that
  * draws or captures the crowd (crowd_vert.glsl, capture_vert.glsl), so they cannot
  * disagree. Needs block_layout.glsl, pose_layout.glsl, pose_rows.glsl, agents.glsl
  * and skinning.glsl before it.
  */
+
+/* `base` tinted by `tint` in proportion to how grey it is: saturation 0 takes the tint
+ * fully, 0.25 and above not at all. */
+vec3 agent_tint(vec3 base, vec3 tint)
+{
+  float high = max(base.r, max(base.g, base.b));
+  float low = min(base.r, min(base.g, base.b));
+  float saturation = (high - low) / max(high, 1e-4);
+  return mix(base, base * tint, clamp(1.0 - 4.0 * saturation, 0.0, 1.0));
+}
 
 void crowd_vertex(int agent_id)
 {
@@ -21,5 +34,5 @@ void crowd_vertex(int agent_id)
   vec2 turn = agent_turn(agent);
   v_world = turn_z(turn, p) + agent.position;
   v_normal = turn_z(turn, n);
-  v_color = agent.color;
+  v_color = agent_tint(col.rgb, agent.color);
 }

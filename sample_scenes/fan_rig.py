@@ -196,18 +196,33 @@ def _create_armature(collection, name):
     return rig
 
 
+def _material(name, colour):
+    """A material of base colour ``colour`` (linear RGBA) for Workbench (its viewport
+    colour) and EEVEE/Cycles (its Principled BSDF)."""
+    mat = bpy.data.materials.get(name) or bpy.data.materials.new(name)
+    mat.diffuse_color = colour
+    if mat.node_tree is None:              # Blender before 5.0: nodes on request
+        mat.use_nodes = True
+    for node in mat.node_tree.nodes if mat.node_tree is not None else ():
+        if node.type == "BSDF_PRINCIPLED":
+            node.inputs["Base Color"].default_value = colour
+    return mat
+
+
 def build_fan(collection, rig_name="FanRig", body_name="FanBody"):
     """Create the armature and its skinned body in ``collection``; returns (rig, body)."""
     rig = _create_armature(collection, rig_name)
     heads = {b.name: np.array(b.head_local) for b in rig.data.bones}
     tails = {b.name: np.array(b.tail_local) for b in rig.data.bones}
-    verts, faces, colours, groups = [], [], [], {}
+    verts, faces, colours, groups, regions = [], [], [], {}, []
+    names = list(_COLOURS)
     for part in _body_parts(heads, tails):
         v, f, station = _tube(part.points, part.t, part.radii, part.ref)
         base = sum(len(x) for x in verts)
         verts.append(v)
         faces += [[base + i for i in face] for face in f]
         colours.append(np.array([_COLOURS[r] for r in part.region])[station])
+        regions.append(np.array([names.index(r) for r in part.region])[station])
         w = _weights(part.t, part.bones, part.bounds, part.blend)[station]
         for b, bone in enumerate(part.bones):
             hit = np.nonzero(w[:, b] > 1e-6)[0]
@@ -217,6 +232,13 @@ def build_fan(collection, rig_name="FanRig", body_name="FanBody"):
     mesh.validate()
     colour = mesh.color_attributes.new("color", "FLOAT_COLOR", "POINT")
     colour.data.foreach_set("color", np.vstack(colours).astype(np.float32).ravel())
+    # one material a body region (what renders, exports and the preview colour by),
+    # each face the region of its first corner
+    for name in names:
+        mesh.materials.append(_material(f"fan_{name}", _COLOURS[name]))
+    region = np.concatenate(regions)
+    mesh.polygons.foreach_set("material_index",
+                              region[[face[0] for face in faces]].astype(np.int32))
     body = bpy.data.objects.new(body_name, mesh)
     collection.objects.link(body)
     for bone in rig.data.bones:

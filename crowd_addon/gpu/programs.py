@@ -81,7 +81,7 @@ CROWD_DRAW = ProgramSpec(
             "skinning.glsl", "crowd_vertex.glsl", "crowd_vert.glsl"),
     fragment=("crowd_frag.glsl",),
     vertex_in=((0, "VEC3", "pos"), (1, "VEC3", "nor"), (2, "UVEC4", "bone_idx"),
-               (3, "VEC4", "bone_w")),
+               (3, "VEC4", "bone_w"), (6, "VEC4", "col")),
     interfaces=(Interface("crowd_iface", (("smooth", "VEC3", "v_world"),
                                           ("smooth", "VEC3", "v_normal"),
                                           ("flat", "VEC3", "v_color"))),),

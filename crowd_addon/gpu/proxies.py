@@ -3,12 +3,13 @@
 A core :class:`~crowd_addon.core.mesh.ProxyMesh` becomes one
 :class:`ProxyBuffers` per LOD: named attribute arrays matching the ``vertex_in``
 names of :data:`~.programs.CROWD_DRAW` (``pos``, ``nor`` float32 ``(V, 3)``,
-``bone_idx`` uint16 ``(V, 4)``, ``bone_w`` float32 ``(V, 4)``, the form Blender's
+``bone_idx`` uint16 ``(V, 4)``, ``bone_w`` float32 ``(V, 4)``, ``col`` uint8 ``(V,
+4)``: the base colour of the vertex's material, the form Blender's
 ``GPUVertBuf.attr_fill`` takes), an interleaved copy for moderngl, and uint32
 triangle indices. A mesh stored eight influences wide (some vertex has five to
 eight bones) adds ``bone_idx2``/``bone_w2``, influences 5..8, declared by the
-program only then (:func:`~.programs.for_influences`); four-wide meshes keep the
-48-byte vertex.
+program only then (:func:`~.programs.for_influences`); four-wide meshes keep a
+52-byte vertex.
 """
 
 from __future__ import annotations
@@ -19,16 +20,17 @@ import numpy as np
 
 from ..core.errors import CrowdError
 
-__all__ = ["ProxyBuffers", "proxy_buffers", "crowd_proxies", "copies_per_instance",
+__all__ = ["ProxyBuffers", "proxy_buffers", "vertex_colors", "crowd_proxies",
+           "copies_per_instance",
            "INTERLEAVED_FORMAT", "WIDE_FORMAT"]
 
 #: (attribute, moderngl format, bytes) of :meth:`ProxyBuffers.interleaved`, in order:
-#: meshes of up to four influences a vertex (48 bytes a vertex) ...
+#: meshes of up to four influences a vertex (52 bytes a vertex) ...
 INTERLEAVED_FORMAT = (("pos", "3f", 12), ("nor", "3f", 12), ("bone_idx", "4u2", 8),
-                      ("bone_w", "4f", 16))
-#: ... and of five to eight (influences 5..8 after them: 72 bytes a vertex).
+                      ("bone_w", "4f", 16), ("col", "4f1", 4))
+#: ... and of five to eight (influences 5..8 after them: 76 bytes a vertex).
 WIDE_FORMAT = INTERLEAVED_FORMAT + (("bone_idx2", "4u2", 8), ("bone_w2", "4f", 16))
-_NUMPY = {"3f": ("<f4", 3), "4u2": ("<u2", 4), "4f": ("<f4", 4)}
+_NUMPY = {"3f": ("<f4", 3), "4u2": ("<u2", 4), "4f": ("<f4", 4), "4f1": ("u1", 4)}
 
 
 def copies_per_instance(vertex_count: int, target: int = 1024, limit: int = 64) -> int:
@@ -85,13 +87,28 @@ class ProxyBuffers:
         return ProxyBuffers(self.name, attrs, indices)
 
     def interleaved(self) -> np.ndarray:
-        """(V,) structured array in :attr:`format` order (48 bytes a vertex, 72 with
+        """(V,) structured array in :attr:`format` order (52 bytes a vertex, 76 with
         eight influences)."""
         fmt = self.format
         out = np.empty(self.vertex_count, np.dtype([(n, *_NUMPY[f]) for n, f, _ in fmt]))
         for name, _, _ in fmt:
             out[name] = self.attributes[name]
         return out
+
+
+def vertex_colors(mesh) -> np.ndarray:
+    """``(V, 4)`` uint8 RGBA base colour of each vertex of a ProxyMesh: its material's
+    (:class:`~crowd_addon.core.mesh.Look` colour; a vertex shared by triangles of
+    several materials takes the last triangle's), white without looks (the agent's
+    colour alone then: gpu_shaders/crowd_vertex.glsl)."""
+    out = np.full((mesh.vertex_count, 4), 255, np.uint8)
+    if mesh.looks:
+        colors = np.array([look.color for look in mesh.looks], np.float64)
+        material = np.zeros(mesh.triangles.shape[0], np.int64) if mesh.material is None \
+            else np.asarray(mesh.material, np.int64)
+        per_triangle = np.rint(np.clip(colors[material], 0, 1) * 255).astype(np.uint8)
+        out[mesh.triangles.reshape(-1)] = np.repeat(per_triangle, 3, axis=0)
+    return out
 
 
 def proxy_buffers(mesh) -> ProxyBuffers:
@@ -101,7 +118,8 @@ def proxy_buffers(mesh) -> ProxyBuffers:
     attrs = {"pos": np.ascontiguousarray(mesh.positions, np.float32),
              "nor": np.ascontiguousarray(mesh.normals, np.float32),
              "bone_idx": np.ascontiguousarray(idx[:, :4], np.uint16),
-             "bone_w": np.ascontiguousarray(w[:, :4], np.float32)}
+             "bone_w": np.ascontiguousarray(w[:, :4], np.float32),
+             "col": vertex_colors(mesh)}
     if idx.shape[1] > 4:
         attrs["bone_idx2"] = np.ascontiguousarray(idx[:, 4:8], np.uint16)
         attrs["bone_w2"] = np.ascontiguousarray(w[:, 4:8], np.float32)

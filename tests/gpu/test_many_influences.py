@@ -25,10 +25,10 @@ def test_vertex_format_grows_only_past_four_influences(h):
     from crowd_addon.gpu.proxies import proxy_buffers
     four = proxy_buffers(h.make_config().meshes["fan"][0])
     six = proxy_buffers(h.make_config(influences=6).meshes["fan"][0])
-    assert sorted(four.attributes) == ["bone_idx", "bone_w", "nor", "pos"]
-    assert four.interleaved().itemsize == 48 and four.influences == 2
-    assert sorted(six.attributes) == ["bone_idx", "bone_idx2", "bone_w", "bone_w2", "nor",
-                                      "pos"]
-    assert six.interleaved().itemsize == 72 and six.influences == 6
+    assert sorted(four.attributes) == ["bone_idx", "bone_w", "col", "nor", "pos"]
+    assert four.interleaved().itemsize == 52 and four.influences == 2
+    assert sorted(six.attributes) == ["bone_idx", "bone_idx2", "bone_w", "bone_w2", "col",
+                                      "nor", "pos"]
+    assert six.interleaved().itemsize == 76 and six.influences == 6
     np.testing.assert_array_equal(six.batched(3).attributes["bone_w2"][: six.vertex_count],
                                   six.attributes["bone_w2"])

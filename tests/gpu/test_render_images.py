@@ -41,6 +41,14 @@ def cpu_reference_image(gl, h, crowd, camera, light):
                         s * normals[..., 0] + c * normals[..., 1], normals[..., 2]], -1)
     color = np.rint(np.clip(crowd.agents.color, 0, 1) * 255) / 255
     color = np.broadcast_to(color[:, None], world.shape)
+    if mesh.looks:                       # the material's colour, tinted where it is grey
+        base = np.ones((mesh.vertex_count, 3))
+        looks = np.array([look.color[:3] for look in mesh.looks])
+        base[mesh.triangles.reshape(-1)] = np.repeat(looks[mesh.material], 3, axis=0)
+        base = np.rint(base * 255) / 255
+        saturation = (base.max(1) - base.min(1)) / np.maximum(base.max(1), 1e-4)
+        grey = np.clip(1 - 4 * saturation, 0, 1)[None, :, None]
+        color = base[None] * (1 - grey) + base[None] * color * grey
     verts = np.concatenate([world, normals, color], -1).astype("f4").reshape(-1, 9)
     tris = (mesh.triangles[None].astype(np.int64)
             + (np.arange(crowd.agents.count) * mesh.vertex_count)[:, None, None]).astype("u4")
@@ -93,6 +101,29 @@ def test_render_matches_cpu_skinning_and_a_wrong_offset_shows(gl, h, renderer):
     assert differing(image, reference) < 0.002
     assert differing(image0, reference) > 0.02
     assert (image[..., :3] != image[0, 0, :3]).any(-1).mean() > 0.04    # agents are on screen
+
+
+def test_materials_colour_the_body_and_the_agent_tints_its_grey_parts(gl, h, renderer):
+    from dataclasses import replace
+
+    from crowd_addon.core.mesh import Look
+    far = (1e3, 2e3, 3e3)
+    cfg = h.make_config(M=8, agents=15, spacing=0.9, lod_distances=far)
+    body = cfg.meshes["fan"][0]
+    upper = body.positions[body.triangles].mean(1)[:, 2] > np.median(body.positions[:, 2])
+    looks = (Look("shirt", (0.9, 0.9, 0.9, 1.0)), Look("skin", (0.8, 0.5, 0.35, 1.0)))
+    cfg.meshes["fan"] = [replace(body, material=np.where(upper, 1, 0).astype(np.uint16),
+                                 looks=looks)]
+    crowd = h.Crowd(cfg)
+    crowd.step()
+    camera = frame_crowd(crowd, aspect=SIZE[0] / SIZE[1])
+    image, r = render(renderer, crowd, camera)
+    reference = cpu_reference_image(gl, h, crowd, camera, r.light)
+    assert differing(image, reference) < 0.002
+    # the skin keeps its colour on every agent: the upper halves look alike
+    plain = h.Crowd(h.make_config(M=8, agents=15, spacing=0.9, lod_distances=far))
+    plain.step()
+    assert differing(image, render(renderer, plain, camera)[0]) > 0.02
 
 
 def test_wrapped_pose_texture_renders_identically(h, renderer):
