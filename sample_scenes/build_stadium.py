@@ -135,7 +135,7 @@ def _camera_and_sun(scene, bowl, rows, collection):
     scene.camera = cam
     sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN"))
     sun.data.energy = 3.0
-    sun.rotation_euler = (math.radians(40), 0.0, math.radians(30))
+    sun.rotation_euler = (math.radians(40), 0.0, math.radians(210))   # lights the home stand
     collection.objects.link(sun)
     return cam, sun
 
