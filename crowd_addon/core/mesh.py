@@ -357,8 +357,10 @@ def card_lod(mesh: ProxyMesh, name: str | None = None) -> ProxyMesh:
                                      mesh.bone_weights[top].ravel())))
     bones = np.where(pos[:, 2] > z0, head, 0)[:, None]
     look = {}
-    if mesh.looks:                   # the card shows the look that covers most area
+    if mesh.looks:   # the look covering most of the upper half: torso and head, what a
+        # far agent shows (over the seat in front, too)
         area = np.linalg.norm(np.cross(p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]]), axis=1)
+        area = area * (p[t].mean(1)[:, 2] > (z0 + z1) / 2)
         mat = np.zeros(t.shape[0], np.int64) if mesh.material is None else mesh.material
         main = int(np.argmax(np.bincount(mat, area, len(mesh.looks))))
         look = {"material": np.full(4, main), "looks": mesh.looks}
