@@ -146,6 +146,38 @@ def make_seats(nx=10, ny=8, name="Seats", spacing=1.0):
     return obj
 
 
+def walking_crowd(markers=()):
+    """A fresh scene with the crowd most preview tests draw: a rig with a box body, one
+    stream "walk" (M = 8, seed 3) and six by five agents 1.5 m apart turned by 0.4
+    rad, LOD 0 up to 500 m (small images: the level the CPU checks skin). Returns
+    (scene, rig, body, walk action)."""
+    scene = reset()
+    rig = make_armature()
+    walk = make_action(rig, "walk", seed=1, markers=list(markers), amplitude=1.0)
+    s = scene.crowd
+    s.max_offset, s.seed = 8, 3
+    body = make_proxy(rig)
+    add_stream(add_character(s, rig, body), "walk", walk)
+    src = s.agent_sources.add()
+    src.name, src.object = "seats", make_seats(6, 5, spacing=1.5)
+    src.heading_mode, src.heading = "FIXED", 0.4
+    s.lod_near, s.lod_far, s.lod_card = 500.0, 600.0, 700.0
+    return scene, rig, body, walk
+
+
+def image_pixels(path) -> np.ndarray:
+    """The image file at ``path`` as Blender loads it: ``(H, W, 4)`` float32, rows
+    bottom-up (the image is removed from ``bpy.data`` again)."""
+    img = bpy.data.images.load(str(path))
+    try:
+        w, h = img.size
+        px = np.empty(w * h * 4, np.float32)
+        img.pixels.foreach_get(px)
+    finally:
+        bpy.data.images.remove(img)
+    return px.reshape(h, w, 4)
+
+
 def add_character(settings, rig, body=None, name=None, weight=1.0):
     """A character of ``scene.crowd`` (named after the rig unless ``name``)."""
     c = settings.characters.add()

@@ -34,18 +34,7 @@ def extension():
 
 def _build_scene():
     preview.stop_all()
-    scene = cs.reset()
-    rig = cs.make_armature()
-    walk = cs.make_action(rig, "walk", seed=1, markers=[("step", 7)], amplitude=1.0)
-    s = scene.crowd
-    s.max_offset, s.seed = 8, 3
-    cs.add_stream(cs.add_character(s, rig, cs.make_proxy(rig)), "walk", walk)
-    src = s.agent_sources.add()
-    src.name, src.object = "seats", cs.make_seats(6, 5, spacing=1.5)
-    src.heading_mode, src.heading = "FIXED", 0.4
-    # agents are a few pixels tall in these small images: keep LOD 0, the level the
-    # image checks skin on the CPU
-    s.lod_near, s.lod_far, s.lod_card = 500.0, 600.0, 700.0
+    scene, rig, _, walk = cs.walking_crowd(markers=[("step", 7)])
     return scene, rig, walk
 
 

@@ -38,17 +38,8 @@ def crowd_scene():
     """Six by five agents of one walking stream (M = 8: eight shared poses), a camera
     over them, the templates hidden from renders, Render Crowd on at frame 9."""
     preview.stop_all()
-    scene = cs.reset()
-    rig = cs.make_armature()
-    walk = cs.make_action(rig, "walk", seed=1, amplitude=1.0)
+    scene, rig, body, _ = cs.walking_crowd()
     s = scene.crowd
-    s.max_offset, s.seed = 8, 3
-    body = cs.make_proxy(rig)
-    cs.add_stream(cs.add_character(s, rig, body), "walk", walk)
-    src = s.agent_sources.add()
-    src.name, src.object = "seats", cs.make_seats(6, 5, spacing=1.5)
-    src.heading_mode, src.heading = "FIXED", 0.4
-    s.lod_near, s.lod_far, s.lod_card = 500.0, 600.0, 700.0
     for obj in (rig, body):
         obj.hide_render = True
     cam = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
@@ -145,13 +136,7 @@ def _preview_alpha(scene, crowd, frame=None):
 
 
 def _load_alpha(path):
-    img = bpy.data.images.load(str(path))
-    try:
-        px = np.empty(SIZE[0] * SIZE[1] * 4, np.float32)
-        img.pixels.foreach_get(px)
-    finally:
-        bpy.data.images.remove(img)
-    return px.reshape(SIZE[1], SIZE[0], 4)[::-1, :, 3] > 0.5       # rows top-down
+    return cs.image_pixels(path)[::-1, :, 3] > 0.5                  # rows top-down
 
 
 def _eevee():

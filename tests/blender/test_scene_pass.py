@@ -52,16 +52,7 @@ def walled():
     """Six by five agents 1.5 m apart, a wall across the left half between the second
     and third rows, a floor, a sun and a low camera looking over the wall."""
     preview.stop_all()
-    scene = cs.reset()
-    rig = cs.make_armature()
-    walk = cs.make_action(rig, "walk", seed=1, amplitude=1.0)
-    s = scene.crowd
-    s.max_offset, s.seed = 8, 3
-    cs.add_stream(cs.add_character(s, rig, cs.make_proxy(rig)), "walk", walk)
-    src = s.agent_sources.add()
-    src.name, src.object = "seats", cs.make_seats(6, 5, spacing=1.5)
-    src.heading_mode, src.heading = "FIXED", 0.4
-    s.lod_near, s.lod_far, s.lod_card = 500.0, 600.0, 700.0
+    scene, *_ = cs.walking_crowd()
     _box("Wall", (1.5, WALL_Y, 0.9), (5.0, 0.2, 1.8), (0.3, 0.5, 0.3))
     _box("Floor", (3.75, 3.0, -0.06), (30.0, 30.0, 0.1), (0.5, 0.45, 0.4))
     sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN"))
@@ -242,13 +233,7 @@ def _workbench_alpha(scene, path):
         for o in hide:
             o.hide_render = False
         r.engine, r.film_transparent, r.filepath = saved
-    img = bpy.data.images.load(str(path))
-    try:
-        px = np.empty(SIZE[0] * SIZE[1] * 4, np.float32)
-        img.pixels.foreach_get(px)
-    finally:
-        bpy.data.images.remove(img)
-    return px.reshape(SIZE[1], SIZE[0], 4)[..., 3]
+    return cs.image_pixels(path)[..., 3]
 
 
 def test_scene_pass_covers_what_workbench_renders(walled, tmp_path):
