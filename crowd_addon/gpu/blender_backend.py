@@ -74,6 +74,13 @@ class _Mesh:
         self.points = gpu.types.GPUBatch(type="POINTS", buf=_vertex_buffer(gpu, buffers))
 
 
+class _ShadowMap:
+    """The shadow map's depth-only framebuffer, its depth texture and side."""
+
+    def __init__(self, framebuffer, texture, size):
+        self.framebuffer, self.texture, self.size = framebuffer, texture, size
+
+
 class BlenderGPURenderer(CrowdRenderer):
     """Draws one crowd with Blender's ``gpu`` module.
 
@@ -82,10 +89,11 @@ class BlenderGPURenderer(CrowdRenderer):
     view : the crowd's ``FrameView`` (see :class:`~.renderer.CrowdRenderer`).
     size : (width, height) of an offscreen image to render into, or None to draw
         only into the framebuffer bound at ``render`` time (a draw handler's).
-    light, culling : see :class:`~.renderer.CrowdRenderer`.
+    light, culling, shadows : see :class:`~.renderer.CrowdRenderer`.
     """
 
-    def __init__(self, view, size=None, light=(0.4, -0.6, 0.8, 0.35), culling=True):
+    def __init__(self, view, size=None, light=(0.4, -0.6, 0.8, 0.35), culling=True,
+                 shadows=False):
         import gpu
         self.gpu = gpu
         try:
@@ -102,7 +110,8 @@ class BlenderGPURenderer(CrowdRenderer):
             self.depth_tex = gpu.types.GPUTexture(self.size, format="DEPTH_COMPONENT32F")
             self.framebuffer = gpu.types.GPUFrameBuffer(depth_slot=self.depth_tex,
                                                         color_slots=(self.color_tex,))
-        super().__init__(view, self.limit, light, culling, max_int=_EXACT_INT)
+        super().__init__(view, self.limit, light, culling, max_int=_EXACT_INT,
+                         shadows=shadows)
 
     # ---------------------------------------------------------------- primitives
     def _create_texture(self, spec):
@@ -190,12 +199,12 @@ class BlenderGPURenderer(CrowdRenderer):
                 state.depth_mask_set(mask)
                 state.blend_set(blend)
 
-    def _bind(self, shader, spec, uniforms, list_texture):
+    def _bind(self, shader, spec, uniforms, list_texture=None):
         use_program(self.gpu, shader)
         self._set_uniforms(shader, spec, uniforms)
-        for _, _, name in spec.samplers:
-            shader.uniform_sampler(name, list_texture if name == "agent_list_tex"
-                                   else self.textures[DRAW_SAMPLERS[name]])
+        for _, _, name in spec.samplers:         # ones the compiler dropped are skipped
+            set_if_used(shader.uniform_sampler, name, list_texture
+                        if name == "agent_list_tex" else self.textures[DRAW_SAMPLERS[name]])
 
     def _draw(self, mesh, draw):
         n = mesh.buffers.influences
@@ -215,9 +224,27 @@ class BlenderGPURenderer(CrowdRenderer):
 
     def _draw_scene(self, scene, uniforms):
         shader = program(self.gpu, SCENE_DRAW)
-        use_program(self.gpu, shader)
-        self._set_uniforms(shader, SCENE_DRAW, uniforms)
+        self._bind(shader, SCENE_DRAW, uniforms)
         scene.draw(shader)
+
+    def _create_shadow_map(self, size):
+        tex = self.gpu.types.GPUTexture((size, size), format="DEPTH_COMPONENT32F")
+        return _ShadowMap(self.gpu.types.GPUFrameBuffer(depth_slot=tex), tex, size)
+
+    @contextmanager
+    def _bind_shadow(self, shadow_map):
+        state = self.gpu.state
+        viewport = state.viewport_get()
+        with shadow_map.framebuffer.bind():
+            state.viewport_set(0, 0, shadow_map.size, shadow_map.size)
+            shadow_map.framebuffer.clear(depth=1.0)
+            try:
+                yield
+            finally:
+                state.viewport_set(*viewport)
+
+    def _matrix_texture(self, texels):
+        return float_texture(self.gpu, texels)
 
     def _capture(self, mesh, capture) -> np.ndarray:
         gpu = self.gpu
@@ -271,4 +298,5 @@ class BlenderGPURenderer(CrowdRenderer):
 
     def _release(self):
         self.color_tex = self.depth_tex = self.framebuffer = None
+        self._shadow_map, self._lit = None, ()
 

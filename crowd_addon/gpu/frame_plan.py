@@ -30,7 +30,8 @@ __all__ = ["FramePlan", "FrameStats", "TextureSpec", "SkinningWork", "Draw", "Ca
            "DRAW_SAMPLERS", "SKIN_SAMPLERS", "gl_matrix"]
 
 #: Sampler of the draw program -> name of the texture it reads.
-DRAW_SAMPLERS = {"pose_tex": "pose", "agent_tex": "agents", "agent_list_tex": "lists"}
+DRAW_SAMPLERS = {"pose_tex": "pose", "agent_tex": "agents", "agent_list_tex": "lists",
+                 "shadow_tex": "shadow", "shadow_view_tex": "shadow_view"}
 #: Sampler of the skinning-rows program -> name of the texture it reads (``batch``: the
 #: batch texture the backend keeps or makes for :class:`SkinningWork`).
 SKIN_SAMPLERS = {"local_tex": "local", "skeleton_tex": "skeletons", "batch_tex": "batch"}
@@ -232,18 +233,29 @@ class FramePlan:
 
     def draws(self, view_projection, light) -> list:
         """One :class:`Draw` per (skeleton, LOD) group of the current draw lists."""
-        common = {"u_pose_layout": self.pose_layout, "u_pose_regions": self.pose_regions(),
-                  "u_view_proj": gl_matrix(view_projection),
-                  "u_light": tuple(float(v) for v in light)}
-        out = []
-        for g in self.lists.groups:
-            buf = self.proxies[g.skeleton][g.lod]
-            copies = copies_per_instance(buf.vertex_count)
-            out.append(Draw((g.skeleton, g.lod), -(-g.count // copies), g.count,
-                            g.count * buf.vertex_count,
-                            {**common, "u_draw": (g.base, g.count, buf.vertex_count,
-                                                  copies)}))
-        return out
+        common = self._draw_uniforms(view_projection, light)
+        return [self._draw(g, g.lod, common) for g in self.lists.groups]
+
+    def caster_draws(self, view_projection, light) -> list:
+        """The shadow map's crowd draws (:mod:`.shadows`): the agents of the current
+        draw lists, each group as its skeleton's coarsest level, seen through the
+        sun's ``view_projection``."""
+        common = self._draw_uniforms(view_projection, light)
+        return [self._draw(g, len(self.proxies[g.skeleton]) - 1, common)
+                for g in self.lists.groups]
+
+    def _draw_uniforms(self, view_projection, light) -> dict:
+        return {"u_pose_layout": self.pose_layout, "u_pose_regions": self.pose_regions(),
+                "u_view_proj": gl_matrix(view_projection),
+                "u_light": tuple(float(v) for v in light)}
+
+    def _draw(self, group, lod: int, common: dict) -> Draw:
+        """The instanced call drawing ``group``'s agents with level ``lod``."""
+        buf = self.proxies[group.skeleton][lod]
+        copies = copies_per_instance(buf.vertex_count)
+        return Draw((group.skeleton, lod), -(-group.count // copies), group.count,
+                    group.count * buf.vertex_count,
+                    {**common, "u_draw": (group.base, group.count, buf.vertex_count, copies)})
 
     def capture(self, agents, lod: int) -> Capture:
         """Check a vertex read-back request: ``agents`` (ids of one skeleton) at

@@ -48,6 +48,13 @@ class _Mesh:
         return [self.draw, self.capture, self.vbo, self.ibo]
 
 
+class _ShadowMap:
+    """The shadow map's depth-only framebuffer and its depth texture."""
+
+    def __init__(self, fbo, texture):
+        self.fbo, self.texture = fbo, texture
+
+
 class ModernGLRenderer(CrowdRenderer):
     """Draws one crowd with moderngl.
 
@@ -57,7 +64,7 @@ class ModernGLRenderer(CrowdRenderer):
     ctx : a moderngl context with OpenGL 4.3 (compute shaders and ``binding``
         layouts).
     size : (width, height) of the offscreen image in pixels.
-    light, culling : see :class:`~.renderer.CrowdRenderer`.
+    light, culling, shadows : see :class:`~.renderer.CrowdRenderer`.
     owns_context : release ``ctx`` with the renderer.
     samples : multisample anti-aliasing of the offscreen image: samples a pixel (0 or 1:
         none; more than the GL allows: its most), resolved by :meth:`read_image`.
@@ -66,7 +73,7 @@ class ModernGLRenderer(CrowdRenderer):
     MAX_ROW_WRITES = 1024       # a few hundred small writes cost less than whole blocks
 
     def __init__(self, view, ctx, size=(640, 360), light=(0.4, -0.6, 0.8, 0.35),
-                 culling=True, owns_context=False, samples=0):
+                 culling=True, owns_context=False, samples=0, shadows=False):
         import moderngl
         self._mgl = moderngl
         if ctx.version_code < GL_VERSION:
@@ -81,10 +88,12 @@ class ModernGLRenderer(CrowdRenderer):
         self.fbo = ctx.framebuffer(color_attachments=[self._attachments[0]],
                                    depth_attachment=self._attachments[1])
         self._resolved = None               # the single-sample image read_image reads
+        self._shadow_view = None
         if self.samples:
             self._attachments += (ctx.renderbuffer(self.size, 4),)
             self._resolved = ctx.framebuffer(color_attachments=[self._attachments[2]])
-        super().__init__(view, ctx.info["GL_MAX_TEXTURE_SIZE"], light, culling)
+        super().__init__(view, ctx.info["GL_MAX_TEXTURE_SIZE"], light, culling,
+                         shadows=shadows)
 
     # ------------------------------------------------------------------ contexts
     @classmethod
@@ -207,6 +216,8 @@ class ModernGLRenderer(CrowdRenderer):
 
     def _draw_scene(self, scene, uniforms):
         _set_uniforms(scene[1].program, uniforms)
+        for slot, _, name in SCENE_DRAW.samplers:
+            self.textures[DRAW_SAMPLERS[name]].use(slot)
         scene[1].render(self._mgl.TRIANGLES)
 
     def _release_scene(self):
@@ -214,6 +225,30 @@ class ModernGLRenderer(CrowdRenderer):
             for obj in reversed(self._scene):
                 obj.release()
         self._scene = None
+
+    def _create_shadow_map(self, size):
+        tex = self.ctx.depth_texture((size, size))
+        tex.compare_func = ""                       # read as depth, not compared
+        tex.filter = (self._mgl.NEAREST, self._mgl.NEAREST)
+        return _ShadowMap(self.ctx.framebuffer(depth_attachment=tex), tex)
+
+    @contextmanager
+    def _bind_shadow(self, shadow_map):
+        outer = self.ctx.fbo
+        shadow_map.fbo.use()
+        shadow_map.fbo.clear(depth=1.0)
+        try:
+            yield
+        finally:
+            outer.use()
+
+    def _matrix_texture(self, texels):
+        if self._shadow_view is None:
+            self._shadow_view = self._create_texture(
+                TextureSpec("shadow_view", (4, 1), "RGBA32F", texels))
+        else:
+            self._shadow_view.write(np.ascontiguousarray(texels, np.float32))
+        return self._shadow_view
 
     def _read_texture(self, texture) -> np.ndarray:
         return np.frombuffer(texture.read(), np.float32)
@@ -238,7 +273,10 @@ class ModernGLRenderer(CrowdRenderer):
         """Free the GL objects, and the context when :meth:`standalone` made it (an
         attached context belongs to its owner and stays)."""
         objects = [*self.textures.values(), self.fbo, self._resolved, *self._attachments,
-                   *self._programs.values()]
+                   *self._programs.values(), *self._lit, self._shadow_view]
+        if self._shadow_map is not None:
+            objects += [self._shadow_map.fbo, self._shadow_map.texture]
+        objects = list({id(o): o for o in objects}.values())     # each once
         for m in self.meshes.values():
             objects += m.objects()
         for obj in objects:

@@ -127,7 +127,8 @@ def _mp4_writer(path, size, fps):
 def render_preview(config, out_dir, frames: int, start: int | None = None,
                    size=(960, 540), mp4: bool = False, backend: str = "moderngl",
                    progress=None, before_step=None, camera=None, scene=None,
-                   light=None, samples: int = 4, on_image=None) -> PreviewResult:
+                   light=None, samples: int = 4, on_image=None,
+                   shadows: bool | None = None) -> PreviewResult:
     """Render ``frames`` frames of ``config`` (a ``CrowdConfig``) from ``start``
     (default: its start frame) into ``out_dir``; ``progress(done, total)`` is called
     after each frame. Raises ``CrowdError`` on bad input before writing anything.
@@ -139,7 +140,8 @@ def render_preview(config, out_dir, frames: int, start: int | None = None,
     drawn around the crowd with the same camera, light and depth; ``light``: the
     renderers' ``(x, y, z, ambient)`` (None: their default); ``samples``: multisample
     anti-aliasing of the moderngl backend (0: none); ``on_image(frame, image)`` is
-    given each frame's ``(H, W, 3)`` uint8 image (e.g. a contact sheet)."""
+    given each frame's ``(H, W, 3)`` uint8 image (e.g. a contact sheet); ``shadows``:
+    the sun's shadows (None: with a scene)."""
     w, h = (int(v) for v in size)
     crowd = config if isinstance(config, Crowd) else None
     config = crowd.config if crowd is not None else config
@@ -151,6 +153,7 @@ def render_preview(config, out_dir, frames: int, start: int | None = None,
         crowd.reset(int(start))
     seconds["simulate"] += time.perf_counter() - t0
     options = {} if light is None else {"light": light}
+    options["shadows"] = scene is not None if shadows is None else bool(shadows)
     if backend == "moderngl":
         options["samples"] = int(samples)
     renderer = make_renderer(crowd.view, backend, (w, h), **options)

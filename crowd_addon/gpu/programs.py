@@ -89,7 +89,8 @@ CROWD_DRAW = ProgramSpec(
                     ("IVEC4", "u_pose_regions"), ("IVEC4", "u_draw"),
                     ("VEC4", "u_light")),
     samplers=((0, "FLOAT_2D", "pose_tex"), (1, "FLOAT_2D", "agent_tex"),
-              (2, "INT_2D", "agent_list_tex")),
+              (2, "INT_2D", "agent_list_tex"), (3, "FLOAT_2D", "shadow_tex"),
+              (4, "FLOAT_2D", "shadow_view_tex")),
     fragment_out=((0, "VEC4", "frag_color"),),
     defines=("INFLUENCES",),
 )
@@ -103,6 +104,7 @@ SCENE_DRAW = ProgramSpec(
     vertex_in=((0, "VEC3", "pos"), (1, "VEC3", "nor"), (2, "VEC3", "col")),
     interfaces=CROWD_DRAW.interfaces,
     push_constants=(("MAT4", "u_view_proj"), ("VEC4", "u_light")),
+    samplers=((3, "FLOAT_2D", "shadow_tex"), (4, "FLOAT_2D", "shadow_view_tex")),
     fragment_out=CROWD_DRAW.fragment_out,
 )
 

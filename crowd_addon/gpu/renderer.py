@@ -15,6 +15,10 @@ A backend (:mod:`.moderngl_backend`, :mod:`.blender_backend`) subclasses
 * ``_draw(mesh, draw)`` -- one instanced call (:class:`~.frame_plan.Draw`);
 * ``_create_scene(geometry)`` / ``_draw_scene(scene, uniforms)`` -- the GPU form of
   a :class:`~.scene_geometry.SceneGeometry` and its draw (:data:`~.programs.SCENE_DRAW`);
+* ``_create_shadow_map(size)`` -- a depth-only target and its depth texture (``.texture``,
+  read through ``shadow_tex``); ``_bind_shadow(shadow_map)`` -- a context manager:
+  bind and clear it, then give the enclosing target back; ``_matrix_texture(texels)``
+  -- the 4 x 1 RGBA32F texture of the sun's matrix (:mod:`.shadows`);
 * ``_capture(mesh, capture)`` -- world positions of the crowd's vertex stage
   (:class:`~.frame_plan.Capture`) as ``(n, V, 3)`` float32;
 * ``_read_texture(texture)`` -- a float texture's texels, flat float32;
@@ -30,7 +34,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .frame_plan import FramePlan, FrameStats, gl_matrix
+from .frame_plan import FramePlan, FrameStats, TextureSpec, gl_matrix
+from .shadows import LIT_VIEW, SHADOW_SIZE, sun_view, view_texels
 
 __all__ = ["CrowdRenderer", "BACKGROUND"]
 
@@ -50,6 +55,8 @@ class CrowdRenderer:
     max_texture_size : the GPU's largest texture side in texels.
     light : (x, y, z, ambient): direction towards the light and ambient level.
     culling : leave out agents outside the camera's view.
+    shadows : cast the sun's shadows (:mod:`.shadows`): the scene and the agents the
+        camera draws, onto both.
     max_int : integers the backend's int texture writes keep exact (None: all int32).
 
     Attributes
@@ -67,15 +74,21 @@ class CrowdRenderer:
     MAX_ROW_WRITES = None
 
     def __init__(self, view, max_texture_size, light=(0.4, -0.6, 0.8, 0.35), culling=True,
-                 max_int=None):
+                 max_int=None, shadows=False):
         self.view = view
         self.culling = bool(culling)
         self.light = tuple(float(v) for v in light)
+        self.shadows = bool(shadows)
         self.stats = FrameStats()
-        self.scene, self._scene = None, None
+        self.scene, self._scene, self._shadow_map = None, None, None
         self.plan = FramePlan(view, max_texture_size, max_int)
         self.textures = {s.name: self._create_texture(s)
                          for s in self.plan.take_initial_textures()}
+        self._lit = (self._create_texture(TextureSpec("shadow", (1, 1), "RGBA32F",
+                                                      np.ones((1, 1, 4), np.float32))),
+                     self._create_texture(TextureSpec("shadow_view", (4, 1), "RGBA32F",
+                                                      view_texels(LIT_VIEW))))
+        self.textures["shadow"], self.textures["shadow_view"] = self._lit
         self.meshes = {key: self._create_mesh(buf, copies)
                        for key, (buf, copies) in self.plan.meshes().items()}
         work = self.plan.take_skinning()          # GPU skinning: fill the pose texture
@@ -124,17 +137,42 @@ class CrowdRenderer:
         s = self.stats
         s.draws = s.instances = s.vertices = 0
         with self._bind_target(target, clear) as pixels_high:
+            for region in self.plan.regroup(vp, pixels_high, self.culling):
+                s.list_bytes += self._write_ints(self.textures["lists"], region)
+            if self.shadows:
+                self._shadow_pass()
             if self._scene is not None:
                 self._draw_scene(self._scene, {"u_view_proj": gl_matrix(vp),
                                                "u_light": self.light})
-            for region in self.plan.regroup(vp, pixels_high, self.culling):
-                s.list_bytes += self._write_ints(self.textures["lists"], region)
             for draw in self.plan.draws(vp, self.light):
                 self._draw(self.meshes[draw.key], draw)
                 s.draws += 1
                 s.instances += draw.agents
                 s.vertices += draw.vertices
         return s
+
+    def _shadow_pass(self):
+        """Draw the sun's shadow map (the scene, then the agents of the current draw
+        lists as their coarsest level) and bind it for the frame's draws."""
+        pos = np.asarray(self.view.agents.position, np.float64)
+        if pos.size == 0:
+            return
+        tall = max((float(buf.extent[1, 2]) for levels in self.plan.proxies for buf in levels),
+                   default=2.0)
+        light_vp = sun_view(self.light, pos.min(0), pos.max(0) + (0.0, 0.0, tall),
+                            None if self.scene is None or not self.scene.triangle_count
+                            else self.scene.bounds())
+        if self._shadow_map is None:
+            self._shadow_map = self._create_shadow_map(SHADOW_SIZE)
+        self.textures["shadow"], self.textures["shadow_view"] = self._lit
+        with self._bind_shadow(self._shadow_map):
+            if self._scene is not None:
+                self._draw_scene(self._scene, {"u_view_proj": gl_matrix(light_vp),
+                                               "u_light": self.light})
+            for draw in self.plan.caster_draws(light_vp, self.light):
+                self._draw(self.meshes[draw.key], draw)
+        self.textures["shadow"] = self._shadow_map.texture
+        self.textures["shadow_view"] = self._matrix_texture(view_texels(light_vp))
 
     # ---------------------------------------------------------------- read-back
     def read_pose_texture(self) -> np.ndarray:
@@ -189,6 +227,15 @@ class CrowdRenderer:
         """Free the scene's GPU objects (a backend whose objects free themselves with
         their Python wrappers only drops them)."""
         self._scene = None
+
+    def _create_shadow_map(self, size):
+        raise NotImplementedError
+
+    def _bind_shadow(self, shadow_map):
+        raise NotImplementedError
+
+    def _matrix_texture(self, texels):
+        raise NotImplementedError
 
     def _read_texture(self, texture) -> np.ndarray:
         raise NotImplementedError

@@ -4,8 +4,9 @@ preview's scene pass) and in the viewport draw path (into an offscreen whose dep
 holds the scene, as Blender's viewport leaves it).
 
 Oracles: Blender's own ray cast of the scene (``Scene.ray_cast``) for the scene's depth
-at every pixel, Blender's Workbench render of the scene alone for the pixels the
-scene covers, and the crowd drawn without its scene for where the agents are.
+at every pixel and, from the floor towards the sun, for the wall's shadow; Blender's
+Workbench render of the scene alone for the pixels the scene covers; the crowd drawn
+without its scene for where the agents are.
 """
 
 import os
@@ -56,7 +57,7 @@ def walled():
     _box("Wall", (1.5, WALL_Y, 0.9), (5.0, 0.2, 1.8), (0.3, 0.5, 0.3))
     _box("Floor", (3.75, 3.0, -0.06), (30.0, 30.0, 0.1), (0.5, 0.45, 0.4))
     sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN"))
-    sun.rotation_euler = (0.6, 0.2, 0.3)
+    sun.rotation_euler = (-0.45, 0.0, 0.4)    # from behind the wall: its shadow faces us
     scene.collection.objects.link(sun)
     cam = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
     cam.location = (3.75, -7.0, 1.6)
@@ -122,7 +123,7 @@ def _linear_depth(window_z, camera):
     return 2.0 * f * n / ((f + n) - ndc * (f - n))
 
 
-def _render(preview_crowd, backend, camera, light, scene=None):
+def _render(preview_crowd, backend, camera, light, scene=None, shadows=False):
     """(RGBA image rows bottom-up, window depth rows bottom-up) of the preview's crowd
     at :data:`FRAME` (a crowd of its own: a renderer consumes its crowd's uploads),
     over ``scene`` when given. Both backends draw in Blender's GL context (a second,
@@ -135,10 +136,10 @@ def _render(preview_crowd, backend, camera, light, scene=None):
         from crowd_addon.blender.shared_gl import shared_context
         from crowd_addon.gpu.moderngl_backend import ModernGLRenderer
         shared = shared_context()
-        r = ModernGLRenderer.attach(crowd.view, SIZE, light=light)
+        r = ModernGLRenderer.attach(crowd.view, SIZE, light=light, shadows=shadows)
         shared.before(r.ctx)
     else:
-        r = make_renderer(crowd.view, backend, SIZE, light=light)
+        r = make_renderer(crowd.view, backend, SIZE, light=light, shadows=shadows)
     try:
         r.set_scene(scene)
         r.sync()
@@ -300,3 +301,90 @@ def test_viewport_draw_is_hidden_by_the_viewport_scene_depth(walled):
     headless = _crowd_pixels(composite, crowd_only)
     assert crowd.sum() > 800 and (crowd & ~shown).sum() > 200
     assert (shown != headless).sum() <= 0.03 * crowd.sum()
+
+
+def _floor_points(scene, camera, size):
+    """Per pixel (rows bottom-up): the world point where the camera's ray first meets
+    the scene, and whether that is the floor (NaN elsewhere)."""
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    eye, dirs = _pixel_rays(camera, size)
+    hide = [o for o in scene.objects if o.name in ("Body", "Seats")]
+    for o in hide:
+        o.hide_set(True)
+    depsgraph.update()
+    points = np.full(dirs.shape, np.nan)
+    try:
+        for (y, x), _ in np.ndenumerate(dirs[..., 0]):
+            hit, loc, _, _, obj, _ = scene.ray_cast(depsgraph, eye, dirs[y, x])
+            if hit and obj.original.name == "Floor":
+                points[y, x] = loc
+    finally:
+        for o in hide:
+            o.hide_set(False)
+    return points
+
+
+def _sun_blocked(scene, points, light):
+    """Whether Blender's ray cast from each point towards the sun meets the wall."""
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    blocked = np.zeros(points.shape[:2], bool)
+    for (y, x), _ in np.ndenumerate(blocked):
+        if np.isfinite(points[y, x, 0]):
+            hit, *_, obj, _ = scene.ray_cast(depsgraph, points[y, x] + (0, 0, 1e-3), light)
+            blocked[y, x] = hit and obj.original.name == "Wall"
+    return blocked
+
+
+def _near_agent_shadow(points, light, positions, reach):
+    """Whether the ray from each point towards the sun passes within ``reach`` metres
+    of an agent's body (a vertical segment 0..2 m over its position)."""
+    d = np.asarray(light, np.float64)
+    near = np.zeros(points.shape[:2], bool)
+    dxy = d[:2] / max(np.dot(d[:2], d[:2]), 1e-12)
+    for a in positions:
+        rel = a[:2] - points[..., :2]
+        t = np.clip(rel @ dxy, 0.0, None)
+        along = points + t[..., None] * d
+        dist = np.linalg.norm(along[..., :2] - a[:2], axis=-1)
+        height = along[..., 2] - a[2]
+        near |= (dist < reach) & (height > -0.2) & (height < 2.2)
+    return near
+
+
+def _erode(mask, steps=2):
+    out = mask.copy()
+    for _ in range(steps):
+        inner = out.copy()
+        inner[1:] &= out[:-1]
+        inner[:-1] &= out[1:]
+        inner[:, 1:] &= out[:, :-1]
+        inner[:, :-1] &= out[:, 1:]
+        out = inner
+    return out
+
+
+@pytest.mark.parametrize("backend", ["moderngl", "blender"])
+def test_the_sun_casts_the_walls_and_the_agents_shadows(walled, backend):
+    scene, cam_obj, pv = walled
+    camera = camera_from_object(cam_obj, SIZE[0] / SIZE[1])
+    light, geo = scene_light(scene), scene_geometry(scene)
+    crowd_only, _ = _render(pv.crowd, backend, camera, light)
+    lit, _ = _render(pv.crowd, backend, camera, light, geo)
+    shaded, _ = _render(pv.crowd, backend, camera, light, geo, shadows=True)
+    points = _floor_points(scene, camera, SIZE)
+    pos = pv.crowd.agents.position.astype(np.float64)
+    inside = (points[..., 0] > pos[:, 0].min()) & (points[..., 0] < pos[:, 0].max()) & \
+        (points[..., 1] > pos[:, 1].min()) & (points[..., 1] < pos[:, 1].max())
+    floor = np.isfinite(points[..., 0]) & (crowd_only[..., 3] == 0) & inside
+    ratio = shaded[..., :3].astype(float).sum(-1) / np.maximum(
+        lit[..., :3].astype(float).sum(-1), 1)
+    dark = ratio < 0.8
+    wall = _sun_blocked(scene, points, light[:3]) & floor
+    agents = _near_agent_shadow(points, light[:3], pos, 0.45) & floor
+    sure_wall = _erode(wall) & ~agents
+    sure_lit = _erode(floor & ~wall) & ~_near_agent_shadow(points, light[:3], pos, 0.9)
+    assert sure_wall.sum() > 100 and sure_lit.sum() > 30
+    assert dark[sure_wall].mean() > 0.97, dark[sure_wall].mean()
+    assert (~dark[sure_lit]).mean() > 0.97, (~dark[sure_lit]).mean()
+    # the agents' own shadows: dark floor where only an agent stands in the sun's way
+    assert (dark & agents & ~wall).sum() > 30

@@ -57,6 +57,11 @@ def cpu_reference_image(gl, h, crowd, camera, light):
                       ["fragment_shader"])
     prog["u_view_proj"].write(np.asarray(camera.view_projection, "f4").T.tobytes())
     prog["u_light"].value = light
+    from crowd_addon.gpu.shadows import LIT_VIEW, view_texels
+    lit = gl.texture((1, 1), 4, np.ones(4, "f4").tobytes(), dtype="f4")
+    lit_view = gl.texture((4, 1), 4, view_texels(LIT_VIEW).tobytes(), dtype="f4")
+    lit.use(3)                        # no shadows: the crowd's stand-in textures
+    lit_view.use(4)
     vbo, ibo = gl.buffer(verts.tobytes()), gl.buffer(tris.tobytes())
     vao = gl.vertex_array(prog, [(vbo, "3f 3f 3f", "in_world", "in_normal", "in_color")], ibo,
                           index_element_size=4)
@@ -67,7 +72,7 @@ def cpu_reference_image(gl, h, crowd, camera, light):
     gl.enable(gl.DEPTH_TEST)
     vao.render()
     img = np.frombuffer(fbo.read(components=4, alignment=1), np.uint8)
-    for obj in (vao, vbo, ibo, prog, fbo):
+    for obj in (vao, vbo, ibo, prog, fbo, lit, lit_view):
         obj.release()
     return img.reshape(SIZE[1], SIZE[0], 4)[::-1]
 
