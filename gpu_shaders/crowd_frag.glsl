@@ -5,15 +5,16 @@
  * facing the ground a third of it, so undersides and backs read as shaded instead
  * of flat.
  *
- * Shadows: `shadow_view_tex` holds the sun's view-projection matrix (4 RGBA32F texels,
- * its columns) and `shadow_tex` the depth the sun sees through it
- * (crowd_addon/gpu/shadows.py). Without shadows both are a stand-in that leaves every
- * point lit: the matrix moves every point outside the map. */
+ * Shadows (SHADOWS 1): `shadow_view_tex` holds the sun's view-projection matrix (4
+ * RGBA32F texels, its columns) and `shadow_tex` the depth the sun sees through it
+ * (crowd_addon/gpu/shadows.py). SHADOWS 0 (no shadows, and the shadow map's own
+ * pass) reads neither: the sun is never hidden. */
 
 const float SHADOW_BIAS = 0.0015;       /* in the map's 0..1 depth */
 
 float sun_visibility(vec3 world)
 {
+#if SHADOWS
   mat4 m = mat4(texelFetch(shadow_view_tex, ivec2(0, 0), 0),
                 texelFetch(shadow_view_tex, ivec2(1, 0), 0),
                 texelFetch(shadow_view_tex, ivec2(2, 0), 0),
@@ -30,6 +31,9 @@ float sun_visibility(vec3 world)
     lit += (p.z - SHADOW_BIAS <= texture(shadow_tex, at).r) ? 1.0 : 0.0;
   }
   return lit * 0.25;
+#else
+  return 1.0;
+#endif
 }
 
 void main()

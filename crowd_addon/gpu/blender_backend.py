@@ -208,7 +208,8 @@ class BlenderGPURenderer(CrowdRenderer):
 
     def _draw(self, mesh, draw):
         n = mesh.buffers.influences
-        shader = program(self.gpu, for_influences(CROWD_DRAW, n), {"INFLUENCES": n})
+        shader = program(self.gpu, for_influences(CROWD_DRAW, n),
+                         {"INFLUENCES": n, "SHADOWS": int(self.sampling_shadows)})
         self._bind(shader, CROWD_DRAW, draw.uniforms, self.textures["lists"])
         mesh.triangles.draw_instanced(shader, instance_count=draw.instances)
 
@@ -223,7 +224,7 @@ class BlenderGPURenderer(CrowdRenderer):
         return self.gpu.types.GPUBatch(type="TRIS", buf=vbo)
 
     def _draw_scene(self, scene, uniforms):
-        shader = program(self.gpu, SCENE_DRAW)
+        shader = program(self.gpu, SCENE_DRAW, {"SHADOWS": int(self.sampling_shadows)})
         self._bind(shader, SCENE_DRAW, uniforms)
         scene.draw(shader)
 
@@ -259,7 +260,7 @@ class BlenderGPURenderer(CrowdRenderer):
         framebuffer = gpu.types.GPUFrameBuffer(color_slots=(target,))
         influences = mesh.buffers.influences
         shader = program(gpu, for_influences(CROWD_CAPTURE, influences),
-                         {"INFLUENCES": influences})
+                         {"INFLUENCES": influences, "SHADOWS": 0})
         with framebuffer.bind():
             framebuffer.clear(color=(0.0, 0.0, 0.0, 0.0))
             gpu.state.viewport_set(0, 0, *size)

@@ -28,24 +28,32 @@ _FORMATS = {"RGBA32F": (4, "f4"), "R32I": (1, "i4")}
 
 class _Mesh:
     """GL objects of one (skeleton, LOD) proxy: vertex arrays for drawing (indexed
-    triangles, ``copies`` agents an instance) and for transform-feedback capture
-    (the first copy's vertices, one agent an instance)."""
+    triangles, ``copies`` agents an instance; one per draw program variant, made when
+    first drawn: with and without shadows) and for transform-feedback capture (the
+    first copy's vertices, one agent an instance)."""
 
-    def __init__(self, ctx, buffers, copies, programs):
-        self.buffers, self.copies = buffers, copies
-        self.draw_program, self.capture_program = programs
+    def __init__(self, ctx, buffers, copies, draw_program, capture_program):
+        self.ctx, self.buffers, self.copies = ctx, buffers, copies
+        self.draw_program, self.capture_program = draw_program, capture_program
         batch = buffers.batched(copies)
         self.vbo = ctx.buffer(batch.interleaved().tobytes())
         self.ibo = ctx.buffer(batch.indices.tobytes())
-        fmt = buffers.format
-        self.draw = ctx.vertex_array(self.draw_program,
-                                     [_layout(self.vbo, self.draw_program, fmt)],
-                                     self.ibo, index_element_size=4)
-        self.capture = ctx.vertex_array(self.capture_program,
-                                        [_layout(self.vbo, self.capture_program, fmt)])
+        self.draws = {}
+        self.capture = ctx.vertex_array(capture_program,
+                                        [_layout(self.vbo, capture_program, buffers.format)])
+
+    def draw(self, shadows: bool):
+        """(program, vertex array) of the draw variant that does or does not read the
+        shadow map."""
+        if shadows not in self.draws:
+            prog = self.draw_program(shadows)
+            self.draws[shadows] = prog, self.ctx.vertex_array(
+                prog, [_layout(self.vbo, prog, self.buffers.format)], self.ibo,
+                index_element_size=4)
+        return self.draws[shadows]
 
     def objects(self):
-        return [self.draw, self.capture, self.vbo, self.ibo]
+        return [vao for _, vao in self.draws.values()] + [self.capture, self.vbo, self.ibo]
 
 
 class _ShadowMap:
@@ -157,10 +165,12 @@ class ModernGLRenderer(CrowdRenderer):
         return self._programs[key]
 
     def _create_mesh(self, buffers, copies):
-        defines = {"INFLUENCES": buffers.influences}
-        spec = for_influences(CROWD_DRAW, buffers.influences)
-        return _Mesh(self.ctx, buffers, copies, (self._program(spec, defines),
-                                                 self._program(spec, defines, True)))
+        n = buffers.influences
+        spec = for_influences(CROWD_DRAW, n)
+        return _Mesh(self.ctx, buffers, copies,
+                     lambda shadows: self._program(spec, {"INFLUENCES": n,
+                                                          "SHADOWS": int(shadows)}),
+                     self._program(spec, {"INFLUENCES": n, "SHADOWS": 0}, True))
 
     def _skin(self, work) -> int:
         if "batch" not in self.textures:
@@ -193,8 +203,9 @@ class ModernGLRenderer(CrowdRenderer):
             tex.use(slot)
 
     def _draw(self, mesh, draw):
-        self._bind(mesh.draw_program, draw.uniforms, self.textures["lists"])
-        mesh.draw.render(self._mgl.TRIANGLES, instances=draw.instances)
+        program, vao = mesh.draw(self.sampling_shadows)
+        self._bind(program, draw.uniforms, self.textures["lists"])
+        vao.render(self._mgl.TRIANGLES, instances=draw.instances)
 
     def _capture(self, mesh, capture) -> np.ndarray:
         n, count = capture.agents.size, mesh.buffers.vertex_count
@@ -210,20 +221,27 @@ class ModernGLRenderer(CrowdRenderer):
         return result
 
     def _create_scene(self, geometry):
-        prog = self._program(SCENE_DRAW, {})
         vbo = self.ctx.buffer(geometry.interleaved().tobytes())
-        return vbo, self.ctx.vertex_array(prog, [(vbo, "3f 3f 3f", "pos", "nor", "col")])
+        return {"vbo": vbo}
 
     def _draw_scene(self, scene, uniforms):
-        _set_uniforms(scene[1].program, uniforms)
+        shadows = self.sampling_shadows
+        if shadows not in scene:                  # one vertex array a program variant
+            prog = self._program(SCENE_DRAW, {"SHADOWS": int(shadows)})
+            scene[shadows] = self.ctx.vertex_array(
+                prog, [(scene["vbo"], "3f 3f 3f", "pos", "nor", "col")])
+        vao = scene[shadows]
+        _set_uniforms(vao.program, uniforms)
         for slot, _, name in SCENE_DRAW.samplers:
             self.textures[DRAW_SAMPLERS[name]].use(slot)
-        scene[1].render(self._mgl.TRIANGLES)
+        vao.render(self._mgl.TRIANGLES)
 
     def _release_scene(self):
         if self._scene is not None:
-            for obj in reversed(self._scene):
-                obj.release()
+            for key, obj in self._scene.items():
+                if key != "vbo":
+                    obj.release()
+            self._scene["vbo"].release()
         self._scene = None
 
     def _create_shadow_map(self, size):

@@ -89,6 +89,8 @@ class CrowdRenderer:
                      self._create_texture(TextureSpec("shadow_view", (4, 1), "RGBA32F",
                                                       view_texels(LIT_VIEW))))
         self.textures["shadow"], self.textures["shadow_view"] = self._lit
+        #: whether the draws now read the shadow map (the programs' ``SHADOWS``)
+        self.sampling_shadows = False
         self.meshes = {key: self._create_mesh(buf, copies)
                        for key, (buf, copies) in self.plan.meshes().items()}
         work = self.plan.take_skinning()          # GPU skinning: fill the pose texture
@@ -139,8 +141,10 @@ class CrowdRenderer:
         with self._bind_target(target, clear) as pixels_high:
             for region in self.plan.regroup(vp, pixels_high, self.culling):
                 s.list_bytes += self._write_ints(self.textures["lists"], region)
+            self.sampling_shadows = False
             if self.shadows:
                 self._shadow_pass()
+                self.sampling_shadows = True
             if self._scene is not None:
                 self._draw_scene(self._scene, {"u_view_proj": gl_matrix(vp),
                                                "u_light": self.light})
@@ -165,6 +169,8 @@ class CrowdRenderer:
         if self._shadow_map is None:
             self._shadow_map = self._create_shadow_map(SHADOW_SIZE)
         self.textures["shadow"], self.textures["shadow_view"] = self._lit
+        #: whether the draws now read the shadow map (the programs' ``SHADOWS``)
+        self.sampling_shadows = False
         with self._bind_shadow(self._shadow_map):
             if self._scene is not None:
                 self._draw_scene(self._scene, {"u_view_proj": gl_matrix(light_vp),

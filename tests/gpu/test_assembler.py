@@ -11,12 +11,14 @@ import pytest
 
 from crowd_addon.core import CrowdError
 from crowd_addon.gpu.assembler import GLSL_VERSION, blender_create_info, gl_sources
-from crowd_addon.gpu.programs import (CROWD_DRAW, ROW_UPLOAD, SKIN_ROWS, WIDE_INPUTS,
-                                      ProgramSpec, for_influences)
+from crowd_addon.gpu.programs import (CROWD_DRAW, ROW_UPLOAD, SCENE_DRAW, SKIN_ROWS,
+                                      WIDE_INPUTS, ProgramSpec, for_influences)
 
 CROWD_DRAW_WIDE = for_influences(CROWD_DRAW, 7)
-DEFINES = {CROWD_DRAW.name: {"INFLUENCES": 2}, SKIN_ROWS.name: {"MAX_BONES": 30},
-           ROW_UPLOAD.name: {}, CROWD_DRAW_WIDE.name: {"INFLUENCES": 7}}
+DEFINES = {CROWD_DRAW.name: {"INFLUENCES": 2, "SHADOWS": 1},
+           SKIN_ROWS.name: {"MAX_BONES": 30}, ROW_UPLOAD.name: {},
+           CROWD_DRAW_WIDE.name: {"INFLUENCES": 7, "SHADOWS": 1},
+           SCENE_DRAW.name: {"SHADOWS": 1}}
 
 
 def test_programs_for_more_than_four_influences_declare_the_second_pair():
@@ -26,7 +28,8 @@ def test_programs_for_more_than_four_influences_declare_the_second_pair():
         CROWD_DRAW_WIDE
 
 
-@pytest.mark.parametrize("spec", [CROWD_DRAW, CROWD_DRAW_WIDE, SKIN_ROWS, ROW_UPLOAD],
+@pytest.mark.parametrize("spec", [CROWD_DRAW, CROWD_DRAW_WIDE, SKIN_ROWS, ROW_UPLOAD,
+                                  SCENE_DRAW],
                          ids=lambda s: s.name)
 def test_gl_sources_compile_and_expose_every_declaration(gl, spec):
     src = gl_sources(spec, DEFINES[spec.name])
@@ -75,9 +78,12 @@ def test_programs_compile_in_blenders_gpu_module():
         scene.render.resolution_x = scene.render.resolution_y = 8
         bpy.ops.render.render()           # initialises the GPU in background mode
         from crowd_addon.gpu.assembler import blender_create_info
-        from crowd_addon.gpu.programs import CROWD_DRAW, ROW_UPLOAD, SKIN_ROWS, for_influences
-        for spec, defines in ((CROWD_DRAW, {"INFLUENCES": 4}),
-                              (for_influences(CROWD_DRAW, 8), {"INFLUENCES": 8}),
+        from crowd_addon.gpu.programs import (CROWD_DRAW, ROW_UPLOAD, SCENE_DRAW, SKIN_ROWS,
+                                              for_influences)
+        for spec, defines in ((CROWD_DRAW, {"INFLUENCES": 4, "SHADOWS": 0}),
+                              (CROWD_DRAW, {"INFLUENCES": 4, "SHADOWS": 1}),
+                              (for_influences(CROWD_DRAW, 8), {"INFLUENCES": 8, "SHADOWS": 1}),
+                              (SCENE_DRAW, {"SHADOWS": 1}),
                               (SKIN_ROWS, {"MAX_BONES": 30}), (ROW_UPLOAD, {})):
             gpu.shader.create_from_info(blender_create_info(spec, defines).build(gpu))
             print("compiled", spec.name)
@@ -85,4 +91,4 @@ def test_programs_compile_in_blenders_gpu_module():
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
                           timeout=240, cwd=Path(__file__).resolve().parents[2])
     assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
-    assert done.stdout.count("compiled") == 4
+    assert done.stdout.count("compiled") == 6

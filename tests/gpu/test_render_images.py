@@ -53,15 +53,10 @@ def cpu_reference_image(gl, h, crowd, camera, light):
     tris = (mesh.triangles[None].astype(np.int64)
             + (np.arange(crowd.agents.count) * mesh.vertex_count)[:, None, None]).astype("u4")
     prog = gl.program(vertex_shader=REFERENCE_VS,
-                      fragment_shader=gl_sources(CROWD_DRAW, {"INFLUENCES": 4})
+                      fragment_shader=gl_sources(CROWD_DRAW, {"INFLUENCES": 4, "SHADOWS": 0})
                       ["fragment_shader"])
     prog["u_view_proj"].write(np.asarray(camera.view_projection, "f4").T.tobytes())
     prog["u_light"].value = light
-    from crowd_addon.gpu.shadows import LIT_VIEW, view_texels
-    lit = gl.texture((1, 1), 4, np.ones(4, "f4").tobytes(), dtype="f4")
-    lit_view = gl.texture((4, 1), 4, view_texels(LIT_VIEW).tobytes(), dtype="f4")
-    lit.use(3)                        # no shadows: the crowd's stand-in textures
-    lit_view.use(4)
     vbo, ibo = gl.buffer(verts.tobytes()), gl.buffer(tris.tobytes())
     vao = gl.vertex_array(prog, [(vbo, "3f 3f 3f", "in_world", "in_normal", "in_color")], ibo,
                           index_element_size=4)
@@ -72,7 +67,7 @@ def cpu_reference_image(gl, h, crowd, camera, light):
     gl.enable(gl.DEPTH_TEST)
     vao.render()
     img = np.frombuffer(fbo.read(components=4, alignment=1), np.uint8)
-    for obj in (vao, vbo, ibo, prog, fbo, lit, lit_view):
+    for obj in (vao, vbo, ibo, prog, fbo):
         obj.release()
     return img.reshape(SIZE[1], SIZE[0], 4)[::-1]
 
