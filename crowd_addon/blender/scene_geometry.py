@@ -5,10 +5,11 @@ every evaluated mesh, curve or text object (instances included) that renders -- 
 one :class:`~crowd_addon.gpu.scene_geometry.SceneGeometry` of world-space triangles,
 coloured by their materials (a material's viewport display colour, as Workbench
 shows it, unless left at its default grey, then its Principled BSDF's base colour;
-the object's colour where a slot has no material). The crowd's own template objects (characters' armatures,
-bodies and LOD meshes, agent sources and what they instance) are left out: the crowd
-draws those itself. :func:`scene_light` is the first rendering sun lamp's direction
-as the renderers' ``light``.
+the object's colour where a slot has no material). The crowd's own objects are left
+out, since the crowd draws those itself: characters' armatures, bodies and LOD
+meshes, agent sources and what they instance, and Render Crowd's instances.
+:func:`scene_light` is the first rendering sun lamp's direction as the renderers'
+``light``.
 """
 
 from __future__ import annotations
@@ -28,8 +29,10 @@ _GREY = (0.8, 0.8, 0.8)
 
 def crowd_objects(scene) -> set:
     """Names of the objects the scene's crowd settings use as templates: characters'
-    armatures, bodies and LOD meshes, and agent sources."""
-    names = set()
+    armatures, bodies and LOD meshes, and agent sources; and Render Crowd's points
+    object (its instances are the crowd itself)."""
+    from .render_crowd import POINTS
+    names = {POINTS}
     settings = getattr(scene, "crowd", None)
     if settings is None:
         return names

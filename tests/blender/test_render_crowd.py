@@ -207,3 +207,13 @@ def test_switching_on_without_a_preview_starts_it(crowd_scene):
     pv = preview.get(scene)
     assert pv is not None and pv.render_frame == scene.frame_current
     _check_instances(scene, pv.crowd)
+
+
+def test_the_scene_pass_leaves_the_render_crowd_out(crowd_scene):
+    """The headless preview draws the crowd itself: Render Crowd's instances are not
+    scene geometry (they would draw every fan twice)."""
+    from crowd_addon.blender.scene_geometry import scene_geometry
+    scene, _ = crowd_scene
+    assert _instances(scene)                          # the render data is there
+    geo = scene_geometry(scene)
+    assert geo.triangle_count == 0 and render_crowd.POINTS not in geo.objects
