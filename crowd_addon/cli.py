@@ -249,6 +249,9 @@ def _add_preview(subparsers) -> None:
     p.add_argument("--backend", choices=BACKENDS, default="moderngl",
                    help="renderer: moderngl (headless EGL) or blender (Blender's gpu "
                         "module through bpy) (default: %(default)s)")
+    p.add_argument("--no-shadows", dest="shadows", action="store_false",
+                   help="with --blend: no sun shadows (they cost about as much again as "
+                        "the crowd at 65k agents on a software rasterizer)")
     p.add_argument("--samples", type=int_at_least(0), default=4, metavar="N",
                    help="multisample anti-aliasing, samples a pixel, moderngl backend "
                         "(Blender's gpu module has no multisampled offscreen image); 0: "
@@ -276,7 +279,7 @@ def _run_preview(args) -> int:
         config, r, camera = preview_blend(
             args.out, args.frames, blend=args.blend, scene=args.scene, start=args.start,
             camera=args.camera, size=size, mp4=args.mp4, backend=args.backend,
-            samples=args.samples, trust_scripts=args.trust_scripts, progress=progress, on_bake=lambda done, total, message: print(
+            samples=args.samples, shadows=args.shadows, trust_scripts=args.trust_scripts, progress=progress, on_bake=lambda done, total, message: print(
                 f"crowd preview: {message}", file=sys.stderr, flush=True))
     else:
         from .core.config_io import load_config

@@ -142,7 +142,7 @@ def preview_blend(out: str, frames: int | None = None, *, blend: str | None = No
                   scene: str | None = None, start: int | None = None,
                   camera: str | None = None, size=(None, None), mp4: bool = False,
                   backend: str = "moderngl", progress=None, on_bake=None,
-                  trust_scripts: bool = False, samples: int = 4):
+                  trust_scripts: bool = False, samples: int = 4, shadows: bool = True):
     """Render the Crowd settings of a .blend's scene (:func:`open_scene`) headless to
     PNG frames (:func:`crowd_addon.gpu.preview_render.render_preview`), drawn in the
     scene's own geometry and lit by its sun (:mod:`.scene_geometry`).
@@ -153,8 +153,8 @@ def preview_blend(out: str, frames: int | None = None, *, blend: str | None = No
     in pixels, either None for the scene's render resolution (its percentage applied).
     The camera, the frames and the output folder are checked before the bake.
     Blender's own output goes to stderr. ``trust_scripts`` as :func:`export_blend`;
-    ``samples``: anti-aliasing of the moderngl backend. Returns ``(config, result,
-    camera object name or None)``.
+    ``samples``: anti-aliasing of the moderngl backend; ``shadows``: the sun's
+    shadows. Returns ``(config, result, camera object name or None)``.
     """
     with blender_output_to_stderr():        # from the import of bpy on (5.2 logs then)
         from ..gpu.preview_render import render_preview, writable_dir
@@ -183,7 +183,7 @@ def preview_blend(out: str, frames: int | None = None, *, blend: str | None = No
         result = render_preview(crowd, out, frames, start=first, size=size, mp4=mp4,
                                 backend=backend, progress=progress, camera=view,
                                 scene=scene_geometry(found), light=scene_light(found),
-                                samples=samples)
+                                samples=samples, shadows=shadows)
     return config, result, None if obj is None else obj.name
 
 

@@ -211,6 +211,26 @@ def test_preview_takes_the_scenes_render_resolution(blend, tmp_path):
         assert read_png(out / f"frame_{FIRST:04d}.png").shape[:2] == (size[1], size[0])
 
 
+def test_shadows_only_darken_and_no_shadows_leaves_them_out(blend, tmp_path):
+    """The crowd on a floor: the fans' shadows darken it, and --no-shadows leaves it
+    as the sun lights it."""
+    bpy.ops.wm.open_mainfile(filepath=str(blend))
+    bpy.ops.mesh.primitive_plane_add(size=40.0, location=(3.5, 2.5, -0.01))
+    s = bpy.context.scene.crowd
+    s.lod_near, s.lod_far, s.lod_card = 500.0, 600.0, 700.0      # near: they cast
+    floored = tmp_path / "floor.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(floored), copy=True)
+    images = {}
+    for extra in ([], ["--no-shadows"]):
+        out = tmp_path / ("plain" if extra else "shadowed")
+        run = crowd("preview", "--blend", floored, "--out", out, "--frames", 1, "--width", W,
+                    "--height", H, "--samples", 0, *extra)
+        assert run.returncode == 0, run.stderr[-3000:]
+        images[bool(extra)] = read_png(out / f"frame_{FIRST:04d}.png").astype(np.int16)
+    darker = images[True].sum(-1) - images[False].sum(-1)
+    assert (darker > 30).sum() > 20 and (darker >= -3).all()
+
+
 def test_a_camera_looking_away_sees_no_agent(blend, tmp_path):
     out = tmp_path / "away"
     run = crowd("preview", "--blend", blend, "--out", out, "--frames", 1, "--width", W,
