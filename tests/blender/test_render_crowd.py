@@ -149,6 +149,9 @@ def _eevee():
 def _workbench(scene, path, animation=False, engine="BLENDER_WORKBENCH"):
     r = scene.render
     r.engine, r.film_transparent = engine, True
+    if engine == "CYCLES":                  # one sharp sample: silhouettes, not light
+        scene.cycles.samples, scene.cycles.device = 1, "CPU"
+        scene.cycles.filter_width = 0.01
     r.image_settings.file_format, r.image_settings.color_mode = "PNG", "RGBA"
     r.filepath = str(path)
     bpy.ops.render.render(write_still=not animation, animation=animation)
@@ -158,7 +161,7 @@ def _overlap(a, b):
     return (a & b).sum() / max((a | b).sum(), 1)
 
 
-@pytest.mark.parametrize("engine", ["BLENDER_WORKBENCH", "EEVEE"])
+@pytest.mark.parametrize("engine", ["BLENDER_WORKBENCH", "EEVEE", "CYCLES"])
 def test_f12_shows_the_crowd_where_the_preview_draws_it(crowd_scene, tmp_path, engine):
     scene, pv = crowd_scene
     _workbench(scene, tmp_path / "still.png", engine=_eevee() if engine == "EEVEE" else engine)
