@@ -12,7 +12,8 @@ of ordinary Blender data, with the paper's sharing kept:
   ``foreach_set``. The meshes hang on objects ``CrowdPose.000000 ...`` of the
   collection :data:`POSES`, which is not linked to the scene (only instanced);
 * one **points object** (:data:`POINTS`): a vertex per agent at its position, with
-  point attributes ``crowd_pose`` (the index of its pose object), ``crowd_heading``
+  point attributes ``crowd_pose`` (the index of its pose object), ``crowd_drawn``
+  (false for agents of a character without a body: not instanced), ``crowd_heading``
   (radians about +Z) and ``crowd_color`` (its tint, readable in materials through an
   Attribute node of type *Instancer*), and a Geometry Nodes modifier that puts the
   picked pose object on every point (*Instance on Points* with *Pick Instance*
@@ -96,10 +97,14 @@ def _node_group():
     heading = nodes.new("GeometryNodeInputNamedAttribute")
     heading.data_type = "FLOAT"
     heading.inputs["Name"].default_value = "crowd_heading"
+    drawn = nodes.new("GeometryNodeInputNamedAttribute")
+    drawn.data_type = "BOOLEAN"
+    drawn.inputs["Name"].default_value = "crowd_drawn"
     euler = nodes.new("ShaderNodeCombineXYZ")
     inst = nodes.new("GeometryNodeInstanceOnPoints")
     inst.inputs["Pick Instance"].default_value = True
     links.new(inp.outputs[0], inst.inputs["Points"])
+    links.new(drawn.outputs["Attribute"], inst.inputs["Selection"])
     links.new(coll.outputs[0], inst.inputs["Instance"])
     links.new(pose.outputs["Attribute"], inst.inputs["Instance Index"])
     links.new(heading.outputs["Attribute"], euler.inputs["Z"])
@@ -128,6 +133,7 @@ def _points_object(scene, count: int):
         mesh.clear_geometry()
         mesh.vertices.add(count)
     for name, kind, domain in (("crowd_pose", "INT", "POINT"),
+                               ("crowd_drawn", "BOOLEAN", "POINT"),
                                ("crowd_heading", "FLOAT", "POINT"),
                                ("crowd_color", "FLOAT_COLOR", "POINT")):
         if mesh.attributes.get(name) is None:
@@ -221,10 +227,10 @@ def sync(scene, crowd) -> RenderStats:
                                            return_inverse=True)
     real = keys >= 0
     stats = RenderStats(agents=int(drawn.sum()))
-    # pose objects 0..P-1 in key order; an agent without a mesh points past them all
+    # pose objects 0..P-1 in key order; an agent without a mesh is not instanced
     poses = int(real.sum())
     offset = int((~real).sum())                 # the -1 key sorts first
-    pose_index = np.where(drawn, pose_of_agent.reshape(-1) - offset, poses).astype(np.int32)
+    pose_index = np.where(drawn, pose_of_agent.reshape(-1) - offset, 0).astype(np.int32)
     coll = _poses_collection()
     existing = _Existing(coll)
     for k in np.unique(skel[drawn]):
@@ -251,6 +257,7 @@ def sync(scene, crowd) -> RenderStats:
     me.vertices.foreach_set("co", np.ascontiguousarray(crowd.agents.position, np.float32)
                             .ravel())
     me.attributes["crowd_pose"].data.foreach_set("value", pose_index)
+    me.attributes["crowd_drawn"].data.foreach_set("value", drawn)
     me.attributes["crowd_heading"].data.foreach_set(
         "value", np.ascontiguousarray(crowd.agents.heading, np.float32))
     color = np.ones((n, 4), np.float32)

@@ -58,8 +58,13 @@ def crowd_scene():
 
 
 def _instances(scene):
-    """{agent: world vertices (V, 3)} of the evaluated Render Crowd instances."""
+    """{agent: world vertices (V, 3)} of the evaluated Render Crowd instances (an
+    instance's id counts the instanced points: agents whose ``crowd_drawn`` is set)."""
     depsgraph = bpy.context.evaluated_depsgraph_get()
+    points = bpy.data.objects[render_crowd.POINTS].data
+    drawn = np.zeros(len(points.vertices), bool)
+    points.attributes["crowd_drawn"].data.foreach_get("value", drawn)
+    agent_of = np.flatnonzero(drawn)
     out = {}
     for inst in depsgraph.object_instances:
         if inst.is_instance and inst.parent is not None and \
@@ -68,20 +73,23 @@ def _instances(scene):
             co = np.empty(3 * len(mesh.vertices), np.float32)
             mesh.vertices.foreach_get("co", co)
             m = np.array(inst.matrix_world, np.float64)
-            out[inst.persistent_id[0]] = co.reshape(-1, 3) @ m[:3, :3].T + m[:3, 3]
+            out[int(agent_of[inst.persistent_id[0]])] = co.reshape(-1, 3) @ m[:3, :3].T + \
+                m[:3, 3]
     return out
 
 
-def _core_world(crowd):
-    """Every agent's proxy skinned by core on the CPU, turned and placed: (N, V, 3)."""
+def _core_world(crowd, agents=None):
+    """The agents' (default: all) proxy skinned by core on the CPU, turned and placed:
+    (n, V, 3)."""
+    agents = np.arange(crowd.agents.count) if agents is None else np.asarray(agents)
     mesh = crowd.config.meshes["Rig"][0]
     local = skin_vertices(mesh.positions, mesh.bone_indices, mesh.bone_weights,
-                          crowd.agent_rows())
-    h = crowd.agents.heading.astype(np.float64)[:, None]
+                          crowd.agent_rows(agents))
+    h = crowd.agents.heading[agents].astype(np.float64)[:, None]
     c, s = np.cos(h), np.sin(h)
     x, y = local[..., 0], local[..., 1]
     return np.stack([c * x - s * y, s * x + c * y, local[..., 2]], -1) + \
-        crowd.agents.position.astype(np.float64)[:, None]
+        crowd.agents.position[agents].astype(np.float64)[:, None]
 
 
 def _check_instances(scene, crowd):
@@ -220,3 +228,21 @@ def test_the_scene_pass_leaves_the_render_crowd_out(crowd_scene):
     assert _instances(scene)                          # the render data is there
     geo = scene_geometry(scene)
     assert geo.triangle_count == 0 and render_crowd.POINTS not in geo.objects
+
+
+def test_agents_of_a_character_without_a_body_are_not_instanced(crowd_scene):
+    scene, _ = crowd_scene
+    s = scene.crowd
+    ghost_rig = cs.make_armature("Ghost")
+    cs.add_stream(cs.add_character(s, ghost_rig, None), "glide",
+                  cs.make_action(ghost_rig, "glide", seed=4))
+    assert bpy.ops.crowd.bake() == {"FINISHED"}
+    pv = preview.get(scene)
+    skel = pv.crowd.view.agent_skeleton
+    bodied = [k for k, sk in enumerate(pv.crowd.view.skeletons) if sk.name == "Rig"][0]
+    assert 0 < (skel == bodied).sum() < skel.size          # both characters have agents
+    got = _instances(scene)
+    assert sorted(got) == sorted(np.flatnonzero(skel == bodied).tolist())
+    expected = _core_world(pv.crowd, np.flatnonzero(skel == bodied))
+    for row, agent in enumerate(np.flatnonzero(skel == bodied)):
+        assert np.abs(got[agent] - expected[row]).max() < 1e-5
