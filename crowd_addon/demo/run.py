@@ -11,7 +11,7 @@
    Python in the loop; the claps are the clap action's event tags, counted by the
    crowd), render preview frames headless with the GPU path as it runs, in the
    stadium's own geometry and sun (PNG, MP4 when imageio-ffmpeg is there, and
-   ``contact_sheet.png``: six frames spread over the run), and record it
+   ``contact_sheet.png``: six frames, the show's beats among them), and record it
    (:mod:`crowd_addon.core.recording`);
 4. export that recording to ``stadium.usdc`` (UsdSkel): the same show, not simulated
    again;
@@ -98,6 +98,25 @@ def show_summary(crowd) -> dict:
                      for c in cues]}
 
 
+def _beat_frames(crowd, first: int, last: int) -> list:
+    """The contact sheet's frames: the first, the wave twice as it passes the camera's
+    stand, the goal's cheer, the hits and the last (beats after the run left out),
+    topped up with frames spread over the run to :data:`SHEET_FRAMES`."""
+    from ..blender.stadium import CUES
+    from ..gpu.contact_sheet import sheet_frames
+
+    at = {c["name"]: c["frame"] for c in crowd.show.describe()} if crowd.show else {}
+    beats = [(CUES["wave"], 6), (CUES["wave"], 10), (CUES["goal_home"], 12),
+             (f"{CUES['hit']} 1", 12)]
+    picked = {first, last} | {at[name] + k for name, k in beats
+                              if name in at and first <= at[name] + k <= last}
+    for f in sheet_frames(first, last, SHEET_FRAMES):
+        if len(picked) >= SHEET_FRAMES:
+            break
+        picked.add(f)
+    return sorted(picked)
+
+
 def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
              mp4: bool = True, usd: bool = True, log=None) -> dict:
     """Run the stadium demo into ``out_dir``; returns the summary dict."""
@@ -128,14 +147,14 @@ def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
 
     from ..core.crowd import Crowd
     from ..core.recorder import Recorder
-    from ..gpu.contact_sheet import ContactSheet, sheet_frames
+    from ..gpu.contact_sheet import ContactSheet
     from ..gpu.png import write_png
     from ..gpu.preview_render import render_preview
 
     log(f"simulating and rendering {frames} frames of {cfg.agent_count:,} agents")
     t = time.perf_counter()
     crowd = Crowd(cfg, skinning="gpu")          # it runs its show (cfg.show) itself
-    sheet = ContactSheet(sheet_frames(crowd.frame, crowd.frame + frames - 1, SHEET_FRAMES))
+    sheet = ContactSheet(_beat_frames(crowd, crowd.frame, crowd.frame + frames - 1))
     # the frames the preview shows, recorded as they are rendered
     recorder = Recorder(crowd, crowd.frame, crowd.frame + frames - 1) if usd else None
     preview = render_preview(crowd, out / "frames", frames, size=size, mp4=mp4,
@@ -155,7 +174,8 @@ def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
                "renderer": preview.device, **show_summary(crowd),
                "muted_cues": list(stadium.muted),
                "pngs": len(preview.pngs), "mp4": preview.mp4,
-               "contact_sheet": str(out / "contact_sheet.png")}
+               "contact_sheet": str(out / "contact_sheet.png"),
+               "contact_sheet_frames": sorted(sheet.frames)}
 
     if usd:
         from ..usd.export import export_crowd

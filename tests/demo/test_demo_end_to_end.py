@@ -170,16 +170,20 @@ def test_preview_of_the_saved_blend_renders_the_demos_frames(demo):
         assert Path(png).read_bytes() == (out / "frames" / name).read_bytes(), name
 
 
-def test_contact_sheet_holds_six_frames_of_the_run(demo):
-    from crowd_addon.gpu.contact_sheet import ContactSheet, sheet_frames
+def test_contact_sheet_holds_six_frames_of_the_run_and_its_beats(demo):
+    from crowd_addon.gpu.contact_sheet import ContactSheet
     out, _ = demo
     s = json.loads((out / "summary.json").read_text())
     sheet = read_png(out / "contact_sheet.png")
     # six 160 x 90 cells (the frames halved), three a row, 4 pixels apart
     assert sheet.shape == (2 * 94 + 4, 3 * 164 + 4, 3)
     shot = [int(p.stem.split("_")[1]) for p in sorted((out / "frames").glob("frame_*.png"))]
-    frames = sheet_frames(shot[0], shot[-1], 6)
+    frames = s["contact_sheet_frames"]
+    cue = {c["name"]: c["frame"] for c in s["cues"]}
     assert len(frames) == 6 and frames[0] == shot[0] and frames[-1] == shot[-1]
+    # the wave passing the camera's stand, the goal's cheer and the hits are on it
+    assert {cue["wave"] + 6, cue["wave"] + 10, cue["goal home"] + 12,
+            cue["hit 1"] + 12} <= set(frames)
     expected = ContactSheet(frames)
     for f in frames:
         expected.offer(f, read_png(out / "frames" / f"frame_{f:04d}.png"))
