@@ -93,9 +93,10 @@ def _pixel_rays(camera, size):
     return np.asarray(camera.eye), d / np.linalg.norm(d, axis=-1, keepdims=True)
 
 
-def _ray_cast_depth(scene, camera, size):
-    """Blender's own depth of the scene (hidden from the crowd's templates, as the
-    scene pass sees it) along the camera's -Z at every pixel; inf where no hit."""
+def _camera_hits(scene, camera, size):
+    """Blender's own ray cast of the scene (without the crowd's templates, as the scene
+    pass sees it) through every pixel (rows bottom-up): the depth along the camera's
+    -Z (inf where nothing is hit), the world point hit and the object's name."""
     depsgraph = bpy.context.evaluated_depsgraph_get()
     eye, dirs = _pixel_rays(camera, size)
     forward = -camera.view[2, :3]
@@ -103,17 +104,20 @@ def _ray_cast_depth(scene, camera, size):
     for o in hide:
         o.hide_set(True)
     depsgraph.update()
+    depth = np.full(dirs.shape[:2], np.inf)
+    points = np.full(dirs.shape, np.nan)
+    names = np.full(dirs.shape[:2], "", object)
     try:
-        depth = np.full(dirs.shape[:2], np.inf)
-        for (y, x), d in np.ndenumerate(dirs[..., 0]):
-            ray = dirs[y, x]
-            hit, loc, *_ = scene.ray_cast(depsgraph, eye, ray)
+        for (y, x), _ in np.ndenumerate(depth):
+            hit, loc, _, _, obj, _ = scene.ray_cast(depsgraph, eye, dirs[y, x])
             if hit:
+                points[y, x] = loc
                 depth[y, x] = float(np.dot(np.asarray(loc) - eye, forward))
+                names[y, x] = obj.original.name
     finally:
         for o in hide:
             o.hide_set(False)
-    return depth
+    return depth, points, names
 
 
 def _linear_depth(window_z, camera):
@@ -202,7 +206,7 @@ def test_a_wall_hides_exactly_the_agents_behind_it(walled, backend):
     light, geo = scene_light(scene), scene_geometry(scene)
     crowd_only, crowd_depth = _render(pv.crowd, backend, camera, light)
     composite, _ = _render(pv.crowd, backend, camera, light, geo)
-    scene_depth = _ray_cast_depth(scene, camera, SIZE)
+    scene_depth, _, _ = _camera_hits(scene, camera, SIZE)
 
     agent = crowd_only[..., 3] > 0
     agent_z = _linear_depth(crowd_depth, camera)
@@ -303,27 +307,6 @@ def test_viewport_draw_is_hidden_by_the_viewport_scene_depth(walled):
     assert (shown != headless).sum() <= 0.03 * crowd.sum()
 
 
-def _floor_points(scene, camera, size):
-    """Per pixel (rows bottom-up): the world point where the camera's ray first meets
-    the scene, and whether that is the floor (NaN elsewhere)."""
-    depsgraph = bpy.context.evaluated_depsgraph_get()
-    eye, dirs = _pixel_rays(camera, size)
-    hide = [o for o in scene.objects if o.name in ("Body", "Seats")]
-    for o in hide:
-        o.hide_set(True)
-    depsgraph.update()
-    points = np.full(dirs.shape, np.nan)
-    try:
-        for (y, x), _ in np.ndenumerate(dirs[..., 0]):
-            hit, loc, _, _, obj, _ = scene.ray_cast(depsgraph, eye, dirs[y, x])
-            if hit and obj.original.name == "Floor":
-                points[y, x] = loc
-    finally:
-        for o in hide:
-            o.hide_set(False)
-    return points
-
-
 def _sun_blocked(scene, points, light):
     """Whether Blender's ray cast from each point towards the sun meets the wall."""
     depsgraph = bpy.context.evaluated_depsgraph_get()
@@ -371,7 +354,8 @@ def test_the_sun_casts_the_walls_and_the_agents_shadows(walled, backend):
     crowd_only, _ = _render(pv.crowd, backend, camera, light)
     lit, _ = _render(pv.crowd, backend, camera, light, geo)
     shaded, _ = _render(pv.crowd, backend, camera, light, geo, shadows=True)
-    points = _floor_points(scene, camera, SIZE)
+    _, points, names = _camera_hits(scene, camera, SIZE)
+    points[names != "Floor"] = np.nan
     pos = pv.crowd.agents.position.astype(np.float64)
     inside = (points[..., 0] > pos[:, 0].min()) & (points[..., 0] < pos[:, 0].max()) & \
         (points[..., 1] > pos[:, 1].min()) & (points[..., 1] < pos[:, 1].max())
