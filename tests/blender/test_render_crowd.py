@@ -157,6 +157,8 @@ def _eevee():
 def _workbench(scene, path, animation=False, engine="BLENDER_WORKBENCH"):
     r = scene.render
     r.engine, r.film_transparent = engine, True
+    if engine == "BLENDER_WORKBENCH":       # no anti-aliasing: the preview has none here
+        scene.display.render_aa = "OFF"
     if engine == "CYCLES":                  # one sharp sample: silhouettes, not light
         scene.cycles.samples, scene.cycles.device = 1, "CPU"
         scene.cycles.filter_width = 0.01
