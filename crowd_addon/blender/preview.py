@@ -147,12 +147,15 @@ def _release_renderer(pv):
 
 def stop(scene) -> None:
     """Stop the scene's preview and forget its crowd (callbacks registered through
-    :mod:`crowd_addon.api` stay for the next one)."""
+    :mod:`crowd_addon.api` stay for the next one). Render Crowd goes off with it: its
+    data would stop following the frame and renders would show a frozen crowd."""
     pv = _PREVIEWS.pop(scene.name, None)
     if pv is not None:
         _release(pv)
     if scene.crowd.preview_enabled:
         scene.crowd.preview_enabled = False
+    if scene.crowd.render_crowd:
+        scene.crowd.render_crowd = False          # its update removes the render data
     if not _PREVIEWS:
         _remove_draw_handler()
 

@@ -212,9 +212,17 @@ def test_a_saved_file_renders_its_crowd_after_loading(crowd_scene, tmp_path):
     _check_instances(scene, pv.crowd)
 
 
+def test_stopping_the_preview_switches_render_crowd_off(crowd_scene):
+    """A stopped preview no longer moves the render data: F12 would show a frozen
+    crowd, so the data goes with it."""
+    scene, _ = crowd_scene
+    preview.stop(scene)
+    assert not scene.crowd.render_crowd
+    assert bpy.data.objects.get(render_crowd.POINTS) is None
+
+
 def test_switching_on_without_a_preview_starts_it(crowd_scene):
     scene, _ = crowd_scene
-    scene.crowd.render_crowd = False
     preview.stop(scene)
     scene.crowd.render_crowd = True
     pv = preview.get(scene)
