@@ -29,7 +29,8 @@ that deep in a 540-pixel image); LODs off: the full mesh for every agent. Prints
 * with the ``bpy`` module, the Render Crowd path (``crowd_addon.blender.render_crowd``:
   pose meshes skinned on the CPU and written into Blender meshes for F12) at 2,000 and
   65,000 agents through the camera above: the first sync (meshes made) and the
-  median of the next frames, with the pose meshes in use;
+  median of the next frames, with the pose meshes in use; against the alternative of
+  one mesh holding every agent's skinned vertices (all as cards);
 
 then one line of JSON with the figures.
 
@@ -365,10 +366,31 @@ def render_crowd_cost(agents, size, rng, count=3) -> dict | None:
             t = time.perf_counter()
             stats = render_crowd.sync(scene, crowd)
             times.append((time.perf_counter() - t) * 1e3)
+        one_mesh_ms = one_mesh_cost(crowd)
     finally:
         render_crowd.remove(scene)
     return {"first_ms": first_ms, "ms": statistics.median(times), "poses": stats.poses,
-            "first_poses": first.poses, "vertices": stats.vertices}
+            "first_poses": first.poses, "vertices": stats.vertices,
+            "one_mesh_ms": one_mesh_ms}
+
+
+def one_mesh_cost(crowd) -> float:
+    """ms of the alternative to pose meshes: every agent's vertices skinned into one
+    Blender mesh, every agent as its coarsest level (the card: the cheapest case for
+    it), written with one ``foreach_set``."""
+    import bpy
+    from crowd_addon.core.skinning import skin_vertices
+    mesh = crowd.config.meshes["fan"][-1]
+    t = time.perf_counter()
+    world = skin_vertices(mesh.positions, mesh.bone_indices, mesh.bone_weights,
+                          crowd.view.agent_rows(np.arange(crowd.agents.count)))
+    target = bpy.data.meshes.new("one_mesh")
+    target.vertices.add(world.shape[0] * world.shape[1])
+    target.vertices.foreach_set("co", world.astype(np.float32).ravel())
+    target.update()
+    ms = (time.perf_counter() - t) * 1e3
+    bpy.data.meshes.remove(target)
+    return ms
 
 
 # ------------------------------------------------------------------------- main
@@ -420,7 +442,9 @@ def main(argv=None):
         rc[agents] = res
         print(f"  Render Crowd at {agents:,} agents: {res['ms']:,.0f} ms a frame for "
               f"{res['poses']:,} pose meshes ({res['vertices']:,} skinned vertices); first "
-              f"frame {res['first_ms']:,.0f} ms (meshes made)", flush=True)
+              f"frame {res['first_ms']:,.0f} ms (meshes made); one mesh of every agent "
+              f"instead, all as the coarsest level: {res['one_mesh_ms']:,.0f} ms",
+              flush=True)
     print(json.dumps({
         "backend": backend, "device": device, "size": list(size),
         "prototype_vertices_per_s": proto, "draw_only_vertices_per_s": raw,
@@ -437,7 +461,9 @@ def main(argv=None):
         "scene_pass_overhead": round(sc["overhead"], 4),
         "shadows_ms_65k": round(sc["shadows_ms"], 2),
         "shadows_overhead": round(sc["shadow_overhead"], 4),
-        "render_crowd_ms": {str(a): round(v["ms"], 1) for a, v in rc.items()} or None}))
+        "render_crowd_ms": {str(a): round(v["ms"], 1) for a, v in rc.items()} or None,
+        "render_crowd_one_mesh_ms": {str(a): round(v["one_mesh_ms"], 1)
+                                     for a, v in rc.items()} or None}))
 
 
 if __name__ == "__main__":
