@@ -81,7 +81,11 @@ class CrowdRenderer:
         self.shadows = bool(shadows)
         self.stats = FrameStats()
         self.scene, self._scene, self._shadow_map = None, None, None
+        self._scene_bounds = None
         self.plan = FramePlan(view, max_texture_size, max_int)
+        #: the highest bind-pose point of any proxy (metres): the shadow casters' reach
+        self._tallest = max((float(buf.extent[1, 2]) for levels in self.plan.proxies
+                             for buf in levels), default=2.0)
         self.textures = {s.name: self._create_texture(s)
                          for s in self.plan.take_initial_textures()}
         self._lit = (self._create_texture(TextureSpec("shadow", (1, 1), "RGBA32F",
@@ -124,8 +128,10 @@ class CrowdRenderer:
         scene) under the crowd in every later :meth:`render`: same camera, same light,
         same depth buffer. A viewport that draws its scene itself needs none."""
         self._release_scene()
+        self._scene_bounds = None
         if geometry is not None and geometry.triangle_count:
             self._scene = self._create_scene(geometry)
+            self._scene_bounds = geometry.bounds()     # once: the shadows' depth range
         self.scene = geometry
 
     def render(self, camera, target=None, clear=BACKGROUND) -> FrameStats:
@@ -161,15 +167,12 @@ class CrowdRenderer:
         pos = np.asarray(self.view.agents.position, np.float64)
         if pos.size == 0:
             return
-        tall = max((float(buf.extent[1, 2]) for levels in self.plan.proxies for buf in levels),
-                   default=2.0)
-        light_vp = sun_view(self.light, pos.min(0), pos.max(0) + (0.0, 0.0, tall),
-                            None if self.scene is None or not self.scene.triangle_count
-                            else self.scene.bounds())
+        light_vp = sun_view(self.light, pos.min(0), pos.max(0) + (0.0, 0.0, self._tallest),
+                            self._scene_bounds)
         if self._shadow_map is None:
             self._shadow_map = self._create_shadow_map(SHADOW_SIZE)
+        # the map's own pass reads no shadow map (SHADOWS 0, stand-in textures bound)
         self.textures["shadow"], self.textures["shadow_view"] = self._lit
-        #: whether the draws now read the shadow map (the programs' ``SHADOWS``)
         self.sampling_shadows = False
         with self._bind_shadow(self._shadow_map):
             if self._scene is not None:
