@@ -37,7 +37,19 @@ from .skinning import SkinningPlan
 from .skinning_modes import skinning_mode
 from .transitions import TransitionResult, TransitionSlots
 
-__all__ = ["Crowd", "StepReport"]
+__all__ = ["Crowd", "StepReport", "MAX_SUBSTEPS", "check_substeps"]
+
+#: The most samples per frame a crowd keeps (:class:`Crowd` ``substeps``).
+MAX_SUBSTEPS = 16
+
+
+def check_substeps(substeps) -> int:
+    """``substeps`` as an int in 1..:data:`MAX_SUBSTEPS` (CrowdError otherwise)."""
+    if isinstance(substeps, bool) or not isinstance(substeps, (int, np.integer)) \
+            or not 1 <= substeps <= MAX_SUBSTEPS:
+        raise CrowdError(f"substeps must be a whole number of samples per frame, "
+                         f"1..{MAX_SUBSTEPS}, got {substeps!r}")
+    return int(substeps)
 
 
 @dataclass(frozen=True)
@@ -60,6 +72,12 @@ class Crowd:
     skinning : ``"cpu"`` (the CPU writes skinning rows) or ``"gpu"`` (the CPU keeps
         local poses, a compute shader skins; also the mode for writers that need no
         skinning), see :mod:`.skinning_modes`.
+    substeps : samples per frame kept for writers, 1..:data:`MAX_SUBSTEPS` (default 1:
+        whole frames only). With ``N > 1`` each frame also evaluates every stream and
+        unique at ``F + k / N`` (``k = 1 .. N - 1``) from the state reached at ``F``
+        (:meth:`~.graph.TreeEvaluator.poses_ahead`, which changes nothing), and keeps
+        the streams' for the last M frames like the history: ``agent_poses(sub=k)``
+        is an agent's pose at ``F + k / N`` (sub-frame samples for motion blur).
 
     Attributes
     ----------
@@ -68,7 +86,8 @@ class Crowd:
     view : FrameView, what renderers and writers read.
     """
 
-    def __init__(self, config: CrowdConfig, skinning: str = "cpu"):
+    def __init__(self, config: CrowdConfig, skinning: str = "cpu", substeps: int = 1):
+        self.substeps = check_substeps(substeps)
         uses = validate_config(config)
         cfg = self.config = config
         self.fps = float(cfg.fps)
@@ -96,6 +115,9 @@ class Crowd:
                                   self.skinning.unique_poses(self.storage,
                                                              (u, self.bones, sqt.WIDTH)),
                                   key_base=self.streams.key_count)
+        n = self.substeps - 1
+        self._sub_streams = np.zeros((m, n, s, self.bones, sqt.WIDTH), np.float32)
+        self._sub_uniques = np.zeros((n, u, self.bones, sqt.WIDTH), np.float32)
         self.agents = AgentState(cfg.agent_position, cfg.agent_heading, cfg.agent_color)
         self.slots = TransitionSlots(int(cfg.transition_slots), self.bones, self.agents,
                                      cfg.when_full, begin=self._begin_transitions)
@@ -168,6 +190,7 @@ class Crowd:
             self.evaluator.prepare(self._root_times(f))
             self.evaluator.evaluate()
             self._store_roots()
+            self._store_substeps()
             self._deliver_events(dispatch=(f == f0))
         self.storage.take_dirty_regions()
         self.storage.mark_dirty(0, self.storage.row_count)
@@ -210,6 +233,7 @@ class Crowd:
         self.evaluator.prepare(self._root_times(self.frame))
         for name in self._order:
             self.graph.tasks[name]()
+        self._store_substeps()
         ms = (time.perf_counter() - t_start) * 1e3
         self._steps += 1
         self._ms_total += ms
@@ -240,6 +264,16 @@ class Crowd:
         self.streams.store(self.frame, poses[:self.streams.count])
         self.uniques.poses[:] = poses[self.streams.count:]
         self.skinning.roots_stored(self.frame)
+
+    def _store_substeps(self):
+        """The streams' and uniques' poses at ``frame + k / N`` from the state reached
+        now (nothing without substeps)."""
+        n, s = self.substeps, self.streams.count
+        for k in range(1, n):
+            times = self._root_times(self.frame) + k / n
+            poses = self.evaluator.poses_ahead(times)
+            self._sub_streams[self.streams.slice(self.frame), k - 1] = poses[:s]
+            self._sub_uniques[k - 1] = poses[s:]
 
     def _deliver_events(self, dispatch):
         """Deliver this frame's tags (during the history warm-up: only log them)."""
@@ -313,6 +347,28 @@ class Crowd:
         """Move, turn or recolour agents (see :meth:`AgentState.place`)."""
         self.agents.place(self.agents.ids(agents), position, heading, color)
 
+    def _sub_poses(self, agents, k):
+        """Local poses ``(n, B, 10)`` the agents show at ``self.frame + k / N`` (``k`` in
+        1..N-1): what they play now, at that time (a transition's weight too)."""
+        out = np.empty((agents.size, self.bones, sqt.WIDTH), np.float32)
+        kind, ref, off = (self.agents.kind[agents], self.agents.ref[agents],
+                          self.agents.offset[agents])
+        slot = np.where(kind == TRANSITION, ref, 0)
+        tr = kind == TRANSITION
+        kind = np.where(tr, self.slots.target_kind[slot], kind)
+        ref = np.where(tr, self.slots.target_ref[slot], ref)
+        off = np.where(tr, self.slots.target_offset[slot], off)
+        m = kind == STREAM
+        out[m] = self._sub_streams[self.streams.slice(self.frame, off[m]), k - 1, ref[m]]
+        m = kind == UNIQUE
+        out[m] = self._sub_uniques[k - 1, ref[m]]
+        if tr.any():
+            s = slot[tr]
+            w = np.clip((self.frame + k / self.substeps - self.slots.t0[s])
+                        / self.slots.length[s], 0.0, 1.0)
+            out[tr] = sqt.blend2(self.slots.start_pose[s], out[tr], w.astype(np.float32))
+        return out
+
     def _current_poses(self, agents):
         """Local poses ``(n, B, 10)`` the agents show at ``self.frame``."""
         out = np.empty((agents.size, self.bones, sqt.WIDTH), np.float32)
@@ -327,10 +383,30 @@ class Crowd:
             out[m] = self.skinning.slot_poses(ref[m])[ref[m]]
         return out
 
-    def agent_poses(self, agents=None) -> np.ndarray:
-        """Local poses ``(n, B, 10)`` float32 of the agents now."""
+    def agent_poses(self, agents=None, sub: int = 0) -> np.ndarray:
+        """Local poses ``(n, B, 10)`` float32 of the agents now, or at ``frame + sub / N``
+        (``sub`` in 0..substeps-1)."""
         agents = np.arange(self.agents.count) if agents is None else self.agents.ids(agents)
-        return self._current_poses(agents)
+        if sub == 0:
+            return self._current_poses(agents)
+        return self._sub_poses(agents, self._check_sub(sub))
+
+    def _check_sub(self, sub) -> int:
+        if isinstance(sub, bool) or not isinstance(sub, (int, np.integer)) \
+                or not 0 <= sub < self.substeps:
+            raise CrowdError(f"sub-frame sample must be 0..{self.substeps - 1} (the crowd "
+                             f"keeps {self.substeps} per frame), got {sub!r}")
+        return int(sub)
+
+    def sub_stream_poses(self, frame: int, sub: int) -> np.ndarray:
+        """``(S, B, 10)`` copy of every stream head at ``frame + sub / N`` (``frame`` one
+        of the last M frames, ``sub`` in 1..N-1)."""
+        self.streams.head_poses(frame, self.frame)          # checks the frame
+        return self._sub_streams[self.streams.slice(frame), self._check_sub(sub) - 1].copy()
+
+    def sub_unique_poses(self, sub: int) -> np.ndarray:
+        """``(U, B, 10)`` copy of every unique at ``frame + sub / N`` (``sub`` 1..N-1)."""
+        return self._sub_uniques[self._check_sub(sub) - 1].copy()
 
     def agent_rows_index(self, agents=None) -> np.ndarray:
         """Logical pose texture row each agent reads at ``self.frame`` (the shader's rule)."""

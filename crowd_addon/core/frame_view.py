@@ -105,19 +105,31 @@ class FrameView:
         return self._crowd.agents.changes_since(cursor)
 
     # -------------------------------------------------------------------- poses
-    def stream_poses(self, frame: int | None = None) -> np.ndarray:
+    @property
+    def substeps(self) -> int:
+        """Samples per frame the crowd keeps (``Crowd(..., substeps=N)``)."""
+        return self._crowd.substeps
+
+    def stream_poses(self, frame: int | None = None, sub: int = 0) -> np.ndarray:
         """``(S, B, 10)`` float32 local poses of every stream head at ``frame`` (default
-        the current one; one of the last M frames), a copy."""
+        the current one; one of the last M frames), or at ``frame + sub / substeps``, a
+        copy."""
         f = self._crowd.frame if frame is None else int(frame)
+        if sub:
+            return self._crowd.sub_stream_poses(f, sub)
         return self._crowd.streams.head_poses(f, self._crowd.frame)
 
-    def unique_poses(self) -> np.ndarray:
-        """``(U, B, 10)`` float32 current poses of the unique animations, a copy."""
+    def unique_poses(self, sub: int = 0) -> np.ndarray:
+        """``(U, B, 10)`` float32 current poses of the unique animations (at ``frame +
+        sub / substeps`` with ``sub``), a copy."""
+        if sub:
+            return self._crowd.sub_unique_poses(sub)
         return self._crowd.uniques.poses.copy()
 
-    def agent_poses(self, agents=None) -> np.ndarray:
-        """``(n, B, 10)`` float32 local poses the agents show now."""
-        return self._crowd.agent_poses(agents)
+    def agent_poses(self, agents=None, sub: int = 0) -> np.ndarray:
+        """``(n, B, 10)`` float32 local poses the agents show now (at ``frame + sub /
+        substeps`` with ``sub``)."""
+        return self._crowd.agent_poses(agents, sub)
 
     def agent_rows(self, agents=None) -> np.ndarray:
         """``(n, B, 3, 4)`` float32 skinning rows the agents are drawn with now."""

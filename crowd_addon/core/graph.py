@@ -171,6 +171,36 @@ class TreeEvaluator:
         """(R, B, 10) float32 poses of the roots (a copy)."""
         return self.ctx.poses[self.root_index]
 
+    def poses_ahead(self, root_times: np.ndarray) -> np.ndarray:
+        """(R, B, 10) float32 root poses at ``root_times`` (e.g. between this frame and
+        the next, for sub-frame samples) as the trees would show them from their
+        present state, which is left exactly as it was: every batch's arrays (state
+        machine states and fades, clip players' last times), the frame arrays, the
+        triggers still to be consumed and the events not yet taken. Tags crossed on the
+        way are not reported."""
+        ctx = self.ctx
+        saved = [{k: v.copy() for k, v in vars(b).items() if isinstance(v, np.ndarray)}
+                 for b in self.batches]
+        frame = [a.copy() for a in (ctx.poses, ctx.time, ctx.shift, ctx.local_weight,
+                                    ctx.weight)]
+        triggers = [set(t) for t in ctx.triggers]
+        emitted = len(ctx._emit_roots)
+        try:
+            self.prepare(root_times)
+            self.evaluate()
+            return self.root_poses()
+        finally:
+            for b, arrays in zip(self.batches, saved):
+                for k, v in arrays.items():
+                    setattr(b, k, v)
+            for a, v in zip((ctx.poses, ctx.time, ctx.shift, ctx.local_weight, ctx.weight),
+                            frame):
+                a[...] = v
+            for t, v in zip(ctx.triggers, triggers):
+                t.clear()
+                t.update(v)
+            del ctx._emit_roots[emitted:], ctx._emit_names[emitted:]
+
     def set_parameter(self, root: int, name: str, value: float):
         """Set controller parameter ``name`` of tree ``root`` (finite values only)."""
         try:

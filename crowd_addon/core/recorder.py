@@ -114,7 +114,8 @@ class Recorder:
             segment_kind=seg[2], segment_ref=seg[3], segment_offset=seg[4],
             start_pose=tr[0], t0=tr[1], length=tr[2], target_kind=tr[3], target_ref=tr[4],
             target_offset=tr[5], position=self._position0, heading=self._heading0,
-            color=self._color0,
+            color=self._color0, substeps=v.substeps,
+            stream_subposes=self._stream_sub, unique_subposes=self._unique_sub,
             move_agent=mv[0], move_frame=mv[1], move_position=mv[2],
             move_heading=mv[3], events=tuple(self._events),
             stream_events=tuple(self._stream_events.columns(order_by=2)),
@@ -132,6 +133,9 @@ class Recorder:
         pose = (lay.bones, sqt.WIDTH)
         self._stream_poses = np.empty((frames + m - 1, lay.streams) + pose, np.float32)
         self._unique_poses = np.empty((frames, lay.uniques) + pose, np.float32)
+        subs = v.substeps - 1
+        self._stream_sub = np.empty((frames + m - 1, subs, lay.streams) + pose, np.float32)
+        self._unique_sub = np.empty((frames, subs, lay.uniques) + pose, np.float32)
         for f in range(self.first - m + 1, self.first):
             self._store(f)
         a = v.agents
@@ -166,9 +170,14 @@ class Recorder:
     def _store(self, f):
         """The heads at ``f``, and the uniques at a shot frame ``f``."""
         v = self.crowd.view
-        self._stream_poses[f - self.first + v.layout.max_offset - 1] = v.stream_poses(f)
+        row = f - self.first + v.layout.max_offset - 1
+        self._stream_poses[row] = v.stream_poses(f)
+        for k in range(1, v.substeps):
+            self._stream_sub[row, k - 1] = v.stream_poses(f, sub=k)
         if f >= self.first:
             self._unique_poses[f - self.first] = v.unique_poses()
+            for k in range(1, v.substeps):
+                self._unique_sub[f - self.first, k - 1] = v.unique_poses(sub=k)
 
     def _animation(self, agents, f):
         """New segments for ``agents`` whose animation differs from their last one."""
@@ -258,10 +267,12 @@ def _check_cost(view, first, last):
     lay = view.layout
     frames = last - first + 1
     pose_bytes = lay.bones * 10 * 4
-    need = ((frames + lay.max_offset - 1) * lay.streams + frames * lay.uniques) * pose_bytes
+    need = ((frames + lay.max_offset - 1) * lay.streams + frames * lay.uniques) * pose_bytes \
+        * view.substeps
     if need > MAX_BYTES:
+        samples = f", {view.substeps} samples a frame" if view.substeps > 1 else ""
         raise CrowdError(f"record: frames {first}-{last} ({frames:,} frames of "
-                         f"{lay.streams} streams and {lay.uniques} uniques) need "
+                         f"{lay.streams} streams and {lay.uniques} uniques{samples}) need "
                          f"{need / 2**30:,.1f} GiB of poses, more than "
                          f"{MAX_BYTES / 2**30:.0f} GiB; record a shorter range")
 

@@ -53,6 +53,10 @@ class Recording:
     stream_events : ``(stream, name, frame)`` (k,) arrays of the tags the heads
     crossed at :attr:`stream_frames`, in frame order.
     seconds : wall-clock seconds spent in the recorder.
+    substeps : samples per frame ``N`` (the crowd's); with ``N > 1``
+    ``stream_subposes`` (T + M - 1, N - 1, S, B, 10) and ``unique_subposes`` (T, N - 1,
+    U, B, 10) hold the heads and uniques at ``F + k / N``, ``k = 1 .. N - 1``, so every
+    time of :attr:`times` (from ``first`` to ``last + (N - 1) / N``) has its poses.
     """
 
     config: object
@@ -87,6 +91,9 @@ class Recording:
     events: tuple
     stream_events: tuple
     seconds: float
+    substeps: int = 1
+    stream_subposes: np.ndarray | None = None
+    unique_subposes: np.ndarray | None = None
 
     @property
     def agent_count(self) -> int:
@@ -96,6 +103,13 @@ class Recording:
     def frames(self) -> np.ndarray:
         """(T,) int64 shot frames ``first .. last``."""
         return np.arange(self.first, self.last + 1)
+
+    @property
+    def times(self) -> np.ndarray:
+        """(T * N,) float64 sample times: each shot frame, then its ``N - 1`` sub-frame
+        samples ``F + k / N`` (just the frames when ``substeps`` is 1)."""
+        n = self.substeps
+        return (self.frames[:, None] + np.arange(n) / n).reshape(-1)
 
     @property
     def stream_frames(self) -> np.ndarray:
@@ -130,23 +144,33 @@ class Recording:
     def agent_poses(self, frames, agents=None) -> np.ndarray:
         """Local poses ``agents`` (default all) showed at ``frames``, as the crowd
         computed them: ``(k, B, 10)`` float32 for one frame, ``(T, k, B, 10)`` for a
-        (T,) array of frames."""
-        frame, agents, shape = self._pairs(frames, agents)
-        out = self.pair_poses(frame, agents)
+        (T,) array of frames. Frames may be any of :attr:`times` (sub-frame samples)."""
+        times = np.asarray(frames, np.float64)
+        whole = np.floor(times)
+        sub = np.rint((times - whole) * self.substeps)
+        if not np.allclose(whole + sub / self.substeps, times, rtol=0, atol=1e-9):
+            raise CrowdError(f"recording: {frames} is not a sample time (whole frames and "
+                             f"{self.substeps} samples a frame)")
+        frame, pairs, shape = self._pairs(whole.astype(np.int64), agents)
+        per_frame = pairs.size // whole.size if whole.size else 0
+        out = self.pair_poses(frame, pairs, np.repeat(sub.astype(np.int64).reshape(-1),
+                                                      per_frame))
         return out.reshape(shape + out.shape[1:])
 
-    def pair_poses(self, frame, agent) -> np.ndarray:
+    def pair_poses(self, frame, agent, sub=None) -> np.ndarray:
         """``(n, B, 10)`` float32 pose of each ``(frame[i], agent[i])`` pair ((n,) int64
-        arrays, frames inside the shot)."""
+        arrays, frames inside the shot), at ``frame[i] + sub[i] / N`` when ``sub`` ((n,)
+        int64 in 0..N-1) is given."""
+        sub = np.zeros(frame.shape, np.int64) if sub is None else np.asarray(sub, np.int64)
         seg = self._find(0, frame, agent)
         kind, ref = self.segment_kind[seg], self.segment_ref[seg]
-        out = self._poses(frame, kind, ref, self.segment_offset[seg])
+        out = self._poses(frame, sub, kind, ref, self.segment_offset[seg])
         m = np.flatnonzero(kind == TRANSITION)
         if m.size:
             t, f = ref[m], frame[m]
-            target = self._poses(f, self.target_kind[t], self.target_ref[t],
+            target = self._poses(f, sub[m], self.target_kind[t], self.target_ref[t],
                                  self.target_offset[t])
-            s = np.clip((f - self.t0[t]) / self.length[t], 0.0, 1.0)
+            s = np.clip((f + sub[m] / self.substeps - self.t0[t]) / self.length[t], 0.0, 1.0)
             out[m] = sqt.blend2(self.start_pose[t], target, s.astype(np.float32))
         return out
 
@@ -186,12 +210,20 @@ class Recording:
         key = agents * (self.last - self.first + 1) + frame - self.first
         return np.searchsorted(self._keys[table], key, "right") - 1
 
-    def _poses(self, frame, kind, ref, offset) -> np.ndarray:
+    def _poses(self, frame, sub, kind, ref, offset) -> np.ndarray:
         """(n, B, 10) poses of streams ``ref`` at ``offset`` (kind STREAM) and uniques
-        ``ref`` (UNIQUE) at ``frame`` ((n,) arrays); rows of other kinds are unset."""
+        ``ref`` (UNIQUE) at ``frame + sub / N`` ((n,) arrays); rows of other kinds are
+        unset."""
         out = np.empty((kind.size,) + self.stream_poses.shape[2:], np.float32)
-        st, un = kind == STREAM, kind == UNIQUE
-        out[st] = self.stream_poses[frame[st] - offset[st] - self.first + self.max_offset - 1,
-                                    ref[st]]
-        out[un] = self.unique_poses[frame[un] - self.first, ref[un]]
+        row = frame - self.first
+        for k in np.unique(sub).tolist():
+            at = sub == k
+            st, un = at & (kind == STREAM), at & (kind == UNIQUE)
+            srow = row[st] - offset[st] + self.max_offset - 1
+            if k == 0:
+                out[st] = self.stream_poses[srow, ref[st]]
+                out[un] = self.unique_poses[row[un], ref[un]]
+            else:
+                out[st] = self.stream_subposes[srow, k - 1, ref[st]]
+                out[un] = self.unique_subposes[row[un], k - 1, ref[un]]
         return out
