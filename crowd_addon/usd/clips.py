@@ -14,9 +14,11 @@ stream at an offset, a unique, or a blend. Its ``SkelAnimation`` holds no poses;
 So a transition costs its blending frames once, and the agent's steady stretches
 stay shared. Every clip layer holds its animation at :data:`PRIM` and authors every
 channel as time samples (clips contribute time samples only; a constant channel is
-one sample). Pieces switch at half frames (``start - 0.5``): every whole frame lies
-inside one piece, so readers that sample whole frames (Blender's importer) and
-UsdSkel agree exactly there.
+one sample). Pieces switch between samples, half a sample before their first frame
+(``start - 0.5 / N`` with ``N`` samples a frame, ``start - 0.5`` without sub-frame
+samples): every sample time lies inside one piece, so readers that sample whole frames
+(Blender's importer) and UsdSkel agree exactly there, and a sub-frame sample just
+before a switch still reads the piece the crowd showed then.
 """
 
 from __future__ import annotations
@@ -37,7 +39,8 @@ PRIM = "Animation"
 GAP = 1
 #: blends whose poses are rebuilt and written at a time
 _BANK_CHUNK = 2048
-#: frames a bank layer holds at most (~110 MB of 82-bone poses); more go to the next
+#: samples (frames, or frames x substeps) a bank layer holds at most (~110 MB of 82-bone
+#: poses); more go to the next
 BANK_FRAMES = 65536
 _T = Sdf.ValueTypeNames
 
@@ -45,14 +48,17 @@ _T = Sdf.ValueTypeNames
 class BankLayout:
     """One bank layer: blends of skeleton ``skeleton`` (``pieces``, indices into the
     shot's pieces), numbered ``part`` among that skeleton's banks, each at bank time
-    ``base`` (its first frame); ``times`` every frame's bank time, blend after blend."""
+    ``base`` (its first frame); ``times`` every sample's bank time (``substeps`` a
+    frame), blend after blend; ``frames`` the blends' frames."""
 
-    def __init__(self, skeleton: int, part: int, pieces: np.ndarray, lengths: np.ndarray):
+    def __init__(self, skeleton: int, part: int, pieces: np.ndarray, lengths: np.ndarray,
+                 substeps: int = 1):
         self.skeleton, self.part, self.pieces = skeleton, part, pieces
-        self.lengths = lengths
+        self.lengths, self.substeps = lengths, substeps
         self.base = np.cumsum(lengths + GAP) - (lengths + GAP)
-        self.times = np.repeat(self.base - np.cumsum(lengths) + lengths, lengths) + \
+        frames = np.repeat(self.base - np.cumsum(lengths) + lengths, lengths) + \
             np.arange(int(lengths.sum()))
+        self.times = (frames[:, None] + np.arange(substeps) / substeps).reshape(-1)
         self.frames = int(lengths.sum())
 
     @property
@@ -66,16 +72,16 @@ def bank_layout(shot, frames_per_bank: int | None = None) -> list:
     frames, so a layer is written and freed before the next is built. Returns the
     :class:`BankLayout` list."""
     frames_per_bank = frames_per_bank or BANK_FRAMES
-    p = shot.pieces
+    p, n = shot.pieces, shot.substeps
     blend = np.flatnonzero(p.kind == TRANSITION)
     skel = shot.agent_skeleton[p.agent[blend]]
     out = []
     for k in np.unique(skel).tolist():
         mine = blend[skel == k]
         lengths = (p.end - p.start)[mine]
-        part = (np.cumsum(lengths) - lengths) // frames_per_bank
+        part = (np.cumsum(lengths) - lengths) * n // frames_per_bank
         for j, q in enumerate(np.unique(part).tolist()):
-            out.append(BankLayout(int(k), j, mine[part == q], lengths[part == q]))
+            out.append(BankLayout(int(k), j, mine[part == q], lengths[part == q], n))
     return out
 
 
@@ -92,7 +98,7 @@ def bank_layer(shot, layout: BankLayout, joints, fmt, name: str):
         prim = define(layer, PRIM, "SkelAnimation")
         define_animation(prim, joints)
     n = len(joints)
-    first = np.r_[0, np.cumsum(layout.lengths)]
+    first = np.r_[0, np.cumsum(layout.lengths)] * layout.substeps
     for a in range(0, layout.pieces.size, _BANK_CHUNK):
         b = min(a + _BANK_CHUNK, layout.pieces.size)
         with Sdf.ChangeBlock():
@@ -131,14 +137,15 @@ def clip_sets(shot, assets, banks):
             key[j] = bank.key
     manifest = Sdf.AssetPath(assets["manifest"])
     bounds = np.flatnonzero(np.r_[True, p.agent[1:] != p.agent[:-1], True])
-    start, end = p.start.astype(np.float64) - 0.5, p.end.astype(np.float64) - 0.5
+    half = 0.5 / shot.substeps                  # half a sample: switches lie between samples
+    start, end = p.start.astype(np.float64) - half, p.end.astype(np.float64) - half
     for a, b in zip(bounds[:-1].tolist(), bounds[1:].tolist()):
         used = list(dict.fromkeys(key[a:b]))
         index = [used.index(k) for k in key[a:b]]
         times, active = [], []
         for j in range(a, b):
             c = clip_time[j]
-            times += [(start[j], c - 0.5), (end[j], c + (end[j] - start[j]) - 0.5)]
+            times += [(start[j], c - half), (end[j], c + (end[j] - start[j]) - half)]
             active.append((start[j], float(index[j - a])))
         yield {"default": {
             "assetPaths": Sdf.AssetPathArray([assets[k] for k in used]),

@@ -278,13 +278,14 @@ def _write_clip_layers(out, rec, shot, joints_of, stream_names, stream_assets):
     banks = bank_layout(shot)
     skeleton_names = unique_identifiers(list(rec.config.skeletons), casefold=True)
     for j, u in enumerate(uniques):
-        layer = new_layer(files.format, rec.fps, rec.first, rec.last, default_prim=PRIM,
+        times = rec.times
+        layer = new_layer(files.format, rec.fps, times[0], times[-1], default_prim=PRIM,
                           comment=f"crowd unique {rec.unique_names[u]!r}: its pose at "
                                   "each shot frame")
         with Sdf.ChangeBlock():
             prim = Sdf.PrimSpec(layer, PRIM, Sdf.SpecifierDef, "SkelAnimation")
             author_animation(prim, joints_of[int(rec.unique_skeleton[u])],
-                             rec.unique_poses[:, u], rec.frames)
+                             _samples(rec.unique_poses, rec.unique_subposes, u), times)
         out.save(layer, f"uniques/{names[u]}")
         assets["unique", u] = files.layer_path(f"uniques/{names[u]}")
         yield "uniques", j + 1, len(uniques)
@@ -364,8 +365,19 @@ def _meshes(config, agent_skeleton) -> dict:
     return out
 
 
+def _samples(whole, sub, i) -> np.ndarray:
+    """``(frames * N, B, 10)`` poses of animation ``i``: each frame's pose from
+    ``whole`` (frames, count, B, 10), then its sub-frame samples from ``sub`` (frames,
+    N - 1, count, B, 10)."""
+    if sub is None or sub.shape[1] == 0:
+        return whole[:, i]
+    both = np.concatenate([whole[:, None, i], sub[:, :, i]], axis=1)
+    return both.reshape((-1,) + whole.shape[2:])
+
+
 def _stream_layer(rec, shot, s, joints, fmt):
-    frames = rec.stream_frames
+    n = rec.substeps
+    frames = (rec.stream_frames[:, None] + np.arange(n) / n).reshape(-1)
     name = rec.stream_names[s]
     layer = new_layer(fmt, rec.fps, frames[0], frames[-1], default_prim=PRIM,
                       comment=f"crowd stream {name!r}: the head's pose at each frame")
@@ -376,7 +388,8 @@ def _stream_layer(rec, shot, s, joints, fmt):
             "stream": name, "streamIndex": int(s),
             "eventNames": Vt.StringArray([n for n, _ in events]),
             "eventFrames": Vt.DoubleArray([float(f) for _, f in events])}}
-        author_animation(prim, joints, rec.stream_poses[:, s], frames)
+        author_animation(prim, joints, _samples(rec.stream_poses, rec.stream_subposes, s),
+                         frames)
     return layer
 
 
@@ -393,4 +406,5 @@ def _settings(rec, shot, layout) -> dict:
             "seed": int(cfg.seed), "streams": len(rec.stream_names),
             "uniques": len(rec.unique_names), "agents": int(shot.agents.size),
             "firstFrame": int(rec.first), "lastFrame": int(rec.last),
-            "writer": "crowd_addon.usd", "version": FORMAT_VERSION, "layout": layout}
+            "writer": "crowd_addon.usd", "version": FORMAT_VERSION, "layout": layout,
+            "substeps": int(rec.substeps)}

@@ -58,6 +58,7 @@ class Shot:
         rec = self.recording = recording
         ids = self.agents = np.asarray(agents, np.int64)
         self.first, self.last, self.fps = rec.first, rec.last, rec.fps
+        self.substeps = rec.substeps
         self.max_offset = rec.max_offset
         self.agent_skeleton = rec.agent_skeleton[ids]
         self.static = rec.static[ids]
@@ -97,12 +98,16 @@ class Shot:
                       rec.segment_offset[seg])
 
     def piece_poses(self, pieces) -> np.ndarray:
-        """``(sum of lengths, B, 10)`` float32 poses of the frames of ``pieces`` (indices
-        into :attr:`pieces`), piece after piece."""
-        p = self.pieces
-        n = p.end[pieces] - p.start[pieces]
-        frame = np.repeat(p.start[pieces] - np.cumsum(n) + n, n) + np.arange(int(n.sum()))
-        return self.recording.pair_poses(frame, np.repeat(self.agents[p.agent[pieces]], n))
+        """``(sum of lengths * N, B, 10)`` float32 poses of the samples of ``pieces``
+        (indices into :attr:`pieces`; ``N`` samples a frame, each frame's in time order),
+        piece after piece."""
+        p, n = self.pieces, self.substeps
+        length = p.end[pieces] - p.start[pieces]
+        frame = np.repeat(p.start[pieces] - np.cumsum(length) + length, length) + \
+            np.arange(int(length.sum()))
+        agent = np.repeat(self.agents[p.agent[pieces]], length)
+        return self.recording.pair_poses(np.repeat(frame, n), np.repeat(agent, n),
+                                         np.tile(np.arange(n), frame.size))
 
     def agent_transforms(self, which) -> tuple:
         """``(position (frames, k, 3), heading (frames, k))`` float32 of agents ``which``."""
