@@ -168,7 +168,8 @@ def _run_export(args) -> int:
             raise CrowdError("--frames FIRST-LAST is required with --config (a .blend "
                              "gives its scene's frame range)")
         config = load_config(args.config)
-        crowd = Crowd(config, skinning="gpu")           # checks the agents' references
+        crowd = Crowd(config, skinning="gpu",          # checks the agents' references
+                      substeps=args.substeps)
         folder = writable_dir(os.path.dirname(os.path.abspath(args.out)))
         with folders_made(folder):                      # gone again if the export fails
             check_export(config, args.out, args.agents, args.layout)   # before simulating
@@ -180,7 +181,7 @@ def _run_export(args) -> int:
         from .blender.cli_commands import export_blend
         config, result = export_blend(
             args.out, args.frames, blend=args.blend, scene=args.scene, agents=args.agents,
-            layout=args.layout, trust_scripts=args.trust_scripts, progress=progress_printer("crowd export"), on_bake=lambda done, total, message: print(
+            layout=args.layout, substeps=args.substeps, trust_scripts=args.trust_scripts, progress=progress_printer("crowd export"), on_bake=lambda done, total, message: print(
                 f"crowd export: {message}", file=sys.stderr, flush=True))
     if args.json:
         print(json.dumps({**dataclasses.asdict(result), "bytes": result.bytes}))
@@ -189,7 +190,8 @@ def _run_export(args) -> int:
     print("\n".join([
         f"wrote {result.path} and {len(result.files) - 1} layers in {result.layers_dir} "
         f"({result.bytes:,} B)",
-        f"  frames {result.frames[0]}-{result.frames[1]} at {config.fps:g} fps, "
+        f"  frames {result.frames[0]}-{result.frames[1]} at {config.fps:g} fps"
+        f"{f' ({result.substeps} samples a frame)' if result.substeps > 1 else ''}, "
         f"{result.agents:,} agents: {result.shared_agents:,} on "
         f"{result.offset_animations:,} shared offset animations, "
         f"{result.clip_agents:,} changing animation on value clips ({result.blend_frames:,} "

@@ -10,7 +10,7 @@ import math
 import re
 import sys
 
-from .core.config import USD_LAYOUTS
+from .core.config import MAX_SUBSTEPS, USD_LAYOUTS
 
 __all__ = ["int_at_least", "positive_float", "frame_range", "frame_number", "path_arg",
            "progress_printer", "add_shot_arguments", "add_trust_argument", "parse_command"]
@@ -19,8 +19,8 @@ __all__ = ["int_at_least", "positive_float", "frame_range", "frame_number", "pat
 MAX_FRAME = 2**31 - 1
 
 
-def int_at_least(minimum: int):
-    """An argparse type: an integer ``>= minimum``."""
+def int_at_least(minimum: int, maximum: int | None = None):
+    """An argparse type: an integer ``>= minimum`` (and ``<= maximum`` if given)."""
     def convert(text: str) -> int:
         try:
             value = int(text)
@@ -28,6 +28,8 @@ def int_at_least(minimum: int):
             raise argparse.ArgumentTypeError(f"must be an integer, got {text!r}") from None
         if value < minimum:
             raise argparse.ArgumentTypeError(f"must be >= {minimum}, got {value}")
+        if maximum is not None and value > maximum:
+            raise argparse.ArgumentTypeError(f"must be <= {maximum}, got {value}")
         return value
     convert.__name__ = "integer"
     return convert
@@ -117,6 +119,10 @@ def add_shot_arguments(parser) -> None:
                         help="instanced (default): agents are instanceable, renderers "
                              "share each character; blender: agents are not instanceable, "
                              "so Blender's own USD import plays their animation")
+    parser.add_argument("--substeps", type=int_at_least(1, MAX_SUBSTEPS), default=1, metavar="N",
+                        help="poses written per frame, 1-%d (default 1): more adds samples "
+                             "between frames, the crowd evaluated there, for renderers' "
+                             "motion blur" % MAX_SUBSTEPS)
     parser.add_argument("--json", action="store_true",
                         help="print the summary as one JSON object")
     add_trust_argument(parser)

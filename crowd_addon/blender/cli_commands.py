@@ -115,10 +115,11 @@ def scene_frames(scene, frames=None) -> tuple:
 
 def export_blend(out: str, frames: tuple | None = None, *, blend: str | None = None,
                  scene: str | None = None, agents: int | None = None, progress=None,
-                 on_bake=None, trust_scripts: bool = False, layout: str = "instanced"):
+                 on_bake=None, trust_scripts: bool = False, layout: str = "instanced",
+                 substeps: int = 1):
     """Export the Crowd settings of a .blend's scene (:func:`open_scene`) as UsdSkel.
 
-    ``out``, ``agents``, ``layout``, ``progress(stage, done, total)`` and ``on_bake(done,
+    ``out``, ``agents``, ``layout``, ``substeps``, ``progress(stage, done, total)`` and ``on_bake(done,
     total, message)`` are those of :func:`.export.export_scene`; ``frames`` (first, last)
     defaults to the scene's frame range. The folder of ``out`` is created when
     missing, and removed again when the export fails. Blender's own output goes to
@@ -135,7 +136,8 @@ def export_blend(out: str, frames: tuple | None = None, *, blend: str | None = N
         folder = writable_dir(os.path.dirname(os.path.abspath(out)))
         with folders_made(folder):
             return export_scene(found, out, scene_frames(found, frames), agents=agents,
-                                progress=progress, on_bake=on_bake, layout=layout)
+                                progress=progress, on_bake=on_bake, layout=layout,
+                                substeps=substeps)
 
 
 def preview_blend(out: str, frames: int | None = None, *, blend: str | None = None,

@@ -21,6 +21,7 @@ import bpy
 from bpy.props import BoolProperty, EnumProperty, IntProperty, StringProperty
 from bpy_extras.io_utils import ExportHelper
 
+from ..core.config import MAX_SUBSTEPS
 from ..core.errors import CrowdError
 from . import preview, scene_config
 
@@ -59,7 +60,7 @@ def check_export(scene, path, frames) -> tuple:
 
 
 def export_scene(scene, path, frames, agents=None, progress=None, on_bake=None,
-                 depsgraph=None, layout="instanced"):
+                 depsgraph=None, layout="instanced", substeps=1):
     """Bake ``scene``'s Crowd settings and export the shot to ``path`` in one call
     (:func:`export_steps` run to the end).
 
@@ -68,6 +69,8 @@ def export_scene(scene, path, frames, agents=None, progress=None, on_bake=None,
     scene : a scene with Crowd settings (``scene.crowd``, the extension registered).
     path, agents, layout : as :func:`crowd_addon.usd.export_crowd`; frames : ``(first, last)``
         (:func:`check_export`).
+    substeps : samples written per frame (1..16; more than 1 adds sub-frame samples
+        for motion blur: ``Crowd(..., substeps=N)``).
     progress : optional ``progress(stage, done, total)`` after each recorded frame
         (``"simulate"``) and each step of the writing.
     on_bake : optional ``on_bake(done, total, message)`` before each bake step
@@ -81,7 +84,7 @@ def export_scene(scene, path, frames, agents=None, progress=None, on_bake=None,
     written then); the scene is not changed. An exception raised by a callback stops
     the export the same way.
     """
-    steps = export_steps(scene, path, frames, agents, depsgraph, layout)
+    steps = export_steps(scene, path, frames, agents, depsgraph, layout, substeps)
     try:
         while True:
             try:
@@ -97,7 +100,8 @@ def export_scene(scene, path, frames, agents=None, progress=None, on_bake=None,
         steps.close()                   # a raising callback: the export is dropped
 
 
-def export_steps(scene, path, frames, agents=None, depsgraph=None, layout="instanced"):
+def export_steps(scene, path, frames, agents=None, depsgraph=None, layout="instanced",
+                 substeps=1):
     """The export of :func:`export_scene` as a generator, one unit of work per
     ``next()``: returns ``(config, result)`` (``StopIteration.value``).
 
@@ -112,13 +116,15 @@ def export_steps(scene, path, frames, agents=None, depsgraph=None, layout="insta
     export: close returns once its temporary files are removed; nothing is written, a
     previous export at ``path`` is left as it was, the scene is unchanged.
     """
+    from ..core.crowd import check_substeps
     from ..usd.export import check_layout
     frames = check_export(scene, path, frames)
     check_layout(layout)
-    return _export_steps(scene, path, frames, agents, depsgraph, layout)
+    return _export_steps(scene, path, frames, agents, depsgraph, layout,
+                         check_substeps(substeps))
 
 
-def _export_steps(scene, path, frames, agents, depsgraph, layout):
+def _export_steps(scene, path, frames, agents, depsgraph, layout, substeps):
     from ..core.crowd import Crowd
     from ..core.recorder import Recorder
     from ..usd.export import check_export as check_output
@@ -137,7 +143,7 @@ def _export_steps(scene, path, frames, agents, depsgraph, layout):
     finally:
         bake.close()
     check_output(config, path, agents, layout)
-    crowd, note = scene_config.build_crowd(scene, config)
+    crowd, note = scene_config.build_crowd(scene, config, substeps=substeps)
     if note:
         yield "bake", 1, 1, note
     recorder = Recorder(crowd, *frames)
@@ -160,8 +166,9 @@ class ExportJob:
     """A scene's export (:func:`export_steps`) run a slice of time at a time, for the
     modal operator; :meth:`cancel` drops it and nothing is written."""
 
-    def __init__(self, scene, path, frames, agents=None, depsgraph=None, layout="instanced"):
-        self.steps = export_steps(scene, path, frames, agents, depsgraph, layout)
+    def __init__(self, scene, path, frames, agents=None, depsgraph=None, layout="instanced",
+                 substeps=1):
+        self.steps = export_steps(scene, path, frames, agents, depsgraph, layout, substeps)
         self.stage, self.done, self.total, self.message = "bake", 0, 1, "starting"
         self.config = self.result = None
 
@@ -254,6 +261,11 @@ class CROWD_OT_export_usd(bpy.types.Operator, ExportHelper):
                ("blender", "Blender", "Agents are not instanceable, so Blender's own USD "
                 "import plays their animation")],
         description="How the agents are laid out in the stage")
+    substeps: IntProperty(
+        name="Samples per Frame", default=1, min=1, max=MAX_SUBSTEPS,
+        description="Poses written per frame: more than 1 adds samples between frames "
+                    "(the crowd evaluated there) for renderers' motion blur, at that many "
+                    "times the animation data")
     interactive: BoolProperty(
         default=False, options={"HIDDEN", "SKIP_SAVE"},
         description="Run step by step on a timer after the file browser (Esc cancels); "
@@ -293,6 +305,7 @@ class CROWD_OT_export_usd(bpy.types.Operator, ExportHelper):
         col.prop(self, "frame_end")
         layout.prop(self, "agents")
         layout.prop(self, "usd_layout")
+        layout.prop(self, "substeps")
 
     def execute(self, context):
         """From the file browser (after invoke): start the modal export. From a script:
@@ -306,7 +319,7 @@ class CROWD_OT_export_usd(bpy.types.Operator, ExportHelper):
             try:
                 # the depsgraph is looked up when the agents are placed, as the bake does
                 self._job = ExportJob(scene, path, frames, agents=self.agents or None,
-                                      layout=self.usd_layout)
+                                      layout=self.usd_layout, substeps=self.substeps)
             except CrowdError as e:
                 return self._fail(e)
             wm.progress_begin(0, 1000)
@@ -324,7 +337,8 @@ class CROWD_OT_export_usd(bpy.types.Operator, ExportHelper):
             _config, result = export_scene(
                 scene, path, frames, agents=self.agents or None, progress=update,
                 on_bake=lambda done, total, _what: update("bake", done, total),
-                depsgraph=context.evaluated_depsgraph_get(), layout=self.usd_layout)
+                depsgraph=context.evaluated_depsgraph_get(), layout=self.usd_layout,
+                substeps=self.substeps)
         except CrowdError as e:
             return self._fail(e)
         finally:

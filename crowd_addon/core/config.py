@@ -18,7 +18,7 @@ from .errors import CrowdError
 from .show import Show
 
 __all__ = ["AnimationDef", "CrowdConfig", "validate_config", "WHEN_FULL", "MAX_TREE_DEPTH",
-           "USD_LAYOUTS"]
+           "USD_LAYOUTS", "MAX_SUBSTEPS"]
 
 #: What a transition request does when every slot is busy: wait, or switch at once.
 WHEN_FULL = ("queue", "cut")
@@ -27,6 +27,8 @@ WHEN_FULL = ("queue", "cut")
 #: USD importer needs to animate them). Here so that the command line and the panel
 #: offer the choice without importing pxr.
 USD_LAYOUTS = ("instanced", "blender")
+#: The most samples per frame a crowd keeps for writers (``Crowd(..., substeps=N)``).
+MAX_SUBSTEPS = 16
 #: The deepest controller tree (levels below the root) a crowd accepts.
 MAX_TREE_DEPTH = 64
 

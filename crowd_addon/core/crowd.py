@@ -26,7 +26,7 @@ import numpy as np
 from . import pose as sqt
 from .agents import STREAM, TRANSITION, UNIQUE, AgentState
 from .clip import ClipBank
-from .config import CrowdConfig, validate_config
+from .config import MAX_SUBSTEPS, CrowdConfig, validate_config
 from .errors import CrowdError
 from .events import EventDispatcher, deliver
 from .frame_view import FrameView
@@ -38,9 +38,6 @@ from .skinning_modes import skinning_mode
 from .transitions import TransitionResult, TransitionSlots
 
 __all__ = ["Crowd", "StepReport", "MAX_SUBSTEPS", "check_substeps"]
-
-#: The most samples per frame a crowd keeps (:class:`Crowd` ``substeps``).
-MAX_SUBSTEPS = 16
 
 
 def check_substeps(substeps) -> int:

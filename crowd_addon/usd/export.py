@@ -75,6 +75,7 @@ class ExportResult:
     offset_animations, stream_animations, characters : prims/layers written.
     seconds : dict ``simulate`` (the recording's), ``author``, ``write``, ``total``
         (wall clock).
+    substeps : samples written per frame (the recording's).
     events : ``[name, frame, agents]`` per event tag fired for exported agents in the
         shot, in firing order (what the crowd's callbacks heard).
     """
@@ -93,6 +94,7 @@ class ExportResult:
     characters: int
     seconds: dict
     events: list
+    substeps: int = 1
 
     @property
     def bytes(self) -> int:
@@ -201,7 +203,7 @@ def _steps(rec, ids, meshes, files, layout):
         blend_frames=int(sum(b.frames for b in clip_assets[1])),
         moving_agents=int(shot.moving.sum()), offset_animations=len(offsets),
         stream_animations=len(stream_assets), characters=len(char_assets),
-        seconds=seconds, events=_events(rec, ids))
+        seconds=seconds, events=_events(rec, ids), substeps=int(rec.substeps))
 
 
 def _events(rec, ids) -> list:

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from pxr import Usd, UsdSkel
+from pxr import Gf, Usd, UsdSkel
 
 from crowd_addon.cli import main
 from crowd_addon.core.config_io import save_config
@@ -66,6 +66,20 @@ def test_blender_layout_agents_are_not_instances(config_path, tmp_path, capsys):
     assert stage.GetRootLayer().customLayerData["crowd"]["layout"] == "blender"
 
 
+def test_substeps_write_samples_between_frames(config_path, tmp_path, capsys):
+    out = tmp_path / "shot.usdc"
+    assert main(["export", "--config", str(config_path), "--out", str(out),
+                 "--frames", "2-6", "--substeps", "4"]) == 0
+    assert "(4 samples a frame)" in capsys.readouterr().out
+    stage = Usd.Stage.Open(str(out))
+    assert stage.GetRootLayer().customLayerData["crowd"]["substeps"] == 4
+    assert (stage.GetStartTimeCode(), stage.GetEndTimeCode()) == (2, 6)
+    anim = UsdSkel.Animation(next(p for p in stage.Traverse() if p.IsA(UsdSkel.Animation)
+                                  and "/Streams/" in str(p.GetPath())))
+    times = anim.GetRotationsAttr().GetTimeSamplesInInterval(Gf.Interval(2, 6.75))
+    assert times == [2 + k / 4 for k in range(20)]      # the last frame's too (shutter)
+
+
 def test_an_unknown_layout_is_refused_before_anything_runs(config_path, tmp_path):
     from crowd_addon.core import CrowdError
     from crowd_addon.usd import check_export
@@ -83,6 +97,9 @@ def test_an_unknown_layout_is_refused_before_anything_runs(config_path, tmp_path
     (["--frames", "soon"], "must be FIRST-LAST or a frame"),
     (["--frames=-4-2"], "starts before the crowd's start frame 0"),
     (["--agents", "0"], "must be >= 1"),
+    (["--substeps", "0"], "argument --substeps: must be >= 1, got 0"),
+    (["--substeps", "17"], "argument --substeps: must be <= 16, got 17"),
+    (["--substeps", "2.5"], "argument --substeps: must be an integer"),
 ])
 def test_bad_input_exits_2_and_writes_nothing(config_path, tmp_path, capsys, extra,
                                                message):
