@@ -128,6 +128,22 @@ def test_the_blender_layout_from_the_operator(scene, tmp_path):
     assert stage.GetRootLayer().customLayerData["crowd"]["layout"] == "blender"
 
 
+def test_samples_per_frame_from_the_operator(scene, tmp_path):
+    """Sub-frame samples for motion blur: the stage holds 3 samples a frame."""
+    path = tmp_path / "blur.usdc"
+    assert bpy.ops.crowd.export_usd(filepath=str(path), use_scene_range=False,
+                                    frame_start=2, frame_end=5, substeps=3) == {"FINISHED"}
+    from pxr import Gf, Usd, UsdSkel
+    stage = Usd.Stage.Open(str(path))
+    assert stage.GetRootLayer().customLayerData["crowd"]["substeps"] == 3
+    anim = next(UsdSkel.Animation(p) for p in stage.Traverse()
+                if p.IsA(UsdSkel.Animation) and "/Streams/" in str(p.GetPath()))
+    times = anim.GetRotationsAttr().GetTimeSamplesInInterval(Gf.Interval(2, 5))
+    assert times == pytest.approx([2 + k / 3 for k in range(10)])
+    with pytest.raises(TypeError):
+        bpy.ops.crowd.export_usd(filepath=str(path), substeps=0.5)
+
+
 def test_scene_range_wins_over_start_and_end_unless_turned_off(scene, tmp_path):
     path = tmp_path / "scene_range.usdc"
     scene.frame_start, scene.frame_end = 2, 6
@@ -371,7 +387,7 @@ class _ModalExport:
 
     def __init__(self, path, **props):
         self.filepath, self.use_scene_range, self.agents = str(path), True, 0
-        self.usd_layout = "instanced"
+        self.usd_layout, self.substeps = "instanced", 1
         self.frame_start, self.frame_end, self.interactive = 1, 250, True
         for k, v in props.items():
             setattr(self, k, v)
