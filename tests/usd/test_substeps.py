@@ -15,12 +15,12 @@ from crowd_addon.core import pose as sqt
 from crowd_addon.core.recorder import record
 from crowd_addon.core.skinning import skin_vertices, skinning_matrices
 
-from .conftest import DYNAMIC, FIRST, LAST, MOVING, make_config, simulate
+from .conftest import FAN_AGENTS, FIRST, KID_AGENTS, LAST, make_config, simulate
 from .test_layout import usdchecker
-from .test_readback import STATIC, rel_err, skeleton_of
+from .test_readback import rel_err, skeleton_of
 
 N = 3
-AGENTS = STATIC + sorted(DYNAMIC) + sorted(MOVING)
+AGENTS = range(FAN_AGENTS + KID_AGENTS)          # every agent
 
 
 def core_samples():
