@@ -271,11 +271,12 @@ def test_config_previews_need_frames_and_have_no_camera(tmp_path, capsys, args, 
 
 def test_export_takes_the_scene_range_and_makes_its_folder(blend, tmp_path):
     out = tmp_path / "a" / "b" / "shot.usdc"
-    run = crowd("export", "--blend", blend, "--out", out, "--json")
+    run = crowd("export", "--blend", blend, "--out", out, "--json", "--substeps", "2")
     assert run.returncode == 0, run.stderr[-3000:]
     summary = json.loads(run.stdout)                # stdout is the JSON object, only
     assert "Read blend" in run.stderr
     assert summary["frames"] == [FIRST, LAST] and summary["agents"] == NX * NY
+    assert summary["substeps"] == 2                 # samples between frames, from --blend
     assert out.is_file() and summary["characters"] == 1
 
 
