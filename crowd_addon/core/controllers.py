@@ -140,7 +140,11 @@ class ClipPlayer(Controller):
             # in clip frames: t_clip = start + speed * t (exactly the given values at rate 1)
             self.speed = rate * np.array([n.speed for n in self.nodes])
             self.start = rate * np.array([n.start for n in self.nodes])
-            self.prev = np.full(len(self.nodes), np.nan)
+            # only nodes whose clip has event tags follow their last time
+            bank = self.bank
+            self.tagged = np.flatnonzero(bank.tag_start[self.clip_ids + 1]
+                                         > bank.tag_start[self.clip_ids])
+            self.prev = np.full(self.tagged.size, np.nan)
 
         def reset(self):
             self.prev[:] = np.nan
@@ -151,14 +155,17 @@ class ClipPlayer(Controller):
                 self.bank.sample(self.clip_ids, t, out=ctx.poses[self.out])
             else:
                 ctx.poses[self.out] = self.bank.sample(self.clip_ids, t)
-            active = ctx.weight[self.index] > 0
+            if not self.tagged.size:
+                return
+            t = t[self.tagged]
+            active = ctx.weight[self.index[self.tagged]] > 0
             # A node that was not playing, or whose time went back, starts fresh:
             # tags exactly at its current time fire.
             prev = np.where(np.isnan(self.prev) | (self.prev > t), t - 1e-6, self.prev)
             self.prev = np.where(active, t, np.nan)
-            if self.bank.tag_frame.size and active.any():
-                sel = np.flatnonzero(active)
-                which, tag = self.bank.crossings(self.clip_ids[sel], prev[sel], t[sel])
+            if active.any():
+                sel = self.tagged[active]
+                which, tag = self.bank.crossings(self.clip_ids[sel], prev[active], t[active])
                 if which.size:
                     ctx.emit(self.roots[sel[which]], self.bank.tag_name[tag])
 
@@ -329,7 +336,11 @@ class Layer(Controller):
             ctx.local_weight[self.il] = self.w.max(axis=1)
 
         def evaluate(self, ctx):
-            out = ctx.poses[self.ib]
+            if isinstance(self.out, slice):        # the base straight into the output
+                out = ctx.poses[self.out]
+                np.take(ctx.poses, self.ib, axis=0, out=out)
+            else:
+                out = ctx.poses[self.ib]
             b = self.bones_used
             base = out[:, b]
             lay = ctx.poses[self.il[:, None], b] if isinstance(b, np.ndarray) \
@@ -340,7 +351,8 @@ class Layer(Controller):
                 out[:, b] = sqt.apply_additive(base, delta, w)
             else:
                 out[:, b] = sqt.blend2(base, lay, w)
-            ctx.poses[self.out] = out
+            if not isinstance(self.out, slice):
+                ctx.poses[self.out] = out
 
 
 def _bone_weights(spec, skeleton, what) -> np.ndarray:
@@ -430,7 +442,8 @@ class BlendSpace2D(Controller):
 
         def prepare(self, ctx):
             p = np.stack([self.param_values(ctx, self.xs), self.param_values(ctx, self.ys)], 1)
-            self.w = blend_space_weights(self.pts, p)
+            if getattr(self, "_p", None) is None or not np.array_equal(p, self._p):
+                self._p, self.w = p, blend_space_weights(self.pts, p)   # point moved
             ctx.local_weight[self.ci] = self.w
 
         def evaluate(self, ctx):

@@ -168,6 +168,7 @@ class Crowd:
         for params, triggers in zip(self.evaluator.ctx.params, self.evaluator.ctx.triggers):
             params.clear()             # a reset crowd is a new crowd: no leftover parameters
             triggers.clear()
+        self.evaluator.ctx.triggered.clear()
         if self.show is not None:
             self.show.apply_tracks(f0, triggers=False)
         self.slots.release(np.arange(self.slots.count))
@@ -377,7 +378,7 @@ class Crowd:
         out[m] = self.uniques.poses[ref[m]]
         m = kind == TRANSITION
         if m.any():
-            out[m] = self.skinning.slot_poses(ref[m])[ref[m]]
+            out[m] = self.skinning.slot_poses(ref[m])
         return out
 
     def agent_poses(self, agents=None, sub: int = 0) -> np.ndarray:

@@ -33,7 +33,8 @@ class FrameContext:
     shift : (N,) time subtracted from the parent's time (set by parents' prepare).
     local_weight : (N,) weight of a node in its parent's output.
     weight : (N,) effective weight in the root's output (product along the path).
-    params, triggers : per root dict / set, from the simulation.
+    params, triggers : per root dict / set, from the simulation; ``triggered`` the roots
+        whose trigger set is not empty (so a frame clears those only).
     """
 
     def __init__(self, n_nodes, bones, n_roots):
@@ -44,6 +45,7 @@ class FrameContext:
         self.weight = np.ones(n_nodes)
         self.params = [dict() for _ in range(n_roots)]
         self.triggers = [set() for _ in range(n_roots)]
+        self.triggered = set()
         self._emit_roots = []
         self._emit_names = []
 
@@ -159,8 +161,9 @@ class TreeEvaluator:
             ctx.weight[idx] = ctx.weight[par] * ctx.local_weight[idx]
             for b in by_depth.get(d, ()):
                 b.prepare(ctx)
-        for t in ctx.triggers:
-            t.clear()
+        for r in ctx.triggered:
+            ctx.triggers[r].clear()
+        ctx.triggered.clear()
 
     def evaluate(self, batches=None) -> None:
         """Bottom-up pass over the given batches (default all), children first."""
@@ -183,7 +186,7 @@ class TreeEvaluator:
                  for b in self.batches]
         frame = [a.copy() for a in (ctx.poses, ctx.time, ctx.shift, ctx.local_weight,
                                     ctx.weight)]
-        triggers = [set(t) for t in ctx.triggers]
+        triggers = {r: set(ctx.triggers[r]) for r in ctx.triggered}
         emitted = len(ctx._emit_roots)
         try:
             self.prepare(root_times)
@@ -196,9 +199,9 @@ class TreeEvaluator:
             for a, v in zip((ctx.poses, ctx.time, ctx.shift, ctx.local_weight, ctx.weight),
                             frame):
                 a[...] = v
-            for t, v in zip(ctx.triggers, triggers):
-                t.clear()
-                t.update(v)
+            for r, v in triggers.items():
+                ctx.triggers[r].update(v)
+            ctx.triggered.update(triggers)
             del ctx._emit_roots[emitted:], ctx._emit_names[emitted:]
 
     def set_parameter(self, root: int, name: str, value: float):
@@ -215,6 +218,7 @@ class TreeEvaluator:
     def set_trigger(self, root: int, name: str):
         """Set trigger ``name`` on tree ``root``; the next prepare consumes it."""
         self.ctx.triggers[root].add(str(name))
+        self.ctx.triggered.add(root)
 
     def states(self, root: int) -> list:
         """Current state names of the state machines in tree ``root``."""

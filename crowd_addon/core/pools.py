@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import pose as sqt
 from .agents import check_offsets
 from .errors import CrowdError
 
@@ -48,6 +49,7 @@ class StreamPool:
         self.skeleton = np.asarray(skeleton, np.int64)
         self.max_offset = int(max_offset)
         self.history = history
+        self._records = sqt.records(history)          # whole-bone gathers and scatters
         self._tag_names = np.asarray(list(tag_names), object)
         self.clear_events()
 
@@ -71,11 +73,14 @@ class StreamPool:
 
     def poses(self, frame, stream, offset) -> np.ndarray:
         """``(k, B, 10)`` local poses ``PH_stream(offset)`` at ``frame`` ((k,) arrays)."""
-        return self.history[self.slice(frame, offset), stream]
+        at = self.slice(frame, offset)
+        if np.ndim(at) == 0 and np.ndim(stream) == 0:
+            return self.history[at, stream]
+        return sqt.from_records(self._records[at, stream])
 
     def store(self, frame: int, poses: np.ndarray):
         """Write the heads' poses ``(S, B, 10)`` of ``frame`` into the ring."""
-        self.history[self.slice(frame)] = poses
+        self._records[self.slice(frame)] = sqt.records(np.ascontiguousarray(poses))
 
     def head_poses(self, frame: int, now: int) -> np.ndarray:
         """A copy of every head's pose ``(S, B, 10)`` at ``frame``, one of the last M

@@ -17,7 +17,8 @@ from . import quaternion as quat
 
 __all__ = [
     "WIDTH", "SCALE", "ROT", "TRANS", "identity_pose", "make_pose", "blend2",
-    "blend_weighted", "additive_delta", "apply_additive", "pose_to_matrices",
+    "blend_weighted", "additive_delta", "apply_additive", "pose_to_matrices", "records",
+    "from_records",
 ]
 
 WIDTH = 10
@@ -26,6 +27,23 @@ ROT = slice(3, 7)
 TRANS = slice(7, 10)
 
 _IDENTITY = np.array([1, 1, 1, 1, 0, 0, 0, 0, 0, 0], np.float32)
+
+
+_RECORD = np.dtype((np.void, WIDTH * 4))
+
+
+def records(poses: np.ndarray) -> np.ndarray:
+    """A ``(..., B)`` view of float32 SQT poses ``(..., B, 10)`` as one 40-byte record
+    per bone. The poses' last axis must be contiguous, the bones need not be (a pose
+    texture's bones are 12 floats apart): gathers and scatters through it copy whole
+    bones at a time, several times faster than float by float on a padded layout."""
+    return poses.view(np.uint8).view(_RECORD)[..., 0]
+
+
+def from_records(rec: np.ndarray) -> np.ndarray:
+    """The float32 poses ``(..., B, 10)`` of contiguous records (e.g. a gather from
+    :func:`records`), a view."""
+    return rec.view(np.float32).reshape(rec.shape + (WIDTH,))
 
 
 def identity_pose(shape) -> np.ndarray:
@@ -111,21 +129,35 @@ def blend_weighted(poses: np.ndarray, weights: np.ndarray) -> np.ndarray:
     (n, B, 10) float32
     """
     w = np.asarray(weights, dtype=poses.dtype)
-    per_node = w.ndim == 2
-    if per_node:
-        w = w[:, :, None]
+    if w.ndim == 2:
+        return _blend_per_node(poses, w)
     total = w.sum(axis=1, keepdims=True)
     w = w / np.where(total > 0, total, 1)
-    if per_node:        # one heaviest child a node: a plain gather, not one a bone
-        heaviest = np.argmax(w[:, :, 0], axis=1)                             # (n,)
-        ref = poses[np.arange(poses.shape[0]), heaviest][:, None]            # (n, 1, B, 10)
-    else:
-        heaviest = np.argmax(np.broadcast_to(w, poses.shape[:3]), axis=1)    # (n, B)
-        ref = np.take_along_axis(poses, heaviest[:, None, :, None], axis=1)  # (n, 1, B, 10)
+    heaviest = np.argmax(np.broadcast_to(w, poses.shape[:3]), axis=1)    # (n, B)
+    ref = np.take_along_axis(poses, heaviest[:, None, :, None], axis=1)  # (n, 1, B, 10)
     wq = np.where(_dot4(poses, ref) < 0, -w, w)                             # (n, k, B)
     out = np.einsum("nkbc,nkb->nbc", poses, np.broadcast_to(w, poses.shape[:3]))
     for c in (3, 4, 5, 6):
         out[..., c] = np.einsum("nkb,nkb->nb", poses[..., c], wq)
+    return normalize_rotations(out)
+
+
+def _blend_per_node(poses, w):
+    """:func:`blend_weighted` with one weight per child (``w`` (n, k)): a weighted sum
+    of each node's children as one small matrix product per node, the children's
+    rotations first flipped (in a copy, only when some point away) onto the heaviest
+    child's hemisphere."""
+    n, k = w.shape
+    total = w.sum(axis=1, keepdims=True)
+    w = w / np.where(total > 0, total, 1)
+    ref = poses[np.arange(n), np.argmax(w, axis=1)][:, None]                 # (n, 1, B, 10)
+    away = _dot4(poses, ref) < 0                                             # (n, k, B)
+    if away.any():
+        poses = poses.copy()
+        rot = poses[..., ROT]
+        np.negative(rot, out=rot, where=away[..., None])
+    out = np.matmul(w[:, None, :], poses.reshape(n, k, -1)).reshape(poses.shape[:1] +
+                                                                     poses.shape[2:])
     return normalize_rotations(out)
 
 

@@ -136,9 +136,8 @@ class CpuSkinning(_Mode):
         self._crowd.slots.pose[slots] = start_poses
 
     def slot_poses(self, slots) -> np.ndarray:
-        """The slots' pose array ``(NT, B, 10)``, ``slots`` up to date (blended by the
-        last step)."""
-        return self._crowd.slots.pose
+        """``(k, B, 10)`` poses of ``slots`` now (blended by the last step)."""
+        return self._crowd.slots.pose[slots]
 
     def rows(self, logical_rows) -> np.ndarray:
         """Skinning rows ``(n, B, 3, 4)`` of logical pose texture rows."""
@@ -189,16 +188,15 @@ class GpuSkinning(_Mode):
     def slot_starting(self, slots, agents, start_poses):
         """StartP goes into the slot's local-pose row; the GPU blends from it."""
         st = self._crowd.storage
-        st.sqt_view()[st.slot_base + slots] = start_poses
+        sqt.records(st.sqt_view())[st.slot_base + slots] = sqt.records(
+            np.ascontiguousarray(start_poses))
         st.mark_rows_dirty(st.slot_base + slots)
 
     def slot_poses(self, slots) -> np.ndarray:
-        """The slots' pose array ``(NT, B, 10)`` with ``slots`` blended now on the CPU
-        (the GPU blends them for drawing)."""
+        """``(k, B, 10)`` poses of ``slots`` now, blended here on the CPU (the GPU blends
+        them for drawing)."""
         c = self._crowd
-        slots = np.unique(slots)
-        c.slots.evaluate(slots, c.frame, c.streams, c.uniques)
-        return c.slots.pose
+        return c.slots.blended(slots, c.frame, c.streams, c.uniques)[0]
 
     def rows(self, logical_rows) -> np.ndarray:
         """Skinning rows ``(n, B, 3, 4)`` of logical rows, skinned here on the CPU (each
@@ -213,7 +211,7 @@ class GpuSkinning(_Mode):
         skel[~is_slot] = self._row_skeleton[used[~is_slot]]
         if is_slot.any():
             slots = used[is_slot] - st.slot_base
-            poses[is_slot] = self.slot_poses(slots)[slots]
+            poses[is_slot] = self.slot_poses(slots)
             skel[is_slot] = c.slots.target_skeleton(slots, c.streams, c.uniques)
         return self._skin_poses(poses, skel)[inverse.reshape(-1)]
 

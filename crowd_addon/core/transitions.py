@@ -307,10 +307,17 @@ class TransitionSlots:
         return {"ready": act[~later], "waiting": act[later]}
 
     def evaluate(self, slots, frame, streams, uniques):
-        """Blend ``slots`` for ``frame`` (targets from the :class:`~.pools.StreamPool`
-        history and the :class:`~.pools.UniquePool`); returns their ``S`` values."""
+        """Blend ``slots`` for ``frame`` into :attr:`pose` (see :meth:`blended`); returns
+        their ``S`` values."""
         if slots.size == 0:
             return np.zeros(0)
+        self.pose[slots], s = self.blended(slots, frame, streams, uniques)
+        return s
+
+    def blended(self, slots, frame, streams, uniques) -> tuple:
+        """``(poses (k, B, 10), S (k,))`` of ``slots`` blended for ``frame`` (targets from
+        the :class:`~.pools.StreamPool` history and the :class:`~.pools.UniquePool`),
+        stored nowhere."""
         kind = self.target_kind[slots]
         ref = self.target_ref[slots]
         target = np.empty((slots.size,) + self.pose.shape[1:], np.float32)
@@ -321,8 +328,7 @@ class TransitionSlots:
         if un.any():
             target[un] = uniques.poses[ref[un]]
         s = self.weights(slots, frame)
-        self.pose[slots] = sqt.blend2(self.start_pose[slots], target, s.astype(np.float32))
-        return s
+        return sqt.blend2(self.start_pose[slots], target, s.astype(np.float32)), s
 
     def weights(self, slots, frame) -> np.ndarray:
         """``S = clip((frame - T0) / L, 0, 1)`` of ``slots`` (float64)."""

@@ -289,7 +289,7 @@ def test_state_machine_trigger_cross_fade():
     sm = sm_batch(ev)
     for t in range(0, 10):
         assert_pose_close(run(ev, t)[0], IDLE.sample(t), atol=1e-6)
-    ev.ctx.triggers[0].add("go")
+    ev.set_trigger(0, "go")
     t0 = 10
     for t in range(t0, t0 + 15):
         out = run(ev, t)[0]
@@ -318,10 +318,10 @@ def test_state_machine_parameter_condition_and_any_source():
     assert_pose_close(run(ev, 2)[0], WALK.sample(0), atol=1e-6)   # a cut: target at 0
     assert sm.state(0) == "walk"
     assert_pose_close(run(ev, 5)[0], WALK.sample(3), atol=1e-6)
-    ev.ctx.triggers[0].add("flee")
+    ev.set_trigger(0, "flee")
     assert_pose_close(run(ev, 6)[0], RUN.sample(0), atol=1e-6)
     assert sm.state(0) == "run"
-    ev.ctx.triggers[0].add("flee")                                  # already there
+    ev.set_trigger(0, "flee")                                  # already there
     assert_pose_close(run(ev, 7)[0], RUN.sample(1), atol=1e-6)
 
 
@@ -330,10 +330,10 @@ def test_state_machine_trigger_consumed_when_not_applicable():
            StateTransition("idle", "walk", 0, trigger="start")]
     ev = make([machine(trs)])
     sm = sm_batch(ev)
-    ev.ctx.triggers[0].add("go")                  # ignored in idle, and not kept
+    ev.set_trigger(0, "go")                  # ignored in idle, and not kept
     run(ev, 0)
     assert sm.state(0) == "idle" and not ev.ctx.triggers[0]
-    ev.ctx.triggers[0].add("start")
+    ev.set_trigger(0, "start")
     run(ev, 1)
     run(ev, 2)
     assert sm.state(0) == "walk"
@@ -349,7 +349,7 @@ def test_state_machine_interrupted_fade_does_not_pop():
     frames = []
     for t in range(40):
         if t in (5, 10):                         # 10 is halfway through A -> B
-            ev.ctx.triggers[0].add({5: "b", 10: "c"}[t])
+            ev.set_trigger(0, {5: "b", 10: "c"}[t])
         frames.append(run(ev, t)[0])
     frames = np.array(frames, np.float64)
     step = np.abs(np.diff(frames, axis=0))
@@ -371,7 +371,7 @@ def test_nested_state_machine_restarts_when_reentered():
     for t in range(46):
         trig = {15: "fast", 20: "stop", 40: "back"}.get(t)
         if trig:
-            ev.ctx.triggers[0].add(trig)
+            ev.set_trigger(0, trig)
         out = run(ev, t)[0]
     # re-entered at 40: whichever inner state it shows, its clip restarted at 0
     err = min(np.abs(out - WALK.sample(5)).max(), np.abs(out - RUN.sample(5)).max())
@@ -395,7 +395,7 @@ def drive(ev, roots, t):
         ev.ctx.params[k]["w"] = ((r * 7 + t) % 10) / 9.0
         ev.ctx.params[k]["lw"] = ((r + t) % 4) / 3.0
         if (t + r) % 6 == 0:
-            ev.ctx.triggers[k].add("go")
+            ev.set_trigger(k, "go")
     return run(ev, t)
 
 
