@@ -87,10 +87,8 @@ def blend2(a: np.ndarray, b: np.ndarray, w, out: np.ndarray | None = None) -> np
     neg = _dot4(a, b) < 0
     if neg.any():
         # shortest arc: blend toward -q_b where the quaternions point apart
-        idx = np.nonzero(np.broadcast_to(neg, out.shape[:-1]))
-        ai = np.broadcast_to(a, out.shape)[idx]
-        bi = np.broadcast_to(b, out.shape)[idx]
-        out[idx + (ROT,)] = -bi[:, ROT] - ai[:, ROT]
+        for c in (3, 4, 5, 6):
+            np.subtract(np.negative(b[..., c]), a[..., c], out=out[..., c], where=neg)
     out *= w[..., None]
     out += a
     normalize_rotations(out)
