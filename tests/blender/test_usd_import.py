@@ -99,6 +99,48 @@ def test_blender_layout_imports_every_agent_animated_as_core(exported, truth):
     assert all(np.abs(world_vertices(agents[a]) - before[a]).max() > 1e-3 for a in before)
 
 
+def test_samples_between_frames_import_as_core_between_frames(tmp_path):
+    """``--substeps 4``: Blender's importer keys the sub-frame samples, and the mesh it
+    evaluates at ``F + k / 4`` (``frame_set(F, subframe=k / 4)``) is core's pose at that
+    time, across the shot's clip switches. Agents that stand still: a moving agent's
+    transform has whole-frame samples, which Blender interpolates (docs/usd_export.md)."""
+    from crowd_addon.core import Crowd
+    from crowd_addon.core.recorder import record
+    from crowd_addon.usd import export_crowd
+    from usd.conftest import simulate
+
+    n = 4
+    path = export_crowd(record(Crowd(make_config(), skinning="gpu", substeps=n), FIRST,
+                               LAST, on_frame=simulate), tmp_path / "blur.usdc",
+                        layout="blender").path
+    crowd = Crowd(make_config(), substeps=n)
+    truth = {}
+    while crowd.frame < LAST:
+        simulate(crowd, crowd.frame + 1)
+        crowd.step()
+        if crowd.frame >= FIRST:
+            a = crowd.view.agents
+            for k in range(n):
+                truth[crowd.frame, k] = {"poses": {0: crowd.view.agent_poses(sub=k)},
+                                         "position": {0: np.array(a.position, np.float64)},
+                                         "heading": {0: np.array(a.heading, np.float64)}}
+    agents = import_agents(path)
+    scene = bpy.context.scene
+    worst, moved = 0.0, 0.0
+    for frame in range(FIRST, LAST):
+        for k in range(1, n):
+            scene.frame_set(frame, subframe=k / n)
+            for a in sorted(set(agents) - MOVING):
+                got = world_vertices(agents[a])
+                err = float(np.abs(got - core_vertices(truth[frame, k], 0, a)).max())
+                assert err < TOLERANCE, (a, frame, k, err)
+                worst = max(worst, err)
+                whole = core_vertices(truth[frame, 0], 0, a)
+                moved = max(moved, float(np.abs(got - whole).max()))
+    assert moved > 1e-2          # between frames they are not their frames' poses
+    print(f"worst vertex error between frames {worst:.2e} m")
+
+
 def test_instanced_layout_is_what_blender_does_not_animate(exported, truth):
     """The control: Blender imports instanceable agents without their skeletons' motion
     (why the Blender layout exists); if a Blender release fixes this, this test says so."""
