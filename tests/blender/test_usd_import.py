@@ -107,23 +107,14 @@ def test_samples_between_frames_import_as_core_between_frames(tmp_path):
     from crowd_addon.core import Crowd
     from crowd_addon.core.recorder import record
     from crowd_addon.usd import export_crowd
-    from usd.conftest import simulate
+    from usd.conftest import core_samples, simulate
 
     n = 4
     path = export_crowd(record(Crowd(make_config(), skinning="gpu", substeps=n), FIRST,
                                LAST, on_frame=simulate), tmp_path / "blur.usdc",
                         layout="blender").path
-    crowd = Crowd(make_config(), substeps=n)
-    truth = {}
-    while crowd.frame < LAST:
-        simulate(crowd, crowd.frame + 1)
-        crowd.step()
-        if crowd.frame >= FIRST:
-            a = crowd.view.agents
-            for k in range(n):
-                truth[crowd.frame, k] = {"poses": {0: crowd.view.agent_poses(sub=k)},
-                                         "position": {0: np.array(a.position, np.float64)},
-                                         "heading": {0: np.array(a.heading, np.float64)}}
+    truth = {key: {"poses": {0: p}, "position": {0: pos}, "heading": {0: head}}
+             for key, (p, pos, head) in core_samples(n).items()}
     agents = import_agents(path)
     scene = bpy.context.scene
     worst, moved = 0.0, 0.0

@@ -114,6 +114,24 @@ def core_truth():
     return out
 
 
+def core_samples(substeps):
+    """Core's truth at every sample time ``F + k / N`` of the shot (``N = substeps``):
+    ``{(F, k): (local poses (N, B, 10), positions, headings)}``, read through
+    ``view.agent_poses(sub=k)`` from a crowd that keeps the samples."""
+    crowd = Crowd(make_config(), substeps=substeps)
+    out = {}
+    while crowd.frame < LAST:
+        simulate(crowd, crowd.frame + 1)
+        crowd.step()
+        if crowd.frame >= FIRST:
+            a = crowd.view.agents
+            for k in range(substeps):
+                out[crowd.frame, k] = (crowd.view.agent_poses(sub=k),
+                                       np.array(a.position, np.float64),
+                                       np.array(a.heading, np.float64))
+    return out
+
+
 def recording(config=None, frames=(FIRST, LAST), on_frame=simulate):
     """The shot recorded (a crowd that skins nothing, as exports use)."""
     return record(Crowd(config or make_config(), skinning="gpu"), *frames, on_frame=on_frame)

@@ -15,25 +15,12 @@ from crowd_addon.core import pose as sqt
 from crowd_addon.core.recorder import record
 from crowd_addon.core.skinning import skin_vertices, skinning_matrices
 
-from .conftest import FAN_AGENTS, FIRST, KID_AGENTS, LAST, make_config, simulate
+from .conftest import FAN_AGENTS, FIRST, KID_AGENTS, LAST, core_samples, make_config, simulate
 from .test_layout import usdchecker
 from .test_readback import rel_err, skeleton_of
 
 N = 3
 AGENTS = range(FAN_AGENTS + KID_AGENTS)          # every agent
-
-
-def core_samples():
-    """Core's local poses at every sample time ``F + k / N`` of the shot."""
-    crowd = Crowd(make_config(), substeps=N)
-    out = {}
-    while crowd.frame < LAST:
-        simulate(crowd, crowd.frame + 1)
-        crowd.step()
-        if crowd.frame >= FIRST:
-            for k in range(N):
-                out[crowd.frame + k / N] = crowd.view.agent_poses(sub=k)
-    return out
 
 
 @pytest.fixture(scope="module")
@@ -55,7 +42,7 @@ def exported(tmp_path_factory):
 
 def test_every_sample_reads_back_as_core(exported):
     result, stage, rec = exported
-    truth = core_samples()
+    truth = {f + k / N: s[0] for (f, k), s in core_samples(N).items()}
     assert sorted(truth) == rec.times.tolist()
     assert sum("/blends/" in f for f in result.files) >= 2
     cache, pred = UsdSkel.Cache(), Usd.TraverseInstanceProxies()
