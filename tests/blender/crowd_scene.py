@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 import bpy
 
@@ -237,6 +238,19 @@ class registered:
         import crowd_addon
         if self.mine:
             crowd_addon.unregister()
+
+
+def extension_fixture():
+    """A module-scoped autouse fixture for a test module (``extension =
+    cs.extension_fixture()``): the extension registered for the module's tests, and
+    every preview they left running stopped before it is unregistered."""
+    @pytest.fixture(scope="module", autouse=True)
+    def extension():
+        with registered():
+            yield
+            from crowd_addon.blender import preview
+            preview.stop_all()
+    return extension
 
 
 def init_gpu():

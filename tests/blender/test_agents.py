@@ -26,10 +26,7 @@ from crowd_addon.core.placement import CharacterStreams  # noqa: E402
 STREAMS = ["idle", "cheer", "sit"]
 
 
-@pytest.fixture(scope="module", autouse=True)
-def extension():
-    with cs.registered():
-        yield
+extension = cs.extension_fixture()
 
 
 @pytest.fixture

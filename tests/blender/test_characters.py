@@ -30,11 +30,7 @@ ROOT = Path(__file__).resolve().parents[2]
 SEATS = (6, 5)
 
 
-@pytest.fixture(scope="module", autouse=True)
-def extension():
-    with cs.registered():
-        yield
-        preview.stop_all()
+extension = cs.extension_fixture()
 
 
 def _seats(name="Seats", character=None, stream=None, nx=SEATS[0], ny=SEATS[1]):

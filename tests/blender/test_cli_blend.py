@@ -33,10 +33,7 @@ NX, NY, FIRST, LAST = 8, 6, 3, 8
 W, H = 96, 64
 
 
-@pytest.fixture(scope="module", autouse=True)
-def extension():
-    with cs.registered():
-        yield
+extension = cs.extension_fixture()
 
 
 def _camera(scene, name, location, rotation, lens=35.0, scale=(1.0, 1.0, 1.0)):

@@ -30,11 +30,7 @@ SEATS = (6, 5)                      # 30 agents, one per seat vertex
 SPACING = 1.5
 
 
-@pytest.fixture(scope="module", autouse=True)
-def extension():
-    with cs.registered():
-        yield
-        preview.stop_all()
+extension = cs.extension_fixture()
 
 
 @pytest.fixture

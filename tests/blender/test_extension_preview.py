@@ -25,11 +25,7 @@ from crowd_addon.core.skinning import skin_vertices  # noqa: E402
 from crowd_addon.gpu.camera import look_at, perspective  # noqa: E402
 
 
-@pytest.fixture(scope="module", autouse=True)
-def extension():
-    with cs.registered():
-        yield
-        preview.stop_all()
+extension = cs.extension_fixture()
 
 
 def _build_scene():

@@ -23,11 +23,7 @@ from crowd_addon.blender.armature import proxy_mesh_from_object  # noqa: E402
 RED = (0.7, 0.1, 0.1, 1.0)
 
 
-@pytest.fixture(scope="module", autouse=True)
-def extension():
-    with cs.registered():
-        yield
-        preview.stop_all()
+extension = cs.extension_fixture()
 
 
 def principled(name, color=None, image=None):

@@ -26,11 +26,7 @@ from crowd_addon.gpu.backends import make_renderer  # noqa: E402
 SIZE = (160, 120)
 
 
-@pytest.fixture(scope="module", autouse=True)
-def extension():
-    with cs.registered():
-        yield
-        preview.stop_all()
+extension = cs.extension_fixture()
 
 
 @pytest.fixture

@@ -25,11 +25,7 @@ from crowd_addon.core.errors import CrowdError  # noqa: E402
 from crowd_addon.core.skinning import model_matrices  # noqa: E402
 
 
-@pytest.fixture(scope="module", autouse=True)
-def extension():
-    with cs.registered():
-        yield
-        preview.stop_all()
+extension = cs.extension_fixture()
 
 
 @pytest.fixture

@@ -30,11 +30,7 @@ WALL_Y = 2.25                       # between the second and third rows of agent
 FRAME = 9
 
 
-@pytest.fixture(scope="module", autouse=True)
-def extension():
-    with cs.registered():
-        yield
-        preview.stop_all()
+extension = cs.extension_fixture()
 
 
 def _box(name, centre, size, color):
@@ -199,11 +195,16 @@ def test_scene_geometry_takes_the_scene_and_leaves_the_crowd_templates(walled):
     np.testing.assert_allclose(light[:3], sun[:3, 2], atol=1e-6)   # towards the sun
 
 
+def _walled_view(walled):
+    """``(scene, camera, sun, scene geometry, preview)`` of the walled scene."""
+    scene, cam_obj, pv = walled
+    return (scene, camera_from_object(cam_obj, SIZE[0] / SIZE[1]), scene_light(scene),
+            scene_geometry(scene), pv)
+
+
 @pytest.mark.parametrize("backend", ["moderngl", "blender"])
 def test_a_wall_hides_exactly_the_agents_behind_it(walled, backend):
-    scene, cam_obj, pv = walled
-    camera = camera_from_object(cam_obj, SIZE[0] / SIZE[1])
-    light, geo = scene_light(scene), scene_geometry(scene)
+    scene, camera, light, geo, pv = _walled_view(walled)
     crowd_only, crowd_depth = _render(pv.crowd, backend, camera, light)
     composite, _ = _render(pv.crowd, backend, camera, light, geo)
     scene_depth, _, _ = _camera_hits(scene, camera, SIZE)
@@ -348,9 +349,7 @@ def _erode(mask, steps=2):
 
 @pytest.mark.parametrize("backend", ["moderngl", "blender"])
 def test_the_sun_casts_the_walls_and_the_agents_shadows(walled, backend):
-    scene, cam_obj, pv = walled
-    camera = camera_from_object(cam_obj, SIZE[0] / SIZE[1])
-    light, geo = scene_light(scene), scene_geometry(scene)
+    scene, camera, light, geo, pv = _walled_view(walled)
     crowd_only, _ = _render(pv.crowd, backend, camera, light)
     lit, _ = _render(pv.crowd, backend, camera, light, geo)
     shaded, _ = _render(pv.crowd, backend, camera, light, geo, shadows=True)

@@ -17,11 +17,7 @@ from crowd_addon.blender import preview, reference  # noqa: E402
 DOC = Path(__file__).resolve().parents[2] / "docs" / "scripting.md"
 
 
-@pytest.fixture(scope="module", autouse=True)
-def extension():
-    with cs.registered():
-        yield
-        preview.stop_all()
+extension = cs.extension_fixture()
 
 
 def test_the_reference_is_what_is_registered():

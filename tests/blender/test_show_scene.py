@@ -33,11 +33,7 @@ NX, NY = 8, 6
 N = NX * NY
 
 
-@pytest.fixture(scope="module", autouse=True)
-def extension():
-    with cs.registered():
-        yield
-        preview.stop_all()
+extension = cs.extension_fixture()
 
 
 def _cue(show, name, **props):
