@@ -227,11 +227,28 @@ class AgentState:
         self._kind[:] = kind
         self._ref[:] = ref
         self._offset[:] = offset
+        self._all_changed()
+
+    def _all_changed(self):
+        """Regroup the index and tell every reader to read every agent."""
         if self._keys is not None:
             self.index = AgentIndex(self._keys(np.arange(self.count)))
         self._serial += 1
         self._floor = self._serial
         self._log, self._head, self._logged = [], 0, 0
+
+    #: the arrays a snapshot keeps (see :mod:`.snapshot`)
+    STATE = ("kind", "ref", "offset", "position", "heading", "color")
+
+    def state(self) -> dict:
+        """The agent arrays a :mod:`.snapshot` keeps (views: the snapshot copies)."""
+        return {k: getattr(self, "_" + k) for k in self.STATE}
+
+    def set_state(self, state: dict):
+        """Back to a :meth:`state`; every agent counts as changed (like :meth:`reset`)."""
+        for k in self.STATE:
+            getattr(self, "_" + k)[...] = state[k]
+        self._all_changed()
 
     def set_animation(self, agents, kind, ref, offset=None):
         """Agents ``agents`` (k,) now play ``(kind, ref)`` (scalars or (k,) arrays), at

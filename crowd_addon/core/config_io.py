@@ -49,7 +49,7 @@ from .mesh import Look, ProxyMesh
 from .show import Action, Cue, Reaction, Show, Sweep, Track
 from .skeleton import Skeleton
 
-__all__ = ["FORMAT", "VERSION", "save_config", "load_config", "register_kind",
+__all__ = ["FORMAT", "VERSION", "save_config", "load_config", "config_digest", "register_kind",
            "unregister_kind", "controller_kinds", "ControllerKind", "Encoder", "Decoder"]
 
 FORMAT = "crowd_addon.config"
@@ -762,6 +762,19 @@ def _sha256(path) -> tuple:
             h.update(block)
             size += len(block)
     return h.hexdigest(), size
+
+
+def config_digest(config: CrowdConfig) -> str:
+    """SHA-256 (hex) of ``config`` as :func:`save_config` encodes it: the manifest
+    (keys sorted) and every array's name, dtype, shape and bytes. Equal for equal
+    configurations in any process (a snapshot names the crowd it belongs to by it)."""
+    manifest, arrays = _encode_config(config)
+    h = hashlib.sha256(json.dumps(manifest, sort_keys=True).encode("utf-8"))
+    for name in sorted(arrays):
+        a = np.ascontiguousarray(arrays[name])
+        h.update(f"\n{name} {a.dtype.str} {a.shape}\n".encode("utf-8"))
+        h.update(a.tobytes())
+    return h.hexdigest()
 
 
 def save_config(config: CrowdConfig, path) -> None:

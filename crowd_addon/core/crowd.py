@@ -27,6 +27,7 @@ from . import pose as sqt
 from .agents import STREAM, TRANSITION, UNIQUE, AgentState
 from .clip import ClipBank
 from .config import MAX_SUBSTEPS, CrowdConfig, validate_config
+from .config_io import config_digest
 from .errors import CrowdError
 from .events import EventDispatcher, deliver
 from .frame_view import FrameView
@@ -35,6 +36,9 @@ from .pools import StreamPool, UniquePool
 from .show import ShowRunner
 from .skinning import SkinningPlan
 from .skinning_modes import skinning_mode
+from .snapshot import Snapshot
+from .snapshot import check as check_snapshot
+from .snapshot import take as take_snapshot
 from .transitions import TransitionResult, TransitionSlots
 
 __all__ = ["Crowd", "StepReport", "MAX_SUBSTEPS", "check_substeps"]
@@ -193,6 +197,56 @@ class Crowd:
         self.storage.take_dirty_regions()
         self.storage.mark_dirty(0, self.storage.row_count)
         self.skinning.reset()
+
+    # ------------------------------------------------------------------ snapshots
+    @property
+    def config_digest(self) -> str:
+        """SHA-256 of the configuration (:func:`~.config_io.config_digest`), worked out
+        at the first call: what a snapshot names the crowd it belongs to by."""
+        if getattr(self, "_digest", None) is None:
+            self._digest = config_digest(self.config)
+        return self._digest
+
+    def snapshot(self) -> Snapshot:
+        """An exact copy of the state now (:mod:`.snapshot`): :meth:`restore` it into
+        this crowd or any crowd built from the same configuration and every later
+        frame's poses and events equal this run's. ``snapshot().save(path)`` writes it
+        to a file, :func:`~.snapshot.load_snapshot` reads it."""
+        return take_snapshot(self)
+
+    def restore(self, snapshot: Snapshot):
+        """Go back (or forward) to ``snapshot``'s frame and state. A snapshot of
+        another configuration or sample count, or a damaged one, raises CrowdError
+        naming what differs, and changes nothing. Callbacks stay registered."""
+        check_snapshot(self, snapshot)
+        self._set_state(snapshot.state())
+
+    def _state(self) -> dict:
+        """Every part's state (views), what :mod:`.snapshot` copies."""
+        return {"crowd": {"frame": int(self.frame), "steps": self._steps,
+                          "ms_total": self._ms_total, "sub_streams": self._sub_streams,
+                          "sub_uniques": self._sub_uniques},
+                "streams": self.streams.state(), "uniques": self.uniques.state(),
+                "agents": self.agents.state(), "slots": self.slots.state(),
+                "evaluator": self.evaluator.state(), "events": self.events.state(),
+                **({"show": self.show.state()} if self.show is not None else {})}
+
+    def _set_state(self, state: dict):
+        c = state["crowd"]
+        self.frame, self._steps, self._ms_total = int(c["frame"]), int(c["steps"]), \
+            float(c["ms_total"])
+        self._sub_streams[...] = c["sub_streams"]
+        self._sub_uniques[...] = c["sub_uniques"]
+        self.streams.set_state(state["streams"])
+        self.uniques.set_state(state["uniques"])
+        self.slots.set_state(state["slots"])
+        self.agents.set_state(state["agents"])        # after the slots: it regroups by target
+        self.evaluator.set_state(state["evaluator"])
+        self.events.set_state(state["events"])
+        if self.show is not None:
+            self.show.set_state(state["show"])
+        self._events_fired = 0
+        self.skinning.restored()
 
     def _agent_keys(self, agents):
         """Event/index key of what each agent plays (a transition's target)."""

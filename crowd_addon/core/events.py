@@ -57,6 +57,13 @@ class EventDispatcher:
         self.fired = Counter()          # event name -> agent-crossings delivered
         self.calls = Counter()          # event name -> frames it fired on
 
+    def state(self) -> dict:
+        """What a :mod:`.snapshot` keeps: the counts (callbacks are not state)."""
+        return {"fired": dict(self.fired), "calls": dict(self.calls)}
+
+    def set_state(self, state: dict):
+        self.fired, self.calls = Counter(state["fired"]), Counter(state["calls"])
+
     def on(self, name: str, fn) -> int:
         """Register ``fn(name, frame, agent_ids)`` for ``name`` (or ``"*"``); returns a handle."""
         if not callable(fn):

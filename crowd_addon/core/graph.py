@@ -19,6 +19,7 @@ import numpy as np
 from . import pose as sqt
 from .controllers import Batch
 from .errors import CrowdError
+from .snapshot import copy_state
 
 __all__ = ["TreeEvaluator", "FrameContext", "DependencyGraph"]
 
@@ -36,6 +37,9 @@ class FrameContext:
     params, triggers : per root dict / set, from the simulation; ``triggered`` the roots
         whose trigger set is not empty (so a frame clears those only).
     """
+
+    #: the per-node arrays a frame leaves behind (kept by snapshots)
+    ARRAYS = ("poses", "time", "shift", "local_weight", "weight")
 
     def __init__(self, n_nodes, bones, n_roots):
         self.poses = sqt.identity_pose((n_nodes, bones))
@@ -177,32 +181,50 @@ class TreeEvaluator:
     def poses_ahead(self, root_times: np.ndarray) -> np.ndarray:
         """(R, B, 10) float32 root poses at ``root_times`` (e.g. between this frame and
         the next, for sub-frame samples) as the trees would show them from their
-        present state, which is left exactly as it was: every batch's arrays (state
-        machine states and fades, clip players' last times), the frame arrays, the
-        triggers still to be consumed and the events not yet taken. Tags crossed on the
-        way are not reported."""
-        ctx = self.ctx
-        saved = [{k: v.copy() for k, v in vars(b).items() if isinstance(v, np.ndarray)}
-                 for b in self.batches]
-        frame = [a.copy() for a in (ctx.poses, ctx.time, ctx.shift, ctx.local_weight,
-                                    ctx.weight)]
-        triggers = {r: set(ctx.triggers[r]) for r in ctx.triggered}
-        emitted = len(ctx._emit_roots)
+        present state, which is left exactly as it was (:meth:`state`: state machine
+        states and fades, clip players' last times, the frame arrays, the triggers
+        still to be consumed) with the events not yet taken. Tags crossed on the way
+        are not reported."""
+        saved = copy_state(self.state())
+        emitted = len(self.ctx._emit_roots)
         try:
             self.prepare(root_times)
             self.evaluate()
             return self.root_poses()
         finally:
-            for b, arrays in zip(self.batches, saved):
-                for k, v in arrays.items():
-                    setattr(b, k, v)
-            for a, v in zip((ctx.poses, ctx.time, ctx.shift, ctx.local_weight, ctx.weight),
-                            frame):
-                a[...] = v
-            for r, v in triggers.items():
-                ctx.triggers[r].update(v)
-            ctx.triggered.update(triggers)
-            del ctx._emit_roots[emitted:], ctx._emit_names[emitted:]
+            self.set_state(saved)
+            del self.ctx._emit_roots[emitted:], self.ctx._emit_names[emitted:]
+
+    def state(self) -> dict:
+        """Everything the trees carry from frame to frame (views; :mod:`.snapshot`
+        copies): every batch's arrays, the frame arrays, parameters and triggers."""
+        ctx = self.ctx
+        return {"batches": {str(i): {k: v for k, v in vars(b).items()
+                                     if isinstance(v, np.ndarray)}
+                            for i, b in enumerate(self.batches)},
+                "frame": {k: getattr(ctx, k) for k in FrameContext.ARRAYS},
+                "params": [dict(p) for p in ctx.params],
+                "triggers": [sorted(t) for t in ctx.triggers]}
+
+    def set_state(self, state: dict):
+        """Back to a :meth:`state` (the arrays are copied in)."""
+        ctx = self.ctx
+        for i, b in enumerate(self.batches):
+            for k, v in state["batches"][str(i)].items():
+                cur = getattr(b, k, None)
+                if isinstance(cur, np.ndarray) and cur.shape == v.shape and cur.dtype == v.dtype:
+                    cur[...] = v
+                else:
+                    setattr(b, k, np.array(v))
+        for k in FrameContext.ARRAYS:
+            getattr(ctx, k)[...] = state["frame"][k]
+        for params, v in zip(ctx.params, state["params"]):
+            params.clear()
+            params.update({str(n): float(x) for n, x in v.items()})
+        for triggers, v in zip(ctx.triggers, state["triggers"]):
+            triggers.clear()
+            triggers.update(str(n) for n in v)
+        ctx.triggered = {r for r, t in enumerate(ctx.triggers) if t}
 
     def set_parameter(self, root: int, name: str, value: float):
         """Set controller parameter ``name`` of tree ``root`` (finite values only)."""

@@ -105,6 +105,16 @@ class StreamPool:
         check_offsets(off, self.max_offset, "transition")
         return np.broadcast_to(off, (count,)).astype(np.int64)
 
+    def state(self) -> dict:
+        """What a :mod:`.snapshot` keeps: the history ring and the crossings log."""
+        return {"history": self.history, "log_stream": self._log_stream,
+                "log_name": self._log_name, "log_frame": self._log_frame}
+
+    def set_state(self, state: dict):
+        self.history[...] = state["history"]
+        for k in ("log_stream", "log_name", "log_frame"):
+            setattr(self, "_" + k, np.array(state[k], np.int64))
+
     # ------------------------------------------------------------------ events
     def clear_events(self):
         self._log_stream = np.zeros(0, np.int64)
@@ -155,6 +165,14 @@ class UniquePool:
         self.poses = poses
         self.start = np.zeros(self.count, np.int64)
         self.key_base = int(key_base)
+
+    def state(self) -> dict:
+        """What a :mod:`.snapshot` keeps: current poses and clock starts."""
+        return {"poses": self.poses, "start": self.start}
+
+    def set_state(self, state: dict):
+        self.poses[...] = state["poses"]
+        self.start[...] = state["start"]
 
     def key(self, unique):
         return self.key_base + unique

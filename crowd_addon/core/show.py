@@ -384,6 +384,17 @@ def _mix(seed: int, salt: str, ids: np.ndarray) -> np.ndarray:
 
 
 # -------------------------------------------------------------------------- runner
+def _grouped(arrays) -> dict:
+    """A list of int64 id arrays as ``{"ids": concatenated, "counts": sizes}``."""
+    return {"ids": np.concatenate([np.zeros(0, np.int64), *arrays]).astype(np.int64),
+            "counts": np.array([a.size for a in arrays], np.int64)}
+
+
+def _ungrouped(d) -> list:
+    """The arrays of :func:`_grouped`, back."""
+    return np.split(d["ids"], np.cumsum(d["counts"])[:-1]) if d["counts"].size else []
+
+
 class ShowRunner:
     """Runs a :class:`Show` on a crowd: ``before_step(frame)`` issues the requests due
     at ``frame`` (called by ``Crowd.step``); ``reset()`` rewinds it with the crowd.
@@ -499,6 +510,36 @@ class ShowRunner:
         self.stats = {c.name: dict.fromkeys(("agents", "skipped", "queued", "cut"), 0)
                       for c in self.show.cues}
         self.reactions = {r.name: 0 for r in self.show.reactions}
+
+    def state(self) -> dict:
+        """What a :mod:`.snapshot` keeps: homes, holds, the returns and reactions still
+        due (in the order they will be issued), the tracks' last values and the counts."""
+        returns = [(f, ids, d) for f, groups in self._returns.items() for ids, d in groups]
+        reacted = [(r, ids) for r, groups in self._reacted.items() for ids in groups]
+        return {"home_kind": self.home_kind, "home_ref": self.home_ref,
+                "home_offset": self.home_offset, "held_until": self.held_until,
+                "returns": {"frame": np.array([f for f, _, _ in returns], np.int64),
+                            "duration": np.array([d for _, _, d in returns], np.float64),
+                            **_grouped([ids for _, ids, _ in returns])},
+                "reacted": {"reaction": np.array([r for r, _ in reacted], np.int64),
+                            **_grouped([ids for _, ids in reacted])},
+                "track_last": list(self._track_last), "stats": self.stats,
+                "reactions": self.reactions}
+
+    def set_state(self, state: dict):
+        for k in ("home_kind", "home_ref", "home_offset", "held_until"):
+            getattr(self, k)[...] = state[k]
+        self._returns, self._reacted = defaultdict(list), defaultdict(list)
+        r = state["returns"]
+        for f, d, ids in zip(r["frame"].tolist(), r["duration"].tolist(), _ungrouped(r)):
+            self._returns[f].append((ids, d))
+        r = state["reacted"]
+        for k, ids in zip(r["reaction"].tolist(), _ungrouped(r)):
+            self._reacted[k].append(ids)
+        self._track_last = list(state["track_last"])
+        self.stats = {c: {k: int(v) for k, v in d.items()} for c, d in state["stats"].items()}
+        self.reactions = {k: int(v) for k, v in state["reactions"].items()}
+        self._grid_cursor = 0               # the neighbour grids are rebuilt when needed
 
     # ------------------------------------------------------------------ step
     def before_step(self, frame: int):

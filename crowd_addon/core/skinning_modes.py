@@ -69,6 +69,14 @@ class _Mode:
     def reset(self):
         pass
 
+    def restored(self):
+        """After a :mod:`.snapshot` was restored into the pools and slots: rebuild what
+        this mode derives from them and mark the whole texture for upload."""
+        st = self._crowd.storage
+        st.take_dirty_regions()
+        st.mark_dirty(0, st.row_count)
+        self.reset()
+
     def _skin(self, groups, poses, out):
         """Skinning rows of ``poses`` (k, B, 10) into ``out`` (k, B, 3, 4), by skeleton."""
         plans = self._crowd.plans
@@ -127,6 +135,21 @@ class CpuSkinning(_Mode):
                 st.slot_rows()[s] = c.plans[k].rows(c.slots.pose[s])
         st.mark_rows_dirty(st.slot_base + act)
 
+    def restored(self):
+        """Skin every history slice and the uniques again, and each active slot's pose:
+        StartP for a slot that started this frame (as :meth:`slot_starting` leaves
+        it), else its blend at this frame (as the last step left it)."""
+        c, st = self._crowd, self._crowd.storage
+        for sl in range(c.streams.max_offset):
+            self._skin(self._stream_groups, c.streams.history[sl], st.stream_slice(sl))
+        self._skin(self._unique_groups, c.uniques.poses, st.unique_rows())
+        act = c.slots.active_slots()
+        new = act[c.slots.t0[act] == c.frame]
+        c.slots.evaluate(act[c.slots.t0[act] != c.frame], c.frame, c.streams, c.uniques)
+        c.slots.pose[new] = c.slots.start_pose[new]
+        self.slots_blended()
+        super().restored()
+
     def slot_starting(self, slots, agents, start_poses):
         """Before ``agents`` enter ``slots``: the slot shows exactly the agent's current
         rows, and its pose is StartP, until the next step blends it."""
@@ -168,6 +191,13 @@ class GpuSkinning(_Mode):
 
     def reset(self):
         self._pending = [(0, self._crowd.storage.slot_base)]
+
+    def restored(self):
+        """Every slot's local-pose row holds its StartP again (the pools' rows are
+        written in place by the restore)."""
+        st = self._crowd.storage
+        sqt.records(st.sqt_view())[st.slot_base:] = sqt.records(self._crowd.slots.start_pose)
+        super().restored()
 
     def roots_stored(self, frame: int):
         c, st = self._crowd, self._crowd.storage

@@ -78,6 +78,24 @@ class RequestQueue:
         tickets, agents = self._line[:, self._head:self._tail]
         return np.flatnonzero(self._ticket[agents] == tickets)
 
+    def state(self) -> dict:
+        """What a :mod:`.snapshot` keeps: the per-agent request arrays, the line from its
+        head, the live count and the tickets issued."""
+        return {"ticket": self._ticket, "kind": self._kind, "ref": self._ref,
+                "offset": self._offset, "length": self._length,
+                "line": self._line[:, self._head:self._tail], "count": self._count,
+                "issued": self._issued}
+
+    def set_state(self, state: dict):
+        """Back to a :meth:`state` (the same requests, in the same order)."""
+        for k in ("ticket", "kind", "ref", "offset", "length"):
+            getattr(self, "_" + k)[...] = state[k]
+        m = state["line"].shape[1]
+        self._line = np.zeros((2, max(64, 2 * m)), np.int64)
+        self._line[:, :m] = state["line"]
+        self._head, self._tail = 0, m
+        self._count, self._issued = int(state["count"]), int(state["issued"])
+
     def agents(self) -> np.ndarray:
         """(k,) int64 waiting agents, first in first."""
         return self._line[1, self._head:self._tail][self._live()].copy()
@@ -173,6 +191,22 @@ class TransitionSlots:
         self.queue = RequestQueue(agents.count)
         self.served = 0
         self.cuts = 0
+
+    #: the slot arrays a snapshot keeps (see :mod:`.snapshot`)
+    STATE = ("active", "agent", "target_kind", "target_ref", "target_offset", "t0", "length",
+             "start_pose")
+
+    def state(self) -> dict:
+        """What a :mod:`.snapshot` keeps: the slot arrays (StartP included), the counts
+        and the queue. ``pose`` is not kept: the skinning mode rebuilds it."""
+        return {**{k: getattr(self, k) for k in self.STATE}, "served": self.served,
+                "cuts": self.cuts, "queue": self.queue.state()}
+
+    def set_state(self, state: dict):
+        for k in self.STATE:
+            getattr(self, k)[...] = state[k]
+        self.served, self.cuts = int(state["served"]), int(state["cuts"])
+        self.queue.set_state(state["queue"])
 
     def free_slots(self) -> np.ndarray:
         return np.flatnonzero(~self.active)

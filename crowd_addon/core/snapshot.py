@@ -1,0 +1,261 @@
+"""Exact snapshots of a running crowd: saved and restored bit for bit, in memory or
+in a file.
+
+A :class:`Snapshot` holds everything a :class:`~.crowd.Crowd` carries from one frame
+to the next: the pose history ring, the uniques and their clocks, the sub-frame
+samples, the transition slots with their StartP and the queue, what every agent
+plays and where it stands, the controller trees' state (state machines, fades, clip
+players, parameters, triggers not yet consumed), the event log the offsets still
+read, and the show's progress (homes, holds, returns and reactions due, the tracks'
+last values, the counts). Restored into a crowd built from the same configuration,
+every later frame's poses and events equal those of the run it was taken from.
+
+Not kept: callbacks (registered functions are the caller's: register them on the
+restored crowd as on any new one) and anything a callback keeps in its own Python
+objects; the skinning rows, which the crowd's skinning mode rebuilds from the local
+poses, so a snapshot taken with either mode restores into either.
+
+The file (``.npz``, see docs/snapshots.md) is a NumPy zip archive: one array per
+state array, and ``snapshot.json``, a UTF-8 JSON header (as uint8 bytes) with the
+format name and version, the frame, the configuration's digest, the samples per
+frame, the small values (counts, parameters, triggers) and the name, dtype and shape
+of every array, all checked on load. Files are written through a temporary name and
+renamed, so a failed write leaves no partial file.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+import zipfile
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import CrowdError
+from .files import file_mode
+
+__all__ = ["Snapshot", "FORMAT", "VERSION", "copy_state", "load_snapshot"]
+
+FORMAT = "crowd-snapshot"
+VERSION = 1
+HEADER = "snapshot.json"
+
+
+def copy_state(state):
+    """A deep copy of a nested state (dicts, lists, arrays and plain values)."""
+    if isinstance(state, np.ndarray):
+        return state.copy()
+    if isinstance(state, dict):
+        return {k: copy_state(v) for k, v in state.items()}
+    if isinstance(state, list):
+        return [copy_state(v) for v in state]
+    return state
+
+
+def _flatten(state, prefix="", arrays=None, values=None):
+    """A nested state as ``(arrays, values)``: ``{"a.b.c": array}`` and
+    ``{"a.b.d": plain value}`` (dots join the keys)."""
+    arrays = {} if arrays is None else arrays
+    values = {} if values is None else values
+    for k, v in state.items():
+        name = f"{prefix}{k}"
+        if isinstance(v, dict) and v and not _is_value_dict(name):
+            _flatten(v, name + ".", arrays, values)
+        elif isinstance(v, np.ndarray):
+            arrays[name] = v
+        else:
+            values[name] = v
+    return arrays, values
+
+
+def _is_value_dict(name) -> bool:
+    """Dicts kept whole as one plain value (their keys are names, not parts)."""
+    return name.rsplit(".", 1)[-1] in ("fired", "calls", "stats", "reactions")
+
+
+def _nested(arrays, values) -> dict:
+    out = {}
+    for flat in (arrays, values):
+        for name, v in flat.items():
+            d = out
+            *parents, leaf = name.split(".")
+            for p in parents:
+                d = d.setdefault(p, {})
+            d[leaf] = v
+    return out
+
+
+def _kind(v) -> str:
+    if v is None or isinstance(v, (bool, int, float, str)):
+        return "scalar"
+    return type(v).__name__
+
+
+@dataclass(frozen=True, eq=False)
+class Snapshot:
+    """One crowd's state at ``frame``: take one with :meth:`Crowd.snapshot
+    <.crowd.Crowd.snapshot>`, restore it with :meth:`Crowd.restore
+    <.crowd.Crowd.restore>`.
+
+    Attributes
+    ----------
+    frame : the crowd's frame when it was taken (the last evaluated frame).
+    config_digest : the digest of the configuration it belongs to
+        (:func:`~.config_io.config_digest`); a crowd of any other refuses it.
+    substeps : samples per frame the crowd kept (a crowd must keep as many).
+    arrays : ``{"part.name": array}`` copies of the state arrays.
+    values : ``{"part.name": value}`` the small plain values (JSON types).
+    """
+
+    frame: int
+    config_digest: str
+    substeps: int
+    arrays: dict = field(repr=False)
+    values: dict = field(repr=False)
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes of the arrays (what it costs in memory, about what its file takes)."""
+        return int(sum(a.nbytes for a in self.arrays.values()))
+
+    def state(self) -> dict:
+        """The nested state (views of :attr:`arrays`) the crowd's parts restore from."""
+        return _nested(self.arrays, self.values)
+
+    def header(self) -> dict:
+        return {"format": FORMAT, "version": VERSION, "frame": self.frame,
+                "config_digest": self.config_digest, "substeps": self.substeps,
+                "values": self.values,
+                "arrays": {k: {"dtype": a.dtype.str, "shape": list(a.shape)}
+                           for k, a in self.arrays.items()}}
+
+    def save(self, path) -> None:
+        """Write the snapshot to ``path`` (a ``.npz`` file; atomic: a temporary name
+        renamed into place, removed on error, which is raised as CrowdError)."""
+        path = os.fspath(path)
+        if not path.lower().endswith(".npz"):
+            raise CrowdError(f"{path}: a crowd snapshot file name ends in .npz")
+        directory = os.path.dirname(os.path.abspath(path))
+        if not os.path.isdir(directory):
+            raise CrowdError(f"{path}: directory {directory} does not exist")
+        head = np.frombuffer(json.dumps(self.header()).encode("utf-8"), np.uint8)
+        tmp = None
+        try:
+            fd, tmp = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", suffix=".tmp",
+                                       dir=directory)
+            with os.fdopen(fd, "wb") as f:
+                np.savez(f, **{HEADER: head}, **self.arrays)
+                f.flush()
+                os.fsync(f.fileno())
+            os.chmod(tmp, file_mode(path))
+            os.replace(tmp, path)
+            tmp = None
+        except OSError as e:
+            raise CrowdError(f"{path}: cannot write the crowd snapshot: {e}") from e
+        finally:
+            if tmp is not None:
+                try:
+                    os.unlink(tmp)
+                except OSError:
+                    pass
+
+
+def load_snapshot(path) -> Snapshot:
+    """Read a snapshot written by :meth:`Snapshot.save`. Anything wrong (not a
+    snapshot, another format version, a missing, extra or mis-shaped array, a damaged
+    archive) raises CrowdError naming the file and what is wrong."""
+    path = os.fspath(path)
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            names = set(z.files)
+            if HEADER not in names:
+                raise CrowdError(f"{path}: not a crowd snapshot (no {HEADER})")
+            try:
+                head = json.loads(z[HEADER].tobytes().decode("utf-8"))
+            except (UnicodeDecodeError, ValueError) as e:
+                raise CrowdError(f"{path}: {HEADER} is not valid JSON: {e}") from None
+            _check_header(path, head)
+            listed = head["arrays"]
+            extra = sorted(names - set(listed) - {HEADER})
+            missing = sorted(set(listed) - names)
+            if missing or extra:
+                raise CrowdError(f"{path}: arrays do not match the header (missing: "
+                                 f"{missing[:5]}, unexpected: {extra[:5]})")
+            arrays = {}
+            for name, spec in listed.items():
+                a = z[name]
+                if a.dtype.str != spec["dtype"] or list(a.shape) != list(spec["shape"]):
+                    raise CrowdError(f"{path}: array {name!r} is {a.dtype.str} "
+                                     f"{list(a.shape)}, the header says {spec['dtype']} "
+                                     f"{spec['shape']}")
+                arrays[name] = a
+    except FileNotFoundError:
+        raise CrowdError(f"{path}: no such file") from None
+    except (OSError, zipfile.BadZipFile, ValueError, EOFError, KeyError) as e:
+        raise CrowdError(f"{path}: not a readable crowd snapshot: {e}") from None
+    return Snapshot(int(head["frame"]), head["config_digest"], int(head["substeps"]),
+                    arrays, head["values"])
+
+
+def _check_header(path, head):
+    if not isinstance(head, dict) or head.get("format") != FORMAT:
+        raise CrowdError(f"{path}: not a crowd snapshot (format "
+                         f"{head.get('format') if isinstance(head, dict) else head!r})")
+    if head.get("version") != VERSION:
+        raise CrowdError(f"{path}: snapshot format version {head.get('version')!r}, this "
+                         f"crowd reads version {VERSION}")
+    for key, kind in (("frame", int), ("config_digest", str), ("substeps", int),
+                      ("values", dict), ("arrays", dict)):
+        if not isinstance(head.get(key), kind) or isinstance(head.get(key), bool):
+            raise CrowdError(f"{path}: {HEADER}: {key!r} must be a {kind.__name__}")
+    for name, spec in head["arrays"].items():
+        if not (isinstance(spec, dict) and isinstance(spec.get("dtype"), str)
+                and isinstance(spec.get("shape"), list)):
+            raise CrowdError(f"{path}: {HEADER}: array {name!r} needs a dtype and a shape")
+
+
+def take(crowd) -> Snapshot:
+    """A :class:`Snapshot` of ``crowd`` now (copies)."""
+    arrays, values = _flatten(crowd._state())
+    return Snapshot(int(crowd.frame), crowd.config_digest, int(crowd.substeps),
+                    {k: np.array(a, copy=True) for k, a in arrays.items()},
+                    json.loads(json.dumps(values)))
+
+
+def check(crowd, snap: Snapshot, what: str = "snapshot") -> None:
+    """Raise CrowdError (naming what differs) unless ``snap`` fits ``crowd``: same
+    configuration digest and samples per frame, and the same state arrays (names,
+    dtypes, shapes) and values (names, kinds). Changes nothing."""
+    if snap.config_digest != crowd.config_digest:
+        raise CrowdError(f"{what} of frame {snap.frame} was taken of another crowd "
+                         f"configuration (digest {snap.config_digest[:12]}, this crowd's "
+                         f"{crowd.config_digest[:12]})")
+    if snap.substeps != crowd.substeps:
+        raise CrowdError(f"{what} of frame {snap.frame} keeps {snap.substeps} samples a "
+                         f"frame, this crowd {crowd.substeps}")
+    arrays, values = _flatten(crowd._state())
+    for name in sorted(set(arrays) | set(snap.arrays)):
+        a, b = arrays.get(name), snap.arrays.get(name)
+        if a is None or b is None:
+            raise CrowdError(f"{what}: state array {name!r} is "
+                             f"{'missing' if b is None else 'unknown to this crowd'}")
+        # the queue's line and the show's due lists vary in length
+        if a.dtype != b.dtype or (a.shape != b.shape and not _varies(name)) \
+                or a.ndim != b.ndim:
+            raise CrowdError(f"{what}: state array {name!r} is {b.dtype} {b.shape}, "
+                             f"this crowd's is {a.dtype} {a.shape}")
+    for name in sorted(set(values) | set(snap.values)):
+        if name not in values or name not in snap.values:
+            raise CrowdError(f"{what}: state value {name!r} is "
+                             f"{'missing' if name not in snap.values else 'unknown'}")
+        if _kind(snap.values[name]) != _kind(values[name]):
+            raise CrowdError(f"{what}: state value {name!r} is a "
+                             f"{_kind(snap.values[name])}, expected a {_kind(values[name])}")
+
+
+def _varies(name) -> bool:
+    return name.endswith(("queue.line", ".ids", ".counts", ".frame", ".duration",
+                          ".reaction", "log_stream", "log_name", "log_frame")) or \
+        ".batches." in name

@@ -1,0 +1,296 @@
+"""Exact snapshots (core/snapshot.py): simulate to frame F, snapshot, restore into a
+fresh crowd (or the same one, or through a file) and continue. The oracle is the
+uninterrupted run: every later frame's local poses (and, on the CPU, skinning rows)
+equal it bit for bit, and so do the events and the show's counts."""
+
+import numpy as np
+import pytest
+
+from crowd_addon.core import Crowd, CrowdError
+from crowd_addon.core.agents import TRANSITION
+from crowd_addon.core.config_io import save_config
+from crowd_addon.core.show import Action, Cue, Reaction, Show, Sweep, Track
+from crowd_addon.core.snapshot import HEADER, load_snapshot
+
+from .test_recording import config as recording_config
+from .test_recording import simulate
+from .test_show import N, make_config
+
+LAST = 48
+
+
+def show():
+    """Every cue kind the show runs: a held sweep, a held random-offset stand, a unique
+    with its return, a parameter cue, trigger and parameter tracks, and a reaction
+    reaching the neighbours of the agents whose clap fired. Six slots: a queue forms."""
+    return Show((Cue("wave", 3, Action("stream", "wave", 4, hold=6),
+                     sweep=Sweep((0, 0, 0), "angle", 1.5)),
+                 Cue("stand", 9, Action("stream", "cheer", 3, offset="random", hold=12),
+                     agents=np.arange(0, N, 3), seed=4),
+                 Cue("hit", 14, Action("unique", "hit", 2, hold=9), agents=np.array([5])),
+                 Cue("w", 6, Action("parameter", "mix", name="w", value=0.7)),
+                 Cue("answer", 0, Action("stream", "idle", 2, offset=1), timeline=False)),
+                tracks=(Track("fsm", "go", 1, (np.arange(60) % 10 == 5).astype(float),
+                              "trigger"),
+                        Track("mix", "w", 20, np.linspace(0, 1, 15))),
+                reactions=(Reaction("near clap", "clap", "answer", radius=2.1),))
+
+
+def show_crowd(skinning="gpu", substeps=1):
+    crowd = Crowd(make_config(show(), slots=6), skinning=skinning, substeps=substeps)
+    by_python(crowd)
+    return crowd
+
+
+def by_python(crowd, event="breath", stream="fsm"):
+    """A Python callback that requests a transition from inside a step. It keeps no
+    state of its own: a snapshot holds the crowd's state, not a callback's."""
+    def react(name, frame, ids):
+        if frame % 4 == 0:
+            crowd.transition_to_streamed(ids[:2], stream, 5)
+    crowd.on_event(event, react)
+
+
+def recording_crowd(skinning="gpu", substeps=1):
+    crowd = Crowd(recording_config(), skinning=skinning, substeps=substeps)
+    by_python(crowd, "jump", "kid play")
+    return crowd
+
+
+def play(crowd, last, drive=None):
+    """Step to ``last``: per frame the agents' poses (every sample), the skinning rows
+    on the CPU, what each agent plays, and every event with its agents."""
+    heard = []
+    handle = crowd.on_event("*", lambda n, f, ids: heard.append((n, f, ids.tolist())))
+    out = []
+    while crowd.frame < last:
+        if drive is not None:
+            drive(crowd, crowd.frame + 1)
+        crowd.step()
+        v = crowd.view
+        out.append({"poses": [v.agent_poses(sub=k) for k in range(v.substeps)],
+                    "rows": v.agent_rows() if not v.skinning.on_gpu else None,
+                    "kind": v.agents.kind.copy(), "ref": v.agents.ref.copy(),
+                    "offset": v.agents.offset.copy(), "position": v.agents.position.copy()})
+    crowd.events.off(handle)
+    return out, heard
+
+
+def assert_same(a, b):
+    assert len(a) == len(b)
+    for fa, fb in zip(a, b):
+        for k in fa:
+            if k == "poses":
+                for pa, pb in zip(fa[k], fb[k]):
+                    np.testing.assert_array_equal(pa, pb)
+            elif fa[k] is not None:
+                np.testing.assert_array_equal(fa[k], fb[k], err_msg=k)
+
+
+CASES = {"show": (show_crowd, None), "recording": (recording_crowd, simulate)}
+
+
+@pytest.mark.parametrize("skinning", ["gpu", "cpu"])
+@pytest.mark.parametrize("case", list(CASES))
+def test_a_restored_crowd_continues_exactly(case, skinning):
+    """Snapshots at several frames (before the show starts, mid-transition with a queue,
+    mid-hold, after the returns) restored into a fresh crowd: the rest of the run equals
+    the uninterrupted one, poses, rows, events and show counts alike."""
+    make, drive = CASES[case]
+    straight = make(skinning)
+    snaps = {}
+
+    def drive_and_snap(crowd, frame):
+        if frame - 1 in (2, 8, 11, 17, 30):
+            snaps[frame - 1] = crowd.snapshot()
+        if drive is not None:
+            drive(crowd, frame)
+    whole, heard = play(straight, LAST, drive_and_snap)
+    checked = {"transitioning": 0, "queued": 0}
+    for f, snap in snaps.items():
+        fresh = make(skinning)
+        fresh.restore(snap)
+        assert fresh.frame == f
+        checked["transitioning"] += int((fresh.agents.kind == TRANSITION).any())
+        checked["queued"] += int(len(fresh.slots.queue) > 0)
+        rest, rest_heard = play(fresh, LAST, drive)
+        assert_same(rest, whole[f + 1 - whole_first(straight, whole):])
+        assert rest_heard == [e for e in heard if e[1] > f]
+        if fresh.show is not None:
+            assert fresh.show.stats == straight.show.stats
+            assert fresh.show.reactions == straight.show.reactions
+        assert dict(fresh.events.fired) == dict(straight.events.fired)
+    # the snapshots really caught blends in flight and a waiting queue
+    assert checked["transitioning"] >= 3 and checked["queued"] >= 1, checked
+
+
+def whole_first(crowd, whole):
+    """The frame of ``whole[0]``."""
+    return crowd.frame - len(whole) + 1
+
+
+def test_restoring_into_the_same_crowd_goes_back_and_forward():
+    crowd = show_crowd()
+    play(crowd, 12)
+    at12 = crowd.snapshot()
+    later, _ = play(crowd, 30)
+    at30 = crowd.snapshot()
+    crowd.restore(at12)
+    again, _ = play(crowd, 30)
+    assert_same(again, later)
+    crowd.restore(at12)
+    crowd.restore(at30)                       # forward, past frames never simulated
+    assert crowd.frame == 30
+    a, _ = play(crowd, 40)
+    crowd.restore(at30)
+    b, _ = play(crowd, 40)
+    assert_same(a, b)
+
+
+def test_sub_frame_samples_continue_exactly():
+    straight = show_crowd(substeps=3)
+    play(straight, 20)
+    snap = straight.snapshot()
+    whole, heard = play(straight, 36)
+    fresh = show_crowd(substeps=3)
+    fresh.restore(snap)
+    rest, rest_heard = play(fresh, 36)
+    assert_same(rest, whole)
+    assert rest_heard == heard
+
+
+def test_a_snapshot_file_restores_in_another_process(tmp_path):
+    """Saved, loaded and restored by a fresh Python process from the configuration file:
+    the continuation there equals this process's (the digest is the same there)."""
+    import json
+    import subprocess
+    import sys
+    cfg_path = tmp_path / "crowd.json"
+    save_config(make_config(show(), slots=6), cfg_path)
+    from crowd_addon.core.config_io import load_config
+    crowd = Crowd(load_config(cfg_path))
+    play(crowd, 15)
+    crowd.snapshot().save(tmp_path / "at15.npz")
+    rest, _ = play(crowd, 25)
+    script = (
+        "import json, sys, numpy as np\n"
+        "from crowd_addon.core import Crowd\n"
+        "from crowd_addon.core.config_io import load_config\n"
+        "from crowd_addon.core.snapshot import load_snapshot\n"
+        "c = Crowd(load_config(sys.argv[1]))\n"
+        "c.restore(load_snapshot(sys.argv[2]))\n"
+        "out = []\n"
+        "while c.frame < 25:\n"
+        "    c.step()\n"
+        "    out.append(c.agent_poses().tobytes().hex())\n"
+        "print(json.dumps(out))\n")
+    run = subprocess.run([sys.executable, "-c", script, str(cfg_path),
+                          str(tmp_path / "at15.npz")], capture_output=True, text=True,
+                         timeout=120)
+    assert run.returncode == 0, run.stderr
+    there = json.loads(run.stdout.strip().splitlines()[-1])
+    assert there == [f["poses"][0].tobytes().hex() for f in rest]
+
+
+def test_the_file_round_trip_is_exact(tmp_path):
+    crowd = show_crowd()
+    play(crowd, 17)
+    snap = crowd.snapshot()
+    snap.save(tmp_path / "s.npz")
+    back = load_snapshot(tmp_path / "s.npz")
+    assert (back.frame, back.config_digest, back.substeps) == (17, crowd.config_digest, 1)
+    assert back.values == snap.values
+    assert set(back.arrays) == set(snap.arrays)
+    for k, a in snap.arrays.items():
+        assert back.arrays[k].dtype == a.dtype
+        np.testing.assert_array_equal(back.arrays[k], a, err_msg=k)
+    assert 0 < snap.nbytes <= (tmp_path / "s.npz").stat().st_size
+
+
+def poses_now(crowd):
+    return crowd.agent_poses().copy(), crowd.frame, crowd.slots.active.copy()
+
+
+def test_a_snapshot_of_another_crowd_is_named_and_changes_nothing():
+    crowd = show_crowd()
+    play(crowd, 10)
+    before = poses_now(crowd)
+    other = recording_crowd()
+    play(other, 10)
+    with pytest.raises(CrowdError, match="another crowd configuration"):
+        crowd.restore(other.snapshot())
+    sub = show_crowd(substeps=2)
+    with pytest.raises(CrowdError, match="keeps 2 samples a frame, this crowd 1"):
+        crowd.restore(sub.snapshot())
+    after = poses_now(crowd)
+    for a, b in zip(before, after):
+        np.testing.assert_array_equal(a, b)
+
+
+def broken_files(tmp_path, good):
+    """(file, expected message) pairs: each breaks one rule of the format."""
+    import json
+    import zipfile
+    with np.load(good) as z:
+        arrays = {k: z[k] for k in z.files}
+    head = json.loads(arrays[HEADER].tobytes())
+
+    def write(name, arrays):
+        p = tmp_path / name
+        np.savez(p, **arrays)
+        return p
+
+    def with_head(**change):
+        h = dict(head, **change)
+        return {**arrays, HEADER: np.frombuffer(json.dumps(h).encode(), np.uint8)}
+
+    out = [(write("plain.npz", {"x": np.zeros(3)}), "not a crowd snapshot"),
+           (write("v2.npz", with_head(version=2)), "format version 2"),
+           (write("fmt.npz", with_head(format="other")), "not a crowd snapshot"),
+           (write("frame.npz", with_head(frame="7")), "'frame' must be a int"),
+           (write("missing.npz", {k: v for k, v in arrays.items()
+                                  if k != "agents.kind"}), "missing: \\['agents.kind'\\]"),
+           (write("shape.npz", {**arrays, "agents.kind": arrays["agents.kind"][:-1]}),
+            "array 'agents.kind' is"),
+           (write("json.npz", {**arrays, HEADER: np.frombuffer(b"{nope", np.uint8)}),
+            "not valid JSON")]
+    cut = tmp_path / "cut.npz"
+    cut.write_bytes(good.read_bytes()[: good.stat().st_size // 2])
+    out.append((cut, "not a readable crowd snapshot"))
+    text = tmp_path / "text.npz"
+    text.write_text("hello")
+    out.append((text, "not a readable crowd snapshot"))
+    assert zipfile.is_zipfile(good)
+    return out
+
+
+def test_bad_snapshot_files_are_named_and_change_nothing(tmp_path):
+    crowd = show_crowd()
+    play(crowd, 10)
+    crowd.snapshot().save(tmp_path / "good.npz")
+    play(crowd, 14)
+    before = poses_now(crowd)
+    for path, message in broken_files(tmp_path, tmp_path / "good.npz"):
+        with pytest.raises(CrowdError, match=message) as err:
+            crowd.restore(load_snapshot(path))
+        assert str(path) in str(err.value)
+    with pytest.raises(CrowdError, match="no such file"):
+        load_snapshot(tmp_path / "nothing.npz")
+    for a, b in zip(before, poses_now(crowd)):
+        np.testing.assert_array_equal(a, b)
+    # a header that fits the format but not this crowd: named by the restore
+    snap = load_snapshot(tmp_path / "good.npz")
+    snap.arrays["slots.start_pose"] = snap.arrays["slots.start_pose"][:, :3]
+    with pytest.raises(CrowdError, match="state array 'slots.start_pose'"):
+        crowd.restore(snap)
+    for a, b in zip(before, poses_now(crowd)):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_saving_where_it_cannot_leaves_nothing(tmp_path):
+    crowd = show_crowd()
+    with pytest.raises(CrowdError, match="does not exist"):
+        crowd.snapshot().save(tmp_path / "no" / "s.npz")
+    with pytest.raises(CrowdError, match="ends in .npz"):
+        crowd.snapshot().save(tmp_path / "s.snap")
+    assert list(tmp_path.iterdir()) == []
