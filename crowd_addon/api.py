@@ -107,10 +107,11 @@ class CrowdHandle:
     # ---------------------------------------------------------------- stepping
     def advance_to(self, frame: int):
         """Step the crowd to ``frame``. Going backwards re-simulates from the start
-        (deterministic); the frames replayed before ``frame`` report no events."""
+        (deterministic) or from the nearest snapshot the crowd keeps; the frames
+        replayed before ``frame`` report no events."""
         crowd = self._need()
         frame = int(frame)
-        if frame < crowd.frame:
+        if frame < crowd.frame or crowd.jump_snapshot(frame) is not None:
             self._mute_before = frame
         try:
             crowd.advance_to(frame)

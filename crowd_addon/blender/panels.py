@@ -113,6 +113,7 @@ class CROWD_PT_main(_Panel, bpy.types.Panel):
                        f"{c.uniques.count} uniques, "
                        f"{len(c.config.clips)} clips")
         box.label(text=f"frame {c.frame}: step {pv.step_ms:.2f} ms, draw {pv.draw_ms:.2f} ms")
+        box.label(text=snapshot_line(c.snapshots))
         if s.render_crowd and pv.render_stats is not None:
             r = pv.render_stats
             box.label(text=f"Render Crowd: {r.poses:,} pose meshes for {r.agents:,} agents, "
@@ -120,6 +121,20 @@ class CROWD_PT_main(_Panel, bpy.types.Panel):
         for text in (pv.status(), pv.draw_error, pv.render_error):
             if text:
                 box.label(text=text, icon="ERROR")
+
+
+def snapshot_line(cache) -> str:
+    """What the preview keeps for scrubbing: spacing in use (and asked for), count,
+    memory and its cap."""
+    if cache is None or cache.max_bytes == 0:
+        return "Scrubbing: no snapshots (jumps back replay from the start)"
+    mb = 1 << 20
+    if not cache.fits:
+        return (f"Scrubbing: one snapshot is more than the {cache.max_bytes / mb:,.0f} MB "
+                "cap (Preferences): jumps back replay from the start")
+    asked = "" if cache.every == cache.requested else f" (asked {cache.requested}, cap reached)"
+    return (f"Scrubbing: a snapshot every {cache.every} frames{asked}, {len(cache)} kept, "
+            f"{cache.nbytes / mb:,.0f} of {cache.max_bytes / mb:,.0f} MB")
 
 
 def _active_character(s):

@@ -10,8 +10,10 @@ GPU context (``crowd_addon.gpu.backends.make_renderer(view, "viewport")`` choose
 * when it cannot be made or draw, nothing is drawn, and :attr:`Preview.draw_error`
   says why (the panel shows it).
 
-The crowd follows ``scene.frame_current``; going backwards re-simulates from the start
-(deterministic, ``Crowd.advance_to``) without reporting the replayed frames' events
+The crowd follows ``scene.frame_current``; it keeps snapshots every few frames within
+the memory cap of the preferences (:mod:`.prefs`), so a jump to any frame (backwards,
+or forwards past frames seen before) re-simulates only from the nearest snapshot
+(deterministic, ``Crowd.advance_to``), without reporting the replayed frames' events
 again. When a character's armature or an action the crowd was built from is
 deleted the preview pauses with a message instead of failing; undo that restores
 them resumes it. Nothing here keeps Blender data between calls, only names, so undo and file
@@ -32,7 +34,7 @@ import bpy
 from .. import api
 from ..core.crowd import Crowd
 from ..core.errors import CrowdError
-from . import scene_config, shared_gl
+from . import prefs, scene_config, shared_gl
 from .props import settings_fingerprint
 
 log = logging.getLogger("crowd_addon.preview")
@@ -108,6 +110,7 @@ def start(scene, config=None) -> Preview:
         if c.armature is None:
             raise CrowdError(f"character {c.name!r}: no armature chosen")
     crowd, note = scene_config.build_crowd(scene, config)
+    crowd.keep_snapshots(*prefs.snapshot_settings())       # scrubbing jumps from them
     pv = Preview(scene.name, crowd, tuple((c.name, c.armature.name) for c in s.characters),
                  tuple(a.name for a in scene_config.scene_actions(s)),
                  settings_fingerprint(s))

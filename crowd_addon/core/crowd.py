@@ -36,7 +36,7 @@ from .pools import StreamPool, UniquePool
 from .show import ShowRunner
 from .skinning import SkinningPlan
 from .skinning_modes import skinning_mode
-from .snapshot import Snapshot
+from .snapshot import Snapshot, SnapshotCache
 from .snapshot import check as check_snapshot
 from .snapshot import take as take_snapshot
 from .transitions import TransitionResult, TransitionSlots
@@ -132,6 +132,8 @@ class Crowd:
         self.skinning.bind(self)
         self._build_graph()
         self.show = ShowRunner(cfg.show, self) if cfg.show else None
+        self.snapshots = None          # a SnapshotCache once keep_snapshots() is called
+        self._quiet = 0                # > 0 inside step/reset/restore: not a user's change
         self.reset(cfg.start_frame)
 
     # ---------------------------------------------------------------- dependency graph
@@ -166,6 +168,15 @@ class Crowd:
         their configured references, slots and queue empty. Deterministic."""
         cfg = self.config
         f0 = cfg.start_frame if frame is None else int(frame)
+        self._origin = f0
+        self._quiet += 1
+        try:
+            self._reset(f0)
+        finally:
+            self._quiet -= 1
+
+    def _reset(self, f0):
+        cfg = self.config
         if self.show is not None:
             self.show.reset()
         self.evaluator.reset()
@@ -219,7 +230,14 @@ class Crowd:
         another configuration or sample count, or a damaged one, raises CrowdError
         naming what differs, and changes nothing. Callbacks stay registered."""
         check_snapshot(self, snapshot)
-        self._set_state(snapshot.state())
+        self._quiet += 1
+        try:
+            self._set_state(snapshot.state())
+        finally:
+            self._quiet -= 1
+        self._origin = self.config.start_frame
+        if self.snapshots is not None:
+            self.snapshots.drop_after(self.frame)
 
     def _state(self) -> dict:
         """Every part's state (views), what :mod:`.snapshot` copies."""
@@ -273,7 +291,19 @@ class Crowd:
 
     # ----------------------------------------------------------------------- step
     def step(self) -> StepReport:
-        """Advance one frame and return what it cost."""
+        """Advance one frame and return what it cost (with :meth:`keep_snapshots`, a
+        frame on the snapshot grid is kept after the step; that copy is not counted)."""
+        self._quiet += 1
+        try:
+            report = self._step()
+        finally:
+            self._quiet -= 1
+        if self.snapshots is not None and self._origin == self.config.start_frame \
+                and self.snapshots.wants(self.frame, self._origin):
+            self.snapshots.add(self.snapshot(), self._origin)
+        return report
+
+    def _step(self) -> StepReport:
         t_start = time.perf_counter()
         mark = self.storage.mark()
         if self.show is not None:
@@ -301,11 +331,52 @@ class Crowd:
                 "transitions_served": self.slots.served, "cuts": self.slots.cuts}
 
     def advance_to(self, frame: int):
-        """Step (or reset and re-simulate when going backwards) to ``frame``."""
-        if frame < self.frame:
-            self.reset(self.config.start_frame if frame >= self.config.start_frame else frame)
+        """Step to ``frame``. Going backwards resets and re-simulates from the start;
+        with :meth:`keep_snapshots` a jump either way starts instead from the nearest
+        kept snapshot before ``frame`` when that is nearer than where the crowd is, so
+        it steps at most ``snapshots.every`` frames (at least one: the frame reached is
+        stepped, so its events fire as on any frame change)."""
+        frame = int(frame)
+        start = self.config.start_frame
+        snap = self.jump_snapshot(frame)
+        if snap is not None:
+            self._quiet += 1
+            try:
+                self._set_state(snap.state())        # one of our own: already checked
+            finally:
+                self._quiet -= 1
+            self._origin = start
+        elif frame < self.frame:
+            self.reset(start if frame >= start else frame)
         while self.frame < frame:
             self.step()
+
+    def jump_snapshot(self, frame: int):
+        """The kept snapshot :meth:`advance_to` would start from to reach ``frame``
+        (None when it steps on from here or resets)."""
+        if self.snapshots is None or frame <= self.config.start_frame:
+            return None
+        snap = self.snapshots.nearest(int(frame) - 1)
+        if snap is None or not (frame < self.frame or snap.frame > self.frame):
+            return None
+        return snap
+
+    def keep_snapshots(self, every: int = 30, max_bytes: int = 2 << 30):
+        """Keep a :class:`~.snapshot.SnapshotCache` of this run (a snapshot every
+        ``every`` frames from the start frame, at most ``max_bytes`` in all), which
+        :meth:`advance_to` jumps from; returns it. ``every=None`` stops keeping them.
+        A change made from outside a step (a request, a parameter, a trigger, a move,
+        a restore) forgets the snapshots past the current frame."""
+        self.snapshots = None if every is None else SnapshotCache(every, max_bytes)
+        if self.snapshots is not None and self._origin == self.config.start_frame \
+                and self.snapshots.wants(self.frame, self._origin):
+            self.snapshots.add(self.snapshot(), self._origin)
+        return self.snapshots
+
+    def _changed(self):
+        """The run changes here (not replayed by a re-simulation): later snapshots go."""
+        if self._quiet == 0 and self.snapshots is not None:
+            self.snapshots.drop_after(self.frame)
 
     def _root_times(self, frame):
         return np.concatenate([np.full(self.streams.count, float(frame)),
@@ -357,6 +428,7 @@ class Crowd:
         """Blend agents to ``stream`` (a name or index, or one stream index per agent)
         at ``offset`` (default: each agent's own offset) over ``duration`` frames (0
         switches at once)."""
+        self._changed()
         agents = self.agents.ids(agents)
         length, policy = self.slots.check_request(duration, when_full)
         if np.ndim(stream) == 0:
@@ -378,6 +450,7 @@ class Crowd:
                              when_full=None) -> TransitionResult:
         """Blend agents to unique animation ``unique`` over ``duration`` frames; with
         ``restart`` its clock restarts so it plays from its beginning next frame."""
+        self._changed()
         agents = self.agents.ids(agents)
         length, policy = self.slots.check_request(duration, when_full)
         u = self.uniques.index(unique)
@@ -397,6 +470,7 @@ class Crowd:
     # ------------------------------------------------------------------ agents
     def place_agents(self, agents, position=None, heading=None, color=None):
         """Move, turn or recolour agents (see :meth:`AgentState.place`)."""
+        self._changed()
         self.agents.place(self.agents.ids(agents), position, heading, color)
 
     def _sub_poses(self, agents, k):
@@ -495,10 +569,12 @@ class Crowd:
 
     def set_parameter(self, target, name: str, value: float):
         """Set a controller parameter on a stream (name or index) or unique (name)."""
+        self._changed()
         self.evaluator.set_parameter(self._root(target), name, value)
 
     def set_trigger(self, target, name: str):
         """Set a trigger on a stream or unique; the next frame's state machines consume it."""
+        self._changed()
         self.evaluator.set_trigger(self._root(target), name)
 
     def state_of(self, target) -> list:

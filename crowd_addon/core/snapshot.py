@@ -36,7 +36,7 @@ import numpy as np
 from .errors import CrowdError
 from .files import file_mode
 
-__all__ = ["Snapshot", "FORMAT", "VERSION", "copy_state", "load_snapshot"]
+__all__ = ["Snapshot", "SnapshotCache", "FORMAT", "VERSION", "copy_state", "load_snapshot"]
 
 FORMAT = "crowd-snapshot"
 VERSION = 1
@@ -259,3 +259,68 @@ def _varies(name) -> bool:
     return name.endswith(("queue.line", ".ids", ".counts", ".frame", ".duration",
                           ".reaction", "log_stream", "log_name", "log_frame")) or \
         ".batches." in name
+
+
+class SnapshotCache:
+    """Snapshots of one crowd's run every :attr:`every` frames, within ``max_bytes``:
+    what lets a crowd jump to any frame by stepping at most ``every - 1`` frames from
+    the nearest one (:meth:`Crowd.advance_to <.crowd.Crowd.advance_to>`).
+
+    Frames ``origin + k * every`` are kept as the crowd steps past them. When the next
+    one would pass ``max_bytes``, :attr:`every` doubles and the snapshots off the new
+    grid are dropped, so a long shot always fits and the farthest a jump re-simulates
+    grows with it. :attr:`requested` is the spacing asked for; :attr:`fits` is False
+    when not even one snapshot fits in ``max_bytes`` (then none is kept).
+    """
+
+    def __init__(self, every: int = 30, max_bytes: int = 2 << 30):
+        if isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 1:
+            raise CrowdError(f"snapshots: every must be a whole number of frames >= 1, "
+                             f"got {every!r}")
+        if isinstance(max_bytes, bool) or not isinstance(max_bytes, (int, np.integer)) \
+                or max_bytes < 0:
+            raise CrowdError(f"snapshots: the memory cap must be bytes >= 0, got "
+                             f"{max_bytes!r}")
+        self.requested = self.every = int(every)
+        self.max_bytes = int(max_bytes)
+        self.fits = True
+        self._snaps = {}
+
+    def __len__(self) -> int:
+        return len(self._snaps)
+
+    @property
+    def frames(self) -> list:
+        return sorted(self._snaps)
+
+    @property
+    def nbytes(self) -> int:
+        return sum(s.nbytes for s in self._snaps.values())
+
+    def wants(self, frame: int, origin: int) -> bool:
+        """Whether the crowd at ``frame`` (of a run started at ``origin``) is one to keep."""
+        return (frame - origin) % self.every == 0 and frame not in self._snaps and self.fits
+
+    def add(self, snap: Snapshot, origin: int):
+        """Keep ``snap`` (taken where :meth:`wants` said so), thinning to stay in the cap."""
+        if snap.nbytes > self.max_bytes:
+            self.fits = False
+            return
+        self._snaps[snap.frame] = snap
+        while self.nbytes > self.max_bytes:
+            self.every *= 2
+            self._snaps = {f: s for f, s in self._snaps.items()
+                           if (f - origin) % self.every == 0}
+
+    def nearest(self, frame: int) -> Snapshot | None:
+        """The kept snapshot at ``frame`` or the latest before it (None if none)."""
+        before = [f for f in self._snaps if f <= frame]
+        return self._snaps[max(before)] if before else None
+
+    def drop_after(self, frame: int):
+        """Forget the snapshots past ``frame`` (the run changed there)."""
+        self._snaps = {f: s for f, s in self._snaps.items() if f <= frame}
+
+    def clear(self):
+        self._snaps = {}
+        self.fits = True

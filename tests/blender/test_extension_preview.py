@@ -103,6 +103,32 @@ def test_frame_changes_drive_the_crowd_and_scrubbing_back_is_deterministic(runni
     assert pv.step_ms > 0 and not pv.paused
 
 
+def test_scrubbing_a_long_shot_jumps_from_the_nearest_snapshot(running):
+    """The preview keeps snapshots (the preferences' defaults here: every 30 frames):
+    a jump back, or forward past frames seen before, steps 1 to 30 frames and
+    shows what a fresh crowd stepped there shows; the panel says what is kept."""
+    from crowd_addon.blender import panels, prefs
+    scene, _rig, _walk, pv = running
+    crowd = pv.crowd
+    assert (crowd.snapshots.requested, crowd.snapshots.max_bytes) == \
+        prefs.snapshot_settings() == (30, 2048 << 20)
+    scene.frame_set(100)
+    assert crowd.snapshots.frames == [1, 31, 61, 91]
+    steps = []
+    inner = crowd._step
+    crowd._step = lambda: steps.append(1) or inner()
+    for target in (47, 95, 12, 88, 61, 31):
+        steps.clear()
+        scene.frame_set(target)
+        assert crowd.frame == target and 1 <= len(steps) <= 30, (target, len(steps))
+        fresh = Crowd(crowd.config)
+        fresh.advance_to(target)
+        np.testing.assert_array_equal(crowd.agent_poses(), fresh.agent_poses())
+    line = panels.snapshot_line(crowd.snapshots)
+    assert line.startswith("Scrubbing: a snapshot every 30 frames, 4 kept,"), line
+    assert prefs.CROWD_AP_preferences.is_registered
+
+
 def _skinned_boxes(crowd, vp, size):
     """Pixel bounding boxes (n, 4) of every agent's proxy skinned on the CPU."""
     mesh = crowd.config.meshes["Rig"][0]

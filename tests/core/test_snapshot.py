@@ -294,3 +294,86 @@ def test_saving_where_it_cannot_leaves_nothing(tmp_path):
     with pytest.raises(CrowdError, match="ends in .npz"):
         crowd.snapshot().save(tmp_path / "s.snap")
     assert list(tmp_path.iterdir()) == []
+
+
+# ------------------------------------------------------------------ scrubbing
+def counting(crowd):
+    """Count the frames ``crowd`` really simulates."""
+    steps = []
+    inner = crowd._step
+    crowd._step = lambda: steps.append(1) or inner()
+    return steps
+
+
+def test_jumps_start_from_the_nearest_snapshot_and_show_the_same_frame():
+    """Any frame reached by a jump (backwards, or forwards past frames simulated
+    before) equals the straight run's, stepping 1 to ``every`` frames."""
+    every = 7
+    straight, _ = play(show_crowd(), LAST)
+    crowd = show_crowd()
+    cache = crowd.keep_snapshots(every=every)
+    play(crowd, LAST)
+    assert cache.frames == list(range(1, LAST + 1, 7))        # start frame 1: 1 + 7k
+    steps = counting(crowd)
+    for target in (40, 9, 33, 2, 46, 15, 15, 21, 22, 8):
+        steps.clear()
+        before = crowd.frame
+        crowd.advance_to(target)
+        assert crowd.frame == target
+        assert 1 <= len(steps) <= every or target == before, (target, len(steps))
+        np.testing.assert_array_equal(crowd.agent_poses(), straight[target - 2]["poses"][0])
+        np.testing.assert_array_equal(crowd.agents.kind, straight[target - 2]["kind"])
+
+
+def test_the_memory_cap_thins_the_snapshots_and_says_so():
+    crowd = show_crowd()
+    one = crowd.snapshot().nbytes
+    cache = crowd.keep_snapshots(every=3, max_bytes=int(3.5 * one))
+    play(crowd, 40)
+    assert cache.nbytes <= 3.5 * one and len(cache) >= 2
+    assert cache.requested == 3 and cache.every in (12, 24, 48)    # doubled
+    assert all((f - 1) % cache.every == 0 for f in cache.frames)
+    assert cache.frames == list(range(1, 41, cache.every))
+    crowd.advance_to(20)
+    np.testing.assert_array_equal(crowd.agent_poses(), play(show_crowd(), 20)[0][-1]["poses"][0])
+    small = show_crowd().keep_snapshots(every=3, max_bytes=one - 1)
+    assert not small.fits and len(small) == 0
+
+
+def test_a_change_from_outside_a_step_forgets_the_later_snapshots():
+    crowd = show_crowd()
+    cache = crowd.keep_snapshots(every=5)
+    play(crowd, 30)
+    crowd.advance_to(12)
+    assert cache.frames == [1, 6, 11, 16, 21, 26]
+    crowd.transition_to_streamed([0, 1], "wave", 3)             # the run changes at 12
+    assert cache.frames == [1, 6, 11]
+    play(crowd, 30)                                             # kept again, new run
+    assert cache.frames == [1, 6, 11, 16, 21, 26]
+    changed = crowd.agent_poses().copy()
+    assert not np.array_equal(changed, play(show_crowd(), 30)[0][-1]["poses"][0])
+    crowd.advance_to(17)
+    crowd.advance_to(30)
+    np.testing.assert_array_equal(crowd.agent_poses(), changed)
+    # requests made by callbacks during steps (by_python's) are part of the run
+    assert cache.frames == [1, 6, 11, 16, 21, 26]
+    with pytest.raises(CrowdError, match="every must be"):
+        crowd.keep_snapshots(every=0)
+
+
+def test_the_api_reports_no_events_of_frames_it_replays():
+    from crowd_addon import api
+    crowd = show_crowd()
+    crowd.keep_snapshots(every=5)
+    sim = api.wrap(crowd)
+    heard = []
+    sim.on_event("*", lambda n, f, ids: heard.append(f))
+    sim.advance_to(30)
+    assert heard and max(heard) <= 30
+    heard.clear()
+    sim.advance_to(14)                       # from the snapshot at 11: 12, 13 replayed
+    assert all(f == 14 for f in heard)
+    sim.advance_to(30)
+    heard.clear()
+    sim.advance_to(28)
+    assert all(f == 28 for f in heard)
