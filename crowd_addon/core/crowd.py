@@ -235,13 +235,13 @@ class Crowd:
             self._set_state(snapshot.state())
         finally:
             self._quiet -= 1
-        self._origin = self.config.start_frame
         if self.snapshots is not None:
             self.snapshots.drop_after(self.frame)
 
     def _state(self) -> dict:
         """Every part's state (views), what :mod:`.snapshot` copies."""
-        return {"crowd": {"frame": int(self.frame), "steps": self._steps,
+        return {"crowd": {"frame": int(self.frame), "origin": int(self._origin),
+                          "steps": self._steps,
                           "ms_total": self._ms_total, "sub_streams": self._sub_streams,
                           "sub_uniques": self._sub_uniques},
                 "streams": self.streams.state(), "uniques": self.uniques.state(),
@@ -251,8 +251,8 @@ class Crowd:
 
     def _set_state(self, state: dict):
         c = state["crowd"]
-        self.frame, self._steps, self._ms_total = int(c["frame"]), int(c["steps"]), \
-            float(c["ms_total"])
+        self.frame, self._origin = int(c["frame"]), int(c["origin"])
+        self._steps, self._ms_total = int(c["steps"]), float(c["ms_total"])
         self._sub_streams[...] = c["sub_streams"]
         self._sub_uniques[...] = c["sub_uniques"]
         self.streams.set_state(state["streams"])
@@ -345,7 +345,6 @@ class Crowd:
                 self._set_state(snap.state())        # one of our own: already checked
             finally:
                 self._quiet -= 1
-            self._origin = start
         elif frame < self.frame:
             self.reset(start if frame >= start else frame)
         while self.frame < frame:
