@@ -206,10 +206,11 @@ def _check_header(path, head):
     if head.get("version") != VERSION:
         raise CrowdError(f"{path}: snapshot format version {head.get('version')!r}, this "
                          f"crowd reads version {VERSION}")
-    for key, kind in (("frame", int), ("config_digest", str), ("substeps", int),
-                      ("values", dict), ("arrays", dict)):
+    for key, kind, what in (("frame", int, "a whole number"), ("config_digest", str, "a string"),
+                            ("substeps", int, "a whole number"), ("values", dict, "an object"),
+                            ("arrays", dict, "an object")):
         if not isinstance(head.get(key), kind) or isinstance(head.get(key), bool):
-            raise CrowdError(f"{path}: {HEADER}: {key!r} must be a {kind.__name__}")
+            raise CrowdError(f"{path}: {HEADER}: {key!r} must be {what}")
     for name, spec in head["arrays"].items():
         if not (isinstance(spec, dict) and isinstance(spec.get("dtype"), str)
                 and isinstance(spec.get("shape"), list)):

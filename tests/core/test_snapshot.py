@@ -247,7 +247,7 @@ def broken_files(tmp_path, good):
     out = [(write("plain.npz", {"x": np.zeros(3)}), "not a crowd snapshot"),
            (write("v2.npz", with_head(version=2)), "format version 2"),
            (write("fmt.npz", with_head(format="other")), "not a crowd snapshot"),
-           (write("frame.npz", with_head(frame="7")), "'frame' must be a int"),
+           (write("frame.npz", with_head(frame="7")), "'frame' must be a whole number"),
            (write("missing.npz", {k: v for k, v in arrays.items()
                                   if k != "agents.kind"}), "missing: \\['agents.kind'\\]"),
            (write("shape.npz", {**arrays, "agents.kind": arrays["agents.kind"][:-1]}),
