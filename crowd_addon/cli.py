@@ -2,7 +2,8 @@
 
 Commands: ``budget`` (the paper's GPU memory model and a proposed stream count and
 max offset, docs/performance_budget.md), ``export`` (a crowd shot over a frame range
-as UsdSkel, docs/usd_export.md), ``preview`` (a crowd rendered headless to PNG frames
+as UsdSkel, docs/usd_export.md), ``snapshot`` (exact snapshots of a shot for chunked
+exports, docs/snapshots.md), ``preview`` (a crowd rendered headless to PNG frames
 and an MP4, docs/preview.md), ``demo`` (the stadium demo end to end,
 docs/pipeline.md) and ``build-extension`` (the Blender extension zip with its bundled
 wheels, ``crowd_addon/packaging.py``).
@@ -27,8 +28,10 @@ import argparse
 import os
 import sys
 
-from .cli_args import (add_shot_arguments, add_trust_argument, frame_number, int_at_least,
-                       parse_command, path_arg, positive_float, progress_printer)
+from .cli_args import (add_shot_arguments, add_trust_argument, frame_number, frame_range,
+                       int_at_least, parse_command, path_arg, positive_float,
+                       progress_printer)
+from .core.config import MAX_SUBSTEPS
 from .core.errors import CrowdError
 
 __all__ = ["build_parser", "main"]
@@ -162,6 +165,7 @@ def _run_export(args) -> int:
         from .core.crowd import Crowd
         from .core.files import folders_made
         from .core.recorder import record
+        from .core.snapshot import ShotSnapshots
         from .gpu.preview_render import writable_dir
         from .usd import check_export, export_crowd
         if args.frames is None:
@@ -174,14 +178,23 @@ def _run_export(args) -> int:
         with folders_made(folder):                      # gone again if the export fails
             check_export(config, args.out, args.agents, args.layout)   # before simulating
             progress = progress_printer("crowd export")
+            snaps = ShotSnapshots(args.snapshots, crowd, args.frames[0]) \
+                if args.snapshots else None
             shot = record(crowd, *args.frames, progress=progress)
+            if snaps is not None:
+                snaps.recorded()
             result = export_crowd(shot, args.out, agents=args.agents, progress=progress,
                                   layout=args.layout)
+            if snaps is not None:
+                result = dataclasses.replace(result, started_from=snaps.started_from,
+                                             snapshot=snaps.keep())
     else:                       # the scene's Crowd settings, baked as the panel does
         from .blender.cli_commands import export_blend
         config, result = export_blend(
             args.out, args.frames, blend=args.blend, scene=args.scene, agents=args.agents,
-            layout=args.layout, substeps=args.substeps, trust_scripts=args.trust_scripts, progress=progress_printer("crowd export"), on_bake=lambda done, total, message: print(
+            layout=args.layout, substeps=args.substeps, trust_scripts=args.trust_scripts,
+            snapshots=args.snapshots, progress=progress_printer("crowd export"),
+            on_bake=lambda done, total, message: print(
                 f"crowd export: {message}", file=sys.stderr, flush=True))
     if args.json:
         print(json.dumps({**dataclasses.asdict(result), "bytes": result.bytes}))
@@ -199,7 +212,80 @@ def _run_export(args) -> int:
         f"  {result.stream_animations:,} stream animations, {result.characters} "
         f"character{'s' if result.characters != 1 else ''}",
         f"  {s['total']:.1f} s (simulate {s['simulate']:.1f} s, author "
-        f"{s['author']:.1f} s, write {s['write']:.1f} s)"]))
+        f"{s['author']:.1f} s, write {s['write']:.1f} s)"]
+        + ([f"  simulated from the snapshot at frame {result.started_from}"
+            if result.started_from is not None else
+            "  no snapshot of this crowd before the shot: simulated from its start frame",
+            f"  left {result.snapshot} for the next chunk"] if result.snapshot else [])))
+    return 0
+
+
+# ----------------------------------------------------------------------- snapshot
+def _add_snapshot(subparsers) -> None:
+    p = subparsers.add_parser(
+        "snapshot",
+        help="write exact snapshots of a crowd shot, for chunked exports",
+        description="Simulate a crowd over a frame range once and write an exact "
+                    "snapshot (docs/snapshots.md) at the frame before each chunk of "
+                    "--every frames and at the last frame, into a folder. "
+                    "crowd export --frames A-B --snapshots DIR then starts from the one "
+                    "before A instead of simulating from the start frame. A snapshot "
+                    "already in the folder before the first frame is started from.",
+        epilog="example: crowd snapshot --config crowd.json --frames 1-3000 --every 500 "
+               "--out snaps")
+    src = p.add_mutually_exclusive_group()
+    src.add_argument("--config", type=path_arg, metavar="CROWD_JSON",
+                     help="crowd configuration manifest written by config_io.save_config")
+    src.add_argument("--blend", type=path_arg, metavar="SCENE_BLEND",
+                     help="a .blend whose scene has Crowd settings (needs the bpy module)")
+    p.add_argument("--scene", default=None, metavar="NAME",
+                   help="scene of the .blend (default: the active scene)")
+    p.add_argument("--out", required=True, type=path_arg, metavar="DIR",
+                   help="snapshot folder (created if missing)")
+    p.add_argument("--frames", type=frame_range, metavar="FIRST-LAST",
+                   help="the shot's frames (default, from a .blend: the scene's frame "
+                        "range; with --config it must be given)")
+    p.add_argument("--every", type=int_at_least(1), required=True, metavar="N",
+                   help="chunk length in frames: a snapshot before each chunk")
+    p.add_argument("--substeps", type=int_at_least(1, MAX_SUBSTEPS), default=1, metavar="N",
+                   help="samples per frame the exports from these snapshots will write "
+                        "(a snapshot keeps them; default 1)")
+    p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    add_trust_argument(p)
+    p.set_defaults(handler=_run_snapshot)
+
+
+def _run_snapshot(args) -> int:
+    import json
+    import time
+
+    t = time.perf_counter()
+    progress = progress_printer("crowd snapshot")
+    if args.config:
+        from .core.config_io import load_config
+        from .core.crowd import Crowd
+        from .core.snapshot import SnapshotFolder, write_snapshots
+        if args.frames is None:
+            raise CrowdError("--frames FIRST-LAST is required with --config (a .blend "
+                             "gives its scene's frame range)")
+        folder = SnapshotFolder(args.out, create=True)
+        crowd = Crowd(load_config(args.config), skinning="gpu", substeps=args.substeps)
+        files = write_snapshots(crowd, folder, *args.frames, args.every,
+                                lambda d, n: progress("simulate", d, n))
+    else:
+        from .blender.cli_commands import snapshot_blend
+        _, files = snapshot_blend(
+            args.out, args.frames, every=args.every, blend=args.blend, scene=args.scene,
+            substeps=args.substeps, trust_scripts=args.trust_scripts,
+            progress=lambda d, n: progress("simulate", d, n),
+            on_bake=lambda done, total, message: print(
+                f"crowd snapshot: {message}", file=sys.stderr, flush=True))
+    size = sum(os.path.getsize(f) for f in files)
+    seconds = time.perf_counter() - t
+    if args.json:
+        print(json.dumps({"files": files, "bytes": size, "seconds": round(seconds, 2)}))
+    else:
+        print(f"wrote {len(files)} snapshots ({size:,} B) in {args.out}, {seconds:.1f} s")
     return 0
 
 
@@ -416,7 +502,8 @@ def _run_build_extension(args) -> int:
 # --------------------------------------------------------------------------- main
 
 #: One ``_add_<command>`` per subcommand.
-_COMMANDS = (_add_budget, _add_export, _add_preview, _add_demo, _add_build_extension)
+_COMMANDS = (_add_budget, _add_export, _add_snapshot, _add_preview, _add_demo,
+             _add_build_extension)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -123,6 +123,12 @@ def add_shot_arguments(parser) -> None:
                         help="poses written per frame, 1-%d (default 1): more adds samples "
                              "between frames, the crowd evaluated there, for renderers' "
                              "motion blur" % MAX_SUBSTEPS)
+    parser.add_argument("--snapshots", type=path_arg, default=None, metavar="DIR",
+                        help="snapshot folder (crowd snapshot, docs/snapshots.md): start "
+                             "from this crowd's latest snapshot there before the first "
+                             "frame instead of simulating from the start frame, and leave "
+                             "one there at the last frame for the next chunk (the folder "
+                             "is created if missing)")
     parser.add_argument("--json", action="store_true",
                         help="print the summary as one JSON object")
     add_trust_argument(parser)

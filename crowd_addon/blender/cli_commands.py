@@ -34,7 +34,7 @@ import sys
 from ..cli_args import add_shot_arguments, parse_command, progress_printer
 from ..core.errors import CrowdError
 
-__all__ = ["open_scene", "export_blend", "preview_blend", "scene_frames",
+__all__ = ["open_scene", "export_blend", "preview_blend", "snapshot_blend", "scene_frames",
            "blender_output_to_stderr", "build_parser", "crowd_command", "register_command",
            "unregister_command", "command_registered"]
 
@@ -116,11 +116,12 @@ def scene_frames(scene, frames=None) -> tuple:
 def export_blend(out: str, frames: tuple | None = None, *, blend: str | None = None,
                  scene: str | None = None, agents: int | None = None, progress=None,
                  on_bake=None, trust_scripts: bool = False, layout: str = "instanced",
-                 substeps: int = 1):
+                 substeps: int = 1, snapshots: str | None = None):
     """Export the Crowd settings of a .blend's scene (:func:`open_scene`) as UsdSkel.
 
-    ``out``, ``agents``, ``layout``, ``substeps``, ``progress(stage, done, total)`` and ``on_bake(done,
-    total, message)`` are those of :func:`.export.export_scene`; ``frames`` (first, last)
+    ``out``, ``agents``, ``layout``, ``substeps``, ``snapshots``, ``progress(stage, done,
+    total)`` and ``on_bake(done, total, message)`` are those of
+    :func:`.export.export_scene`; ``frames`` (first, last)
     defaults to the scene's frame range. The folder of ``out`` is created when
     missing, and removed again when the export fails. Blender's own output goes to
     stderr (:func:`blender_output_to_stderr`). Returns ``(config, result)``: the baked
@@ -137,7 +138,7 @@ def export_blend(out: str, frames: tuple | None = None, *, blend: str | None = N
         with folders_made(folder):
             return export_scene(found, out, scene_frames(found, frames), agents=agents,
                                 progress=progress, on_bake=on_bake, layout=layout,
-                                substeps=substeps)
+                                substeps=substeps, snapshots=snapshots)
 
 
 def preview_blend(out: str, frames: int | None = None, *, blend: str | None = None,
@@ -189,6 +190,27 @@ def preview_blend(out: str, frames: int | None = None, *, blend: str | None = No
     return config, result, None if obj is None else obj.name
 
 
+def snapshot_blend(out: str, frames: tuple | None = None, *, every: int,
+                   blend: str | None = None, scene: str | None = None, substeps: int = 1,
+                   trust_scripts: bool = False, progress=None, on_bake=None):
+    """Write snapshots of a .blend's scene crowd (:func:`open_scene`, baked as the
+    exports bake it, with its crowd script) into the folder ``out``:
+    :func:`crowd_addon.core.snapshot.write_snapshots` over ``frames`` (default: the
+    scene's frame range) every ``every`` frames. Returns ``(config, files written)``."""
+    with blender_output_to_stderr():
+        from ..core.snapshot import SnapshotFolder, write_snapshots
+        from .scene_config import build_crowd, config_from_scene
+        _trust(trust_scripts)
+        found = open_scene(blend, scene)
+        first, last = scene_frames(found, frames)
+        folder = SnapshotFolder(out, create=True)
+        config = config_from_scene(found, on_bake)
+        crowd, note = build_crowd(found, config, substeps=substeps)
+        if note and on_bake is not None:
+            on_bake(1, 1, note)
+        return config, write_snapshots(crowd, folder, first, last, every, progress)
+
+
 def scene_size(scene, size=(None, None)) -> tuple:
     """``size`` with a None width or height taken from ``scene``'s render resolution
     (``resolution_x/y`` times ``resolution_percentage``)."""
@@ -229,7 +251,8 @@ def crowd_command(argv) -> int:
             raise CrowdError("no .blend is open (blender -b SCENE_BLEND -c crowd export ...)")
         _, result = export_blend(
             args.out, args.frames, scene=args.scene, agents=args.agents,
-            layout=args.layout, trust_scripts=args.trust_scripts, progress=progress_printer("crowd export"),
+            layout=args.layout, substeps=args.substeps, snapshots=args.snapshots,
+            trust_scripts=args.trust_scripts, progress=progress_printer("crowd export"),
             on_bake=lambda done, total, message: print(
                 f"crowd export: {message}", file=sys.stderr, flush=True))
     except CrowdError as exc:

@@ -60,7 +60,7 @@ def check_export(scene, path, frames) -> tuple:
 
 
 def export_scene(scene, path, frames, agents=None, progress=None, on_bake=None,
-                 depsgraph=None, layout="instanced", substeps=1):
+                 depsgraph=None, layout="instanced", substeps=1, snapshots=None):
     """Bake ``scene``'s Crowd settings and export the shot to ``path`` in one call
     (:func:`export_steps` run to the end).
 
@@ -71,6 +71,9 @@ def export_scene(scene, path, frames, agents=None, progress=None, on_bake=None,
         (:func:`check_export`).
     substeps : samples written per frame (1..16; more than 1 adds sub-frame samples
         for motion blur: ``Crowd(..., substeps=N)``).
+    snapshots : optional snapshot folder (``crowd export --snapshots``): the crowd
+        starts from its latest snapshot there before ``first`` and leaves one at
+        ``last`` (:class:`crowd_addon.core.snapshot.ShotSnapshots`).
     progress : optional ``progress(stage, done, total)`` after each recorded frame
         (``"simulate"``) and each step of the writing.
     on_bake : optional ``on_bake(done, total, message)`` before each bake step
@@ -84,7 +87,7 @@ def export_scene(scene, path, frames, agents=None, progress=None, on_bake=None,
     written then); the scene is not changed. An exception raised by a callback stops
     the export the same way.
     """
-    steps = export_steps(scene, path, frames, agents, depsgraph, layout, substeps)
+    steps = export_steps(scene, path, frames, agents, depsgraph, layout, substeps, snapshots)
     try:
         while True:
             try:
@@ -101,7 +104,7 @@ def export_scene(scene, path, frames, agents=None, progress=None, on_bake=None,
 
 
 def export_steps(scene, path, frames, agents=None, depsgraph=None, layout="instanced",
-                 substeps=1):
+                 substeps=1, snapshots=None):
     """The export of :func:`export_scene` as a generator, one unit of work per
     ``next()``: returns ``(config, result)`` (``StopIteration.value``).
 
@@ -121,10 +124,13 @@ def export_steps(scene, path, frames, agents=None, depsgraph=None, layout="insta
     frames = check_export(scene, path, frames)
     check_layout(layout)
     return _export_steps(scene, path, frames, agents, depsgraph, layout,
-                         check_substeps(substeps))
+                         check_substeps(substeps), snapshots)
 
 
-def _export_steps(scene, path, frames, agents, depsgraph, layout, substeps):
+def _export_steps(scene, path, frames, agents, depsgraph, layout, substeps, snapshots):
+    import dataclasses
+
+    from ..core.snapshot import ShotSnapshots
     from ..core.crowd import Crowd
     from ..core.recorder import Recorder
     from ..usd.export import check_export as check_output
@@ -146,17 +152,23 @@ def _export_steps(scene, path, frames, agents, depsgraph, layout, substeps):
     crowd, note = scene_config.build_crowd(scene, config, substeps=substeps)
     if note:
         yield "bake", 1, 1, note
+    snaps = ShotSnapshots(snapshots, crowd, frames[0]) if snapshots else None
     recorder = Recorder(crowd, *frames)
     while not recorder.finished:
         recorder.step()
         yield "simulate", recorder.done, recorder.total, "simulate"
+    if snaps is not None:
+        snaps.recorded()
     writing = write_steps(recorder.finish(), path, agents, layout)
     try:
         while True:
             try:
                 stage, done, total = next(writing)
             except StopIteration as stop:
-                return config, stop.value
+                if snaps is None:
+                    return config, stop.value
+                return config, dataclasses.replace(stop.value, started_from=snaps.started_from,
+                                                   snapshot=snaps.keep())
             yield stage, done, total, stage
     finally:
         writing.close()                 # a cancel: its temporary files are removed

@@ -36,7 +36,8 @@ import numpy as np
 from .errors import CrowdError
 from .files import file_mode
 
-__all__ = ["Snapshot", "SnapshotCache", "FORMAT", "VERSION", "copy_state", "load_snapshot"]
+__all__ = ["Snapshot", "SnapshotCache", "SnapshotFolder", "FORMAT", "VERSION", "copy_state",
+           "load_snapshot", "write_snapshots", "ShotSnapshots"]
 
 FORMAT = "crowd-snapshot"
 VERSION = 1
@@ -325,3 +326,105 @@ class SnapshotCache:
     def clear(self):
         self._snaps = {}
         self.fits = True
+
+
+class SnapshotFolder:
+    """A folder of snapshot files, one per (crowd configuration, samples per frame,
+    frame): ``snap_<digest[:16]>_s<substeps>_f<frame>.npz``, so several shots may
+    share one folder. What ``crowd snapshot`` writes and ``crowd export --snapshots``
+    starts from (docs/snapshots.md)."""
+
+    def __init__(self, path, create: bool = False):
+        self.path = os.fspath(path)
+        if create:
+            try:
+                os.makedirs(self.path, exist_ok=True)
+            except OSError as e:
+                raise CrowdError(f"{self.path}: cannot create the snapshot folder: {e}") \
+                    from None
+        if not os.path.isdir(self.path):
+            raise CrowdError(f"{self.path}: no such snapshot folder")
+
+    @staticmethod
+    def _stem(crowd) -> str:
+        return f"snap_{crowd.config_digest[:16]}_s{crowd.substeps}_f"
+
+    def file(self, crowd, frame: int) -> str:
+        """The file of ``crowd``'s snapshot at ``frame``."""
+        return os.path.join(self.path, f"{self._stem(crowd)}{int(frame)}.npz")
+
+    def frames(self, crowd) -> list:
+        """Frames of the snapshots of ``crowd``'s configuration here, ascending."""
+        stem, out = self._stem(crowd), []
+        for name in os.listdir(self.path):
+            if name.startswith(stem) and name.endswith(".npz"):
+                try:
+                    out.append(int(name[len(stem):-4]))
+                except ValueError:
+                    continue
+        return sorted(out)
+
+    def save(self, crowd) -> str:
+        """Write ``crowd``'s snapshot now; returns the file."""
+        path = self.file(crowd, crowd.frame)
+        crowd.snapshot().save(path)
+        return path
+
+    def start(self, crowd, first: int):
+        """Restore into ``crowd`` the latest snapshot of it here before ``first`` (at
+        frame ``first - 1`` or earlier) when that is ahead of the crowd; returns its
+        frame, or None when there is none (the crowd is left as it was)."""
+        usable = [f for f in self.frames(crowd) if crowd.frame < f < first]
+        if not usable:
+            return None
+        crowd.restore(load_snapshot(self.file(crowd, usable[-1])))
+        return usable[-1]
+
+
+def write_snapshots(crowd, folder: SnapshotFolder, first: int, last: int, every: int,
+                    progress=None) -> list:
+    """Step ``crowd`` to ``last`` (from the latest snapshot in ``folder`` before
+    ``first`` when there is one) and write a snapshot at ``first - 1`` and every
+    ``every`` frames after it (the frame before each ``every``-frame chunk of
+    ``first .. last``; none before the start frame, where a chunk needs none) and at
+    ``last``. Returns the files written.
+    ``progress(done, total)`` after each step."""
+    if isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 1:
+        raise CrowdError(f"snapshots: every must be a whole number of frames >= 1, "
+                         f"got {every!r}")
+    if first > last:
+        raise CrowdError(f"snapshots: frames {first}-{last}: the first is after the last")
+    folder.start(crowd, first)
+    wanted = set(range(first - 1, last + 1, every)) | {last}
+    written, total = [], last - crowd.frame
+    if crowd.frame in wanted:
+        written.append(folder.save(crowd))
+    while crowd.frame < last:
+        crowd.step()
+        if crowd.frame in wanted:
+            written.append(folder.save(crowd))
+        if progress is not None:
+            progress(total - (last - crowd.frame), total)
+    return written
+
+
+class ShotSnapshots:
+    """An export's use of a snapshot folder: the crowd starts from the latest snapshot
+    of it there before the shot's first frame (:attr:`started_from`, None when there
+    is none), and leaves one at the shot's last frame for the next chunk: taken by
+    :meth:`recorded` once the shot is simulated, written by :meth:`keep` once the
+    export succeeded."""
+
+    def __init__(self, path, crowd, first: int):
+        self.folder = SnapshotFolder(path, create=True)
+        self.crowd = crowd
+        self.started_from = self.folder.start(crowd, first)
+        self._snap = None
+
+    def recorded(self):
+        self._snap = self.crowd.snapshot()
+
+    def keep(self) -> str:
+        path = self.folder.file(self.crowd, self._snap.frame)
+        self._snap.save(path)
+        return path

@@ -78,6 +78,9 @@ class ExportResult:
     substeps : samples written per frame (the recording's).
     events : ``[name, frame, agents]`` per event tag fired for exported agents in the
         shot, in firing order (what the crowd's callbacks heard).
+    started_from : the frame of the snapshot the simulation started from (``--snapshots``;
+        None: it ran from the crowd's start frame); snapshot : the snapshot file the
+        export left at its last frame (None without a snapshot folder).
     """
 
     path: str
@@ -95,6 +98,8 @@ class ExportResult:
     seconds: dict
     events: list
     substeps: int = 1
+    started_from: int | None = None
+    snapshot: str | None = None
 
     @property
     def bytes(self) -> int:

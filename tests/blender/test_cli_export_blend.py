@@ -34,6 +34,9 @@ rc = crowd_command(["export", "--out", sys.argv[3], "--frames", "1-12"])
 print("RC", rc)
 rc = crowd_command(["export", "--out", sys.argv[4], "--frames", "1-3", "--layout", "blender"])
 print("RC", rc)
+rc = crowd_command(["export", "--out", sys.argv[5], "--frames", "2-4", "--substeps", "2",
+                    "--snapshots", sys.argv[6]])
+print("RC", rc)
 """
 
 
@@ -43,10 +46,11 @@ def crowd_blend(tmp_path_factory):
     blend, usd = tmp / "crowd.blend", tmp / "from_cli_command.usdc"
     run = subprocess.run([sys.executable, "-c", PREPARE,
                           str(tmp / "stadium.blend"), str(blend), str(usd),
-                          str(tmp / "for_blender.usdc")],
+                          str(tmp / "for_blender.usdc"), str(tmp / "blur.usdc"),
+                          str(tmp / "snaps")],
                          cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr[-2000:]
-    assert run.stdout.count("RC 0") == 2, run.stdout[-2000:] + run.stderr[-2000:]
+    assert run.stdout.count("RC 0") == 3, run.stdout[-2000:] + run.stderr[-2000:]
     return tmp, blend, usd
 
 
@@ -67,6 +71,14 @@ def test_the_crowd_command_takes_the_layout(crowd_blend):
     stage = Usd.Stage.Open(str(tmp / "for_blender.usdc"))
     agents = stage.GetPrimAtPath("/Crowd/Agents").GetChildren()
     assert len(agents) == 2000 and not any(p.IsInstanceable() for p in agents)
+
+
+def test_the_crowd_command_takes_substeps_and_a_snapshot_folder(crowd_blend):
+    from pxr import Usd
+    tmp, _, _ = crowd_blend
+    stage = Usd.Stage.Open(str(tmp / "blur.usdc"))
+    assert stage.GetRootLayer().customLayerData["crowd"]["substeps"] == 2
+    assert [p.name.rsplit("_", 1)[1] for p in (tmp / "snaps").glob("*.npz")] == ["f4.npz"]
 
 
 def test_python_m_export_with_blend(crowd_blend):

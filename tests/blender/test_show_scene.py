@@ -256,6 +256,37 @@ def test_a_fresh_process_exports_what_the_authoring_session_plays(scene, tmp_pat
     assert worst < 1e-6, worst
 
 
+def test_a_chunk_exported_from_a_snapshot_equals_it_simulated_from_the_start(scene, tmp_path):
+    """From the saved .blend, in fresh processes: ``crowd snapshot --blend`` writes the
+    snapshots, and ``crowd export --blend --snapshots`` of frames 13-40 writes the
+    same files and events as that export simulated from frame 1 (the show and the
+    trusted crowd script's callback run in both)."""
+    _script(scene, SCRIPT)
+    blend, snaps = tmp_path / "show.blend", tmp_path / "snaps"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+
+    def crowd(*args):
+        run = subprocess.run([sys.executable, "-m", "crowd_addon", *args, "--blend",
+                              str(blend), "--json", "--trust-scripts"], cwd=ROOT,
+                             capture_output=True, text=True, timeout=300)
+        assert run.returncode == 0, run.stderr[-3000:]
+        return json.loads(run.stdout.strip().splitlines()[-1])
+
+    written = crowd("snapshot", "--frames", "1-40", "--every", "12", "--out", str(snaps))
+    assert [f.rsplit("_f", 1)[1] for f in written["files"]] == \
+        ["12.npz", "24.npz", "36.npz", "40.npz"]
+    results = {}
+    for name, extra in (("plain", ()), ("chunk", ("--snapshots", str(snaps)))):
+        results[name] = crowd("export", "--frames", "13-40", "--out",
+                              str(tmp_path / name / "show.usdc"), *extra)
+    assert results["chunk"]["started_from"] == 12 and results["plain"]["started_from"] is None
+    assert results["chunk"]["events"] == results["plain"]["events"] != []
+    assert results["chunk"]["clip_agents"] > 0
+    read = {name: {f: (Path(r["path"]).parent / f).read_bytes() for f in r["files"]}
+            for name, r in results.items()}
+    assert read["chunk"] == read["plain"]
+
+
 def test_saving_and_reloading_gives_the_same_crowd(scene, tmp_path):
     _, want, events = run_here(scene, 30)
     before = settings_fingerprint(scene.crowd)

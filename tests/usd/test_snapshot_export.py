@@ -1,0 +1,126 @@
+"""``crowd snapshot`` and ``crowd export --snapshots``: a chunk of a shot exported from
+the snapshot before it equals the same frames exported by simulating from the start
+frame (the oracle), file for file, with the same events; chunks chain through the
+snapshot each export leaves at its last frame."""
+
+import json
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from crowd_addon.cli import main
+from crowd_addon.core.config_io import save_config
+from crowd_addon.core.show import Action, Cue, Show, Sweep
+
+from .conftest import FAN_AGENTS, make_config
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def show_config():
+    """The module's crowd with a show: a held sweep (the queue fills: 3 slots), a
+    unique with its return, a trigger, a random-offset stand over many frames."""
+    cfg = make_config()
+    fans = np.arange(FAN_AGENTS)
+    cfg.show = Show((Cue("wave", 4, Action("stream", "cheer.loud", 3, hold=5),
+                         sweep=Sweep((0, 0, 0), "angle", 0.8), agents=fans),
+                     Cue("solo", 9, Action("unique", "solo", 2, hold=6), agents=fans[:3]),
+                     Cue("go", 12, Action("trigger", "wave", name="go")),
+                     Cue("stand", 23, Action("stream", "idle", 4, offset="random", hold=8),
+                         agents=fans[::2], spread=6, seed=3)))
+    return cfg
+
+
+@pytest.fixture(scope="module")
+def config_path(tmp_path_factory):
+    path = tmp_path_factory.mktemp("config") / "crowd.json"
+    save_config(show_config(), path)
+    return path
+
+
+def export(config_path, out, frames, capsys, *extra):
+    assert main(["export", "--config", str(config_path), "--out", str(out), "--frames",
+                 frames, "--json", *extra]) == 0
+    return json.loads(capsys.readouterr().out)
+
+
+def files(result):
+    """Every file an export wrote, by name relative to the main layer's folder."""
+    top = Path(result["path"]).parent
+    return {name: (top / name).read_bytes() for name in result["files"]}
+
+
+def test_a_chunk_from_its_snapshot_equals_the_chunk_simulated_from_the_start(
+        config_path, tmp_path, capsys):
+    snaps = tmp_path / "snaps"
+    assert main(["snapshot", "--config", str(config_path), "--frames", "1-40", "--every",
+                 "10", "--out", str(snaps), "--json"]) == 0
+    written = json.loads(capsys.readouterr().out)
+    frames = sorted(int(Path(f).stem.rsplit("_f", 1)[1]) for f in written["files"])
+    assert frames == [0, 10, 20, 30, 40]          # before the chunks 1, 11, 21, 31; the last
+    plain = export(config_path, tmp_path / "plain" / "shot.usdc", "21-34", capsys)
+    chunk = export(config_path, tmp_path / "chunk" / "shot.usdc", "21-34", capsys,
+                   "--snapshots", str(snaps))
+    assert plain["started_from"] is None and chunk["started_from"] == 20
+    assert chunk["events"] == plain["events"] and plain["events"]
+    assert files(chunk) == files(plain)
+    assert chunk["clip_agents"] > 0 and chunk["blend_frames"] > 0      # the show ran
+    stem = Path(written["files"][0]).name.rsplit("_f", 1)[0]
+    assert chunk["snapshot"] == str(snaps / f"{stem}_f34.npz")
+
+
+def test_chunks_chain_through_the_snapshot_each_export_leaves(config_path, tmp_path,
+                                                              capsys):
+    snaps = tmp_path / "chain"                           # created by the first export
+    first = export(config_path, tmp_path / "a" / "shot.usdc", "3-17", capsys,
+                   "--snapshots", str(snaps))
+    assert first["started_from"] is None and Path(first["snapshot"]).exists()
+    second = export(config_path, tmp_path / "b" / "shot.usdc", "18-30", capsys,
+                    "--snapshots", str(snaps))
+    assert second["started_from"] == 17
+    plain = export(config_path, tmp_path / "c" / "shot.usdc", "18-30", capsys)
+    assert files(second) == files(plain) and second["events"] == plain["events"]
+
+
+def test_snapshots_of_another_crowd_are_not_used(config_path, tmp_path, capsys):
+    other = tmp_path / "other.json"
+    save_config(make_config(), other)                  # no show: another digest
+    snaps = tmp_path / "snaps"
+    assert main(["snapshot", "--config", str(other), "--frames", "1-20", "--every", "5",
+                 "--out", str(snaps)]) == 0
+    assert "wrote 5 snapshots" in capsys.readouterr().out      # 0, 5, 10, 15, 20
+    assert main(["export", "--config", str(config_path), "--out",
+                 str(tmp_path / "x.usdc"), "--frames", "12-14", "--snapshots",
+                 str(snaps)]) == 0
+    out = capsys.readouterr().out
+    assert "no snapshot of this crowd before the shot: simulated from its start frame" in out
+    assert "left " in out and "_f14.npz for the next chunk" in out
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["snapshot", "--every", "2", "--out", "{tmp}/s", "--config", "{cfg}"],
+     "--frames FIRST-LAST is required"),
+    (["snapshot", "--frames", "1-5", "--every", "0", "--out", "{tmp}/s", "--config", "{cfg}"],
+     "--every"),
+    (["snapshot", "--frames", "9-5", "--every", "2", "--out", "{tmp}/s", "--config", "{cfg}"],
+     "last frame 5 is before first frame 9"),
+    (["export", "--frames", "3-5", "--out", "{tmp}/x.usdc", "--config", "{cfg}",
+      "--snapshots", "{cfg}"], "cannot create the snapshot folder"),
+])
+def test_bad_input_is_named_and_writes_nothing(config_path, tmp_path, capsys, argv, message):
+    argv = [a.format(tmp=tmp_path, cfg=config_path) for a in argv]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "error:" in err and re.search(message, err), err
+    assert not (tmp_path / "x.usdc").exists()
+    assert not list(tmp_path.glob("s/*.npz"))
+
+
+def test_python_m_crowd_addon_snapshot_help():
+    run = subprocess.run([sys.executable, "-m", "crowd_addon", "snapshot", "--help"],
+                         cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert run.returncode == 0 and "--every N" in run.stdout and "--out DIR" in run.stdout
