@@ -3,7 +3,8 @@
 Commands: ``budget`` (the paper's GPU memory model and a proposed stream count and
 max offset, docs/performance_budget.md), ``export`` (a crowd shot over a frame range
 as UsdSkel, docs/usd_export.md), ``snapshot`` (exact snapshots of a shot for chunked
-exports, docs/snapshots.md), ``preview`` (a crowd rendered headless to PNG frames
+exports) and ``stitch`` (chunk exports joined into one stage; both docs/snapshots.md),
+``preview`` (a crowd rendered headless to PNG frames
 and an MP4, docs/preview.md), ``demo`` (the stadium demo end to end,
 docs/pipeline.md) and ``build-extension`` (the Blender extension zip with its bundled
 wheels, ``crowd_addon/packaging.py``).
@@ -217,6 +218,44 @@ def _run_export(args) -> int:
             if result.started_from is not None else
             "  no snapshot of this crowd before the shot: simulated from its start frame",
             f"  left {result.snapshot} for the next chunk"] if result.snapshot else [])))
+    return 0
+
+
+# ------------------------------------------------------------------------- stitch
+def _add_stitch(subparsers) -> None:
+    p = subparsers.add_parser(
+        "stitch",
+        help="join chunk exports of one shot into one stage",
+        description="Join the USD exports of consecutive chunks of one shot (crowd export "
+                    "--frames A-B --snapshots DIR, one per chunk) into one stage that reads "
+                    "back as the export of the whole range. The stitched stage reads the "
+                    "chunks' characters and blends where they are (relative paths): keep "
+                    "them beside it. Nothing is written unless it all succeeds "
+                    "(docs/snapshots.md).",
+        epilog="example: crowd stitch --out shot.usdc chunks/c1/shot.usdc "
+               "chunks/c2/shot.usdc")
+    p.add_argument("chunks", nargs="+", type=path_arg, metavar="CHUNK_USD",
+                   help="the chunks' main layers, any order")
+    p.add_argument("--out", required=True, type=path_arg, metavar="SHOT_USD",
+                   help="main layer to write (.usdc, .usd or .usda)")
+    p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    p.set_defaults(handler=_run_stitch)
+
+
+def _run_stitch(args) -> int:
+    import dataclasses
+    import json
+
+    from .usd.stitch import stitch
+    result = stitch(args.chunks, args.out, progress=progress_printer("crowd stitch"))
+    if args.json:
+        print(json.dumps({**dataclasses.asdict(result), "bytes": result.bytes}))
+        return 0
+    print(f"wrote {result.path} and {len(result.files) - 1} layers in {result.layers_dir} "
+          f"({result.bytes:,} B): {len(result.chunks)} chunks, frames {result.frames[0]}-"
+          f"{result.frames[1]}, {result.agents:,} agents ({result.shared_agents:,} shared, "
+          f"{result.clip_agents:,} on value clips, {result.moving_agents:,} moving), "
+          f"{result.seconds:.1f} s")
     return 0
 
 
@@ -502,7 +541,7 @@ def _run_build_extension(args) -> int:
 # --------------------------------------------------------------------------- main
 
 #: One ``_add_<command>`` per subcommand.
-_COMMANDS = (_add_budget, _add_export, _add_snapshot, _add_preview, _add_demo,
+_COMMANDS = (_add_budget, _add_export, _add_snapshot, _add_stitch, _add_preview, _add_demo,
              _add_build_extension)
 
 

@@ -29,6 +29,7 @@ import numpy as np
 from pxr import Sdf, Vt
 
 from ..core.config import USD_LAYOUTS, validate_config
+from ..core.config_io import config_digest
 from ..core.errors import CrowdError
 from ..core.recording import Recording
 from .agents import (ROOT, agent_names, author_agent_animations, author_agents,
@@ -414,4 +415,4 @@ def _settings(rec, shot, layout) -> dict:
             "uniques": len(rec.unique_names), "agents": int(shot.agents.size),
             "firstFrame": int(rec.first), "lastFrame": int(rec.last),
             "writer": "crowd_addon.usd", "version": FORMAT_VERSION, "layout": layout,
-            "substeps": int(rec.substeps)}
+            "substeps": int(rec.substeps), "configDigest": config_digest(cfg)}

@@ -1,0 +1,145 @@
+"""Chunks stitched into one stage (usd/stitch.py, ``crowd stitch``). The oracle is the
+single-process export of the whole range: pxr's UsdSkel joint transforms and the
+agents' transforms of every agent at every sample time equal it (to 1e-6), and so do
+the event tags of every stream animation."""
+
+import json
+
+import numpy as np
+import pytest
+from pxr import Usd, UsdGeom, UsdSkel
+
+from crowd_addon.cli import main
+from crowd_addon.core import Crowd, CrowdError
+from crowd_addon.core.recorder import record
+from crowd_addon.usd import export_crowd
+from crowd_addon.usd.stitch import stitch
+
+from .conftest import FIRST, LAST, make_config, simulate
+
+#: chunk ranges: blends, the queue, a cut and moves cross their boundaries
+CHUNKS = ((FIRST, 5), (6, 10), (11, LAST))
+
+
+def export_chunks(folder, substeps=1, fmt="usdc"):
+    """The whole shot in one export, and in chunks each started from the snapshot
+    before it (taken from one run, restored into a fresh crowd per chunk)."""
+    crowd = Crowd(make_config(), skinning="gpu", substeps=substeps)
+    snaps = {}
+    while crowd.frame < LAST:
+        if crowd.frame + 1 in [a for a, _ in CHUNKS]:
+            snaps[crowd.frame + 1] = crowd.snapshot()
+        simulate(crowd, crowd.frame + 1)
+        crowd.step()
+    whole = export_crowd(record(Crowd(make_config(), skinning="gpu", substeps=substeps),
+                                FIRST, LAST, on_frame=simulate), folder / f"whole.{fmt}")
+    paths = []
+    for k, (a, b) in enumerate(CHUNKS):
+        chunk = Crowd(make_config(), skinning="gpu", substeps=substeps)
+        if snaps[a].frame > chunk.frame:
+            chunk.restore(snaps[a])
+        path = folder / "chunks" / f"c{k}" / f"shot.{fmt}"
+        path.parent.mkdir(parents=True)
+        export_crowd(record(chunk, a, b, on_frame=simulate), path)
+        paths.append(path)
+    return whole, paths
+
+
+def sample_times(substeps):
+    return [f + k / substeps for f in range(FIRST, LAST + 1) for k in range(substeps)]
+
+
+def read(path, times):
+    """Per agent name: (joint local transforms (T, J, 4, 4), local-to-world (T, 4, 4))."""
+    stage = Usd.Stage.Open(str(path))
+    cache, pred = UsdSkel.Cache(), Usd.TraverseInstanceProxies()
+    out = {}
+    for prim in stage.GetPrimAtPath("/Crowd/Agents").GetChildren():
+        root = UsdSkel.Root(prim)
+        assert cache.Populate(root, pred)
+        (binding,) = cache.ComputeSkelBindings(root, pred)
+        query = cache.GetSkelQuery(binding.GetSkeleton())
+        xf = UsdGeom.Xformable(prim)
+        out[prim.GetName()] = (
+            np.array([np.array(query.ComputeJointLocalTransforms(t)) for t in times]),
+            np.array([np.array(xf.ComputeLocalToWorldTransform(t)) for t in times]))
+    return stage, out
+
+
+def stream_events(stage):
+    out = {}
+    for prim in stage.Traverse():
+        if prim.GetPath().pathString.startswith("/Crowd/Streams/"):
+            crowd = prim.GetCustomDataByKey("crowd") or {}
+            out[prim.GetPath().pathString] = (list(crowd.get("eventNames", [])),
+                                              list(crowd.get("eventFrames", [])))
+    return out
+
+
+@pytest.mark.parametrize("substeps, fmt", [(1, "usdc"), (2, "usda")])
+def test_stitched_chunks_read_back_as_the_whole_export(tmp_path, substeps, fmt):
+    whole, chunks = export_chunks(tmp_path, substeps, fmt)
+    result = stitch(list(reversed(chunks)), tmp_path / f"stitched.{fmt}")
+    assert result.frames == (FIRST, LAST) and result.chunks == [str(p) for p in chunks]
+    assert result.agents == whole.agents and result.moving_agents == whole.moving_agents
+    assert result.shared_agents <= whole.shared_agents and result.clip_agents > 0
+    times = sample_times(substeps)
+    want_stage, want = read(whole.path, times)
+    got_stage, got = read(result.path, times)
+    assert sorted(got) == sorted(want)
+    worst = 0.0
+    for name, (joints, world) in want.items():
+        worst = max(worst, float(np.abs(got[name][0] - joints).max()),
+                    float(np.abs(got[name][1] - world).max()))
+    assert worst < 1e-6, worst
+    assert stream_events(got_stage) == stream_events(want_stage)
+    info = got_stage.GetRootLayer().customLayerData["crowd"]
+    assert (info["firstFrame"], info["lastFrame"], info["substeps"]) == (FIRST, LAST, substeps)
+    assert (got_stage.GetStartTimeCode(), got_stage.GetEndTimeCode()) == \
+        (want_stage.GetStartTimeCode(), want_stage.GetEndTimeCode())
+
+
+def test_the_stitched_stage_moves_with_its_chunks(tmp_path):
+    """Relative paths: the stitched shot and its chunks can move together."""
+    import shutil
+    (tmp_path / "a").mkdir()
+    whole, chunks = export_chunks(tmp_path / "a")
+    stitch(chunks, tmp_path / "a" / "stitched.usdc")
+    shutil.move(str(tmp_path / "a"), str(tmp_path / "b"))
+    times = sample_times(1)
+    _, want = read(tmp_path / "b" / "whole.usdc", times)
+    _, got = read(tmp_path / "b" / "stitched.usdc", times)
+    for name in want:
+        np.testing.assert_allclose(got[name][0], want[name][0], atol=1e-6)
+
+
+def test_bad_chunk_sets_are_named_and_nothing_is_written(tmp_path):
+    whole, chunks = export_chunks(tmp_path)
+    out = tmp_path / "stitched.usdc"
+    with pytest.raises(CrowdError, match="leave a gap"):
+        stitch([chunks[0], chunks[2]], out)
+    with pytest.raises(CrowdError, match="overlap"):
+        stitch([chunks[0], whole.path], out)
+    other = make_config()
+    other.agent_position[0] += 1.0                # the same settings, another crowd
+    lone = export_crowd(record(Crowd(other, skinning="gpu"), 6, 10), tmp_path / "other.usdc")
+    with pytest.raises(CrowdError, match="configDigest"):
+        stitch([chunks[0], lone.path, chunks[2]], out)
+    (tmp_path / "text.usda").write_text("#usda 1.0\n")
+    with pytest.raises(CrowdError, match="not a crowd export"):
+        stitch([tmp_path / "text.usda"], out)
+    with pytest.raises(CrowdError, match="no such chunk"):
+        stitch([tmp_path / "nope.usdc"], out)
+    with pytest.raises(CrowdError, match="no chunks"):
+        stitch([], out)
+    assert not out.exists() and not (tmp_path / "stitched.layers").exists()
+
+
+def test_crowd_stitch_command(tmp_path, capsys):
+    _, chunks = export_chunks(tmp_path)
+    out = tmp_path / "shot.usdc"
+    assert main(["stitch", "--out", str(out), *map(str, chunks), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["frames"] == [FIRST, LAST] and summary["path"] == str(out)
+    assert main(["stitch", "--out", str(out), str(chunks[0]), str(chunks[2])]) == 2
+    assert "crowd stitch: error:" in capsys.readouterr().err
