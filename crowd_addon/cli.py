@@ -154,6 +154,15 @@ def _add_export(subparsers) -> None:
                      help="a .blend whose scene has Crowd settings (needs the bpy module; "
                           "inside Blender: blender -b scene.blend -c crowd export ...)")
     add_shot_arguments(p)
+    farm = p.add_argument_group("chunks on a Dask cluster (pip install 'crowd_addon[farm]')")
+    farm.add_argument("--workers", type=int_at_least(1), default=None, metavar="N",
+                      help="export in chunks on a local Dask cluster of N processes, then "
+                           "stitch them (docs/snapshots.md); the chunks and their "
+                           "snapshots go to <out stem>.chunks/")
+    farm.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
+                      help="run the chunks on this running Dask scheduler instead")
+    farm.add_argument("--chunk-frames", type=int_at_least(1), default=None, metavar="N",
+                      help="frames per chunk (default: two chunks per worker)")
     p.set_defaults(handler=_run_export)
 
 
@@ -161,42 +170,17 @@ def _run_export(args) -> int:
     import dataclasses
     import json
 
-    if args.config:
-        from .core.config_io import load_config
-        from .core.crowd import Crowd
-        from .core.files import folders_made
-        from .core.recorder import record
-        from .core.snapshot import ShotSnapshots
-        from .gpu.preview_render import writable_dir
-        from .usd import check_export, export_crowd
-        if args.frames is None:
-            raise CrowdError("--frames FIRST-LAST is required with --config (a .blend "
-                             "gives its scene's frame range)")
-        config = load_config(args.config)
-        crowd = Crowd(config, skinning="gpu",          # checks the agents' references
-                      substeps=args.substeps)
-        folder = writable_dir(os.path.dirname(os.path.abspath(args.out)))
-        with folders_made(folder):                      # gone again if the export fails
-            check_export(config, args.out, args.agents, args.layout)   # before simulating
-            progress = progress_printer("crowd export")
-            snaps = ShotSnapshots(args.snapshots, crowd, args.frames[0]) \
-                if args.snapshots else None
-            shot = record(crowd, *args.frames, progress=progress)
-            if snaps is not None:
-                snaps.recorded()
-            result = export_crowd(shot, args.out, agents=args.agents, progress=progress,
-                                  layout=args.layout)
-            if snaps is not None:
-                result = dataclasses.replace(result, started_from=snaps.started_from,
-                                             snapshot=snaps.keep())
-    else:                       # the scene's Crowd settings, baked as the panel does
-        from .blender.cli_commands import export_blend
-        config, result = export_blend(
-            args.out, args.frames, blend=args.blend, scene=args.scene, agents=args.agents,
-            layout=args.layout, substeps=args.substeps, trust_scripts=args.trust_scripts,
-            snapshots=args.snapshots, progress=progress_printer("crowd export"),
-            on_bake=lambda done, total, message: print(
-                f"crowd export: {message}", file=sys.stderr, flush=True))
+    from .farm import ShotSource, export_chunk
+    source = ShotSource(config=args.config, blend=args.blend, scene=args.scene,
+                        trust_scripts=args.trust_scripts, agents=args.agents,
+                        layout=args.layout, substeps=args.substeps)
+    progress = progress_printer("crowd export")
+    if args.workers is not None or args.scheduler is not None:
+        return _run_farm_export(args, source, progress)
+    config, result = export_chunk(
+        source, args.frames, args.out, args.snapshots, progress=progress,
+        on_bake=lambda done, total, message: print(f"crowd export: {message}",
+                                                   file=sys.stderr, flush=True))
     if args.json:
         print(json.dumps({**dataclasses.asdict(result), "bytes": result.bytes}))
         return 0
@@ -218,6 +202,28 @@ def _run_export(args) -> int:
             if result.started_from is not None else
             "  no snapshot of this crowd before the shot: simulated from its start frame",
             f"  left {result.snapshot} for the next chunk"] if result.snapshot else [])))
+    return 0
+
+
+def _run_farm_export(args, source, progress) -> int:
+    from .farm import chunk_folder, farm_export, summary_json
+    if args.frames is None:
+        raise CrowdError("--workers and --scheduler need --frames FIRST-LAST")
+    if args.snapshots is not None:
+        raise CrowdError("--workers keeps its snapshots beside its chunks "
+                         "(<out stem>.chunks/snapshots); leave out --snapshots")
+    result = farm_export(source, args.out, args.frames, workers=args.workers or 2,
+                         scheduler=args.scheduler, chunk_frames=args.chunk_frames,
+                         progress=progress)
+    if args.json:
+        print(summary_json(result))
+        return 0
+    s, sec = result.stitch, result.seconds
+    print(f"wrote {s.path} ({s.layers_dir}) stitched from {len(result.chunks)} chunks in "
+          f"{chunk_folder(args.out)}: frames {s.frames[0]}-{s.frames[1]}, {s.agents:,} "
+          f"agents ({s.clip_agents:,} on value clips)\n"
+          f"  {sec['total']:.1f} s (snapshots {sec['snapshots']:.1f} s, chunks "
+          f"{sec['chunks']:.1f} s, stitch {sec['stitch']:.1f} s)")
     return 0
 
 

@@ -395,7 +395,8 @@ def write_snapshots(crowd, folder: SnapshotFolder, first: int, last: int, every:
     if first > last:
         raise CrowdError(f"snapshots: frames {first}-{last}: the first is after the last")
     folder.start(crowd, first)
-    wanted = set(range(first - 1, last + 1, every)) | {last}
+    start = crowd.config.start_frame              # a new crowd is there already
+    wanted = {f for f in range(first - 1, last + 1, every) if f > start} | {last}
     written, total = [], last - crowd.frame
     if crowd.frame in wanted:
         written.append(folder.save(crowd))

@@ -1,0 +1,165 @@
+"""``crowd export --workers N`` on a Dask cluster (crowd_addon/farm.py): a shot exported
+in four chunks by a ``LocalCluster`` of two worker processes, then stitched, reads back
+as the single-process export of the whole range (pxr UsdSkel joint and agent
+transforms of every agent at every frame, to 1e-6) with the same events in its
+stream animations. A chunk that fails is retried once, then named, and the stage
+already at the output is left as it was."""
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from dask.distributed import LocalCluster  # a missing Dask fails the run, never skips
+
+from crowd_addon.cli import main
+from crowd_addon.core.config_io import save_config
+from crowd_addon.farm import chunk_folder, chunk_ranges
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))       # tests/: the usd tests
+from usd.test_snapshot_export import show_config  # noqa: E402
+from usd.test_stitch import read, stream_events  # noqa: E402
+
+FRAMES = (1, 40)
+
+
+@pytest.fixture(scope="module")
+def shot(tmp_path_factory):
+    """The configuration and the single-process export of the whole range."""
+    tmp = tmp_path_factory.mktemp("farm")
+    config = tmp / "crowd.json"
+    save_config(show_config(), config)
+    whole = tmp / "whole" / "shot.usdc"
+    assert main(["export", "--config", str(config), "--out", str(whole), "--frames",
+                 f"{FRAMES[0]}-{FRAMES[1]}"]) == 0
+    return tmp, config, whole
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                      dashboard_address=None) as c:
+        yield c
+
+
+def same_shot(path, whole):
+    times = list(range(FRAMES[0], FRAMES[1] + 1))
+    want_stage, want = read(whole, times)
+    got_stage, got = read(path, times)
+    assert sorted(got) == sorted(want)
+    worst = max(max(float(np.abs(got[n][0] - want[n][0]).max()),
+                    float(np.abs(got[n][1] - want[n][1]).max())) for n in want)
+    assert worst < 1e-6, worst
+    assert stream_events(got_stage) == stream_events(want_stage) != {}
+
+
+def test_four_chunks_on_two_local_workers_equal_the_single_process_export(shot, capsys):
+    tmp, config, whole = shot
+    out = tmp / "farm" / "shot.usdc"
+    assert main(["export", "--config", str(config), "--out", str(out), "--frames",
+                 f"{FRAMES[0]}-{FRAMES[1]}", "--workers", "2", "--json"]) == 0
+    captured = capsys.readouterr()
+    summary = json.loads(captured.out)
+    assert [c["frames"] for c in summary["chunk_exports"]] == \
+        [list(r) for r in chunk_ranges(*FRAMES, 10)]                # two per worker
+    assert [c["started_from"] for c in summary["chunk_exports"]] == [None, 10, 20, 30]
+    assert "crowd export: chunks 4/4" in captured.err
+    assert "crowd export: snapshots" in captured.err
+    same_shot(out, whole)
+    log = (tmp / "farm" / "shot.chunks" / "attempts.log").read_text()
+    assert sorted(line.split(": done on")[0].split(" ", 2)[2] for line in log.splitlines()) \
+        == [f"chunk {k} (frames {a}-{b})" for k, (a, b) in enumerate(chunk_ranges(*FRAMES, 10))]
+
+
+def test_an_existing_scheduler_runs_the_chunks(shot, cluster, capsys):
+    tmp, config, whole = shot
+    out = tmp / "sched" / "shot.usda"
+    assert main(["export", "--config", str(config), "--out", str(out), "--frames",
+                 f"{FRAMES[0]}-{FRAMES[1]}", "--scheduler", cluster.scheduler_address,
+                 "--chunk-frames", "13"]) == 0
+    assert "stitched from 4 chunks" in capsys.readouterr().out     # 13 + 13 + 13 + 1
+    same_shot(out, whole)
+
+
+def test_a_failing_chunk_is_retried_once_named_and_the_old_stage_kept(shot, cluster,
+                                                                      capsys):
+    tmp, config, whole = shot
+    out = tmp / "kept" / "shot.usdc"
+    args = ["export", "--config", str(config), "--out", str(out), "--frames",
+            f"{FRAMES[0]}-{FRAMES[1]}", "--scheduler", cluster.scheduler_address]
+    assert main(args) == 0
+    capsys.readouterr()
+    before = out.read_bytes()
+    # chunk 2's output folder cannot be made: a file stands where it goes
+    blocker = next(p for p in (tmp / "kept" / "shot.chunks").glob("c0002_*"))
+    for f in blocker.rglob("*"):
+        if f.is_file():
+            f.unlink()
+    import shutil
+    shutil.rmtree(blocker)
+    blocker.write_text("in the way")
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert "chunk 2 (frames 21-30) failed twice" in err and "nothing was stitched" in err
+    assert out.read_bytes() == before
+    blocker.unlink()
+    assert main(args) == 0                                          # and it recovers
+    same_shot(out, whole)
+    log = (tmp / "kept" / "shot.chunks" / "attempts.log").read_text()
+    assert log.count("chunk 2 (frames 21-30): failed on") == 2          # tried twice
+    assert log.count("chunk 2 (frames 21-30): done on") == 2            # before and after
+
+
+def test_farm_options_are_checked(shot, capsys):
+    tmp, config, _ = shot
+    base = ["export", "--config", str(config), "--out", str(tmp / "x.usdc")]
+    assert main(base + ["--workers", "2"]) == 2
+    assert "--workers and --scheduler need --frames" in capsys.readouterr().err
+    assert main(base + ["--frames", "1-4", "--workers", "2", "--snapshots",
+                        str(tmp)]) == 2
+    assert "leave out --snapshots" in capsys.readouterr().err
+    assert main(base + ["--frames", "1-4", "--scheduler", "tcp://127.0.0.1:9"]) == 2
+    assert "cannot connect" in capsys.readouterr().err
+    assert chunk_folder(tmp / "x.usdc") == str(tmp / "x.chunks")
+
+
+PREPARE = """
+import sys, bpy
+sys.path.insert(0, "sample_scenes")
+from build_stadium import build_stadium
+from crowd_addon import register
+build_stadium(sys.argv[1], log=None)
+bpy.ops.wm.open_mainfile(filepath=sys.argv[1])
+register()
+from crowd_addon.blender.stadium import setup_crowd
+setup_crowd(bpy.context.scene, hits=2, slots=16)
+bpy.ops.wm.save_as_mainfile(filepath=sys.argv[2])
+"""
+
+
+def test_a_blend_shot_on_workers_equals_its_single_process_export(tmp_path):
+    """Each worker opens the .blend with the bpy module, although the process that
+    started the cluster has imported bpy (its Blender script folders on the path the
+    workers inherit used to hide the module from them)."""
+    import subprocess
+    root = Path(__file__).resolve().parents[2]
+    blend = tmp_path / "crowd.blend"
+    run = subprocess.run([sys.executable, "-c", PREPARE, str(tmp_path / "stadium.blend"),
+                          str(blend)], cwd=root, capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr[-2000:]
+    outs = {}
+    for name, extra in (("plain", ()), ("farm", ("--workers", "2"))):
+        outs[name] = tmp_path / name / "shot.usdc"
+        run = subprocess.run([sys.executable, "-m", "crowd_addon", "export", "--blend",
+                              str(blend), "--frames", "1-16", "--out", str(outs[name]),
+                              *extra], cwd=root, capture_output=True, text=True, timeout=600)
+        assert run.returncode == 0, run.stderr[-3000:]
+    times = list(range(1, 17))
+    want_stage, want = read(outs["plain"], times)
+    got_stage, got = read(outs["farm"], times)
+    assert len(got) == len(want) == 2000
+    worst = max(max(float(np.abs(got[n][0] - want[n][0]).max()),
+                    float(np.abs(got[n][1] - want[n][1]).max())) for n in want)
+    assert worst < 1e-6, worst
+    assert stream_events(got_stage) == stream_events(want_stage)
