@@ -1,4 +1,4 @@
-"""Seeking in a long shot: from the nearest snapshot against from the start (issue 18).
+"""Seeking in a long shot from snapshots, and exporting it in chunks (issue 18).
 
 The paper's configuration (65,000 agents, 256 streams, M = 60, 800 slots, 82 bones)
 running the cue-heavy show of ``core_frame.py`` (a Mexican wave lapping the stadium
@@ -8,9 +8,13 @@ keeping a snapshot every ``--every`` frames (K, default 30) over the last
 figure is printed, not allocated). Then it jumps to random frames of that window and
 to the last frame, and measures each jump from the nearest snapshot, and once the
 same last frame reached from the start (reset and step) as the baseline. Every jump
-is checked against the straight run's poses. Prints the figures and ends with one
-JSON line (``seek_s_from_snapshot``: the slowest jump, ``seek_s_median``,
-``seek_s_from_start``, ``snapshot_bytes``, ``snapshot_ms``, ``restore_ms``).
+is checked against the straight run's poses. Then it exports ``--export-frames`` of
+the show in one process and in chunks on a local Dask cluster of 1 and 2 workers
+(snapshot pass, chunks, stitch; each stitched stage checked against the single
+export). Prints the figures and ends with one JSON line (``seek_s_from_snapshot``:
+the slowest jump, ``seek_s_median``, ``seek_s_from_start``, ``snapshot_bytes``,
+``snapshot_ms``, ``restore_ms``, ``export_fps_single``, ``export_fps_1_worker``,
+``export_fps_2_workers``).
 
     .venv/bin/python benchmarks/scrub.py [--frames 10000] [--every 30] [--quick]
 """
@@ -42,6 +46,8 @@ def main(argv=None):
     ap.add_argument("--window", type=int, default=300,
                     help="frames before the last where snapshots are kept")
     ap.add_argument("--jumps", type=int, default=20)
+    ap.add_argument("--export-frames", type=int, default=120,
+                    help="frames of the export throughput figures")
     ap.add_argument("--quick", action="store_true", help="1,000 frames (smoke run)")
     args = ap.parse_args(argv)
     frames = 1_000 if args.quick else args.frames
@@ -108,6 +114,14 @@ def main(argv=None):
           f"whole {frames:,}-frame shot at K = {args.every} would keep "
           f"{frames // args.every:,} of them ({frames // args.every * snap_bytes / 2**30:.1f} "
           f"GiB: the memory cap doubles K until they fit)")
+    exp = export_throughput(args.agents, 20 if args.quick else args.export_frames)
+    print(f"  export of {exp['frames']} frames of the same show ({exp['clip_agents']:,} agents "
+          f"on value clips, {exp['bytes'] / 2**20:,.0f} MiB): single process "
+          f"{exp['fps_single']:.2f} frames/s ({exp['s_single']:.1f} s); in chunks on a local "
+          f"Dask cluster, stitched: 1 worker {exp['fps_1']:.2f} frames/s "
+          f"({exp['s_1']:.1f} s), 2 workers {exp['fps_2']:.2f} frames/s ({exp['s_2']:.1f} s: "
+          f"snapshots {exp['steps_2']['snapshots']:.1f}, chunks {exp['steps_2']['chunks']:.1f}, "
+          f"stitch {exp['steps_2']['stitch']:.1f}); this machine has {os.cpu_count()} cores")
     print(json.dumps({
         "seek_s_from_snapshot": round(worst, 4),
         "seek_s_median": round(statistics.median(seeks), 4),
@@ -117,7 +131,66 @@ def main(argv=None):
         "restore_ms": round(restore_ms, 1),
         "every": args.every, "frames": frames, "agents": args.agents,
         "straight_run_s": round(straight_s, 1),
+        "export_fps_single": round(exp["fps_single"], 3),
+        "export_fps_1_worker": round(exp["fps_1"], 3),
+        "export_fps_2_workers": round(exp["fps_2"], 3),
+        "export_frames": exp["frames"],
     }))
+
+
+def export_throughput(agents: int, frames: int) -> dict:
+    """Frames per second of exporting ``frames`` frames of the show: one process
+    (``crowd export``), then chunked on a local Dask cluster of 1 and of 2 workers,
+    snapshots and stitch included (``crowd export --workers N``). Each stitched stage
+    is checked against the single export's poses at a few frames."""
+    import tempfile
+
+    from crowd_addon.core.config_io import save_config
+    from crowd_addon.core.synthetic import humanoid_mesh
+    from crowd_addon.farm import ShotSource, export_chunk, farm_export
+    cfg = show_config(agents, frames)
+    cfg.add_mesh(humanoid_mesh(cfg.skeletons["fan"]), lods=())
+    out = {"frames": frames}
+    with tempfile.TemporaryDirectory() as tmp:
+        path = os.path.join(tmp, "crowd.json")
+        save_config(cfg, path)
+        source, span = ShotSource(config=path), (cfg.start_frame + 1, cfg.start_frame + frames)
+        t = time.perf_counter()
+        _, single = export_chunk(source, span, os.path.join(tmp, "single", "shot.usdc"))
+        out["s_single"] = time.perf_counter() - t
+        out["bytes"], out["clip_agents"] = single.bytes, single.clip_agents
+        for w in (1, 2):
+            t = time.perf_counter()
+            result = farm_export(source, os.path.join(tmp, f"w{w}", "shot.usdc"), span,
+                                 workers=w)
+            out[f"s_{w}"] = time.perf_counter() - t
+            out[f"steps_{w}"] = result.seconds
+            _same_poses(single.path, result.stitch.path, span)
+    for k in ("single", "1", "2"):
+        out[f"fps_{k}"] = frames / out[f"s_{k}"]
+    return out
+
+
+def _same_poses(a, b, span):
+    """The stitched stage's joint transforms equal the single export's (1e-6) for 50
+    agents at the first, middle and last frame."""
+    from pxr import Usd, UsdSkel
+    times = (span[0], (span[0] + span[1]) // 2, span[1])
+    stages = [Usd.Stage.Open(p) for p in (a, b)]
+    caches = [UsdSkel.Cache() for _ in stages]
+    pred = Usd.TraverseInstanceProxies()
+    for name in [p.GetName() for p in stages[0].GetPrimAtPath("/Crowd/Agents").GetChildren()][
+            ::1300][:50]:
+        got = []
+        for stage, cache in zip(stages, caches):
+            root = UsdSkel.Root(stage.GetPrimAtPath(f"/Crowd/Agents/{name}"))
+            cache.Populate(root, pred)
+            (binding,) = cache.ComputeSkelBindings(root, pred)
+            query = cache.GetSkelQuery(binding.GetSkeleton())
+            got.append(np.array([np.array(query.ComputeJointLocalTransforms(t))
+                                 for t in times]))
+        if np.abs(got[0] - got[1]).max() > 1e-6:
+            raise AssertionError(f"stitched {name} differs from the single export")
 
 
 if __name__ == "__main__":

@@ -162,7 +162,8 @@ def _add_export(subparsers) -> None:
     farm.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
                       help="run the chunks on this running Dask scheduler instead")
     farm.add_argument("--chunk-frames", type=int_at_least(1), default=None, metavar="N",
-                      help="frames per chunk (default: two chunks per worker)")
+                      help="frames per chunk (default: one chunk per worker; each "
+                           "chunk's stream layers repeat the M - 1 frames before it)")
     p.set_defaults(handler=_run_export)
 
 

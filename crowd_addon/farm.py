@@ -188,8 +188,9 @@ class FarmResult:
 def farm_export(source: ShotSource, out, frames, workers: int = 2, scheduler=None,
                 chunk_frames: int | None = None, progress=None) -> FarmResult:
     """Export ``frames`` of ``source``'s shot to ``out`` in chunks on a Dask cluster
-    and stitch them (the module docstring). ``chunk_frames`` defaults to the frames
-    split in two chunks per worker. ``scheduler``: the address of a running Dask
+    and stitch them (the module docstring). ``chunk_frames`` defaults to one chunk per
+    worker: every chunk's stream layers repeat the M - 1 history frames before it, so
+    fewer, longer chunks write less. ``scheduler``: the address of a running Dask
     scheduler (``tcp://HOST:PORT``); default a ``LocalCluster`` of ``workers``
     single-threaded processes, closed at the end. ``progress(stage, done, total)``:
     ``snapshots``, ``chunks`` (one count over every worker) and the stitch's stages."""
@@ -197,7 +198,7 @@ def farm_export(source: ShotSource, out, frames, workers: int = 2, scheduler=Non
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise CrowdError(f"--workers must be at least 1, got {workers!r}")
     first, last = int(frames[0]), int(frames[1])
-    size = chunk_frames or max(1, math.ceil((last - first + 1) / (2 * workers)))
+    size = chunk_frames or max(1, math.ceil((last - first + 1) / workers))
     ranges = chunk_ranges(first, last, size)
     folder = chunk_folder(out)
     snaps_dir = os.path.join(folder, "snapshots")

@@ -58,11 +58,12 @@ def test_four_chunks_on_two_local_workers_equal_the_single_process_export(shot, 
     tmp, config, whole = shot
     out = tmp / "farm" / "shot.usdc"
     assert main(["export", "--config", str(config), "--out", str(out), "--frames",
-                 f"{FRAMES[0]}-{FRAMES[1]}", "--workers", "2", "--json"]) == 0
+                 f"{FRAMES[0]}-{FRAMES[1]}", "--workers", "2", "--chunk-frames", "10",
+                 "--json"]) == 0
     captured = capsys.readouterr()
     summary = json.loads(captured.out)
     assert [c["frames"] for c in summary["chunk_exports"]] == \
-        [list(r) for r in chunk_ranges(*FRAMES, 10)]                # two per worker
+        [list(r) for r in chunk_ranges(*FRAMES, 10)]                # four chunks
     assert [c["started_from"] for c in summary["chunk_exports"]] == [None, 10, 20, 30]
     assert "crowd export: chunks 4/4" in captured.err
     assert "crowd export: snapshots" in captured.err
@@ -87,7 +88,8 @@ def test_a_failing_chunk_is_retried_once_named_and_the_old_stage_kept(shot, clus
     tmp, config, whole = shot
     out = tmp / "kept" / "shot.usdc"
     args = ["export", "--config", str(config), "--out", str(out), "--frames",
-            f"{FRAMES[0]}-{FRAMES[1]}", "--scheduler", cluster.scheduler_address]
+            f"{FRAMES[0]}-{FRAMES[1]}", "--scheduler", cluster.scheduler_address,
+            "--chunk-frames", "10"]
     assert main(args) == 0
     capsys.readouterr()
     before = out.read_bytes()
