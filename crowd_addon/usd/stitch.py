@@ -99,6 +99,7 @@ class _Chunk:
             self.own_dir = os.path.dirname(self.own.realPath)
         agents = self.layer.GetPrimAtPath(f"/{ROOT}/Agents")
         self.names = list(agents.nameChildren.keys()) if agents else []
+        self._offsets = {}                   # offset animation path -> what it plays
 
     def resolve(self, asset, base=None) -> str:
         return os.path.normpath(os.path.join(base or self.dir, asset))
@@ -115,9 +116,19 @@ class _Chunk:
             spec = self.own.GetPrimAtPath(target)
             return ("clips", dict(spec.GetInfo("clips")["default"]),
                     spec.attributes["joints"].default)
-        ref = self.layer.GetPrimAtPath(target).referenceList.prependedItems[0]
-        return ("static", self.resolve(ref.assetPath), target.GetParentPath().name,
+        found = self._offsets.get(target)
+        if found is None:
+            ref = self.layer.GetPrimAtPath(target).referenceList.prependedItems[0]
+            found = self._offsets[target] = (
+                "static", self.resolve(ref.assetPath), target.GetParentPath().name,
                 int(round(ref.layerOffset.offset)))
+        return found
+
+    def moving(self, name) -> bool:
+        """Whether agent ``name``'s transform has time samples here (the export writes
+        both ops' samples or neither)."""
+        return bool(self.layer.ListTimeSamplesForPath(
+            Sdf.Path(f"/{ROOT}/Agents/{name}.{_XFORM[0]}")))
 
 
 def _open(real, shown):
@@ -353,37 +364,38 @@ def _agents(main, parts, static, merged, offsets, own_names, files) -> int:
     stitched stage's folder, and join the transforms of agents that moved. Returns
     how many moved."""
     first = parts[0]
-    rebased = {}
+    rebased = {}                    # a chunk's reference list -> the same from here
     own = set(own_names)
     moved = 0
+    same_folder = os.path.normpath(first.dir) == os.path.normpath(files.directory)
     with Sdf.ChangeBlock():
         for name in first.names:
             prim = main.GetPrimAtPath(f"/{ROOT}/Agents/{name}")
-            refs = list(prim.referenceList.prependedItems)
-            new = []
-            for r in refs:
-                if r.assetPath not in rebased:
-                    rebased[r.assetPath] = _relative(first.resolve(r.assetPath),
-                                                     files.directory)
-                new.append(Sdf.Reference(rebased[r.assetPath], r.primPath, r.layerOffset))
-            prim.referenceList.prependedItems = new
+            if not same_folder:
+                refs = prim.referenceList.prependedItems
+                key = tuple(r.assetPath for r in refs)
+                if key not in rebased:
+                    rebased[key] = [Sdf.Reference(_relative(first.resolve(r.assetPath),
+                                                            files.directory),
+                                                  r.primPath, r.layerOffset) for r in refs]
+                prim.referenceList.prependedItems = rebased[key]
             if name in own:
                 target = Sdf.Path(f"/{ROOT}/AgentAnimations/{name}")
             else:
                 _, real, _, o = static[name]
                 target = offsets[(merged[real], o)]
             prim.relationships["skel:animationSource"].targetPathList.explicitItems = [target]
-            moved += _join_moves(main, prim.path, parts, name)
+            if any(c.moving(name) for c in parts):
+                _join_moves(main, prim.path, parts, name)
+                moved += 1
     return moved
 
 
-def _join_moves(main, path, parts, name) -> int:
-    """Time samples of an agent's transform over the whole shot when any chunk has
-    some (its value at a chunk's first and last frame where that chunk has none)."""
+def _join_moves(main, path, parts, name):
+    """Time samples of an agent's transform over the whole shot (some chunk has
+    some): each chunk's, or its value at the chunk's first and last frame where that
+    chunk has none."""
     agent = f"/{ROOT}/Agents/{name}"
-    if not any(c.layer.ListTimeSamplesForPath(f"{agent}.{_XFORM[0]}") or
-               c.layer.ListTimeSamplesForPath(f"{agent}.{_XFORM[1]}") for c in parts):
-        return 0
     for op in _XFORM:
         dst = path.AppendProperty(op)
         for t in main.ListTimeSamplesForPath(dst):
@@ -398,4 +410,3 @@ def _join_moves(main, path, parts, name) -> int:
                 value = c.layer.GetAttributeAtPath(src).default
                 for t in sorted({float(c.first), float(c.last)}):
                     main.SetTimeSample(dst, t, value)
-    return 1
