@@ -3,8 +3,8 @@
 Commands: ``budget`` (the paper's GPU memory model and a proposed stream count and
 max offset, docs/performance_budget.md), ``export`` (a crowd shot over a frame range
 as UsdSkel, docs/usd_export.md), ``snapshot`` (exact snapshots of a shot for chunked
-exports) and ``stitch`` (chunk exports joined into one stage; both docs/snapshots.md),
-``preview`` (a crowd rendered headless to PNG frames
+exports), ``stitch`` (chunk exports joined into one stage) and ``farm`` (a shot list
+exported in chunks on one Dask cluster; all three docs/snapshots.md), ``preview`` (a crowd rendered headless to PNG frames
 and an MP4, docs/preview.md), ``demo`` (the stadium demo end to end,
 docs/pipeline.md) and ``build-extension`` (the Blender extension zip with its bundled
 wheels, ``crowd_addon/packaging.py``).
@@ -207,7 +207,9 @@ def _run_export(args) -> int:
 
 
 def _run_farm_export(args, source, progress) -> int:
-    from .farm import chunk_folder, farm_export, summary_json
+    import json
+
+    from .farm import chunk_folder, farm_export, summary
     if args.frames is None:
         raise CrowdError("--workers and --scheduler need --frames FIRST-LAST")
     if args.snapshots is not None:
@@ -217,15 +219,60 @@ def _run_farm_export(args, source, progress) -> int:
                          scheduler=args.scheduler, chunk_frames=args.chunk_frames,
                          progress=progress)
     if args.json:
-        print(summary_json(result))
+        print(json.dumps(summary(result)))
         return 0
     s, sec = result.stitch, result.seconds
     print(f"wrote {s.path} ({s.layers_dir}) stitched from {len(result.chunks)} chunks in "
           f"{chunk_folder(args.out)}: frames {s.frames[0]}-{s.frames[1]}, {s.agents:,} "
           f"agents ({s.clip_agents:,} on value clips)\n"
-          f"  {sec['total']:.1f} s (snapshots {sec['snapshots']:.1f} s, chunks "
+          f"  {sec['total']:.1f} s (snapshot pass {sec['snapshots']:.1f} s, slowest chunk "
           f"{sec['chunks']:.1f} s, stitch {sec['stitch']:.1f} s)")
     return 0
+
+
+# --------------------------------------------------------------------------- farm
+def _add_farm(subparsers) -> None:
+    p = subparsers.add_parser(
+        "farm",
+        help="export many shots in chunks on one Dask cluster",
+        description="Export every shot of a shot list (JSON: {\"shots\": [{\"config\" or "
+                    "\"blend\": ..., \"frames\": \"FIRST-LAST\", \"out\": ..., optional "
+                    "\"scene\", \"trust_scripts\", \"agents\", \"layout\", \"substeps\", "
+                    "\"chunk_frames\"}]}, paths relative to the file) as crowd export "
+                    "--workers does: every shot's snapshot pass, chunks and stitch as tasks "
+                    "of one Dask cluster. A shot that fails is named and writes no stage; "
+                    "the others are written (docs/snapshots.md).",
+        epilog="example: crowd farm shots.json --workers 8")
+    p.add_argument("shots", type=path_arg, metavar="SHOTS_JSON", help="the shot list")
+    p.add_argument("--workers", type=int_at_least(1), default=2, metavar="N",
+                   help="local Dask worker processes (default 2)")
+    p.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
+                   help="run on this running Dask scheduler instead")
+    p.add_argument("--json", action="store_true",
+                   help="print one JSON object: a summary or an error per shot")
+    p.set_defaults(handler=_run_farm)
+
+
+def _run_farm(args) -> int:
+    import json
+
+    from .farm import farm_export_shots, load_shot_list, summary
+    shots = load_shot_list(args.shots)
+    results = farm_export_shots(shots, args.workers, args.scheduler,
+                                progress_printer("crowd farm"))
+    failed = [r for r in results if isinstance(r, CrowdError)]
+    if args.json:
+        print(json.dumps({"shots": [{"error": str(r)} if isinstance(r, CrowdError)
+                                    else summary(r) for r in results]}))
+    else:
+        for shot, r in zip(shots, results):
+            if not isinstance(r, CrowdError):
+                s = r.stitch
+                print(f"wrote {s.path}: frames {s.frames[0]}-{s.frames[1]}, {s.agents:,} "
+                      f"agents, {len(r.chunks)} chunks")
+    for r in failed:
+        print(f"crowd farm: error: {r}", file=sys.stderr)
+    return 2 if failed else 0
 
 
 # ------------------------------------------------------------------------- stitch
@@ -548,8 +595,8 @@ def _run_build_extension(args) -> int:
 # --------------------------------------------------------------------------- main
 
 #: One ``_add_<command>`` per subcommand.
-_COMMANDS = (_add_budget, _add_export, _add_snapshot, _add_stitch, _add_preview, _add_demo,
-             _add_build_extension)
+_COMMANDS = (_add_budget, _add_export, _add_snapshot, _add_stitch, _add_farm, _add_preview,
+             _add_demo, _add_build_extension)
 
 
 def build_parser() -> argparse.ArgumentParser:

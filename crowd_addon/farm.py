@@ -11,8 +11,11 @@ render-farm queue can run them as plain command lines too (docs/snapshots.md):
 3. :func:`crowd_addon.usd.stitch.stitch` (``crowd stitch``): the chunks joined into one
    stage.
 
-:func:`farm_export` runs the three on a Dask cluster: a ``LocalCluster`` of ``workers``
-processes by default, or an existing scheduler. Each chunk is a task retried once;
+:func:`farm_export` (``crowd export --workers N``) runs the three as tasks of a Dask
+cluster: a ``LocalCluster`` of ``workers`` processes by default, or an existing
+scheduler. :func:`farm_export_shots` (``crowd farm SHOTS_JSON``, :func:`load_shot_list`)
+runs many shots' tasks on one cluster at once. Each snapshot pass and chunk is a task
+retried once, the chunks wait for their shot's snapshots and the stitch for its chunks;
 progress from every worker shows as one ``chunks done/total`` count; a chunk that fails
 twice is reported by name with its error, and then nothing is stitched, so a stage
 already at the output is left as it was. Every attempt is logged in
@@ -33,8 +36,9 @@ from dataclasses import dataclass, field
 
 from .core.errors import CrowdError
 
-__all__ = ["ShotSource", "chunk_ranges", "chunk_folder", "write_shot_snapshots",
-           "export_chunk", "farm_export", "FarmResult"]
+__all__ = ["ShotSource", "FarmShot", "chunk_ranges", "chunk_folder", "write_shot_snapshots",
+           "export_chunk", "farm_export", "farm_export_shots", "load_shot_list",
+           "FarmResult", "summary"]
 
 
 @dataclass(frozen=True)
@@ -137,11 +141,12 @@ def export_chunk(source: ShotSource, frames, out, snapshots=None, progress=None,
                         on_bake=on_bake)
 
 
-def _run_chunk(source, frames, out, snapshots, name, log):
-    """A worker's task: :func:`export_chunk`, each attempt logged in ``log``."""
+def _run_chunk(source, frames, out, snapshots, name, log, _after=None):
+    """A worker's task: :func:`export_chunk`, each attempt logged in ``log``
+    (``_after``: the snapshot pass's result, which Dask passes once it is done)."""
     _without_blender_scripts()
     t = time.perf_counter()
-    where = f"{socket.gethostname()} pid {os.getpid()}"
+    where = _where()
     try:
         os.makedirs(os.path.dirname(out), exist_ok=True)
         _, result = export_chunk(source, frames, out, snapshots)
@@ -185,86 +190,147 @@ class FarmResult:
     seconds: dict = field(default_factory=dict)
 
 
+@dataclass(frozen=True)
+class FarmShot:
+    """One shot of a farm run: its :class:`ShotSource`, the main layer ``out``, its
+    ``frames`` (first, last) and ``chunk_frames`` (None: one chunk per worker)."""
+
+    source: ShotSource
+    out: str
+    frames: tuple
+    chunk_frames: int | None = None
+
+
 def farm_export(source: ShotSource, out, frames, workers: int = 2, scheduler=None,
                 chunk_frames: int | None = None, progress=None) -> FarmResult:
     """Export ``frames`` of ``source``'s shot to ``out`` in chunks on a Dask cluster
-    and stitch them (the module docstring). ``chunk_frames`` defaults to one chunk per
+    and stitch them (the module docstring; :func:`farm_export_shots` for one shot).
+    Raises CrowdError naming what failed."""
+    (result,) = farm_export_shots([FarmShot(source, out, frames, chunk_frames)], workers,
+                                  scheduler, progress)
+    if isinstance(result, CrowdError):
+        raise result
+    return result
+
+
+def farm_export_shots(shots, workers: int = 2, scheduler=None, progress=None) -> list:
+    """Export every :class:`FarmShot` in chunks on one Dask cluster: per shot a snapshot
+    task, then its chunk tasks (each retried once), then a stitch task, all on the
+    workers, every shot's tasks at once. ``chunk_frames`` defaults to one chunk per
     worker: every chunk's stream layers repeat the M - 1 history frames before it, so
     fewer, longer chunks write less. ``scheduler``: the address of a running Dask
     scheduler (``tcp://HOST:PORT``); default a ``LocalCluster`` of ``workers``
-    single-threaded processes, closed at the end. ``progress(stage, done, total)``:
-    ``snapshots``, ``chunks`` (one count over every worker) and the stitch's stages."""
-    from .usd.stitch import stitch
+    single-threaded processes, closed at the end. ``progress("chunks", done, total)``
+    over every shot's chunks. Returns per shot a :class:`FarmResult`, or a CrowdError
+    naming what failed (its snapshot pass, each chunk that failed twice, or its
+    stitch); a failed shot writes no stage, so one already at its output is kept."""
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise CrowdError(f"--workers must be at least 1, got {workers!r}")
-    first, last = int(frames[0]), int(frames[1])
-    size = chunk_frames or max(1, math.ceil((last - first + 1) / workers))
-    ranges = chunk_ranges(first, last, size)
-    folder = chunk_folder(out)
-    snaps_dir = os.path.join(folder, "snapshots")
-    t0 = time.perf_counter()
-    seconds = {}
-    snaps = write_shot_snapshots(source, snaps_dir, (first, last), size,
-                                 None if progress is None else
-                                 (lambda d, n: progress("snapshots", d, n)))
-    seconds["snapshots"] = time.perf_counter() - t0
-    t = time.perf_counter()
-    summaries = _run_on_cluster(source, out, ranges, snaps_dir, workers, scheduler,
-                                progress)
-    seconds["chunks"] = time.perf_counter() - t
-    t = time.perf_counter()
-    stitched = stitch([s["path"] for s in summaries], out, progress=progress)
-    seconds["stitch"] = time.perf_counter() - t
-    seconds["total"] = time.perf_counter() - t0
-    return FarmResult(stitched, summaries, snaps, seconds)
-
-
-def _run_on_cluster(source, out, ranges, snaps_dir, workers, scheduler, progress) -> list:
     try:
         from dask.distributed import Client, LocalCluster, as_completed
     except ImportError:
         raise CrowdError("--workers needs Dask: pip install 'crowd_addon[farm]' (dask "
                          "and distributed)") from None
+    t0 = time.perf_counter()
     cluster = None
-    try:
-        if scheduler:
-            try:
-                client = Client(scheduler, timeout=30)
-            except OSError as e:
-                raise CrowdError(f"--scheduler {scheduler}: cannot connect: {e}") from None
-        else:
-            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                   dashboard_address=None)
-            client = Client(cluster)
+    if scheduler:
         try:
-            names = [f"chunk {k} (frames {a}-{b})" for k, (a, b) in enumerate(ranges)]
-            log = os.path.join(chunk_folder(out), "attempts.log")
-            futures = [client.submit(_run_chunk, source, (a, b), _chunk_path(out, k, (a, b)),
-                                     snaps_dir, names[k], log, key=f"crowd-chunk-{k}-{a}-{b}-"
-                                     f"{os.getpid()}-{time.time_ns()}", retries=1, pure=False)
-                       for k, (a, b) in enumerate(ranges)]
-            which = {f.key: k for k, f in enumerate(futures)}
-            results, failed = [None] * len(ranges), []
-            done = 0
-            for f in as_completed(futures):
-                k = which[f.key]
-                if f.status == "error":
-                    failed.append(f"{names[k]} failed twice: {_error(f)}")
-                else:
-                    results[k] = f.result()
-                done += 1
-                if progress is not None:
-                    progress("chunks", done, len(ranges))
-        finally:
-            client.close()
+            client = Client(scheduler, timeout=30)
+        except OSError as e:
+            raise CrowdError(f"--scheduler {scheduler}: cannot connect: {e}") from None
+    else:
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                               dashboard_address=None)
+        client = Client(cluster)
+    try:
+        plans = [_submit(client, shot, workers, k) for k, shot in enumerate(shots)]
+        chunk_futures = [f for p in plans for f in p["chunks"]]
+        done = 0
+        for _ in as_completed(chunk_futures):
+            done += 1
+            if progress is not None:
+                progress("chunks", done, len(chunk_futures))
+        results = [_collect(p, t0) for p in plans]
     finally:
+        client.close()
         if cluster is not None:
             cluster.close()
-    if failed:
-        raise CrowdError("; ".join(failed) + f"; nothing was stitched ({out} is as it "
-                         f"was; every attempt is in "
-                         f"{os.path.join(chunk_folder(out), 'attempts.log')})")
     return results
+
+
+def _submit(client, shot, workers, k) -> dict:
+    """Submit one shot's tasks: snapshots, chunks (after the snapshots), stitch (after
+    the chunks)."""
+    first, last = int(shot.frames[0]), int(shot.frames[1])
+    size = shot.chunk_frames or max(1, math.ceil((last - first + 1) / workers))
+    ranges = chunk_ranges(first, last, size)
+    folder = chunk_folder(shot.out)
+    snaps_dir = os.path.join(folder, "snapshots")
+    log = os.path.join(folder, "attempts.log")
+    os.makedirs(folder, exist_ok=True)
+    tag = f"{os.getpid()}-{time.time_ns()}-{k}"
+    snaps = client.submit(_run_snapshots, shot.source, snaps_dir, (first, last), size, log,
+                          key=f"crowd-snapshots-{tag}", retries=1, pure=False)
+    names = [f"chunk {j} (frames {a}-{b})" for j, (a, b) in enumerate(ranges)]
+    chunks = [client.submit(_run_chunk, shot.source, (a, b), _chunk_path(shot.out, j, (a, b)),
+                            snaps_dir, names[j], log, snaps, key=f"crowd-chunk-{tag}-{j}",
+                            retries=1, pure=False)
+              for j, (a, b) in enumerate(ranges)]
+    stitched = client.submit(_run_stitch, shot.out, chunks, log, key=f"crowd-stitch-{tag}",
+                             pure=False)
+    return {"shot": shot, "names": names, "snapshots": snaps, "chunks": chunks,
+            "stitch": stitched}
+
+
+def _collect(plan, t0):
+    """A shot's FarmResult, or a CrowdError naming what failed."""
+    out = plan["shot"].out
+    where = f"{out}: "
+    if plan["snapshots"].status == "error":
+        return CrowdError(where + f"the snapshot pass failed twice: "
+                                  f"{_error(plan['snapshots'])}; nothing was exported")
+    failed = [f"{name} failed twice: {_error(f)}"
+              for name, f in zip(plan["names"], plan["chunks"]) if f.status == "error"]
+    if failed:
+        return CrowdError(where + "; ".join(failed) + f"; nothing was stitched ({out} is as "
+                          f"it was; every attempt is in "
+                          f"{os.path.join(chunk_folder(out), 'attempts.log')})")
+    try:
+        stitched, stitch_s = plan["stitch"].result()
+    except Exception as e:  # noqa: BLE001 - reported with its shot
+        return CrowdError(where + f"the stitch failed: {type(e).__name__}: {e}")
+    files, snap_s = plan["snapshots"].result()
+    chunks = [f.result() for f in plan["chunks"]]
+    return FarmResult(stitched, chunks, files, {
+        "snapshots": snap_s, "chunks": max(c["seconds"]["total"] for c in chunks),
+        "stitch": stitch_s, "total": time.perf_counter() - t0})
+
+
+def _run_snapshots(source, folder, frames, every, log):
+    """A worker's task: the shot's snapshot pass; returns (files, seconds)."""
+    _without_blender_scripts()
+    t = time.perf_counter()
+    try:
+        files = write_shot_snapshots(source, folder, frames, every)
+    except BaseException as e:
+        _log(log, f"snapshots: failed on {_where()}: {type(e).__name__}: {e}")
+        raise
+    _log(log, f"snapshots: done on {_where()} in {time.perf_counter() - t:.1f} s")
+    return files, time.perf_counter() - t
+
+
+def _run_stitch(out, chunks, log):
+    """A worker's task: the chunks (their summaries) stitched; returns (StitchResult,
+    seconds)."""
+    from .usd.stitch import stitch
+    t = time.perf_counter()
+    result = stitch([c["path"] for c in chunks], out)
+    _log(log, f"stitch: done on {_where()} in {time.perf_counter() - t:.1f} s")
+    return result, time.perf_counter() - t
+
+
+def _where() -> str:
+    return f"{socket.gethostname()} pid {os.getpid()}"
 
 
 def _error(future) -> str:
@@ -272,11 +338,77 @@ def _error(future) -> str:
     return f"{type(e).__name__}: {e}"
 
 
-def summary_json(result: FarmResult) -> str:
-    """One JSON object: the stitched stage's summary, the chunks and the seconds."""
+#: what a shot of a shot list may say, with its JSON type
+_SHOT_KEYS = {"config": str, "blend": str, "scene": str, "trust_scripts": bool, "out": str,
+              "frames": str, "agents": int, "layout": str, "substeps": int,
+              "chunk_frames": int}
+
+
+def load_shot_list(path) -> list:
+    """The :class:`FarmShot` list of a shot list file (docs/snapshots.md): JSON
+    ``{"shots": [{"config" | "blend": ..., "frames": "FIRST-LAST", "out": ..., ...}]}``,
+    paths relative to the file's folder. Every problem is a CrowdError naming the
+    file, the shot and the key."""
+    from .cli_args import frame_range
+    from .core.config import MAX_SUBSTEPS, USD_LAYOUTS
+    path = os.fspath(path)
+    try:
+        with open(path, encoding="utf-8") as f:
+            data = json.load(f)
+    except FileNotFoundError:
+        raise CrowdError(f"{path}: no such shot list") from None
+    except (OSError, UnicodeDecodeError, ValueError) as e:
+        raise CrowdError(f"{path}: not a JSON shot list: {e}") from None
+    shots = data.get("shots") if isinstance(data, dict) else None
+    if not isinstance(shots, list) or not shots:
+        raise CrowdError(f'{path}: needs {{"shots": [...]}} with at least one shot')
+    base = os.path.dirname(os.path.abspath(path))
+    out, outs = [], set()
+    for i, shot in enumerate(shots):
+        where = f"{path}: shot {i}"
+        if not isinstance(shot, dict):
+            raise CrowdError(f"{where}: must be an object")
+        for key, value in shot.items():
+            kind = _SHOT_KEYS.get(key)
+            if kind is None:
+                raise CrowdError(f"{where}: unknown key {key!r} (known: {sorted(_SHOT_KEYS)})")
+            if not isinstance(value, kind) or (kind is int and isinstance(value, bool)):
+                raise CrowdError(f"{where}: {key!r} must be a {kind.__name__}, got {value!r}")
+        for key in ("out", "frames"):
+            if key not in shot:
+                raise CrowdError(f"{where}: {key!r} is required")
+        if ("config" in shot) == ("blend" in shot):
+            raise CrowdError(f"{where}: give one of 'config' and 'blend'")
+        try:
+            frames = frame_range(shot["frames"])
+        except Exception as e:  # noqa: BLE001 - argparse's type error, named here
+            raise CrowdError(f"{where}: 'frames': {e}") from None
+        if shot.get("layout", "instanced") not in USD_LAYOUTS:
+            raise CrowdError(f"{where}: 'layout' must be one of {list(USD_LAYOUTS)}")
+        if not 1 <= shot.get("substeps", 1) <= MAX_SUBSTEPS:
+            raise CrowdError(f"{where}: 'substeps' must be 1..{MAX_SUBSTEPS}")
+        for key in ("agents", "chunk_frames"):
+            if key in shot and shot[key] < 1:
+                raise CrowdError(f"{where}: {key!r} must be at least 1")
+        target = os.path.normpath(os.path.join(base, shot["out"]))
+        if target in outs:
+            raise CrowdError(f"{where}: 'out' {shot['out']!r} is another shot's output too")
+        outs.add(target)
+
+        def at(key):
+            return os.path.normpath(os.path.join(base, shot[key])) if key in shot else None
+        source = ShotSource(config=at("config"), blend=at("blend"), scene=shot.get("scene"),
+                            trust_scripts=shot.get("trust_scripts", False),
+                            agents=shot.get("agents"), layout=shot.get("layout", "instanced"),
+                            substeps=shot.get("substeps", 1))
+        out.append(FarmShot(source, target, frames, shot.get("chunk_frames")))
+    return out
+
+
+def summary(result: FarmResult) -> dict:
+    """The stitched stage's summary, the chunks and the seconds (JSON types)."""
     import dataclasses
     s = result.stitch
-    return json.dumps({**dataclasses.asdict(s), "bytes": s.bytes,
-                       "chunk_exports": result.chunks,
-                       "snapshots": result.snapshots,
-                       "seconds": {k: round(v, 3) for k, v in result.seconds.items()}})
+    return {**dataclasses.asdict(s), "bytes": s.bytes, "chunk_exports": result.chunks,
+            "snapshots": result.snapshots,
+            "seconds": {k: round(v, 3) for k, v in result.seconds.items()}}

@@ -34,7 +34,7 @@ import os
 import time
 from dataclasses import dataclass
 
-from pxr import Sdf, Tf, Vt
+from pxr import Sdf, Tf, UsdUtils, Vt
 
 from ..core.errors import CrowdError
 from .agents import ROOT
@@ -100,6 +100,7 @@ class _Chunk:
         agents = self.layer.GetPrimAtPath(f"/{ROOT}/Agents")
         self.names = list(agents.nameChildren.keys()) if agents else []
         self._offsets = {}                   # offset animation path -> what it plays
+        self._targets = {}                   # agent name -> its animation source
 
     def resolve(self, asset, base=None) -> str:
         return os.path.normpath(os.path.join(base or self.dir, asset))
@@ -107,11 +108,18 @@ class _Chunk:
     def agent(self, name) -> Sdf.PrimSpec:
         return self.layer.GetPrimAtPath(f"/{ROOT}/Agents/{name}")
 
+    def target(self, name) -> Sdf.Path:
+        """Agent ``name``'s ``skel:animationSource`` target."""
+        found = self._targets.get(name)
+        if found is None:
+            rel = self.agent(name).relationships["skel:animationSource"]
+            found = self._targets[name] = rel.targetPathList.explicitItems[0]
+        return found
+
     def source(self, name):
         """What agent ``name`` plays: ``("static", stream layer, prim name, offset)`` or
         ``("clips", its clip set dict, its joints)``."""
-        rel = self.agent(name).relationships["skel:animationSource"]
-        target = rel.targetPathList.explicitItems[0]
+        target = self.target(name)
         if self.own is not None and target.HasPrefix(f"/{ROOT}/AgentAnimations"):
             spec = self.own.GetPrimAtPath(target)
             return ("clips", dict(spec.GetInfo("clips")["default"]),
@@ -201,6 +209,9 @@ def stitch(chunks, path, progress=None) -> StitchResult:
         main.customLayerData = {"crowd": {
             **first.settings, "firstFrame": first.first, "lastFrame": last.last,
             "chunks": Vt.StringArray([_relative(c.path, files.directory) for c in parts])}}
+        crowd = Sdf.PrimSpec(main, ROOT, Sdf.SpecifierDef, "Xform")
+        Sdf.CopySpec(first.layer, f"/{ROOT}/Agents", main, f"/{ROOT}/Agents")
+        _rebase(main, first, files)          # before anything of ours is in the layer
         if own_names:
             files.save(manifest_layer(files.format, fps), "manifest")
             own = new_layer(files.format, fps, first.first, last.last,
@@ -222,10 +233,8 @@ def stitch(chunks, path, progress=None) -> StitchResult:
         if progress is not None:
             progress("agent animations", len(own_names), len(own_names))
 
-        crowd = Sdf.PrimSpec(main, ROOT, Sdf.SpecifierDef, "Xform")
-        Sdf.CopySpec(first.layer, f"/{ROOT}/Agents", main, f"/{ROOT}/Agents")
         offsets = _offset_animations(crowd, static, merged, files)
-        moving = _agents(main, parts, static, merged, offsets, own_names, files)
+        moving = _agents(main, parts, sources, static, merged, offsets, own_names, files)
         files.save(main)
         if progress is not None:
             progress("layout", len(first.names), len(first.names))
@@ -359,36 +368,43 @@ def _offset_animations(crowd, static, merged, files) -> dict:
     return out
 
 
-def _agents(main, parts, static, merged, offsets, own_names, files) -> int:
+def _agents(main, parts, sources, static, merged, offsets, own_names, files) -> int:
     """Point each copied agent prim at its animation, move its references to the
     stitched stage's folder, and join the transforms of agents that moved. Returns
     how many moved."""
     first = parts[0]
-    rebased = {}                    # a chunk's reference list -> the same from here
     own = set(own_names)
     moved = 0
-    same_folder = os.path.normpath(first.dir) == os.path.normpath(files.directory)
     with Sdf.ChangeBlock():
-        for name in first.names:
-            prim = main.GetPrimAtPath(f"/{ROOT}/Agents/{name}")
-            if not same_folder:
-                refs = prim.referenceList.prependedItems
-                key = tuple(r.assetPath for r in refs)
-                if key not in rebased:
-                    rebased[key] = [Sdf.Reference(_relative(first.resolve(r.assetPath),
-                                                            files.directory),
-                                                  r.primPath, r.layerOffset) for r in refs]
-                prim.referenceList.prependedItems = rebased[key]
+        for name, (kind, *rest) in zip(first.names, (sources[n][0] for n in first.names)):
             if name in own:
                 target = Sdf.Path(f"/{ROOT}/AgentAnimations/{name}")
             else:
                 _, real, _, o = static[name]
                 target = offsets[(merged[real], o)]
-            prim.relationships["skel:animationSource"].targetPathList.explicitItems = [target]
+            if kind == "clips" or target != first.target(name):
+                prim = main.GetPrimAtPath(f"/{ROOT}/Agents/{name}")
+                prim.relationships["skel:animationSource"].targetPathList.explicitItems = \
+                    [target]
             if any(c.moving(name) for c in parts):
-                _join_moves(main, prim.path, parts, name)
+                _join_moves(main, Sdf.Path(f"/{ROOT}/Agents/{name}"), parts, name)
                 moved += 1
     return moved
+
+
+def _rebase(main, first, files):
+    """The asset paths of the agents copied from ``first`` (their characters),
+    relative to the stitched stage's folder: one C++ walk over the layer, not an
+    edit per agent."""
+    if os.path.normpath(first.dir) == os.path.normpath(files.directory):
+        return
+    rebased = {}
+
+    def rebase(asset):
+        if asset not in rebased:
+            rebased[asset] = _relative(first.resolve(asset), files.directory)
+        return rebased[asset]
+    UsdUtils.ModifyAssetPaths(main, rebase)
 
 
 def _join_moves(main, path, parts, name):

@@ -189,3 +189,44 @@ def test_contact_sheet_holds_six_frames_of_the_run_and_its_beats(demo):
         expected.offer(f, read_png(out / "frames" / f"frame_{f:04d}.png"))
     assert np.array_equal(sheet, expected.image())
     assert s["contact_sheet"] == str(out / "contact_sheet.png")
+
+
+def test_the_demo_show_continues_exactly_from_a_snapshot(demo):
+    """The demo's own crowd and show (its saved configuration), snapshotted at several
+    frames, blends in flight among them, and restored into a fresh crowd: every later
+    frame's poses and events equal the uninterrupted run's, bit for bit."""
+    from crowd_addon.core import Crowd
+    from crowd_addon.core.agents import TRANSITION
+    from crowd_addon.core.config_io import load_config
+    out, _ = demo
+    config = load_config(out / "stadium_crowd.json")
+
+    def run(crowd, last, snap_at=()):
+        poses, heard, snaps, state = {}, [], {}, {}
+        crowd.on_event("*", lambda n, f, ids: heard.append((n, int(f), ids.tolist())))
+        while crowd.frame < last:
+            if crowd.frame in snap_at:
+                snaps[crowd.frame] = crowd.snapshot()
+            crowd.step()
+            poses[crowd.frame] = crowd.agent_poses()
+            state[crowd.frame] = (int((crowd.agents.kind == TRANSITION).sum()),
+                                  len(crowd.slots.queue))
+        return poses, heard, snaps, state
+
+    straight = Crowd(config, skinning="gpu")
+    first = straight.frame
+    _, _, _, state = run(Crowd(config, skinning="gpu"), first + FRAMES)
+    blending = [f for f, (n, _) in state.items() if n]
+    queued = [f for f, (_, q) in state.items() if q]
+    assert blending, "the demo's show starts no blend in its first frames"
+    at = sorted({first + 5, blending[0], blending[len(blending) // 2], *queued[:1]})
+    poses, heard, snaps, _ = run(straight, first + FRAMES, at)
+    assert sorted(snaps) == at
+    for f, snap in snaps.items():
+        fresh = Crowd(config, skinning="gpu")
+        fresh.restore(snap)
+        rest, rest_heard, _, _ = run(fresh, first + FRAMES)
+        assert sorted(rest) == [g for g in sorted(poses) if g > f]
+        for g, p in rest.items():
+            np.testing.assert_array_equal(p, poses[g], err_msg=f"snapshot {f}, frame {g}")
+        assert rest_heard == [e for e in heard if e[1] > f]

@@ -66,11 +66,12 @@ def test_four_chunks_on_two_local_workers_equal_the_single_process_export(shot, 
         [list(r) for r in chunk_ranges(*FRAMES, 10)]                # four chunks
     assert [c["started_from"] for c in summary["chunk_exports"]] == [None, 10, 20, 30]
     assert "crowd export: chunks 4/4" in captured.err
-    assert "crowd export: snapshots" in captured.err
     same_shot(out, whole)
-    log = (tmp / "farm" / "shot.chunks" / "attempts.log").read_text()
-    assert sorted(line.split(": done on")[0].split(" ", 2)[2] for line in log.splitlines()) \
-        == [f"chunk {k} (frames {a}-{b})" for k, (a, b) in enumerate(chunk_ranges(*FRAMES, 10))]
+    log = (tmp / "farm" / "shot.chunks" / "attempts.log").read_text().splitlines()
+    done = sorted(line.split(": done on")[0].split(" ", 2)[2] for line in log)
+    assert done == sorted([f"chunk {k} (frames {a}-{b})"
+                           for k, (a, b) in enumerate(chunk_ranges(*FRAMES, 10))]
+                          + ["snapshots", "stitch"])
 
 
 def test_an_existing_scheduler_runs_the_chunks(shot, cluster, capsys):
@@ -111,6 +112,54 @@ def test_a_failing_chunk_is_retried_once_named_and_the_old_stage_kept(shot, clus
     log = (tmp / "kept" / "shot.chunks" / "attempts.log").read_text()
     assert log.count("chunk 2 (frames 21-30): failed on") == 2          # tried twice
     assert log.count("chunk 2 (frames 21-30): done on") == 2            # before and after
+
+
+def test_a_shot_list_runs_every_shot_on_one_cluster(shot, cluster, tmp_path, capsys):
+    """Two shots and one whose configuration is missing: the two are written (the
+    first equals the single export), the third is named and writes nothing."""
+    tmp, config, whole = shot
+    shots = tmp_path / "shots.json"
+    shots.write_text(json.dumps({"shots": [
+        {"config": str(config), "frames": f"{FRAMES[0]}-{FRAMES[1]}", "out": "a/shot.usdc",
+         "chunk_frames": 15},
+        {"config": str(config), "frames": "5-24", "out": "b/shot.usda", "substeps": 2},
+        {"config": "missing.json", "frames": "1-10", "out": "c/shot.usdc"}]}))
+    assert main(["farm", str(shots), "--scheduler", cluster.scheduler_address,
+                 "--json"]) == 2
+    captured = capsys.readouterr()
+    a, b, c = json.loads(captured.out)["shots"]
+    assert a["frames"] == list(FRAMES) and len(a["chunk_exports"]) == 3
+    assert b["frames"] == [5, 24] and "missing.json" in c["error"]
+    assert "crowd farm: error:" in captured.err and "snapshot pass failed" in captured.err
+    assert "crowd farm: chunks" in captured.err
+    same_shot(tmp_path / "a" / "shot.usdc", whole)
+    from pxr import Usd
+    stage = Usd.Stage.Open(str(tmp_path / "b" / "shot.usda"))
+    assert stage.GetRootLayer().customLayerData["crowd"]["substeps"] == 2
+    assert not (tmp_path / "c" / "shot.usdc").exists()
+
+
+@pytest.mark.parametrize("shots, message", [
+    ({"shots": []}, "at least one shot"),
+    ([1], "at least one shot"),
+    ({"shots": [{"config": "x.json", "frames": "1-4"}]}, "shot 0: 'out' is required"),
+    ({"shots": [{"config": "x.json", "out": "a.usdc", "frames": "1-4", "speed": 2}]},
+     "shot 0: unknown key 'speed'"),
+    ({"shots": [{"config": "x.json", "blend": "y.blend", "out": "a.usdc", "frames": "1-4"}]},
+     "give one of 'config' and 'blend'"),
+    ({"shots": [{"config": "x.json", "out": "a.usdc", "frames": "4-1"}]}, "shot 0: 'frames'"),
+    ({"shots": [{"config": "x.json", "out": "a.usdc", "frames": 4}]},
+     "'frames' must be a str"),
+    ({"shots": [{"config": "x.json", "out": "a.usdc", "frames": "1-4"},
+                {"config": "y.json", "out": "./a.usdc", "frames": "1-4"}]},
+     "shot 1: 'out' './a.usdc' is another shot's output too"),
+])
+def test_bad_shot_lists_are_named_before_anything_runs(tmp_path, capsys, shots, message):
+    path = tmp_path / "shots.json"
+    path.write_text(json.dumps(shots))
+    assert main(["farm", str(path)]) == 2
+    assert message in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["shots.json"]
 
 
 def test_farm_options_are_checked(shot, capsys):
