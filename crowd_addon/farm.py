@@ -100,8 +100,9 @@ def export_chunk(source: ShotSource, frames, out, snapshots=None, progress=None,
                  on_bake=None):
     """Export ``frames`` of ``source``'s shot to ``out`` exactly as ``crowd export``
     does, starting from the latest snapshot in ``snapshots`` before the first frame
-    (and leaving one at the last). Returns the :class:`~crowd_addon.usd.export.
-    ExportResult`. What ``crowd export`` runs, and a worker for each chunk. ``frames``
+    (and leaving one at the last). Returns ``(config, ExportResult)``: the crowd's
+    configuration and :class:`~crowd_addon.usd.export.ExportResult`. What ``crowd
+    export`` runs, and a worker for each chunk. ``frames``
     None: a .blend's scene range (a configuration needs them); ``on_bake(done, total,
     message)``: the .blend's bake steps."""
     if source.config is not None:
