@@ -134,6 +134,7 @@ class Crowd:
         self.show = ShowRunner(cfg.show, self) if cfg.show else None
         self.snapshots = None          # a SnapshotCache once keep_snapshots() is called
         self._quiet = 0                # > 0 inside step/reset/restore: not a user's change
+        self._outside = []             # frames of changes made from outside a step
         self.reset(cfg.start_frame)
 
     # ---------------------------------------------------------------- dependency graph
@@ -168,6 +169,7 @@ class Crowd:
         their configured references, slots and queue empty. Deterministic."""
         cfg = self.config
         f0 = cfg.start_frame if frame is None else int(frame)
+        self._replay_from(f0)
         self._origin = f0
         self._quiet += 1
         try:
@@ -230,13 +232,13 @@ class Crowd:
         another configuration or sample count, or a damaged one, raises CrowdError
         naming what differs, and changes nothing. Callbacks stay registered."""
         check_snapshot(self, snapshot)
+        self._replay_from(snapshot.frame)
         self._quiet += 1
         try:
             self._set_state(snapshot.state())
         finally:
             self._quiet -= 1
-        if self.snapshots is not None:
-            self.snapshots.drop_after(self.frame)
+        self._changed()                     # its run may not be the one kept
 
     def _state(self) -> dict:
         """Every part's state (views), what :mod:`.snapshot` copies."""
@@ -339,6 +341,9 @@ class Crowd:
         frame = int(frame)
         start = self.config.start_frame
         snap = self.jump_snapshot(frame)
+        if frame < self.frame and self._outside:   # replayed from there: changes lost
+            self._replay_from(snap.frame if snap is not None else start)
+            snap = self.jump_snapshot(frame)
         if snap is not None:
             self._quiet += 1
             try:
@@ -365,8 +370,11 @@ class Crowd:
         ``every`` frames from the start frame, at most ``max_bytes`` in all), which
         :meth:`advance_to` jumps from; returns it. ``every=None`` stops keeping them.
         A change made from outside a step (a request, a parameter, a trigger, a move,
-        a restore) forgets the snapshots past the current frame."""
+        a restore) forgets the snapshots past the current frame; going back before it
+        forgets those taken after it, since a replay does not make that change again
+        (so a jump shows what a re-simulation from the start shows)."""
         self.snapshots = None if every is None else SnapshotCache(every, max_bytes)
+        self._outside = []
         if self.snapshots is not None and self._origin == self.config.start_frame \
                 and self.snapshots.wants(self.frame, self._origin):
             self.snapshots.add(self.snapshot(), self._origin)
@@ -376,6 +384,16 @@ class Crowd:
         """The run changes here (not replayed by a re-simulation): later snapshots go."""
         if self._quiet == 0 and self.snapshots is not None:
             self.snapshots.drop_after(self.frame)
+            self._outside.append(self.frame)
+
+    def _replay_from(self, frame):
+        """The run is replayed from ``frame``: changes made from outside a step at or
+        after it are not made again, so the snapshots taken after the first of them
+        go."""
+        lost = [f for f in self._outside if f >= frame]
+        if lost and self.snapshots is not None:
+            self.snapshots.drop_after(min(lost))
+        self._outside = [f for f in self._outside if f < frame]
 
     def _root_times(self, frame):
         return np.concatenate([np.full(self.streams.count, float(frame)),

@@ -361,6 +361,29 @@ def test_a_change_from_outside_a_step_forgets_the_later_snapshots():
         crowd.keep_snapshots(every=0)
 
 
+def test_going_back_before_a_change_replays_without_it_as_a_reset_would():
+    """A one-off request at frame 30 (from outside a step) is not made again when the
+    crowd goes back before it: every jump afterwards shows what a crowd re-simulated
+    from the start shows, the snapshots taken after the change forgotten."""
+    plain, _ = play(show_crowd(), 60)
+    crowd = show_crowd()
+    cache = crowd.keep_snapshots(every=5)
+    play(crowd, 30)
+    crowd.transition_to_streamed([0, 1, 2], "wave", 3)
+    play(crowd, 60)
+    assert cache.frames[-1] == 56                          # retaken after the change
+    changed = crowd.agent_poses().copy()
+    assert not np.array_equal(changed, plain[-1]["poses"][0])
+    crowd.advance_to(45)                                   # back, after the change: kept
+    crowd.advance_to(60)
+    np.testing.assert_array_equal(crowd.agent_poses(), changed)
+    crowd.advance_to(20)                                   # back before it: replayed
+    assert cache.frames[-1] <= 30
+    for target in (58, 40, 25, 59):
+        crowd.advance_to(target)
+        np.testing.assert_array_equal(crowd.agent_poses(), plain[target - 2]["poses"][0])
+
+
 def test_the_api_reports_no_events_of_frames_it_replays():
     from crowd_addon import api
     crowd = show_crowd()
