@@ -17,6 +17,11 @@ Every outcome must be a success or a *named* error, and nothing may be left behi
   traceback, and the sandbox exactly as it was (no temporaries, no partial files).
 - **process**: a few of those command lines through ``python -m crowd_addon`` in a
   subprocess, for what only a real process shows (exit status, stderr).
+- **snapshot**: a valid crowd snapshot file with its JSON header (keys deleted or
+  given other types), its small values (other types, NaN, nested junk), its arrays
+  (other dtypes and shapes, NaN, huge or negative values, missing, with the header
+  lying to match) or its bytes damaged, then loaded and restored into a running
+  crowd: success (and three steps), or a named error that leaves the crowd as it was.
 
 Each case draws from its own ``random.Random(f"{seed}:{part}:{case}")``, so a failure
 names the seed, part, case and mutations and replays alone with ``CROWD_FUZZ_SEED`` and
@@ -61,7 +66,7 @@ SEED = int(os.environ.get("CROWD_FUZZ_SEED", "1711"))
 SECONDS = float(os.environ.get("CROWD_FUZZ_SECONDS", "24"))
 CASE = os.environ.get("CROWD_FUZZ_CASE", "")        # "part:case" replays one case
 #: Share of CROWD_FUZZ_SECONDS per time-bounded part.
-SHARE = {"config": 0.4, "export": 0.3, "preview": 0.3}
+SHARE = {"config": 0.35, "export": 0.25, "preview": 0.25, "snapshot": 0.15}
 #: A single case taking longer than this is a failure (a hang), not a slow success.
 CASE_LIMIT_S = 20.0
 #: ... and so is one allocating more than this much address space.
@@ -659,6 +664,123 @@ def test_fuzz_config_loader(pristine, tmp_path, request):
             outcome, detail = "other", f"loading changed files: {sorted(written)}"
         tally.add(case, outcome, notes, detail)
         shutil.rmtree(directory)
+    tally.seconds = time.monotonic() - t0
+    _record(request, tally)
+    assert tally.counts["other"] == 0, tally.report()
+    assert tally.cases or CASE, "no case ran"
+
+
+# ---------------------------------------------------------------------- snapshot part
+def snapshot_crowd() -> Crowd:
+    """The valid configuration's crowd 8 frames in, some agents blending."""
+    crowd = Crowd(base_config())
+    crowd.advance_to(4)
+    crowd.transition_to_streamed([0, 1, 2], 1, 6)
+    crowd.advance_to(8)
+    return crowd
+
+
+def mutated_snapshot(rng, good: Path, path: Path, notes) -> None:
+    """A snapshot file with its header, its arrays or its bytes damaged."""
+    from crowd_addon.core.snapshot import HEADER
+    kind = rng.choice(["header", "header", "values", "values", "arrays", "bytes"])
+    if kind == "bytes":
+        path.write_bytes(npz_bytes(rng, good.read_bytes(), notes))
+        return
+    with np.load(good) as z:
+        arrays = {k: z[k] for k in z.files}
+    head = json.loads(arrays.pop(HEADER).tobytes())
+    if kind == "header":
+        key = rng.choice(sorted(head))
+        op = rng.choice(["delete", "weird"])
+        if op == "delete":
+            del head[key]
+        else:
+            head[key] = rng.choice([None, -1, 2**63, 1.5, "x", [], {}, NAN, True])
+        notes.append(f"header {key}: {op}")
+    elif kind == "values":
+        key = rng.choice(sorted(head["values"]))
+        value = head["values"][key]
+        choices = [None, -1, 2**40, 0.5, "x", [], {}, [1, "a"], {"w": "x"}, NAN, INF, True]
+        if isinstance(value, list) and value:
+            value = list(value)
+            value[rng.randrange(len(value))] = rng.choice(choices)
+            head["values"][key] = value
+        elif isinstance(value, dict) and value:
+            value = dict(value)
+            value[rng.choice(sorted(value))] = rng.choice(choices)
+            head["values"][key] = value
+        else:
+            head["values"][key] = rng.choice(choices)
+        notes.append(f"value {key}")
+    else:
+        name = rng.choice(sorted(arrays))
+        a = arrays[name]
+        op = rng.choice(["dtype", "shape", "nan", "huge", "negative", "missing"])
+        if op == "dtype":
+            arrays[name] = a.astype(rng.choice([np.float64, np.int8, np.bool_, np.float32]))
+        elif op == "shape":
+            arrays[name] = a.reshape(-1)[:max(0, a.size - 1)]
+        elif op == "nan" and a.dtype.kind == "f":
+            arrays[name] = np.full_like(a, NAN)
+        elif op == "huge" and a.dtype.kind in "iu":
+            arrays[name] = np.full_like(a, np.iinfo(a.dtype).max)
+        elif op == "negative" and a.dtype.kind == "i":
+            arrays[name] = np.full_like(a, -7)
+        elif op == "missing":
+            del arrays[name]
+        if name in arrays and op in ("dtype", "shape") and rng.random() < 0.5:
+            head["arrays"][name] = {"dtype": arrays[name].dtype.str,
+                                    "shape": list(arrays[name].shape)}   # a consistent lie
+        notes.append(f"array {name}: {op}")
+    with open(path, "wb") as f:
+        np.savez(f, **{HEADER: np.frombuffer(json.dumps(head).encode(), np.uint8)}, **arrays)
+
+
+def restore_outcome(crowd: Crowd, path: Path, steps=3) -> tuple:
+    """("ok" | "named" | "other", detail) for loading and restoring ``path`` into
+    ``crowd`` and stepping it; a refused snapshot must leave the crowd as it was."""
+    from crowd_addon.core.snapshot import load_snapshot
+    before = (crowd.frame, crowd.agent_poses().copy(), crowd.agents.kind.copy())
+    try:
+        with case_limits():
+            try:
+                crowd.restore(load_snapshot(path))
+            except CrowdError as e:
+                after = (crowd.frame, crowd.agent_poses(), crowd.agents.kind)
+                if not (before[0] == after[0]
+                        and np.array_equal(before[1], after[1], equal_nan=True)
+                        and np.array_equal(before[2], after[2])):
+                    return "other", f"refused ({e}) but the crowd changed"
+                return ("named", "") if str(e).strip() else ("other", "no message")
+            try:
+                for _ in range(steps):
+                    crowd.step()
+            except CrowdError as e:
+                return ("named", "") if str(e).strip() else ("other", "no message (step)")
+            return "ok", ""
+    except (Exception, CaseTimeout) as e:                 # noqa: BLE001 - the finding
+        return "other", _summary(e)
+
+
+def test_fuzz_snapshot_loader(tmp_path, request):
+    tally = Tally("snapshot")
+    t0 = time.monotonic()
+    good = tmp_path / "good.npz"
+    snapshot_crowd().snapshot().save(good)
+    crowd = Crowd(base_config())
+    crowd.advance_to(3)
+    for case in _cases("snapshot"):
+        rng = random.Random(f"{SEED}:snapshot:{case}")
+        notes = []
+        path = tmp_path / f"s{case}.npz"
+        mutated_snapshot(rng, good, path, notes)
+        outcome, detail = restore_outcome(crowd, path)
+        if outcome != "named":
+            crowd = Crowd(base_config())                   # a clean crowd again
+            crowd.advance_to(3)
+        tally.add(case, outcome, notes, detail)
+        path.unlink()
     tally.seconds = time.monotonic() - t0
     _record(request, tally)
     assert tally.counts["other"] == 0, tally.report()

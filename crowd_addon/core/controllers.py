@@ -84,6 +84,13 @@ class Batch:
     def evaluate(self, ctx) -> None:
         raise NotImplementedError
 
+    #: the attributes a frame leaves for the next (what snapshots and look-aheads keep;
+    #: everything else is set up once or recomputed by every prepare)
+    STATE = ()
+
+    def check_state(self) -> None:
+        """Raise ValueError when restored :data:`STATE` arrays cannot be this batch's."""
+
     def reset(self) -> None:
         """Forget per-frame state (time restarted)."""
 
@@ -133,6 +140,8 @@ class ClipPlayer(Controller):
         view.clip(self.clip)            # exists, with the skeleton's bones
 
     class Batch(Batch):
+        STATE = ("prev",)            # node times of the last frame, for tag crossings
+
         def setup(self):
             self.clip_ids = np.array([self.bank.entry(n.clip, sk)
                                       for n, sk in zip(self.nodes, self.skeletons)], np.int64)
@@ -525,6 +534,17 @@ class StateMachine(Controller):
         return self.states
 
     class Batch(Batch):
+        STATE = ("current", "source", "fading", "fade_t", "fade_len", "entered",
+                 "src_entered", "snapshot", "has_snapshot")
+
+        def check_state(self):
+            n = np.array([len(nd.state_names) for nd in self.nodes])
+            if ((self.current < 0) | (self.current >= n)).any() or \
+                    ((self.source < -1) | (self.source >= n)).any():
+                raise ValueError("a state machine's state is not one of its states")
+            if not (self.fade_len > 0).all():
+                raise ValueError("a state machine's fade length is not positive")
+
         def setup(self):
             n = len(self.nodes)
             self.current = np.array([nd.state_names.index(nd.initial) for nd in self.nodes])

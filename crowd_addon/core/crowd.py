@@ -232,12 +232,18 @@ class Crowd:
         another configuration or sample count, or a damaged one, raises CrowdError
         naming what differs, and changes nothing. Callbacks stay registered."""
         check_snapshot(self, snapshot)
-        self._replay_from(snapshot.frame)
+        before = take_snapshot(self)        # a value the checks cannot see: roll back
         self._quiet += 1
         try:
-            self._set_state(snapshot.state())
+            try:
+                self._set_state(snapshot.state())
+            except Exception as e:  # noqa: BLE001 - any fault of the snapshot's values
+                self._set_state(before.state())
+                raise CrowdError(f"snapshot of frame {snapshot.frame} cannot be restored: "
+                                 f"{type(e).__name__}: {e}; the crowd is as it was") from e
         finally:
             self._quiet -= 1
+        self._replay_from(snapshot.frame)
         self._changed()                     # its run may not be the one kept
 
     def _state(self) -> dict:
@@ -265,8 +271,45 @@ class Crowd:
         self.events.set_state(state["events"])
         if self.show is not None:
             self.show.set_state(state["show"])
+        self._check_state()
         self._events_fired = 0
         self.skinning.restored()
+
+    def _check_state(self):
+        """Raise ValueError unless what agents, slots, the queue and the event log refer
+        to exists (restored values the shape checks cannot see)."""
+        a, sl, q = self.agents, self.slots, self.slots.queue
+        s, u, m, n = self.streams.count, self.uniques.count, self.streams.max_offset, a.count
+
+        def refs_ok(kind, ref, off):
+            return bool(np.all(np.where(kind == STREAM, (ref >= 0) & (ref < s) & (off >= 0)
+                                        & (off < m), (kind == UNIQUE) & (ref >= 0)
+                                        & (ref < u))))
+        tr = a.kind == TRANSITION
+        slot = np.where(tr, a.ref, 0)
+        if not (np.isin(a.kind, (STREAM, UNIQUE, TRANSITION)).all()
+                and refs_ok(a.kind[~tr], a.ref[~tr], a.offset[~tr])
+                and ((slot >= 0) & (slot < max(sl.count, 1))).all()):
+            raise ValueError("an agent plays a stream, unique or slot that does not exist")
+        if tr.any() and not (sl.active[slot[tr]].all()
+                             and (sl.agent[slot[tr]] == np.flatnonzero(tr)).all()):
+            raise ValueError("an agent's transition slot is not its own")
+        act = sl.active_slots()
+        if not (((sl.agent[act] >= 0) & (sl.agent[act] < n)).all()
+                and refs_ok(sl.target_kind[act], sl.target_ref[act], sl.target_offset[act])
+                and (sl.length[act] >= 1).all()):
+            raise ValueError("a transition slot targets what does not exist")
+        wait = np.flatnonzero(q._ticket >= 0)
+        line = q._line[:, q._head:q._tail]
+        if not (refs_ok(q._kind[wait], q._ref[wait], q._offset[wait])
+                and (q._length[wait] >= 1).all() and wait.size == len(q)
+                and ((line[1] >= 0) & (line[1] < n)).all()):
+            raise ValueError("the transition queue holds a request that cannot be")
+        log = self.streams.state()
+        if not (((log["log_stream"] >= 0) & (log["log_stream"] < s)).all()
+                and ((log["log_name"] >= 0) & (log["log_name"]
+                                               < len(self.bank.tag_names))).all()):
+            raise ValueError("the event log names a stream or tag that does not exist")
 
     def _agent_keys(self, agents):
         """Event/index key of what each agent plays (a transition's target)."""

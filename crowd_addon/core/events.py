@@ -62,7 +62,11 @@ class EventDispatcher:
         return {"fired": dict(self.fired), "calls": dict(self.calls)}
 
     def set_state(self, state: dict):
-        self.fired, self.calls = Counter(state["fired"]), Counter(state["calls"])
+        counts = [Counter({str(k): int(v) for k, v in state[key].items()})
+                  for key in ("fired", "calls")]
+        if any(v < 0 for c in counts for v in c.values()):
+            raise ValueError("an event count is negative")
+        self.fired, self.calls = counts
 
     def on(self, name: str, fn) -> int:
         """Register ``fn(name, frame, agent_ids)`` for ``name`` (or ``"*"``); returns a handle."""

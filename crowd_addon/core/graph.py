@@ -197,11 +197,12 @@ class TreeEvaluator:
 
     def state(self) -> dict:
         """Everything the trees carry from frame to frame (views; :mod:`.snapshot`
-        copies): every batch's arrays, the frame arrays, parameters and triggers."""
+        copies): each batch's :data:`~.controllers.Batch.STATE` arrays (state machines'
+        states and fades, clip players' last times), the frame arrays, parameters and
+        triggers."""
         ctx = self.ctx
-        return {"batches": {str(i): {k: v for k, v in vars(b).items()
-                                     if isinstance(v, np.ndarray)}
-                            for i, b in enumerate(self.batches)},
+        return {"batches": {str(i): {k: getattr(b, k) for k in b.STATE}
+                            for i, b in enumerate(self.batches) if b.STATE},
                 "frame": {k: getattr(ctx, k) for k in FrameContext.ARRAYS},
                 "params": [dict(p) for p in ctx.params],
                 "triggers": [sorted(t) for t in ctx.triggers]}
@@ -210,17 +211,17 @@ class TreeEvaluator:
         """Back to a :meth:`state` (the arrays are copied in)."""
         ctx = self.ctx
         for i, b in enumerate(self.batches):
-            for k, v in state["batches"][str(i)].items():
-                cur = getattr(b, k, None)
-                if isinstance(cur, np.ndarray) and cur.shape == v.shape and cur.dtype == v.dtype:
-                    cur[...] = v
-                else:
-                    setattr(b, k, np.array(v))
+            for k in b.STATE:
+                getattr(b, k)[...] = state["batches"][str(i)][k]
+            b.check_state()
         for k in FrameContext.ARRAYS:
             getattr(ctx, k)[...] = state["frame"][k]
         for params, v in zip(ctx.params, state["params"]):
+            v = {str(n): float(x) for n, x in v.items()}
+            if not all(np.isfinite(x) for x in v.values()):
+                raise ValueError("a parameter is not finite")
             params.clear()
-            params.update({str(n): float(x) for n, x in v.items()})
+            params.update(v)
         for triggers, v in zip(ctx.triggers, state["triggers"]):
             triggers.clear()
             triggers.update(str(n) for n in v)

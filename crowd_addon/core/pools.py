@@ -111,9 +111,12 @@ class StreamPool:
                 "log_name": self._log_name, "log_frame": self._log_frame}
 
     def set_state(self, state: dict):
+        logs = [np.array(state[k], np.int64).reshape(-1)
+                for k in ("log_stream", "log_name", "log_frame")]
+        if len({a.size for a in logs}) != 1:
+            raise ValueError("the event log's arrays differ in length")
         self.history[...] = state["history"]
-        for k in ("log_stream", "log_name", "log_frame"):
-            setattr(self, "_" + k, np.array(state[k], np.int64))
+        self._log_stream, self._log_name, self._log_frame = logs
 
     # ------------------------------------------------------------------ events
     def clear_events(self):

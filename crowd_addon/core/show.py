@@ -536,9 +536,31 @@ class ShowRunner:
         r = state["reacted"]
         for k, ids in zip(r["reaction"].tolist(), _ungrouped(r)):
             self._reacted[k].append(ids)
-        self._track_last = list(state["track_last"])
-        self.stats = {c: {k: int(v) for k, v in d.items()} for c, d in state["stats"].items()}
-        self.reactions = {k: int(v) for k, v in state["reactions"].items()}
+        last = [None if v is None else float(v) for v in state["track_last"]]
+        if len(last) != len(self.show.tracks):
+            raise ValueError("the show's track values do not fit its tracks")
+        self._track_last = last
+        self.stats = {str(c): {str(k): int(v) for k, v in d.items()}
+                      for c, d in state["stats"].items()}
+        self.reactions = {str(k): int(v) for k, v in state["reactions"].items()}
+        c = self.crowd
+        ids = [r["ids"] for r in (state["returns"], state["reacted"])]
+        if not (np.isin(self.home_kind, (STREAM, UNIQUE)).all()
+                and all(((i >= 0) & (i < self._n)).all() for i in ids)
+                and all(int(r["counts"].sum()) == r["ids"].size and (r["counts"] >= 0).all()
+                        for r in (state["returns"], state["reacted"]))
+                and state["returns"]["frame"].size == state["returns"]["duration"].size
+                == state["returns"]["counts"].size
+                and state["reacted"]["reaction"].size == state["reacted"]["counts"].size
+                and ((state["reacted"]["reaction"] >= 0)
+                     & (state["reacted"]["reaction"] < len(self.show.reactions))).all()
+                and np.where(self.home_kind == STREAM,
+                             (self.home_ref >= 0) & (self.home_ref < c.streams.count)
+                             & (self.home_offset >= 0)
+                             & (self.home_offset < c.streams.max_offset),
+                             (self.home_ref >= 0) & (self.home_ref < c.uniques.count)).all()):
+            raise ValueError("the show's homes, returns or reactions name what does not "
+                             "exist")
         self._grid_cursor = 0               # the neighbour grids are rebuilt when needed
 
     # ------------------------------------------------------------------ step

@@ -29,6 +29,7 @@ import json
 import os
 import tempfile
 import zipfile
+import zlib
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -169,7 +170,10 @@ def load_snapshot(path) -> Snapshot:
     archive) raises CrowdError naming the file and what is wrong."""
     path = os.fspath(path)
     try:
-        with np.load(path, allow_pickle=False) as z:
+        z = np.load(path, allow_pickle=False)
+        if not isinstance(z, np.lib.npyio.NpzFile):
+            raise CrowdError(f"{path}: not a crowd snapshot (one array, not an archive)")
+        with z:
             names = set(z.files)
             if HEADER not in names:
                 raise CrowdError(f"{path}: not a crowd snapshot (no {HEADER})")
@@ -192,9 +196,12 @@ def load_snapshot(path) -> Snapshot:
                                      f"{list(a.shape)}, the header says {spec['dtype']} "
                                      f"{spec['shape']}")
                 arrays[name] = a
+    except CrowdError:
+        raise
     except FileNotFoundError:
         raise CrowdError(f"{path}: no such file") from None
-    except (OSError, zipfile.BadZipFile, ValueError, EOFError, KeyError) as e:
+    except (OSError, zipfile.BadZipFile, zipfile.LargeZipFile, zlib.error, ValueError,
+            EOFError, KeyError, NotImplementedError, RuntimeError) as e:
         raise CrowdError(f"{path}: not a readable crowd snapshot: {e}") from None
     return Snapshot(int(head["frame"]), head["config_digest"], int(head["substeps"]),
                     arrays, head["values"])
@@ -248,6 +255,11 @@ def check(crowd, snap: Snapshot, what: str = "snapshot") -> None:
                 or a.ndim != b.ndim:
             raise CrowdError(f"{what}: state array {name!r} is {b.dtype} {b.shape}, "
                              f"this crowd's is {a.dtype} {a.shape}")
+    for name, b in snap.arrays.items():
+        if b.dtype.kind == "f" and not name.endswith(_NAN_ALLOWED) and \
+                not np.isfinite(b).all():
+            raise CrowdError(f"{what}: state array {name!r} holds values that are not "
+                             "finite")
     for name in sorted(set(values) | set(snap.values)):
         if name not in values or name not in snap.values:
             raise CrowdError(f"{what}: state value {name!r} is "
@@ -257,10 +269,14 @@ def check(crowd, snap: Snapshot, what: str = "snapshot") -> None:
                              f"{_kind(snap.values[name])}, expected a {_kind(values[name])}")
 
 
+#: float state arrays where NaN means something (a clip player's "no last time", a
+#: state machine's "not entered yet")
+_NAN_ALLOWED = (".prev", ".entered")
+
+
 def _varies(name) -> bool:
     return name.endswith(("queue.line", ".ids", ".counts", ".frame", ".duration",
-                          ".reaction", "log_stream", "log_name", "log_frame")) or \
-        ".batches." in name
+                          ".reaction", "log_stream", "log_name", "log_frame"))
 
 
 class SnapshotCache:

@@ -400,3 +400,33 @@ def test_the_api_reports_no_events_of_frames_it_replays():
     heard.clear()
     sim.advance_to(28)
     assert all(f == 28 for f in heard)
+
+
+def test_values_a_shape_check_cannot_see_are_refused_and_rolled_back(tmp_path):
+    """Arrays of the right shape with impossible values, or small values of the wrong
+    kind inside: the restore is undone and named (the fuzz test tries many more)."""
+    crowd = show_crowd()
+    play(crowd, 10)
+    good = crowd.snapshot()
+    play(crowd, 14)
+    before = poses_now(crowd)
+    cases = [("agents.kind", lambda a: np.full_like(a, 7), "does not exist"),
+             ("slots.target_ref", lambda a: np.full_like(a, 10**6), "does not exist"),
+             ("streams.log_name", lambda a: a[:-1] if a.size else np.zeros(1, a.dtype),
+              "differ in length|was taken|state array"),
+             ("slots.start_pose", lambda a: np.full_like(a, np.nan), "not finite")]
+    for name, change, message in cases:
+        arrays = dict(good.arrays, **{name: change(good.arrays[name])})
+        bad = type(good)(good.frame, good.config_digest, good.substeps, arrays, good.values)
+        with pytest.raises(CrowdError, match=message):
+            crowd.restore(bad)
+        for a, b in zip(before, poses_now(crowd)):
+            np.testing.assert_array_equal(a, b)
+    values = dict(good.values, **{"evaluator.params": [{"w": "high"}] * len(
+        good.values["evaluator.params"])})
+    bad = type(good)(good.frame, good.config_digest, good.substeps, good.arrays, values)
+    with pytest.raises(CrowdError, match="cannot be restored.*the crowd is as it was"):
+        crowd.restore(bad)
+    for a, b in zip(before, poses_now(crowd)):
+        np.testing.assert_array_equal(a, b)
+    play(crowd, 20)                                       # and it runs on
