@@ -241,7 +241,7 @@ def farm_export_shots(shots, workers: int = 2, scheduler=None, progress=None) ->
             raise CrowdError(f"--scheduler {scheduler}: cannot connect: {e}") from None
     else:
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                               dashboard_address=None)
+                               dashboard_address=":0")        # any free port
         client = Client(cluster)
     try:
         plans = [_submit(client, shot, workers, k) for k, shot in enumerate(shots)]

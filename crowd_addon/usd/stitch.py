@@ -182,6 +182,9 @@ def stitch(chunks, path, progress=None) -> StitchResult:
     parts = sorted((_Chunk(p) for p in chunks), key=lambda c: c.first)
     _check(parts)
     files = ExportFiles(path)
+    if any(os.path.normpath(c.path) == os.path.normpath(files.path) for c in parts):
+        raise CrowdError(f"stitch: the output {path} is one of the chunks; write the "
+                         "stitched stage beside them")
     first, last = parts[0], parts[-1]
     fps, n = float(first.settings["fps"]), int(first.settings["substeps"])
     with files:

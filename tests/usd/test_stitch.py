@@ -132,6 +132,8 @@ def test_bad_chunk_sets_are_named_and_nothing_is_written(tmp_path):
         stitch([tmp_path / "nope.usdc"], out)
     with pytest.raises(CrowdError, match="no chunks"):
         stitch([], out)
+    with pytest.raises(CrowdError, match="is one of the chunks"):
+        stitch(chunks, chunks[1])
     assert not out.exists() and not (tmp_path / "stitched.layers").exists()
 
 
