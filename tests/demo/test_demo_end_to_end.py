@@ -191,15 +191,19 @@ def test_contact_sheet_holds_six_frames_of_the_run_and_its_beats(demo):
     assert s["contact_sheet"] == str(out / "contact_sheet.png")
 
 
-def test_the_demo_show_continues_exactly_from_a_snapshot(demo):
+@pytest.mark.parametrize("slots", [None, 6])
+def test_the_demo_show_continues_exactly_from_a_snapshot(demo, slots):
     """The demo's own crowd and show (its saved configuration), snapshotted at several
     frames, blends in flight among them, and restored into a fresh crowd: every later
-    frame's poses and events equal the uninterrupted run's, bit for bit."""
+    frame's poses and events equal the uninterrupted run's, bit for bit. With 6 slots
+    instead of its 800 the same show also queues, and a snapshot is taken mid-queue."""
     from crowd_addon.core import Crowd
     from crowd_addon.core.agents import TRANSITION
     from crowd_addon.core.config_io import load_config
     out, _ = demo
     config = load_config(out / "stadium_crowd.json")
+    if slots is not None:
+        config.transition_slots = slots
 
     def run(crowd, last, snap_at=()):
         poses, heard, snaps, state = {}, [], {}, {}
@@ -219,6 +223,7 @@ def test_the_demo_show_continues_exactly_from_a_snapshot(demo):
     blending = [f for f, (n, _) in state.items() if n]
     queued = [f for f, (_, q) in state.items() if q]
     assert blending, "the demo's show starts no blend in its first frames"
+    assert queued or slots is None, "the demo's show never queues with 6 slots"
     at = sorted({first + 5, blending[0], blending[len(blending) // 2], *queued[:1]})
     poses, heard, snaps, _ = run(straight, first + FRAMES, at)
     assert sorted(snaps) == at
