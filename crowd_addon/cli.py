@@ -352,27 +352,16 @@ def _run_snapshot(args) -> int:
     import json
     import time
 
+    from .farm import ShotSource, write_shot_snapshots
     t = time.perf_counter()
     progress = progress_printer("crowd snapshot")
-    if args.config:
-        from .core.config_io import load_config
-        from .core.crowd import Crowd
-        from .core.snapshot import SnapshotFolder, write_snapshots
-        if args.frames is None:
-            raise CrowdError("--frames FIRST-LAST is required with --config (a .blend "
-                             "gives its scene's frame range)")
-        folder = SnapshotFolder(args.out, create=True)
-        crowd = Crowd(load_config(args.config), skinning="gpu", substeps=args.substeps)
-        files = write_snapshots(crowd, folder, *args.frames, args.every,
-                                lambda d, n: progress("simulate", d, n))
-    else:
-        from .blender.cli_commands import snapshot_blend
-        _, files = snapshot_blend(
-            args.out, args.frames, every=args.every, blend=args.blend, scene=args.scene,
-            substeps=args.substeps, trust_scripts=args.trust_scripts,
-            progress=lambda d, n: progress("simulate", d, n),
-            on_bake=lambda done, total, message: print(
-                f"crowd snapshot: {message}", file=sys.stderr, flush=True))
+    source = ShotSource(config=args.config, blend=args.blend, scene=args.scene,
+                        trust_scripts=args.trust_scripts, substeps=args.substeps)
+    files = write_shot_snapshots(
+        source, args.out, args.frames, args.every,
+        progress=lambda d, n: progress("simulate", d, n),
+        on_bake=lambda done, total, message: print(f"crowd snapshot: {message}",
+                                                   file=sys.stderr, flush=True))
     size = sum(os.path.getsize(f) for f in files)
     seconds = time.perf_counter() - t
     if args.json:

@@ -80,20 +80,28 @@ def _chunk_path(out, k, frames) -> str:
     return os.path.join(chunk_folder(out), f"c{k:04d}_{frames[0]}-{frames[1]}", f"shot{ext}")
 
 
-def write_shot_snapshots(source: ShotSource, folder, frames, every, progress=None) -> list:
+def write_shot_snapshots(source: ShotSource, folder, frames, every, progress=None,
+                         on_bake=None) -> list:
     """Snapshots of ``source``'s crowd before each ``every``-frame chunk of ``frames``
-    into ``folder`` (created if missing); returns the files."""
+    into ``folder`` (created if missing); returns the files. What ``crowd snapshot``
+    runs, and a worker for a shot's snapshot pass. ``frames`` None: a .blend's scene
+    range (a configuration needs them); ``on_bake(done, total, message)``: the .blend's
+    bake steps."""
     if source.config is not None:
         from .core.config_io import load_config
         from .core.crowd import Crowd
         from .core.snapshot import SnapshotFolder, write_snapshots
+        if frames is None:
+            raise CrowdError("--frames FIRST-LAST is required with --config (a .blend "
+                             "gives its scene's frame range)")
+        folder = SnapshotFolder(folder, create=True)
         crowd = Crowd(load_config(source.config), skinning="gpu", substeps=source.substeps)
-        return write_snapshots(crowd, SnapshotFolder(folder, create=True), *frames, every,
-                               progress)
+        return write_snapshots(crowd, folder, *frames, every, progress)
     from .blender.cli_commands import snapshot_blend
     return snapshot_blend(folder, frames, every=every, blend=source.blend,
                           scene=source.scene, substeps=source.substeps,
-                          trust_scripts=source.trust_scripts, progress=progress)[1]
+                          trust_scripts=source.trust_scripts, progress=progress,
+                          on_bake=on_bake)[1]
 
 
 def export_chunk(source: ShotSource, frames, out, snapshots=None, progress=None,
