@@ -40,7 +40,7 @@ from ..core.errors import CrowdError
 from .agents import ROOT
 from .clips import PRIM, manifest_layer
 from .files import ExportFiles
-from .layers import attribute, define, new_layer, relationship
+from .layers import attribute, define, new_layer
 
 __all__ = ["stitch", "StitchResult"]
 
