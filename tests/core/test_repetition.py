@@ -1,0 +1,221 @@
+"""The repetition metric (core.repetition): exact screen-space neighbours, the rule for
+"looks alike", and the metric of a running crowd and of its recording. The oracles
+are brute force written here (every pair compared) and hand-made crowds whose value
+is known."""
+
+import numpy as np
+import pytest
+
+from crowd_addon.core import Crowd, CrowdError
+from crowd_addon.core.agents import STREAM, TRANSITION, UNIQUE
+from crowd_addon.core.recorder import Recorder
+from crowd_addon.core.repetition import (RepetitionSettings, crowd_repetition,
+                                         frame_repetition, measure_frames,
+                                         nearest_neighbours, recording_repetition,
+                                         screen_points)
+
+from .test_recording import config as recording_config
+from .test_recording import simulate
+
+
+def brute_neighbours(xy, k):
+    """Every pair's distance; the k nearest others by (distance, index)."""
+    n = len(xy)
+    out = np.full((n, k), -1, np.int64)
+    for i in range(n):
+        d = ((xy - xy[i]) ** 2).sum(1)
+        d[i] = np.inf
+        order = np.lexsort((np.arange(n), d))[:min(k, n - 1)]
+        out[i, :order.size] = order
+    return out
+
+
+def clustered(rng, n):
+    centres = rng.uniform(-500, 500, (4, 2))
+    scales = np.array([0.5, 5.0, 50.0, 400.0])
+    which = rng.integers(0, 4, n)
+    return centres[which] + rng.normal(0, 1, (n, 2)) * scales[which, None]
+
+
+@pytest.mark.parametrize("case", ["uniform", "clustered", "grid ties", "duplicates"])
+@pytest.mark.parametrize("n,k", [(7, 3), (600, 6), (4000, 6), (9000, 4)])
+def test_neighbours_are_exact(case, n, k):
+    rng = np.random.default_rng(n + k)
+    if case == "uniform":
+        xy = rng.uniform(0, 1920, (n, 2))
+    elif case == "clustered":
+        xy = clustered(rng, n)
+    elif case == "grid ties":                 # many equal distances: ties by index
+        xy = rng.integers(0, int(np.sqrt(n)) + 2, (n, 2)).astype(float)
+    else:
+        xy = np.repeat(rng.uniform(0, 100, (n // 5 + 1, 2)), 5, axis=0)[:n]
+    if n > 4000:
+        sample = rng.choice(n, 300, replace=False)
+        got = nearest_neighbours(xy, k)[sample]
+        want = np.empty_like(got)
+        for r, i in enumerate(sample):
+            d = ((xy - xy[i]) ** 2).sum(1)
+            d[i] = np.inf
+            want[r] = np.lexsort((np.arange(n), d))[:k]
+        np.testing.assert_array_equal(got, want)
+    else:
+        np.testing.assert_array_equal(nearest_neighbours(xy, k), brute_neighbours(xy, k))
+
+
+def test_fewer_points_than_neighbours():
+    np.testing.assert_array_equal(nearest_neighbours(np.zeros((0, 2)), 3).shape, (0, 3))
+    np.testing.assert_array_equal(nearest_neighbours([[0, 0]], 2), [[-1, -1]])
+    np.testing.assert_array_equal(nearest_neighbours([[0, 0], [3, 0], [1, 0]], 4),
+                                  [[2, 1, -1, -1], [2, 0, -1, -1], [0, 1, -1, -1]])
+
+
+def top_view(half=60.0):
+    """An orthographic camera above the origin looking down: x, y in -half..half fill
+    the screen."""
+    m = np.eye(4)
+    m[0, 0] = m[1, 1] = 1.0 / half
+    m[2, 2] = -0.001
+    return m
+
+
+def crowd_arrays(n, rng, streams=1, max_offset=1, colors=1):
+    side = int(np.ceil(np.sqrt(n)))
+    pos = np.zeros((n, 3))
+    pos[:, 0] = (np.arange(n) % side) * 1.1 - 50 + rng.uniform(-0.3, 0.3, n)
+    pos[:, 1] = (np.arange(n) // side) * 1.1 - 50 + rng.uniform(-0.3, 0.3, n)
+    kind = np.zeros(n, np.int8)
+    ref = rng.integers(0, streams, n)
+    offset = rng.integers(0, max_offset, n)
+    palette = rng.uniform(0, 1, (colors, 3))
+    color = palette[rng.integers(0, colors, n)]
+    look = np.zeros(n, np.int64)
+    return pos, kind, ref, offset, look, color
+
+
+def brute_metric(pos, kind, ref, offset, look, color, vp, s):
+    """The metric from its definition, pair by pair."""
+    clip = np.c_[pos, np.ones(len(pos))] @ vp.T
+    ndc = clip[:, :3] / clip[:, 3:]
+    vis = np.flatnonzero((clip[:, 3] > 0) & (np.abs(ndc) <= 1).all(1))
+    xy = np.c_[(ndc[vis, 0] + 1) / 2 * s.width, (ndc[vis, 1] + 1) / 2 * s.height]
+    nb = brute_neighbours(xy, s.k)
+    alike = pairs = 0
+    for a in range(len(vis)):
+        for b in nb[a][nb[a] >= 0]:
+            i, j = vis[a], vis[b]
+            pairs += 1
+            same = kind[i] == kind[j] and kind[i] != TRANSITION and ref[i] == ref[j]
+            same = same and (kind[i] == UNIQUE or abs(int(offset[i]) - int(offset[j]))
+                             <= s.offset_tolerance)
+            same = same and look[i] == look[j]
+            same = same and np.abs(color[i] - color[j]).max() <= s.color_tolerance
+            alike += same
+    return alike / pairs
+
+
+def test_one_stream_at_one_offset_repeats_fully():
+    rng = np.random.default_rng(3)
+    arrays = crowd_arrays(900, rng)
+    share, visible, pairs = frame_repetition(*arrays, top_view())
+    assert share == 1.0 and visible == 900 and pairs == 900 * 6
+
+
+@pytest.mark.parametrize("streams,offsets,colors,k", [(3, 10, 1, 6), (8, 60, 2, 4),
+                                                     (1, 4, 3, 8), (2, 1, 1, 1)])
+def test_spread_agents_match_brute_force(streams, offsets, colors, k):
+    rng = np.random.default_rng(streams * 100 + offsets)
+    pos, kind, ref, offset, look, color = crowd_arrays(700, rng, streams, offsets, colors)
+    kind[rng.random(700) < 0.05] = TRANSITION
+    uniq = rng.random(700) < 0.05
+    kind[uniq], ref[uniq] = UNIQUE, rng.integers(0, 2, uniq.sum())
+    look[rng.random(700) < 0.1] = 1
+    pos[:40, 0] += 200                       # off screen
+    s = RepetitionSettings(k=k, width=640, height=480)
+    vp = top_view()
+    share, visible, _ = frame_repetition(pos, kind, ref, offset, look, color, vp, s)
+    assert visible == 660
+    assert share == pytest.approx(brute_metric(pos, kind, ref, offset, look, color, vp, s),
+                                  abs=1e-12)
+    assert 0 < share < 1
+
+
+def test_each_difference_breaks_likeness():
+    """Two agents side by side, k = 1: alike until one thing differs."""
+    pos = np.array([[0.0, 0, 0], [1.0, 0, 0]])
+    base = dict(kind=np.array([STREAM, STREAM]), ref=np.array([0, 0]),
+                offset=np.array([3, 5]), look=np.array([0, 0]),
+                color=np.array([[0.2, 0.3, 0.4], [0.22, 0.3, 0.4]]))
+    s = RepetitionSettings(k=1)
+
+    def share(**change):
+        a = {**base, **change}
+        return frame_repetition(pos, a["kind"], a["ref"], a["offset"], a["look"],
+                                a["color"], top_view(), s)[0]
+
+    assert share() == 1.0                                       # 2 frames, 0.02 apart
+    assert share(offset=np.array([3, 6])) == 0.0
+    assert share(ref=np.array([0, 1])) == 0.0
+    assert share(look=np.array([0, 1])) == 0.0
+    assert share(color=np.array([[0.2, 0.3, 0.4], [0.3, 0.3, 0.4]])) == 0.0
+    assert share(kind=np.array([TRANSITION, TRANSITION])) == 0.0
+    assert share(kind=np.array([UNIQUE, UNIQUE]), offset=np.array([0, 50])) == 1.0
+    assert share(kind=np.array([UNIQUE, STREAM])) == 0.0
+    assert frame_repetition(pos[:1], *(v[:1] for v in base.values()), top_view(), s) == \
+        (None, 1, 0)
+
+
+def test_screen_points_and_visibility():
+    vp = top_view(10.0)
+    xy, vis = screen_points([[0, 0, 0], [10, 10, 0], [-10, 0, 0], [11, 0, 0]], vp, 200, 100)
+    np.testing.assert_allclose(xy[:3], [[100, 50], [200, 100], [0, 50]])
+    np.testing.assert_array_equal(vis, [True, True, True, False])
+    behind = np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, -1, 0]], float)
+    assert not screen_points([[0, 0, 5]], behind, 10, 10)[1][0]      # w < 0
+
+
+def test_a_recording_measures_what_the_running_crowd_showed():
+    """The oracle is the crowd itself: the metric of ``crowd.view`` after each step,
+    against the recording's at the same frames (transitions, uniques and moves
+    included)."""
+    crowd = Crowd(recording_config(), skinning="gpu")
+    first, last = 3, 24
+    vp = top_view(8.0)
+    s = RepetitionSettings(k=3, offset_tolerance=1, color_tolerance=1.0)
+    recorder = Recorder(crowd, first, last, on_frame=simulate)
+    live = {}
+    while True:
+        if crowd.view.frame >= first:
+            live[crowd.view.frame] = crowd_repetition(crowd.view, vp, settings=s)
+        if recorder.finished:
+            break
+        recorder.step()
+    rec = recorder.finish()
+    got = recording_repetition(rec, vp, frames=range(first, last + 1), settings=s)
+    assert got.per_frame == tuple(live[f].value for f in range(first, last + 1))
+    assert len(set(got.per_frame)) > 3                  # the shot changes it
+    assert got.value == pytest.approx(np.mean(got.per_frame))
+    assert got.as_dict()["k"] == 3 and "repetition 0." in got.line()
+    default = recording_repetition(rec, vp)
+    assert default.frames == tuple(measure_frames(first, last, 12))
+
+
+@pytest.mark.parametrize("kwargs,message", [
+    ({"k": 0}, "k must be an integer >= 1"),
+    ({"width": 1.5}, "width must be an integer"),
+    ({"offset_tolerance": -1}, "offset_tolerance must be an integer >= 0"),
+    ({"color_tolerance": 2}, "color_tolerance must be in 0..1"),
+])
+def test_bad_settings_are_named(kwargs, message):
+    with pytest.raises(CrowdError, match=message):
+        RepetitionSettings(**kwargs)
+
+
+def test_bad_input_is_named():
+    with pytest.raises(CrowdError, match=r"points must be \(n, 2\)"):
+        nearest_neighbours(np.zeros((4, 3)), 2)
+    with pytest.raises(CrowdError, match="points must be finite"):
+        nearest_neighbours([[0, np.nan], [1, 1]], 1)
+    with pytest.raises(CrowdError, match="view_projection must be a finite 4x4"):
+        screen_points(np.zeros((2, 3)), np.eye(3), 10, 10)
+    with pytest.raises(CrowdError, match="outside the shot"):
+        recording_repetition(type("R", (), {"first": 0, "last": 5})(), np.eye(4), [9])
