@@ -29,9 +29,10 @@ import argparse
 import os
 import sys
 
-from .cli_args import (add_shot_arguments, add_trust_argument, frame_number, frame_range,
+from .cli_args import (add_repetition_arguments, add_shot_arguments, add_trust_argument,
+                       frame_number, frame_range,
                        int_at_least, parse_command, path_arg, positive_float,
-                       progress_printer)
+                       progress_printer, repetition_settings)
 from .core.config import MAX_SUBSTEPS
 from .core.errors import CrowdError
 
@@ -171,6 +172,7 @@ def _run_export(args) -> int:
     import dataclasses
     import json
 
+    from .core.repetition import describe
     from .farm import ShotSource, export_chunk
     source = ShotSource(config=args.config, blend=args.blend, scene=args.scene,
                         trust_scripts=args.trust_scripts, agents=args.agents,
@@ -181,7 +183,8 @@ def _run_export(args) -> int:
     config, result = export_chunk(
         source, args.frames, args.out, args.snapshots, progress=progress,
         on_bake=lambda done, total, message: print(f"crowd export: {message}",
-                                                   file=sys.stderr, flush=True))
+                                                   file=sys.stderr, flush=True),
+        repetition=repetition_settings(args))
     if args.json:
         print(json.dumps({**dataclasses.asdict(result), "bytes": result.bytes}))
         return 0
@@ -199,6 +202,7 @@ def _run_export(args) -> int:
         f"character{'s' if result.characters != 1 else ''}",
         f"  {s['total']:.1f} s (simulate {s['simulate']:.1f} s, author "
         f"{s['author']:.1f} s, write {s['write']:.1f} s)"]
+        + ([f"  {describe(result.repetition)}"] if result.repetition else [])
         + ([f"  simulated from the snapshot at frame {result.started_from}"
             if result.started_from is not None else
             "  no snapshot of this crowd before the shot: simulated from its start frame",
@@ -426,6 +430,7 @@ def _add_preview(subparsers) -> None:
                    help="multisample anti-aliasing, samples a pixel, moderngl backend "
                         "(Blender's gpu module has no multisampled offscreen image); 0: "
                         "none (default: %(default)s)")
+    add_repetition_arguments(p)
     p.add_argument("--json", action="store_true",
                    help="print the summary as one JSON object")
     add_trust_argument(p)
@@ -435,6 +440,7 @@ def _add_preview(subparsers) -> None:
 def _run_preview(args) -> int:
     import json
 
+    from .core.repetition import describe
     from .gpu.preview_render import render_preview
     shown = [-1]
 
@@ -449,7 +455,9 @@ def _run_preview(args) -> int:
         config, r, camera = preview_blend(
             args.out, args.frames, blend=args.blend, scene=args.scene, start=args.start,
             camera=args.camera, size=size, mp4=args.mp4, backend=args.backend,
-            samples=args.samples, shadows=args.shadows, trust_scripts=args.trust_scripts, progress=progress, on_bake=lambda done, total, message: print(
+            samples=args.samples, shadows=args.shadows, trust_scripts=args.trust_scripts,
+            progress=progress, repetition=repetition_settings(args),
+            on_bake=lambda done, total, message: print(
                 f"crowd preview: {message}", file=sys.stderr, flush=True))
     else:
         from .core.config_io import load_config
@@ -467,14 +475,14 @@ def _run_preview(args) -> int:
             init_headless_gpu()
         r = render_preview(config, args.out, args.frames, start=args.start, size=size,
                            mp4=args.mp4, backend=args.backend, progress=progress,
-                           samples=args.samples)
+                           samples=args.samples, repetition=repetition_settings(args))
     s = r.seconds
     if args.json:
         print(json.dumps({
             "out": args.out, "pngs": r.pngs, "mp4": r.mp4, "frames": list(r.frames),
             "size": list(r.size), "agents": r.agents, "backend": r.backend,
             "device": r.device, "camera": camera, "upload_bytes_per_frame": r.upload_bytes,
-            "seconds": s}))
+            "repetition": r.repetition, "seconds": s}))
         return 0
     n = len(r.pngs)
     print("\n".join([
@@ -485,6 +493,7 @@ def _run_preview(args) -> int:
         f"  {r.agents:,} agents, {r.backend} on {r.device}, "
         + (f"camera {camera!r}, " if camera else "") +
         f"{r.upload_bytes:,} B uploaded per frame (median)",
+        *([f"  {describe(r.repetition)}"] if r.repetition else []),
         f"  {s['total']:.1f} s, {n / s['total']:.1f} frames/s (simulate {s['simulate']:.1f} s, "
         f"sync {s['sync']:.1f} s, render {s['render']:.1f} s, write {s['write']:.1f} s)"]))
     return 0
@@ -520,6 +529,7 @@ def _add_demo(subparsers) -> None:
 
 
 def _run_demo(args) -> int:
+    from .core.repetition import describe
     from .demo.run import run_demo
 
     import importlib.util
@@ -539,6 +549,7 @@ def _run_demo(args) -> int:
         f"  events fired {s['events_fired']:,} (clap: {s['clap_agent_events']:,} agent "
         f"claps on {s['clap_calls']} frames), cheering {s['cheering']:,}, wave "
         f"{s['wave_agents']:,}, hit {s['hits']}",
+        f"  {describe(s['repetition'])} through the demo's camera",
         "  cues: " + ", ".join(f"{c['name']} @{c['frame']}" + (" (muted)" if c["name"] in
                                                               s["muted_cues"] else "")
                                for c in s["cues"]),

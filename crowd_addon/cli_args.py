@@ -129,9 +129,33 @@ def add_shot_arguments(parser) -> None:
                              "frame instead of simulating from the start frame, and leave "
                              "one there at the last frame for the next chunk (the folder "
                              "is created if missing)")
+    add_repetition_arguments(parser)
     parser.add_argument("--json", action="store_true",
                         help="print the summary as one JSON object")
     add_trust_argument(parser)
+
+
+def add_repetition_arguments(parser, frames: bool = True) -> None:
+    """``--neighbours`` and (``frames``) ``--repetition-frames``: the repetition
+    metric's settings (:func:`repetition_settings`)."""
+    parser.add_argument("--neighbours", type=int_at_least(1), default=6, metavar="K",
+                        help="repetition metric: screen-space neighbours compared per "
+                             "agent (default 6; docs/variety.md)")
+    if frames:
+        parser.add_argument("--repetition-frames", type=int_at_least(0), default=8,
+                            metavar="N", help="repetition metric: frames measured, spread "
+                                              "over the shot (default 8; 0: not measured)")
+
+
+def repetition_settings(args, **size):
+    """The :class:`~crowd_addon.core.repetition.RepetitionSettings` of parsed
+    arguments (:func:`add_repetition_arguments`), None when ``--repetition-frames`` is
+    0; ``size``: ``width``/``height`` of the screen."""
+    from .core.repetition import RepetitionSettings
+    frames = getattr(args, "repetition_frames", 1)
+    if frames == 0:
+        return None
+    return RepetitionSettings(k=args.neighbours, frames=frames, **size)
 
 
 def add_trust_argument(parser) -> None:

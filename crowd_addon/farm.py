@@ -35,6 +35,7 @@ import time
 from dataclasses import dataclass, field
 
 from .core.errors import CrowdError
+from .core.repetition import RepetitionSettings
 
 __all__ = ["ShotSource", "FarmShot", "chunk_ranges", "chunk_folder", "write_shot_snapshots",
            "export_chunk", "farm_export", "farm_export_shots", "load_shot_list",
@@ -105,14 +106,15 @@ def write_shot_snapshots(source: ShotSource, folder, frames, every, progress=Non
 
 
 def export_chunk(source: ShotSource, frames, out, snapshots=None, progress=None,
-                 on_bake=None):
+                 on_bake=None, repetition=RepetitionSettings()):
     """Export ``frames`` of ``source``'s shot to ``out`` exactly as ``crowd export``
     does, starting from the latest snapshot in ``snapshots`` before the first frame
     (and leaving one at the last). Returns ``(config, ExportResult)``: the crowd's
     configuration and :class:`~crowd_addon.usd.export.ExportResult`. What ``crowd
     export`` runs, and a worker for each chunk. ``frames``
     None: a .blend's scene range (a configuration needs them); ``on_bake(done, total,
-    message)``: the .blend's bake steps."""
+    message)``: the .blend's bake steps; ``repetition``: the repetition metric's
+    settings (None: not measured)."""
     if source.config is not None:
         import dataclasses
 
@@ -137,7 +139,7 @@ def export_chunk(source: ShotSource, frames, out, snapshots=None, progress=None,
             if snaps is not None:
                 snaps.recorded()
             result = export_crowd(shot, out, agents=source.agents, progress=progress,
-                                  layout=source.layout)
+                                  layout=source.layout, repetition=repetition)
             if snaps is not None:
                 result = dataclasses.replace(result, started_from=snaps.started_from,
                                              snapshot=snaps.keep())
@@ -147,7 +149,7 @@ def export_chunk(source: ShotSource, frames, out, snapshots=None, progress=None,
                         agents=source.agents, layout=source.layout,
                         substeps=source.substeps, snapshots=snapshots,
                         trust_scripts=source.trust_scripts, progress=progress,
-                        on_bake=on_bake)
+                        on_bake=on_bake, repetition=repetition)
 
 
 def _run_chunk(source, frames, out, snapshots, name, log, _after=None):

@@ -18,7 +18,7 @@ import numpy as np
 from ..core.errors import CrowdError
 from ..gpu.camera import Camera
 
-__all__ = ["find_camera", "camera_from_object"]
+__all__ = ["find_camera", "camera_from_object", "scene_size", "metric_view"]
 
 
 def find_camera(scene, name: str | None = None):
@@ -72,3 +72,32 @@ def camera_from_object(obj, aspect: float) -> Camera:
         return camera
     except CrowdError as e:
         raise CrowdError(f"{what}: {str(e).removeprefix('camera: ')}") from None
+
+
+def scene_size(scene, size=(None, None)) -> tuple:
+    """``size`` with a None width or height taken from ``scene``'s render resolution
+    (``resolution_x/y`` times ``resolution_percentage``)."""
+    r = scene.render
+    pct = r.resolution_percentage / 100.0
+    return tuple(int(v) if v is not None else max(1, int(round(full * pct)))
+                 for v, full in zip(size, (r.resolution_x, r.resolution_y)))
+
+
+def metric_view(scene, settings):
+    """The camera and settings the repetition metric of ``scene``'s crowd is measured
+    with: its scene camera at its render size, as a render frames it. Without a scene
+    camera, or with one the renderer cannot draw (orthographic, lens shift), the
+    camera is None (the export frames the agents) and the size stays the settings'.
+    ``settings`` None: None, None (not measured)."""
+    import dataclasses
+    if settings is None:
+        return None, None
+    obj = scene.camera
+    if obj is None:
+        return None, settings
+    w, h = scene_size(scene)
+    try:
+        return camera_from_object(obj, w / h), dataclasses.replace(settings, width=w,
+                                                                   height=h)
+    except CrowdError:
+        return None, settings

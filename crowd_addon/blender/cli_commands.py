@@ -31,8 +31,11 @@ import json
 import os
 import sys
 
-from ..cli_args import add_shot_arguments, parse_command, progress_printer
+from ..cli_args import add_shot_arguments, parse_command, progress_printer, repetition_settings
 from ..core.errors import CrowdError
+from ..core.repetition import RepetitionSettings, describe
+
+_DEFAULT = RepetitionSettings()
 
 __all__ = ["open_scene", "export_blend", "preview_blend", "snapshot_blend", "scene_frames",
            "blender_output_to_stderr", "build_parser", "crowd_command", "register_command",
@@ -116,11 +119,11 @@ def scene_frames(scene, frames=None) -> tuple:
 def export_blend(out: str, frames: tuple | None = None, *, blend: str | None = None,
                  scene: str | None = None, agents: int | None = None, progress=None,
                  on_bake=None, trust_scripts: bool = False, layout: str = "instanced",
-                 substeps: int = 1, snapshots: str | None = None):
+                 substeps: int = 1, snapshots: str | None = None, repetition=_DEFAULT):
     """Export the Crowd settings of a .blend's scene (:func:`open_scene`) as UsdSkel.
 
-    ``out``, ``agents``, ``layout``, ``substeps``, ``snapshots``, ``progress(stage, done,
-    total)`` and ``on_bake(done, total, message)`` are those of
+    ``out``, ``agents``, ``layout``, ``substeps``, ``snapshots``, ``repetition``,
+    ``progress(stage, done, total)`` and ``on_bake(done, total, message)`` are those of
     :func:`.export.export_scene`; ``frames`` (first, last)
     defaults to the scene's frame range. The folder of ``out`` is created when
     missing, and removed again when the export fails. Blender's own output goes to
@@ -138,14 +141,16 @@ def export_blend(out: str, frames: tuple | None = None, *, blend: str | None = N
         with folders_made(folder):
             return export_scene(found, out, scene_frames(found, frames), agents=agents,
                                 progress=progress, on_bake=on_bake, layout=layout,
-                                substeps=substeps, snapshots=snapshots)
+                                substeps=substeps, snapshots=snapshots,
+                                repetition=repetition)
 
 
 def preview_blend(out: str, frames: int | None = None, *, blend: str | None = None,
                   scene: str | None = None, start: int | None = None,
                   camera: str | None = None, size=(None, None), mp4: bool = False,
                   backend: str = "moderngl", progress=None, on_bake=None,
-                  trust_scripts: bool = False, samples: int = 4, shadows: bool = True):
+                  trust_scripts: bool = False, samples: int = 4, shadows: bool = True,
+                  repetition=_DEFAULT):
     """Render the Crowd settings of a .blend's scene (:func:`open_scene`) headless to
     PNG frames (:func:`crowd_addon.gpu.preview_render.render_preview`), drawn in the
     scene's own geometry and lit by its sun (:mod:`.scene_geometry`).
@@ -157,11 +162,12 @@ def preview_blend(out: str, frames: int | None = None, *, blend: str | None = No
     The camera, the frames and the output folder are checked before the bake.
     Blender's own output goes to stderr. ``trust_scripts`` as :func:`export_blend`;
     ``samples``: anti-aliasing of the moderngl backend; ``shadows``: the sun's
-    shadows. Returns ``(config, result, camera object name or None)``.
+    shadows; ``repetition``: the repetition metric's settings (None: not measured).
+    Returns ``(config, result, camera object name or None)``.
     """
     with blender_output_to_stderr():        # from the import of bpy on (5.2 logs then)
         from ..gpu.preview_render import render_preview, writable_dir
-        from .cameras import camera_from_object, find_camera
+        from .cameras import camera_from_object, find_camera, scene_size
         from .scene_config import build_crowd, config_from_scene
         from .scene_geometry import scene_geometry, scene_light
         _trust(trust_scripts)
@@ -186,7 +192,7 @@ def preview_blend(out: str, frames: int | None = None, *, blend: str | None = No
         result = render_preview(crowd, out, frames, start=first, size=size, mp4=mp4,
                                 backend=backend, progress=progress, camera=view,
                                 scene=scene_geometry(found), light=scene_light(found),
-                                samples=samples, shadows=shadows)
+                                samples=samples, shadows=shadows, repetition=repetition)
     return config, result, None if obj is None else obj.name
 
 
@@ -209,15 +215,6 @@ def snapshot_blend(out: str, frames: tuple | None = None, *, every: int,
         if note and on_bake is not None:
             on_bake(1, 1, note)
         return config, write_snapshots(crowd, folder, first, last, every, progress)
-
-
-def scene_size(scene, size=(None, None)) -> tuple:
-    """``size`` with a None width or height taken from ``scene``'s render resolution
-    (``resolution_x/y`` times ``resolution_percentage``)."""
-    r = scene.render
-    pct = r.resolution_percentage / 100.0
-    return tuple(int(v) if v is not None else max(1, int(round(full * pct)))
-                 for v, full in zip(size, (r.resolution_x, r.resolution_y)))
 
 
 # ------------------------------------------------------------- blender -c crowd
@@ -252,6 +249,7 @@ def crowd_command(argv) -> int:
         _, result = export_blend(
             args.out, args.frames, scene=args.scene, agents=args.agents,
             layout=args.layout, substeps=args.substeps, snapshots=args.snapshots,
+            repetition=repetition_settings(args),
             trust_scripts=args.trust_scripts, progress=progress_printer("crowd export"),
             on_bake=lambda done, total, message: print(
                 f"crowd export: {message}", file=sys.stderr, flush=True))
@@ -264,6 +262,8 @@ def crowd_command(argv) -> int:
         print(f"wrote {result.path} and {len(result.files) - 1} layers in "
               f"{result.layers_dir} ({result.bytes:,} B): {result.agents:,} agents, frames "
               f"{result.frames[0]}-{result.frames[1]}, {result.seconds['total']:.1f} s")
+        if result.repetition is not None:
+            print(f"  {describe(result.repetition)}")
     return 0
 
 

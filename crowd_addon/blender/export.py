@@ -23,7 +23,9 @@ from bpy_extras.io_utils import ExportHelper
 
 from ..core.config import MAX_SUBSTEPS
 from ..core.errors import CrowdError
+from ..core.repetition import RepetitionSettings
 from . import preview, scene_config
+from .cameras import metric_view
 
 __all__ = ["CLASSES", "MENUS", "ExportJob", "check_export", "export_scene",
            "export_steps", "menu_export", "CROWD_OT_export_usd"]
@@ -60,7 +62,8 @@ def check_export(scene, path, frames) -> tuple:
 
 
 def export_scene(scene, path, frames, agents=None, progress=None, on_bake=None,
-                 depsgraph=None, layout="instanced", substeps=1, snapshots=None):
+                 depsgraph=None, layout="instanced", substeps=1, snapshots=None,
+                 repetition=RepetitionSettings()):
     """Bake ``scene``'s Crowd settings and export the shot to ``path`` in one call
     (:func:`export_steps` run to the end).
 
@@ -79,6 +82,9 @@ def export_scene(scene, path, frames, agents=None, progress=None, on_bake=None,
     on_bake : optional ``on_bake(done, total, message)`` before each bake step
         (:func:`.scene_config.config_steps`).
     depsgraph : evaluated depsgraph for the agent sources (default: the scene's).
+    repetition : the repetition metric's settings (None: not measured), measured
+        through the scene camera at the scene's render size when it has one
+        (:func:`.cameras.metric_view`).
 
     Returns
     -------
@@ -87,7 +93,8 @@ def export_scene(scene, path, frames, agents=None, progress=None, on_bake=None,
     written then); the scene is not changed. An exception raised by a callback stops
     the export the same way.
     """
-    steps = export_steps(scene, path, frames, agents, depsgraph, layout, substeps, snapshots)
+    steps = export_steps(scene, path, frames, agents, depsgraph, layout, substeps, snapshots,
+                         repetition)
     try:
         while True:
             try:
@@ -104,7 +111,7 @@ def export_scene(scene, path, frames, agents=None, progress=None, on_bake=None,
 
 
 def export_steps(scene, path, frames, agents=None, depsgraph=None, layout="instanced",
-                 substeps=1, snapshots=None):
+                 substeps=1, snapshots=None, repetition=RepetitionSettings()):
     """The export of :func:`export_scene` as a generator, one unit of work per
     ``next()``: returns ``(config, result)`` (``StopIteration.value``).
 
@@ -124,10 +131,11 @@ def export_steps(scene, path, frames, agents=None, depsgraph=None, layout="insta
     frames = check_export(scene, path, frames)
     check_layout(layout)
     return _export_steps(scene, path, frames, agents, depsgraph, layout,
-                         check_substeps(substeps), snapshots)
+                         check_substeps(substeps), snapshots, repetition)
 
 
-def _export_steps(scene, path, frames, agents, depsgraph, layout, substeps, snapshots):
+def _export_steps(scene, path, frames, agents, depsgraph, layout, substeps, snapshots,
+                  repetition):
     import dataclasses
 
     from ..core.snapshot import ShotSnapshots
@@ -159,7 +167,8 @@ def _export_steps(scene, path, frames, agents, depsgraph, layout, substeps, snap
         yield "simulate", recorder.done, recorder.total, "simulate"
     if snaps is not None:
         snaps.recorded()
-    writing = write_steps(recorder.finish(), path, agents, layout)
+    camera, repetition = metric_view(scene, repetition)
+    writing = write_steps(recorder.finish(), path, agents, layout, camera, repetition)
     try:
         while True:
             try:

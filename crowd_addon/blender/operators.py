@@ -192,6 +192,29 @@ class CROWD_OT_preview_toggle(bpy.types.Operator):
         return bpy.ops.crowd.bake("INVOKE_DEFAULT")
 
 
+class CROWD_OT_measure_repetition(bpy.types.Operator):
+    """Measure how much the previewed crowd repeats itself at this frame: the share of
+    screen-space neighbour pairs that play the same stream in step, with the same body
+    and colour (docs/variety.md). Seen through the scene camera, or through this
+    viewport when the scene has none"""
+
+    bl_idname = "crowd.measure_repetition"
+    bl_label = "Measure Repetition"
+    bl_options = {"REGISTER"}
+
+    @classmethod
+    def poll(cls, context):
+        return preview.get(context.scene) is not None
+
+    def execute(self, context):
+        try:
+            preview.measure_repetition(context.scene, context.region_data, context.region)
+        except CrowdError as e:
+            self.report({"ERROR"}, str(e))
+            return {"CANCELLED"}
+        return {"FINISHED"}
+
+
 # ---------------------------------------------------------------- list editing
 _COLLECTIONS = (
     ("characters", "Characters", ""), ("lods", "LODs", ""), ("streams", "Streams", ""),
@@ -364,4 +387,5 @@ class CROWD_OT_item_move(_ListOperator, bpy.types.Operator):
 
 
 CLASSES = (CROWD_OT_bake, CROWD_OT_generate_agents, CROWD_OT_preview_toggle,
+           CROWD_OT_measure_repetition,
            CROWD_OT_item_add, CROWD_OT_item_remove, CROWD_OT_item_move)

@@ -114,6 +114,11 @@ class CROWD_PT_main(_Panel, bpy.types.Panel):
                        f"{len(c.config.clips)} clips")
         box.label(text=f"frame {c.frame}: step {pv.step_ms:.2f} ms, draw {pv.draw_ms:.2f} ms")
         box.label(text=snapshot_line(c.snapshots))
+        row = box.row(align=True)
+        row.operator("crowd.measure_repetition", icon="VIEWZOOM")
+        row.prop(s, "repetition_neighbours", text="k")
+        if pv.repetition is not None:
+            box.label(text=repetition_line(pv.repetition, pv.repetition_seen))
         if s.render_crowd and pv.render_stats is not None:
             r = pv.render_stats
             box.label(text=f"Render Crowd: {r.poses:,} pose meshes for {r.agents:,} agents, "
@@ -121,6 +126,15 @@ class CROWD_PT_main(_Panel, bpy.types.Panel):
         for text in (pv.status(), pv.draw_error, pv.render_error):
             if text:
                 box.label(text=text, icon="ERROR")
+
+
+def repetition_line(measured, seen) -> str:
+    """The last repetition measurement: its value and what it was measured through."""
+    if measured.value is None:
+        return f"Repetition at frame {measured.frames[0]}: no neighbours in view ({seen})"
+    return (f"Repetition {measured.value:.3f} at frame {measured.frames[0]}: "
+            f"{measured.value * 100:.1f} % of neighbour pairs alike, "
+            f"{measured.visible[0]:,} agents in {seen}")
 
 
 def snapshot_line(cache) -> str:

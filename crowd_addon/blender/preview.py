@@ -23,6 +23,7 @@ loads never leave dangling references; after a load the previews marked in the f
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
 from dataclasses import dataclass
@@ -40,6 +41,7 @@ from .props import settings_fingerprint
 log = logging.getLogger("crowd_addon.preview")
 
 __all__ = ["Preview", "start", "stop", "stop_all", "get", "check", "last_error", "draw_scene",
+           "measure_repetition",
            "draw_handle", "on_frame_change", "on_depsgraph_update", "on_undo",
            "render_crowd_changed",
            "on_load_pre", "on_load_post"]
@@ -64,6 +66,8 @@ class Preview:
     render_frame: int | None = None    # the frame the Render Crowd data shows
     render_stats: object = None        # render_crowd.RenderStats of the last sync
     render_error: str = ""
+    repetition: object = None          # core.repetition.Repetition last measured
+    repetition_seen: str = ""          # through what it was measured
 
     @property
     def handle(self):
@@ -368,6 +372,33 @@ def draw_scene(scene, view_matrix, projection_matrix) -> bool:
         return False
     pv.draw_ms = (time.perf_counter() - t0) * 1e3
     return True
+
+
+def measure_repetition(scene, region_data=None, region=None):
+    """Measure the previewed crowd's repetition metric at its frame (docs/variety.md),
+    through the scene camera at the render size (:func:`.cameras.metric_view`), or
+    through the viewport ``region_data``/``region`` when the scene has no camera the
+    renderer can draw; kept in :attr:`Preview.repetition` for the panel."""
+    from ..core.repetition import RepetitionSettings, crowd_repetition
+    from .cameras import metric_view
+    pv = _PREVIEWS.get(scene.name)
+    if pv is None:
+        raise CrowdError("the preview is not running: start it to measure its crowd")
+    settings = RepetitionSettings(k=scene.crowd.repetition_neighbours)
+    camera, settings = metric_view(scene, settings)
+    if camera is not None:
+        vp, seen = camera.view_projection, f"scene camera {scene.camera.name!r}"
+    elif region_data is not None and region is not None:
+        vp = np.array(region_data.window_matrix, np.float64) @ np.array(
+            region_data.view_matrix, np.float64)
+        settings = dataclasses.replace(settings, width=max(region.width, 1),
+                                       height=max(region.height, 1))
+        seen = "the viewport"
+    else:
+        raise CrowdError("the scene has no camera: measure from a 3D viewport's sidebar")
+    pv.repetition = crowd_repetition(pv.crowd.view, vp, settings=settings)
+    pv.repetition_seen = seen
+    return pv.repetition
 
 
 def _draw_callback():

@@ -267,6 +267,10 @@ class CROWD_PG_settings(PropertyGroup):
     preview_enabled: BoolProperty(
         name="Preview", default=False, options=set(),
         description="Whether the viewport preview runs (restarted after a file load)")
+    repetition_neighbours: IntProperty(
+        name="Neighbours", default=6, min=1, max=64,
+        description="Repetition metric: screen-space neighbours each agent is compared "
+                    "with (docs/variety.md)")
 
 
 CLASSES = show_props.CLASSES + (CROWD_PG_input, CROWD_PG_state_transition, CROWD_PG_node, CROWD_PG_animation,
@@ -299,7 +303,7 @@ _UI_ONLY = {"active_character_index", "active_lod_index", "active_stream_index",
             "active_unique_index", "active_source_index", "active_node_index",
             "active_input_index", "active_transition_index", "preview_enabled",
             "active_cue_index", "active_reaction_index", "active_parameter_index",
-            "render_crowd"}
+            "render_crowd", "repetition_neighbours"}
 
 
 def settings_fingerprint(settings) -> int:

@@ -63,7 +63,7 @@ def agent_lods(crowd, scene) -> np.ndarray:
     """``(N,)`` level of detail of each agent seen through ``scene``'s camera at its
     render resolution (every agent's finest level when the scene has no camera)."""
     from .cameras import camera_from_object
-    from .cli_commands import scene_size
+    from .cameras import scene_size
 
     levels = np.array([len(crowd.config.meshes.get(s.name, ())) for s in crowd.view.skeletons])
     skel = crowd.view.agent_skeleton

@@ -32,7 +32,7 @@ from .errors import CrowdError
 
 __all__ = ["RepetitionSettings", "Repetition", "nearest_neighbours", "screen_points",
            "pairs_alike", "frame_repetition", "crowd_repetition", "recording_repetition",
-           "measure_frames"]
+           "recording_repetition_steps", "measure_frames", "describe", "combine"]
 
 #: points at or below which neighbours are found by brute force
 _BRUTE = 2048
@@ -45,16 +45,18 @@ class RepetitionSettings:
     """What counts as a neighbour and as alike. ``k`` neighbours per agent; offsets at
     most ``offset_tolerance`` frames apart (2 frames: 1/15 s at 30 fps, too close for a
     viewer to tell apart); colours within ``color_tolerance`` per RGB channel;
-    ``width`` x ``height`` pixels of the screen the camera's image fills."""
+    ``width`` x ``height`` pixels of the screen the camera's image fills; ``frames``
+    measured over a shot, spread evenly (the first and the last among them)."""
 
     k: int = 6
     offset_tolerance: int = 2
     color_tolerance: float = 0.05
     width: int = 1280
     height: int = 720
+    frames: int = 8
 
     def __post_init__(self):
-        for name in ("k", "width", "height"):
+        for name in ("k", "width", "height", "frames"):
             v = getattr(self, name)
             if isinstance(v, bool) or int(v) != v or int(v) < 1:
                 raise CrowdError(f"repetition: {name} must be an integer >= 1, got {v!r}")
@@ -94,14 +96,18 @@ class Repetition:
                 "color_tolerance": s.color_tolerance, "screen": [s.width, s.height]}
 
     def line(self) -> str:
-        """One line for a terminal or a panel."""
-        if self.value is None:
-            return "repetition: no visible neighbours"
-        n = len(self.frames)
-        vis = int(round(np.mean(self.visible))) if self.visible else 0
-        return (f"repetition {self.value:.3f} ({self.value * 100:.1f} % of neighbour pairs "
-                f"alike; k={self.settings.k}, {vis:,} agents visible, "
-                f"{n} frame{'s' if n != 1 else ''})")
+        """One line for a terminal or a panel (:func:`describe`)."""
+        return describe(self.as_dict())
+
+
+def describe(measured: dict) -> str:
+    """One line for :meth:`Repetition.as_dict`'s dict (what exports report)."""
+    value, n = measured["value"], len(measured["frames"])
+    if value is None:
+        return "repetition: no visible neighbours"
+    vis = int(round(np.mean(measured["visible"]))) if measured["visible"] else 0
+    return (f"repetition {value:.3f} ({value * 100:.1f} % of neighbour pairs alike; "
+            f"k={measured['k']}, {vis:,} agents visible, {n} frame{'s' if n != 1 else ''})")
 
 
 # ------------------------------------------------------------------ neighbours
@@ -320,6 +326,16 @@ def frame_repetition(positions, kind, ref, offset, look, color, view_projection,
     return float(alike.sum()) / pairs, int(idx.size), pairs
 
 
+def combine(parts) -> Repetition:
+    """One :class:`Repetition` of several (frames in order; the first one's settings),
+    e.g. frames measured one at a time as a crowd runs."""
+    parts = list(parts)
+    if not parts:
+        raise CrowdError("repetition: nothing measured to combine")
+    results = [(v, n, p) for r in parts for v, n, p in zip(r.per_frame, r.visible, r.pairs)]
+    return _report([f for r in parts for f in r.frames], results, parts[0].settings)
+
+
 def _report(frames, results, settings) -> Repetition:
     shares = [r[0] for r in results]
     kept = [s for s in shares if s is not None]
@@ -348,30 +364,49 @@ def measure_frames(first: int, last: int, count: int) -> list:
     return sorted({int(round(v)) for v in np.linspace(first, last, count)})
 
 
-def recording_repetition(rec, view_projection, frames=None, look=None,
+def recording_repetition(rec, view_projection, frames=None, look=None, agents=None,
                          settings: RepetitionSettings = RepetitionSettings()) -> Repetition:
     """The metric of a recorded shot (:class:`~.recording.Recording`) at ``frames``
-    (default: 12 spread over the shot), from what each agent plays and where it
-    stands at each of them."""
-    frames = measure_frames(rec.first, rec.last, 12) if frames is None else list(frames)
+    (default: ``settings.frames`` spread over the shot), from what each agent plays and
+    where it stands at each of them; ``agents``: ids measured (default all)."""
+    steps = recording_repetition_steps(rec, view_projection, frames, look, agents, settings)
+    while True:
+        try:
+            next(steps)
+        except StopIteration as stop:
+            return stop.value
+
+
+def recording_repetition_steps(rec, view_projection, frames=None, look=None, agents=None,
+                               settings: RepetitionSettings = RepetitionSettings()):
+    """:func:`recording_repetition` as a generator: yields ``(done, total)`` after each
+    frame measured and returns the :class:`Repetition`. Its input is checked when it
+    is called."""
+    frames = measure_frames(rec.first, rec.last, settings.frames) if frames is None \
+        else list(frames)
     bad = [f for f in frames if not rec.first <= f <= rec.last]
     if bad:
         raise CrowdError(f"repetition: frame {bad[0]} is outside the shot "
                          f"{rec.first}..{rec.last}")
-    n = rec.agent_count
     look = rec.agent_skeleton if look is None else np.asarray(look)
-    agents = np.arange(n, dtype=np.int64)
+    agents = np.arange(rec.agent_count, dtype=np.int64) if agents is None \
+        else np.asarray(agents, np.int64)
+    return _recording_steps(rec, view_projection, frames, look, agents, settings)
+
+
+def _recording_steps(rec, view_projection, frames, look, agents, settings):
     results = []
     for f in frames:
         seg = _last_at(rec.segment_agent, rec.segment_frame, agents, f)
         kind, ref, off = rec.segment_kind[seg], rec.segment_ref[seg], rec.segment_offset[seg]
-        pos = rec.position.copy()
+        pos = rec.position[agents]
         if rec.move_agent.size:
             mv = _last_at(rec.move_agent, rec.move_frame, agents, f, missing=True)
             has = mv >= 0
             pos[has] = rec.move_position[mv[has]]
-        results.append(frame_repetition(pos, kind, ref, off, look, rec.color,
-                                        view_projection, settings))
+        results.append(frame_repetition(pos, kind, ref, off, look[agents],
+                                        rec.color[agents], view_projection, settings))
+        yield len(results), len(frames)
     return _report(frames, results, settings)
 
 

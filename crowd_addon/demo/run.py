@@ -14,8 +14,8 @@
    ``contact_sheet.png``: six frames, the show's beats among them), and record it
    (:mod:`crowd_addon.core.recording`);
 4. export that recording to ``stadium.usdc`` (UsdSkel): the same show, not simulated
-   again;
-5. print a summary and write it as ``summary.json``.
+   again; measure its repetition metric (docs/variety.md) through the demo's camera;
+5. print a summary and write it as ``summary.json`` (``repetition``: the metric).
 """
 
 from __future__ import annotations
@@ -28,6 +28,7 @@ from importlib import resources
 from pathlib import Path
 
 from ..core.errors import CrowdError
+from ..core.repetition import RepetitionSettings, recording_repetition
 
 __all__ = ["run_demo", "show_summary", "USD_COUNTS", "SHEET_FRAMES"]
 
@@ -156,12 +157,11 @@ def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
     crowd = Crowd(cfg, skinning="gpu")          # it runs its show (cfg.show) itself
     sheet = ContactSheet(_beat_frames(crowd, crowd.frame, crowd.frame + frames - 1))
     # the frames the preview shows, recorded as they are rendered
-    recorder = Recorder(crowd, crowd.frame, crowd.frame + frames - 1) if usd else None
+    recorder = Recorder(crowd, crowd.frame, crowd.frame + frames - 1)
     preview = render_preview(crowd, out / "frames", frames, size=size, mp4=mp4,
-                             before_step=None if recorder is None else
-                             lambda crowd, frame: recorder.capture(),   # the frame shown
+                             before_step=lambda crowd, frame: recorder.capture(),  # shown
                              camera=stadium.camera, scene=stadium.scene,
-                             light=stadium.light,
+                             light=stadium.light, repetition=None,   # measured below
                              progress=lambda d, n: _bar(d, n, "render"),
                              on_image=sheet.offer)
     write_png(out / "contact_sheet.png", sheet.image())
@@ -177,17 +177,25 @@ def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
                "contact_sheet": str(out / "contact_sheet.png"),
                "contact_sheet_frames": sorted(sheet.frames)}
 
+    recorder.capture()                           # the last frame
+    shot = recorder.finish()
+    # the repetition metric through the demo's camera, at the frames' size
+    measure = RepetitionSettings(width=size[0], height=size[1])
+    t = time.perf_counter()
     if usd:
         from ..usd.export import export_crowd
-        recorder.capture()                       # the last frame
         log("exporting the show to USD")
-        t = time.perf_counter()
-        res = export_crowd(recorder.finish(), out / "stadium.usdc",
-                           progress=lambda stage, d, n: _bar(d, n, stage))
+        res = export_crowd(shot, out / "stadium.usdc", camera=stadium.camera,
+                           repetition=measure, progress=lambda stage, d, n: _bar(d, n, stage))
         seconds["usd"] = time.perf_counter() - t
         summary.update(usd=str(res.path), usd_bytes=int(sum(res.files.values())),
                        usd_clip_agents=res.clip_agents,
                        usd_export={k: getattr(res, k) for k in USD_COUNTS})
+        summary["repetition"] = res.repetition
+    else:
+        summary["repetition"] = recording_repetition(
+            shot, stadium.camera.view_projection, settings=measure).as_dict()
+        seconds["repetition"] = time.perf_counter() - t
     seconds["total"] = time.perf_counter() - t0
     summary["seconds"] = {k: round(v, 2) for k, v in seconds.items()}
     with open(out / "summary.json", "w", encoding="utf-8") as f:

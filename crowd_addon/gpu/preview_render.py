@@ -11,6 +11,7 @@ command (:mod:`crowd_addon.cli`) is a thin wrapper around it.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import time
 from dataclasses import dataclass, field
@@ -20,6 +21,7 @@ import numpy as np
 
 from ..core.crowd import Crowd
 from ..core.errors import CrowdError
+from ..core.repetition import RepetitionSettings, combine, crowd_repetition, measure_frames
 from .backends import BACKENDS, make_renderer
 from .camera import frame_crowd
 from .png import write_png
@@ -39,7 +41,9 @@ class PreviewResult:
     or None; ``size``: (width, height) in pixels; ``device``: the renderer the GL
     reports; ``seconds``: wall time per stage (``simulate``, ``sync``, ``render``,
     ``write``, ``total``); ``upload_bytes``: pose and instance bytes sent per frame
-    (median).
+    (median); ``repetition``: the repetition metric through the camera at the frames'
+    size (:meth:`~crowd_addon.core.repetition.Repetition.as_dict`; None when not
+    measured).
     """
 
     frames: tuple
@@ -51,6 +55,7 @@ class PreviewResult:
     device: str
     upload_bytes: int = 0
     seconds: dict = field(default_factory=dict)
+    repetition: dict | None = None
 
 
 def _check(config, out_dir, frames, size, mp4, backend) -> Path:
@@ -128,7 +133,8 @@ def render_preview(config, out_dir, frames: int, start: int | None = None,
                    size=(960, 540), mp4: bool = False, backend: str = "moderngl",
                    progress=None, before_step=None, camera=None, scene=None,
                    light=None, samples: int = 4, on_image=None,
-                   shadows: bool | None = None) -> PreviewResult:
+                   shadows: bool | None = None,
+                   repetition=RepetitionSettings()) -> PreviewResult:
     """Render ``frames`` frames of ``config`` (a ``CrowdConfig``) from ``start``
     (default: its start frame) into ``out_dir``; ``progress(done, total)`` is called
     after each frame. Raises ``CrowdError`` on bad input before writing anything.
@@ -141,7 +147,9 @@ def render_preview(config, out_dir, frames: int, start: int | None = None,
     renderers' ``(x, y, z, ambient)`` (None: their default); ``samples``: multisample
     anti-aliasing of the moderngl backend (0: none); ``on_image(frame, image)`` is
     given each frame's ``(H, W, 3)`` uint8 image (e.g. a contact sheet); ``shadows``:
-    the sun's shadows (None: with a scene)."""
+    the sun's shadows (None: with a scene); ``repetition``: the repetition metric's
+    settings (their ``frames`` spread over the run, measured as they are shown; the
+    size is the frames'), None not to measure it."""
     w, h = (int(v) for v in size)
     crowd = config if isinstance(config, Crowd) else None
     config = crowd.config if crowd is not None else config
@@ -159,6 +167,11 @@ def render_preview(config, out_dir, frames: int, start: int | None = None,
     renderer = make_renderer(crowd.view, backend, (w, h), **options)
     device = renderer.device
     camera = camera or frame_crowd(crowd, aspect=w / h)
+    if repetition is not None:
+        repetition = dataclasses.replace(repetition, width=w, height=h)
+        measure = set(measure_frames(crowd.frame, crowd.frame + int(frames) - 1,
+                                     repetition.frames))
+        measured = []
     mp4_path = out / "preview.mp4" if mp4 else None
     partial = out / ".preview.partial.mp4"
     made = _missing_folders(out)
@@ -173,6 +186,9 @@ def render_preview(config, out_dir, frames: int, start: int | None = None,
                 if before_step is not None:
                     before_step(crowd, crowd.frame + 1)
                 crowd.step()
+            if repetition is not None and crowd.frame in measure:
+                measured.append(crowd_repetition(crowd.view, camera.view_projection,
+                                                 settings=repetition))
             t1 = time.perf_counter()
             uploads.append(renderer.sync().upload_bytes)
             t2 = time.perf_counter()
@@ -219,4 +235,5 @@ def render_preview(config, out_dir, frames: int, start: int | None = None,
     seconds["total"] = time.perf_counter() - t0
     return PreviewResult((first, crowd.frame), pngs, None if mp4_path is None else
                          str(mp4_path), (w, h), crowd.agents.count, backend, device,
-                         int(np.median(uploads)), seconds)
+                         int(np.median(uploads)), seconds,
+                         None if repetition is None else combine(measured).as_dict())

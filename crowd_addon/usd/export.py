@@ -32,6 +32,7 @@ from ..core.config import USD_LAYOUTS, validate_config
 from ..core.config_io import config_digest
 from ..core.errors import CrowdError
 from ..core.recording import Recording
+from ..core.repetition import RepetitionSettings, recording_repetition_steps
 from .agents import (ROOT, agent_names, author_agent_animations, author_agents,
                      author_offset_animations)
 from .animation import author_animation
@@ -82,6 +83,9 @@ class ExportResult:
     started_from : the frame of the snapshot the simulation started from (``--snapshots``;
         None: it ran from the crowd's start frame); snapshot : the snapshot file the
         export left at its last frame (None without a snapshot folder).
+    repetition : the exported agents' repetition metric over the shot
+        (:meth:`~crowd_addon.core.repetition.Repetition.as_dict`; None when not
+        measured).
     """
 
     path: str
@@ -101,13 +105,15 @@ class ExportResult:
     substeps: int = 1
     started_from: int | None = None
     snapshot: str | None = None
+    repetition: dict | None = None
 
     @property
     def bytes(self) -> int:
         return int(sum(self.files.values()))
 
 
-def export_crowd(recording, path, agents=None, progress=None, layout="instanced") -> ExportResult:
+def export_crowd(recording, path, agents=None, progress=None, layout="instanced",
+                 camera=None, repetition=RepetitionSettings()) -> ExportResult:
     """Write ``recording`` to UsdSkel in one call (:func:`export_steps` to the end).
 
     Parameters
@@ -121,6 +127,10 @@ def export_crowd(recording, path, agents=None, progress=None, layout="instanced"
     layout : ``"instanced"`` (default: agents are instanceable, so renderers share
         each character's prototype) or ``"blender"`` (agents are not instanceable:
         Blender's USD importer animates them only then); :data:`LAYOUTS`.
+    camera : the :class:`~crowd_addon.gpu.camera.Camera` the repetition metric is
+        measured from (default: one framing the exported agents).
+    repetition : :class:`~crowd_addon.core.repetition.RepetitionSettings` of the
+        metric (stage ``repetition``, one step a frame measured), or None to skip it.
 
     Raises
     ------
@@ -128,7 +138,7 @@ def export_crowd(recording, path, agents=None, progress=None, layout="instanced"
     export at ``path`` is left as it was. An exception raised by ``progress`` stops
     the export the same way.
     """
-    steps = export_steps(recording, path, agents, layout)
+    steps = export_steps(recording, path, agents, layout, camera, repetition)
     try:
         while True:
             try:
@@ -141,7 +151,8 @@ def export_crowd(recording, path, agents=None, progress=None, layout="instanced"
         steps.close()
 
 
-def export_steps(recording, path, agents=None, layout="instanced"):
+def export_steps(recording, path, agents=None, layout="instanced", camera=None,
+                 repetition=RepetitionSettings()):
     """The export of :func:`export_crowd` as a generator yielding ``(stage, done,
     total)`` after each unit of work and returning the :class:`ExportResult`
     (``StopIteration.value``). The recording, ``path``, ``agents`` and ``layout`` are
@@ -153,7 +164,21 @@ def export_steps(recording, path, agents=None, layout="instanced"):
     check_layout(layout)
     ids = _agent_ids(agents, recording.agent_count)
     meshes = _meshes(recording.config, recording.agent_skeleton[ids])
-    return _steps(recording, ids, meshes, ExportFiles(path), layout)
+    measure = None if repetition is None else recording_repetition_steps(
+        recording, _view_projection(recording, ids, camera, repetition), agents=ids,
+        settings=repetition)
+    return _steps(recording, ids, meshes, ExportFiles(path), layout, measure)
+
+
+def _view_projection(rec, ids, camera, settings) -> np.ndarray:
+    """The repetition metric's camera: ``camera``'s, or one framing the agents ``ids``
+    at the settings' aspect."""
+    from ..gpu.camera import frame_points
+    if camera is None:
+        pos = rec.position[ids].astype(np.float64) if ids.size else np.zeros((1, 3))
+        camera = frame_points(pos.min(0) - 1.0, pos.max(0) + np.array([1.0, 1.0, 2.0]),
+                              aspect=settings.width / settings.height)
+    return camera.view_projection
 
 
 def check_export(config, path, agents=None, layout="instanced") -> None:
@@ -173,7 +198,7 @@ def check_export(config, path, agents=None, layout="instanced") -> None:
     _meshes(config, np.where(st >= 0, of_stream[st], of_unique[un]))
 
 
-def _steps(rec, ids, meshes, files, layout):
+def _steps(rec, ids, meshes, files, layout, measure):
     t0 = time.perf_counter()
     out = _Output(files)
     with files:
@@ -185,10 +210,11 @@ def _steps(rec, ids, meshes, files, layout):
                                                     stream_assets)
         names = agent_names(ids)
         own_paths = yield from _write_own_animations(out, shot, names, joints_of, clip_assets)
+        measured = None if measure is None else (yield from _staged("repetition", measure))
         yield "layout", 0, ids.size
         layer = new_layer(files.format, rec.fps, rec.first, rec.last, default_prim=ROOT,
                           comment="crowd shot written by crowd_addon.usd")
-        layer.customLayerData = {"crowd": _settings(rec, shot, layout)}
+        layer.customLayerData = {"crowd": _settings(rec, shot, layout, measured)}
         if own_paths:
             layer.subLayerPaths.append(files.asset_path("agents"))
         with Sdf.ChangeBlock():
@@ -209,7 +235,19 @@ def _steps(rec, ids, meshes, files, layout):
         blend_frames=int(sum(b.frames for b in clip_assets[1])),
         moving_agents=int(shot.moving.sum()), offset_animations=len(offsets),
         stream_animations=len(stream_assets), characters=len(char_assets),
-        seconds=seconds, events=_events(rec, ids), substeps=int(rec.substeps))
+        seconds=seconds, events=_events(rec, ids), substeps=int(rec.substeps),
+        repetition=None if measured is None else measured.as_dict())
+
+
+def _staged(stage, steps):
+    """Yield ``(stage, done, total)`` for each ``(done, total)`` of the generator
+    ``steps``; returns what it returns."""
+    while True:
+        try:
+            done, total = next(steps)
+        except StopIteration as stop:
+            return stop.value
+        yield stage, done, total
 
 
 def _events(rec, ids) -> list:
@@ -408,9 +446,11 @@ def _sources(shot, offsets, own_paths) -> list:
             for k, st in zip(keys.tolist(), shot.static.tolist())]
 
 
-def _settings(rec, shot, layout) -> dict:
+def _settings(rec, shot, layout, measured=None) -> dict:
     cfg = rec.config
-    return {"M": int(rec.max_offset), "NT": int(cfg.transition_slots), "fps": float(rec.fps),
+    seen = {} if measured is None or measured.value is None else {
+        "repetition": float(measured.value), "repetitionK": measured.settings.k}
+    return {**seen, "M": int(rec.max_offset), "NT": int(cfg.transition_slots), "fps": float(rec.fps),
             "seed": int(cfg.seed), "streams": len(rec.stream_names),
             "uniques": len(rec.unique_names), "agents": int(shot.agents.size),
             "firstFrame": int(rec.first), "lastFrame": int(rec.last),

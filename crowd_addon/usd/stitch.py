@@ -210,7 +210,7 @@ def stitch(chunks, path, progress=None) -> StitchResult:
                          default_prim=ROOT, comment="crowd shot stitched from chunks by "
                                                     "crowd_addon.usd")
         main.customLayerData = {"crowd": {
-            **first.settings, "firstFrame": first.first, "lastFrame": last.last,
+            **_shot_settings(parts), "firstFrame": first.first, "lastFrame": last.last,
             "chunks": Vt.StringArray([_relative(c.path, files.directory) for c in parts])}}
         crowd = Sdf.PrimSpec(main, ROOT, Sdf.SpecifierDef, "Xform")
         Sdf.CopySpec(first.layer, f"/{ROOT}/Agents", main, f"/{ROOT}/Agents")
@@ -309,6 +309,19 @@ def _events(prim) -> list:
     crowd = dict(prim.customData).get("crowd", {}) if prim else {}
     return list(zip(list(crowd.get("eventNames", [])),
                     [float(f) for f in crowd.get("eventFrames", [])]))
+
+
+def _shot_settings(parts) -> dict:
+    """The first chunk's settings, with the shot's repetition metric: the mean of the
+    chunks' (each measures the same number of frames), or none when a chunk lacks it
+    or measured with other neighbours."""
+    out = {k: v for k, v in parts[0].settings.items()
+           if k not in ("repetition", "repetitionK")}
+    values = [c.settings.get("repetition") for c in parts]
+    ks = {c.settings.get("repetitionK") for c in parts}
+    if None not in values and len(ks) == 1:
+        out.update(repetition=sum(values) / len(values), repetitionK=ks.pop())
+    return out
 
 
 def _relative(real, directory) -> str:

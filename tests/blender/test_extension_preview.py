@@ -372,3 +372,37 @@ def test_blender_still_draws_right_after_the_crowd(running):
     assert drawn
     assert (img[:, :32] == [255, 0, 0, 255]).all()
     assert (img[:, 32:, 3] > 0).any()                       # the crowd on the right
+
+
+def test_measure_repetition_sees_through_the_scene_camera(running):
+    """The panel's measurement at the current frame, through the scene camera: the
+    oracle is Blender's own projection of that camera (``calc_matrix_camera`` at the
+    render size, times the inverse world matrix) fed to the metric's definition."""
+    from crowd_addon.blender import panels
+    from crowd_addon.core.repetition import RepetitionSettings, frame_repetition
+    scene, _rig, _walk, pv = running
+    assert pv.repetition is None
+    cam = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
+    scene.collection.objects.link(cam)
+    cam.location, cam.rotation_euler = (4.0, -14.0, 9.0), (0.95, 0.0, 0.2)
+    scene.camera = cam
+    scene.render.resolution_x, scene.render.resolution_y = 640, 400
+    scene.render.resolution_percentage = 100
+    scene.crowd.repetition_neighbours = 3
+    scene.frame_set(4)
+    assert bpy.ops.crowd.measure_repetition() == {"FINISHED"}
+    got = pv.repetition
+    dg = bpy.context.evaluated_depsgraph_get()
+    proj = np.array(cam.calc_matrix_camera(dg, x=640, y=400), np.float64)
+    vp = proj @ np.array(cam.matrix_world.inverted(), np.float64)
+    a = pv.crowd.view.agents
+    want = frame_repetition(a.position, a.kind, a.ref, a.offset,
+                            pv.crowd.view.agent_skeleton, a.color, vp,
+                            RepetitionSettings(k=3, width=640, height=400))
+    assert got.frames == (4,) and got.settings.k == 3
+    assert (got.per_frame[0], got.visible[0], got.pairs[0]) == pytest.approx(want)
+    assert 0 < got.visible[0] <= 30 and pv.repetition_seen == "scene camera 'Cam'"
+    assert "Repetition" in panels.repetition_line(got, pv.repetition_seen)
+    scene.camera = None                           # no camera and no viewport: named
+    with pytest.raises(RuntimeError, match="no camera"):
+        bpy.ops.crowd.measure_repetition()

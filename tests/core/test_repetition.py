@@ -196,7 +196,13 @@ def test_a_recording_measures_what_the_running_crowd_showed():
     assert got.value == pytest.approx(np.mean(got.per_frame))
     assert got.as_dict()["k"] == 3 and "repetition 0." in got.line()
     default = recording_repetition(rec, vp)
-    assert default.frames == tuple(measure_frames(first, last, 12))
+    assert default.frames == tuple(measure_frames(first, last, 8))
+    some = np.arange(4, 26)                  # a subset: the exported agents
+    a = crowd.view.agents
+    want = frame_repetition(a.position[some], a.kind[some], a.ref[some], a.offset[some],
+                            crowd.view.agent_skeleton[some], a.color[some], vp, s)
+    assert recording_repetition(rec, vp, [last], agents=some, settings=s).per_frame == \
+        (want[0],)
 
 
 @pytest.mark.parametrize("kwargs,message", [

@@ -52,6 +52,10 @@ def test_summary_reports_the_show(demo):
     assert frames["goal home"] == frames["goal away"] == 2 + FRAMES * 45 // 240
     assert {frames[f"hit {k}"] for k in range(1, 7)} == {2 + FRAMES * 70 // 240}
     assert "transitions:" in run.stdout and "events fired" in run.stdout
+    rep = s["repetition"]                       # docs/variety.md
+    assert 0 < rep["value"] < 0.5 and rep["k"] == 6 and rep["screen"] == [320, 180]
+    assert len(rep["frames"]) == 8 and min(rep["visible"]) >= 30    # a stand in view
+    assert f"repetition {rep['value']:.3f}" in run.stdout
     assert "cues: goal home @" in run.stdout
 
 
@@ -149,6 +153,8 @@ def test_export_of_the_saved_blend_is_the_demos_stage(demo, export_from_blend):
     summary = json.loads((out / "summary.json").read_text())
     assert result["characters"] == 2 and result["frames"] == [1, FRAMES]
     assert {k: result[k] for k in summary["usd_export"]} == summary["usd_export"]
+    # measured through the scene camera at the render size: the demo's camera and frames
+    assert result["repetition"] == summary["repetition"]
     assert result["clip_agents"] > 0               # the show moved agents
     for rel in result["files"]:                     # main layer, characters, streams, agents
         assert (usd.parent / rel).read_bytes() == (out / rel).read_bytes(), rel
