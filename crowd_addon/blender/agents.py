@@ -22,6 +22,7 @@ import numpy as np
 from ..core.errors import CrowdError
 from ..core.placement import (SOURCE_SEED, AgentSet, CharacterStreams, PlacementPolicy,
                               place_agents, z_angle)
+from ..core.variety import Timing
 
 __all__ = ["agents_from_source", "agents_from_scene", "describe_source", "placement_policy",
            "character_streams", "PlacedSource"]
@@ -125,8 +126,15 @@ def character_streams(settings) -> tuple:
     """The scene's characters (``scene.crowd.characters``) as plain
     :class:`~crowd_addon.core.placement.CharacterStreams`, in list order."""
     return tuple(CharacterStreams(c.name, tuple(a.name for a in c.streams),
-                                  tuple(a.weight for a in c.streams), c.weight)
+                                  tuple(a.weight for a in c.streams), c.weight,
+                                  tuple(stream_timing(a) for a in c.streams))
                  for c in settings.characters)
+
+
+def stream_timing(anim) -> Timing:
+    """A stream's timing variation (:class:`~crowd_addon.core.variety.Timing`) from its
+    properties."""
+    return Timing(anim.speed_min, anim.speed_max, anim.speed_streams, anim.copies)
 
 
 def describe_source(source, index: int | None = None) -> str:

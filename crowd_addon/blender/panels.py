@@ -4,6 +4,7 @@ USD export, stats."""
 
 import bpy
 
+from ..core.errors import CrowdError
 from . import preview
 
 __all__ = ["CLASSES"]
@@ -13,10 +14,13 @@ _KIND_ICONS = {"CLIP": "ACTION", "BLEND2": "MOD_MASK", "LAYER": "RENDERLAYERS",
 
 
 class CROWD_UL_animations(bpy.types.UIList):
-    def draw_item(self, _context, layout, _data, item, _icon, _active, _prop):
+    def draw_item(self, _context, layout, _data, item, _icon, _active, prop):
         row = layout.row(align=True)
         row.prop(item, "name", text="", emboss=False, icon="ARMATURE_DATA")
-        row.label(text=f"{len(item.nodes)} nodes")
+        made = item.speed_streams * item.copies
+        row.label(text=f"{len(item.nodes)} nodes" + (f", {made} streams"
+                                                      if prop == "streams" and made > 1
+                                                      else ""))
         row.prop(item, "weight", text="")
 
 
@@ -109,7 +113,9 @@ class CROWD_PT_main(_Panel, bpy.types.Panel):
             return
         box = layout.box()
         c = pv.crowd
-        box.label(text=f"{c.agents.count:,} agents, {c.streams.count} streams, "
+        authored = sum(len(ch.streams) for ch in s.characters)
+        made = f" (from {authored} authored)" if authored != c.streams.count else ""
+        box.label(text=f"{c.agents.count:,} agents, {c.streams.count} streams{made}, "
                        f"{c.uniques.count} uniques, "
                        f"{len(c.config.clips)} clips")
         box.label(text=f"frame {c.frame}: step {pv.step_ms:.2f} ms, draw {pv.draw_ms:.2f} ms")
@@ -169,9 +175,36 @@ def _draw_animation_pool(layout, s, pool):
         return
     anim = anims[i]
     layout.prop_search(anim, "root", anim, "nodes")
+    if pool == "STREAMS":
+        _draw_timing(layout.box(), anim)
     _list(layout, "CROWD_UL_nodes", anim, "nodes", "active_node_index", pool)
     if 0 <= anim.active_node_index < len(anim.nodes):
         _draw_node(layout.box(), anim, anim.nodes[anim.active_node_index], pool)
+
+
+def timing_line(anim) -> str:
+    """How many streams a stream's timing variation makes, at which speeds."""
+    from .agents import stream_timing
+    t = stream_timing(anim)
+    try:
+        t.check("")
+    except CrowdError as e:
+        return str(e).lstrip(": ")
+    speeds = t.speeds()
+    at = f"at {speeds[0]:.3g}x" if speeds.size == 1 else \
+        f"at {speeds[0]:.3g}x .. {speeds[-1]:.3g}x"
+    copies = f" in {t.copies} copies" if t.copies > 1 else ""
+    return f"Makes {t.count} stream{'s' if t.count != 1 else ''} {at}{copies}"
+
+
+def _draw_timing(layout, anim):
+    layout.label(text="Timing Variation")
+    col = layout.column(align=True)
+    col.prop(anim, "speed_min")
+    col.prop(anim, "speed_max")
+    layout.prop(anim, "speed_streams")
+    layout.prop(anim, "copies")
+    layout.label(text=timing_line(anim))
 
 
 def _draw_node(layout, anim, node, pool):

@@ -126,6 +126,22 @@ class CROWD_PG_animation(PropertyGroup):
                                                   "first node)")
     weight: FloatProperty(name="Weight", default=1.0, min=0.0,
                           description="Relative share of randomly assigned agents")
+    speed_min: FloatProperty(
+        name="Speed Min", default=1.0, min=0.05, soft_max=4.0,
+        description="Timing variation (streams only): the slowest an agent plays this "
+                    "stream, as a factor of its speed")
+    speed_max: FloatProperty(
+        name="Speed Max", default=1.0, min=0.05, soft_max=4.0,
+        description="Timing variation (streams only): the fastest an agent plays this "
+                    "stream, as a factor of its speed")
+    speed_streams: IntProperty(
+        name="Speed Streams", default=1, min=1, max=16,
+        description="Streams at speeds spread over the range; each agent plays the one "
+                    "nearest the speed it draws (CPU cost is per stream, not per agent)")
+    copies: IntProperty(
+        name="Copies", default=1, min=1, max=16,
+        description="Copies of each speed stream, each M frames further into the "
+                    "animation: agents spread over more poses without a longer history")
 
 
 class CROWD_PG_lod(PropertyGroup):
@@ -190,6 +206,8 @@ class CROWD_PG_agent_source(PropertyGroup):
     offset_mode: EnumProperty(name="Offset", default="UNIFORM", items=(
         ("UNIFORM", "Uniform", "Every offset 0..M-1 equally likely"),
         ("NORMAL", "Normal", "Around a mean, rounded and clipped to 0..M-1"),
+        ("SPREAD", "Spread", "Neighbours playing the same stream kept out of step (least "
+                             "repetition, docs/variety.md)"),
         ("ATTRIBUTE", "Attribute", "An INT point attribute in 0..M-1")))
     offset_mean: FloatProperty(name="Mean", default=-1.0,
                                description="Frames (negative: the middle of 0..M-1)")

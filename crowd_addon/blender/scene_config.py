@@ -27,6 +27,7 @@ from ..core.config import CrowdConfig
 from ..core.controller_graph import InputSpec, NodeSpec, TransitionSpec, build_tree
 from ..core.errors import CrowdError
 from ..core.mesh import CARD
+from ..core.variety import expand
 
 __all__ = ["config_from_scene", "config_steps", "scene_fps", "used_actions", "node_specs",
            "bone_collections", "lod_distances", "clip_names", "scene_actions"]
@@ -279,9 +280,14 @@ def config_steps(scene, depsgraph=None, notes=None):
             msg = msg if act.name in msg else f"action {act.name!r}: {msg}"
             raise CrowdError(f"character {c.name!r}: {msg}" if several else msg) from None
     for c in chars:
-        for pool, add in (("stream", cfg.add_stream), ("unique", cfg.add_unique)):
-            for name, root in trees[c.name][pool]:
-                add(name, c.name, root)
+        for (name, root), anim in zip(trees[c.name]["stream"], c.streams):
+            timing = agent_mod.stream_timing(anim).check(f"character {c.name!r}: stream "
+                                                         f"{name!r}")
+            for label, speed, phase in expand(name, timing, s.max_offset, scene.frame_start):
+                cfg.add_stream(label, c.name, root, speed, phase,
+                               "" if timing.count == 1 else name)
+        for name, root in trees[c.name]["unique"]:
+            cfg.add_unique(name, c.name, root)
     for k, c in enumerate(chars):
         yield len(jobs) + k, total, "reading the proxy mesh" + (
             f" of character {c.name!r}" if several else "")

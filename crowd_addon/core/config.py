@@ -35,16 +35,38 @@ MAX_TREE_DEPTH = 64
 
 @dataclass
 class AnimationDef:
-    """A stream (shared, with pose history) or unique animation: a named controller tree."""
+    """A stream (shared, with pose history) or unique animation: a named controller tree.
+
+    A stream plays its tree at ``speed`` times the crowd's rate from ``phase`` crowd
+    frames in: at frame ``F`` its root time is ``phase + speed * F`` (speed 1, phase 0:
+    the frame itself). Streams generated from one template for timing variation
+    (:mod:`.variety`) differ only in these, and name it in ``template`` (empty: the
+    stream is its own template). Uniques keep their own clocks (speed 1, phase 0
+    only)."""
 
     name: str
     skeleton: str
     root: Controller
+    speed: float = 1.0
+    phase: float = 0.0
+    template: str = ""
+
+    @property
+    def template_name(self) -> str:
+        """The authored stream this one was made from (its own name when none)."""
+        return self.template or self.name
 
     def __post_init__(self):
         if not str(self.name).strip():
             raise CrowdError(f"an animation on skeleton {self.skeleton!r} has an empty name "
                              f"({self.name!r}); name each stream and unique")
+        speed, phase = float(self.speed), float(self.phase)
+        if not (np.isfinite(speed) and speed > 0):
+            raise CrowdError(f"stream {self.name!r}: speed must be a finite number > 0, got "
+                             f"{self.speed!r}")
+        if not np.isfinite(phase):
+            raise CrowdError(f"stream {self.name!r}: phase must be finite, got {self.phase!r}")
+        self.speed, self.phase = speed, phase
 
 
 @dataclass
@@ -150,8 +172,9 @@ class CrowdConfig:
                              f"{int(mesh.bone_indices.max())} but skeleton {mesh.skeleton!r} "
                              f"has {bones} bones")
 
-    def add_stream(self, name, skeleton, root):
-        self.streams.append(AnimationDef(str(name), str(skeleton), root))
+    def add_stream(self, name, skeleton, root, speed=1.0, phase=0.0, template=""):
+        self.streams.append(AnimationDef(str(name), str(skeleton), root, speed, phase,
+                                         str(template)))
         return len(self.streams) - 1
 
     def add_unique(self, name, skeleton, root):
@@ -275,6 +298,14 @@ def _validate_animations(cfg):
             seen.add(d.name)
             if d.skeleton not in cfg.skeletons:
                 raise CrowdError(f"{pool} {d.name!r}: unknown skeleton {d.skeleton!r}")
+            speed, phase = float(d.speed), float(d.phase)
+            if not (np.isfinite(speed) and speed > 0 and np.isfinite(phase)):
+                raise CrowdError(f"{pool} {d.name!r}: speed must be finite and > 0 and "
+                                 f"phase finite, got speed {d.speed!r}, phase {d.phase!r}")
+            if pool == "unique" and ((speed, phase) != (1.0, 0.0) or d.template):
+                raise CrowdError(f"unique {d.name!r}: uniques keep their own clocks; speed, "
+                                 f"phase and template are for streams (got {speed:g}, "
+                                 f"{phase:g}, {d.template!r})")
             lookup = _ClipLookup(cfg, cfg.skeletons[d.skeleton],
                                  uses.setdefault(d.skeleton, {}))
             stack = [(d.root, 0)]

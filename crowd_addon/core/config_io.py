@@ -485,7 +485,7 @@ def _encode_config(cfg: CrowdConfig) -> tuple:
                            "keys": enc.at("clips", i).array(c.keys, "keys")})
     for pool in ("streams", "uniques"):
         m[pool] = [{"name": a.name, "skeleton": a.skeleton,
-                    "root": enc.controller(a.root, pool, i, "root")}
+                    **_timing(a), "root": enc.controller(a.root, pool, i, "root")}
                    for i, a in enumerate(getattr(cfg, pool))]
     m["lod_distances"] = [float(x) for x in cfg.lod_distances]
     m["meshes"] = []
@@ -672,7 +672,17 @@ def _decode_config(m: dict, dec: Decoder) -> CrowdConfig:
                 raise d.at("skeleton").error(f"unknown skeleton {skel!r} "
                                              f"(known: {sorted(cfg.skeletons)})")
             d.skeleton = cfg.skeletons[skel]
-            out.append(AnimationDef(d.get(a, "name", "name"), skel, d.controller(a, "root")))
+            name = d.get(a, "name", "name")
+            speed, phase = d.get(a, "speed", "number", 1.0), d.get(a, "phase", "number", 0.0)
+            template = d.get(a, "template", "str", "")
+            if pool == "uniques" and ((speed, phase) != (1.0, 0.0) or template):
+                raise d.error("uniques keep their own clocks: speed, phase and template "
+                              "are for streams")
+            try:
+                out.append(AnimationDef(name, skel, d.controller(a, "root"), speed, phase,
+                                        template))
+            except CrowdError as e:
+                raise d.error(str(e)) from None
     lods = dec.items(m, "lod_distances", "number", list(CrowdConfig.lod_distances))
     if any(b <= a for a, b in zip(lods, lods[1:])) or any(d < 0 for d in lods):
         raise dec.at("lod_distances").error(f"must be increasing distances >= 0, got {lods}")
@@ -737,6 +747,14 @@ def _exact_skeleton(d, name, names, parents, bind, inv):
         return Skeleton(name, names, parents, bind, inv)
     except CrowdError as e:
         raise d.error(str(e)) from None
+
+
+def _timing(a) -> dict:
+    """A stream's speed and phase, written only when they are not the defaults (files
+    of streams without timing variation read and hash as before)."""
+    return {**({"speed": a.speed} if a.speed != 1.0 else {}),
+            **({"phase": a.phase} if a.phase != 0.0 else {}),
+            **({"template": a.template} if a.template else {})}
 
 
 def _exact_clip(d, name, keys, fps, loop, events, bones):

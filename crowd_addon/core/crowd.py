@@ -106,6 +106,8 @@ class Crowd:
         self.plans = [SkinningPlan(s, self.bones) for s in self.skeletons]
         self.skinning = skinning_mode(skinning)
         m, s, u = int(cfg.max_offset), len(cfg.streams), len(cfg.uniques)
+        self._stream_speed = np.array([d.speed for d in cfg.streams], np.float64)
+        self._stream_phase = np.array([d.phase for d in cfg.streams], np.float64)
         self.storage = self.skinning.storage(s, m, u, int(cfg.transition_slots), self.bones,
                                              cfg.max_texture_size)
         self.streams = StreamPool([d.name for d in cfg.streams], skel[:s], m,
@@ -438,9 +440,12 @@ class Crowd:
             self.snapshots.drop_after(min(lost))
         self._outside = [f for f in self._outside if f < frame]
 
-    def _root_times(self, frame):
-        return np.concatenate([np.full(self.streams.count, float(frame)),
-                               self.uniques.times(frame)])
+    def _root_times(self, frame, sub=0.0):
+        """Root times at ``frame + sub``: a stream's ``phase + speed * t``
+        (:class:`~.config.AnimationDef`), a unique's own clock."""
+        t = float(frame) + sub
+        return np.concatenate([self._stream_phase + self._stream_speed * t,
+                               self.uniques.times(frame) + sub])
 
     def _store_roots(self):
         poses = self.evaluator.ctx.poses[self.evaluator.root_index]
@@ -453,7 +458,7 @@ class Crowd:
         now (nothing without substeps)."""
         n, s = self.substeps, self.streams.count
         for k in range(1, n):
-            times = self._root_times(self.frame) + k / n
+            times = self._root_times(self.frame, k / n)
             poses = self.evaluator.poses_ahead(times)
             self._sub_streams[self.streams.slice(self.frame), k - 1] = poses[:s]
             self._sub_uniques[k - 1] = poses[s:]

@@ -14,8 +14,11 @@ come from a callback (the Blender side reads mesh attributes,
 ``crowd_addon.blender.agents``).
 
 The crowd's stream list is the characters' streams one character after the other
-(:class:`CharacterStreams` in order), so an agent's stream index is its character's
-first stream plus its stream's place among the character's streams.
+(:class:`CharacterStreams` in order). A character's streams are *templates*: one with
+timing variation (:class:`~.variety.Timing`) is several streams in the list, its
+variants in order (:func:`.variety.expand`); the policy picks a template per agent
+and :func:`.variety.choose_variants` one of its variants. An agent's stream index is
+its character's first stream, plus its template's first, plus its variant.
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ import numpy as np
 
 from .agents import assign_offsets, assign_streams, check_offsets
 from .errors import CrowdError
+from .variety import Timing, choose_variants, spread_offsets
 
 __all__ = ["AgentSet", "CharacterStreams", "PlacementPolicy", "place_agents", "z_angle",
            "FORWARD", "SOURCE_SEED", "CHARACTER_SEED"]
@@ -41,6 +45,9 @@ CHARACTER_SEED = 104729
 #: added to a source's seed for the draw of characters by weight (offsets use ``+ 1``,
 #: colours ``+ 2``)
 _CHARACTER_DRAW = 3
+#: added to a character's stream seed for the draw of variants, plus the template's
+#: index
+_VARIANT_DRAW = 7
 
 
 @dataclass(frozen=True)
@@ -74,14 +81,30 @@ class AgentSet:
 
 @dataclass(frozen=True)
 class CharacterStreams:
-    """A character as the placement sees it: its ``name``, its streams' names and
-    weights (in the crowd's order) and its ``weight``, the relative share of agents a
-    source drawing characters by weight gives it."""
+    """A character as the placement sees it: its ``name``, its streams' (templates')
+    names and weights (in the crowd's order), its ``weight``, the relative share of
+    agents a source drawing characters by weight gives it, and per template its
+    :class:`~.variety.Timing` (empty: none; the crowd's list holds
+    ``timing.count`` streams per template)."""
 
     name: str
     streams: tuple = ()
     stream_weights: tuple = ()
     weight: float = 1.0
+    timings: tuple = ()
+
+    def timing(self, i: int) -> Timing:
+        return self.timings[i] if self.timings else Timing()
+
+    @property
+    def variant_counts(self) -> np.ndarray:
+        """(templates,) int64 streams each template is in the crowd's list."""
+        return np.array([self.timing(i).count for i in range(len(self.streams))], np.int64)
+
+    @property
+    def stream_count(self) -> int:
+        """Streams of this character in the crowd's list."""
+        return int(self.variant_counts.sum())
 
 
 @dataclass(frozen=True)
@@ -98,8 +121,10 @@ class PlacementPolicy:
         weights), ``"ATTRIBUTE"`` (per-point index among them, ``stream_attribute``)
         or ``"FIXED"`` (the stream ``stream_name``, which must be the character's).
     offset_mode : ``"UNIFORM"``, ``"NORMAL"`` (``offset_mean``, ``offset_std`` in
-        frames; negative: the defaults of :func:`.agents.assign_offsets`) or
-        ``"ATTRIBUTE"`` (per-point ``offset_attribute``).
+        frames; negative: the defaults of :func:`.agents.assign_offsets`),
+        ``"SPREAD"`` (neighbours on the same stream kept out of step:
+        :func:`.variety.spread_offsets`) or ``"ATTRIBUTE"`` (per-point
+        ``offset_attribute``).
     color_mode : ``"RANDOM"`` (``color`` (3,) 0..1 moved toward a random colour by
         ``color_variation``) or ``"ATTRIBUTE"`` (per-point ``color_attribute``).
     """
@@ -161,7 +186,9 @@ def place_agents(what: str, positions: np.ndarray, base_heading: np.ndarray,
     char = _characters(what, n, p, characters, seed, values)
     st = _streams(what, n, p, characters, char, seed, values)
 
-    if p.offset_mode == "ATTRIBUTE":
+    if p.offset_mode == "SPREAD":
+        off = spread_offsets(pos, st, max_offset, seed + 1)
+    elif p.offset_mode == "ATTRIBUTE":
         off = values(p.offset_attribute, "int")
         try:
             check_offsets(off, max_offset, f"{what}: point")
@@ -226,9 +253,11 @@ def _characters(what, n, p, characters, seed, values) -> np.ndarray:
 
 def _streams(what, n, p, characters, char, seed, values) -> np.ndarray:
     """(n,) int32 stream index per point in the crowd's stream list: each point's
-    stream among its character's streams, by the policy's stream mode."""
+    template among its character's streams, by the policy's stream mode, then its
+    variant of that template (:mod:`.variety`)."""
     counts = np.array([len(c.streams) for c in characters], np.int64)
-    first = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    totals = np.array([c.stream_count for c in characters], np.int64)
+    first = np.concatenate([[0], np.cumsum(totals)[:-1]])
     present = np.unique(char).tolist()
     for k in present:
         if counts[k] == 0:
@@ -243,19 +272,35 @@ def _streams(what, n, p, characters, char, seed, values) -> np.ndarray:
             raise CrowdError(f"{what}: attribute {p.stream_attribute!r} gives stream "
                              f"{int(local[i])} at point {i}; character {c.name!r} has "
                              f"streams 0..{len(c.streams) - 1} ({list(c.streams)})")
-        return (first[char] + local).astype(np.int32)
-    local = np.zeros(n, np.int64)
-    for k in present:
-        c, mine = characters[k], char == k
-        if p.stream_mode == "FIXED":
-            local[mine] = _named_stream(what, p.stream_name, c, characters)
+    else:
+        local = np.zeros(n, np.int64)
+        for k in present:
+            c, mine = characters[k], char == k
+            if p.stream_mode == "FIXED":
+                local[mine] = _named_stream(what, p.stream_name, c, characters)
+                continue
+            try:
+                local[mine] = assign_streams(int(mine.sum()), len(c.streams),
+                                             c.stream_weights or None,
+                                             seed + k * CHARACTER_SEED)
+            except CrowdError as e:
+                raise CrowdError(f"{what}: character {c.name!r}: {e}") from None
+    out = first[char] + local
+    for k in present:                      # templates -> their variants
+        c = characters[k]
+        if c.stream_count == len(c.streams):
             continue
-        try:
-            local[mine] = assign_streams(int(mine.sum()), len(c.streams),
-                                         c.stream_weights or None, seed + k * CHARACTER_SEED)
-        except CrowdError as e:
-            raise CrowdError(f"{what}: character {c.name!r}: {e}") from None
-    return (first[char] + local).astype(np.int32)
+        starts = np.concatenate([[0], np.cumsum(c.variant_counts)[:-1]])
+        mine = np.flatnonzero(char == k)
+        out[mine] = first[k] + starts[local[mine]]
+        for t in range(len(c.streams)):
+            timing = c.timing(t)
+            if timing.count == 1:
+                continue
+            these = mine[local[mine] == t]
+            out[these] += choose_variants(these.size, timing,
+                                          seed + k * CHARACTER_SEED + _VARIANT_DRAW + t)
+    return out.astype(np.int32)
 
 
 def _named_stream(what, name, character, characters) -> int:

@@ -214,6 +214,46 @@ def test_config_carries_settings_mesh_uniques_and_agents(rig_scene):
     Crowd(cfg)
 
 
+def test_timing_variation_makes_speed_streams_that_play_as_blender_does(rig_scene):
+    """A stream with a speed range becomes speed streams (and copies): the oracle for
+    each is Blender's own pose of the action at the frame that speed reaches from the
+    scene's start frame (copy c another c x speed x M frames in); every agent plays a
+    variant of its template."""
+    scene, rig, acts = rig_scene
+    s = scene.crowd
+    walk = cs.add_stream(s, "walk", acts["walk"])
+    # speeds 1 and 2 (the centres of two halves of 0.5 .. 2.5): whole clip frames, where
+    # the baked keys are Blender's own values
+    walk.speed_min, walk.speed_max, walk.speed_streams, walk.copies = 0.5, 2.5, 2, 2
+    cs.add_stream(s, "idle", acts["idle"])
+    s.characters[0].body = cs.make_proxy(rig)
+    src = s.agent_sources.add()
+    src.name, src.object = "seats", cs.make_seats(10, 10)
+    cfg = scene_config.config_from_scene(scene)
+    assert [(d.name, round(d.speed, 6)) for d in cfg.streams] == [
+        ("walk", 1.0), ("walk 1x #2", 1.0), ("walk 2x", 2.0), ("walk 2x #2", 2.0),
+        ("idle", 1.0)]
+    assert [d.template_name for d in cfg.streams] == ["walk"] * 4 + ["idle"]
+    assert set(cfg.agent_stream.tolist()) == set(range(5))
+    from crowd_addon.blender import panels
+    assert panels.timing_line(walk) == "Makes 4 streams at 1x .. 2x in 2 copies"
+    sk = cfg.skeletons["Rig"]
+    crowd = Crowd(cfg)
+    m = s.max_offset
+    for frame in (1, 7, 20):
+        crowd.advance_to(frame)
+        got = model_matrices(np.stack([crowd.pose(d.name) for d in cfg.streams[:4]]), sk)
+        for k, (v, c) in enumerate([(1, 0), (1, 1), (2, 0), (2, 1)]):
+            clip_t = v * (frame - 1) + c * v * m            # walk loops every 24 frames
+            want = _blender_model(scene, rig, acts["walk"], 1 + clip_t % 24, sk)
+            np.testing.assert_allclose(got[k], want, atol=2e-5,
+                                       err_msg=f"{cfg.streams[k].name} at frame {frame}")
+    walk.speed_streams = 3
+    walk.speed_min = walk.speed_max = 1.0
+    with pytest.raises(CrowdError, match="stream 'walk': 3 speed streams need a speed range"):
+        scene_config.config_from_scene(scene)
+
+
 @pytest.mark.parametrize("setup, message", [
     (lambda s, a: setattr(s.characters[0], "armature", None),
      r"^character 'Rig': no armature chosen"),
