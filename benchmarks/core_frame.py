@@ -5,7 +5,10 @@
 blends). Prints ms per ``Crowd.step()`` (median) and bytes uploaded per frame at
 1k, 8k and 65k agents (CPU cost should be flat in agent count), the mean ms per step
 at 65k agents running a cue-heavy show instead (a Mexican wave over every agent, and
-a cue every 10 frames: a held transition of 500 agents, a trigger or a parameter), then
+a cue every 10 frames: a held transition of 500 agents, a trigger or a parameter), the
+ms per step at 65k agents with timing variation on (the same 256 streams made from 64
+templates at two speeds in two copies, Spread offsets) against the plain streams,
+interleaved, then
 the time to evaluate the same 256 streams with a naive per-stream Python loop as a
 ratio, and ends with one JSON line.
 
@@ -30,16 +33,43 @@ from crowd_addon.core.graph import TreeEvaluator  # noqa: E402
 from crowd_addon.core.show import Action, Cue, Show, Sweep  # noqa: E402
 from crowd_addon.core.skinning import SkinningPlan  # noqa: E402
 from crowd_addon.core.synthetic import paper_config  # noqa: E402
+from crowd_addon.core.variety import Timing, choose_variants, expand, spread_offsets  # noqa: E402
 
 STREAMS, M, SLOTS, BONES = 256, 60, 800, 82
 
 
-def build(agents: int, skinning: str = "cpu") -> Crowd:
-    return Crowd(paper_config(agents, STREAMS, M, SLOTS, BONES), skinning=skinning)
+def build(agents: int, skinning: str = "cpu", variety: bool = False) -> Crowd:
+    cfg = variety_config(agents) if variety else paper_config(agents, STREAMS, M, SLOTS,
+                                                              BONES)
+    return Crowd(cfg, skinning=skinning)
 
 
-def run(agents: int, steps: int, rng, skinning="cpu") -> dict:
-    crowd = build(agents, skinning)
+def variety_config(agents: int):
+    """The paper's configuration with timing variation on (docs/variety.md): its 256
+    streams made from 64 templates (every fourth stream's tree), each at two speeds
+    (0.85 .. 1.15) in two copies, agents on a grid, each on a template at random and
+    its nearest speed and a copy (``choose_variants``), with Spread offsets. The same
+    stream count as the plain configuration, so the two compare per stream."""
+    cfg = paper_config(agents, STREAMS, M, SLOTS, BONES)
+    templates, cfg.streams = cfg.streams[::4], []
+    timing = Timing(0.85, 1.15, 2, 2)
+    for d in templates:
+        for name, speed, phase in expand(d.name, timing, M):
+            cfg.add_stream(name, d.skeleton, d.root, speed, phase, d.name)
+    rng = np.random.default_rng(3)
+    t = rng.integers(0, len(templates), agents)
+    stream = t * timing.count + choose_variants(agents, timing, 4)
+    side = int(np.ceil(np.sqrt(agents)))
+    pos = np.zeros((agents, 3), np.float32)
+    pos[:, 0], pos[:, 1] = np.arange(agents) % side * 0.6, np.arange(agents) // side * 0.9
+    cfg.agent_stream = stream.astype(np.int32)
+    cfg.agent_position = pos
+    cfg.agent_offset = spread_offsets(pos, stream, M, 5)
+    return cfg
+
+
+def run(agents: int, steps: int, rng, skinning="cpu", variety=False) -> dict:
+    crowd = build(agents, skinning, variety)
     on_gpu = crowd.view.skinning.on_gpu
     claps = []
     crowd.on_event("clap", lambda name, frame, ids: claps.append(ids.size))
@@ -184,6 +214,15 @@ def main(argv=None):
                   f"(p90 {r['ms_p90']:.2f}), {r['bytes_per_frame']:,} B uploaded/frame, "
                   f"{r['active_transitions']} active transitions, {r['queued']} queued",
                   flush=True)
+    plain_ms, variety_ms = [], []
+    for _ in range(1 if args.quick else 3):      # interleaved: the machine drifts
+        plain_ms.append(run(65_000, steps, rng, skinning="gpu")["ms_median"])
+        variety_ms.append(run(65_000, steps, rng, skinning="gpu", variety=True)["ms_median"])
+    v_ms, p_ms = statistics.median(variety_ms), statistics.median(plain_ms)
+    print(f"  65k agents with timing variation (64 templates x 2 speeds x 2 copies = "
+          f"{STREAMS} streams, Spread offsets), GPU skinning: {v_ms:.2f} ms/step median "
+          f"against {p_ms:.2f} ms for {STREAMS} plain streams, interleaved "
+          f"(variety/plain {v_ms / p_ms:.2f})", flush=True)
     show_frames = 60 if args.quick else 240
     sh = run_show(65_000, show_frames)
     print(f"  show at 65k agents (GPU skinning), {show_frames} frames of a wave lapping in "
@@ -214,6 +253,9 @@ def main(argv=None):
         "ms_per_step_65k_show": round(sh["ms_mean"], 3),
         "ms_per_step_65k_show_p90": round(sh["ms_p90"], 3),
         "ms_per_step_65k_quiet": round(sh["ms_mean_quiet"], 3),
+        "ms_per_step_65k_variety": round(v_ms, 3),
+        "ms_per_step_65k_plain": round(p_ms, 3),
+        "variety_over_plain": round(v_ms / p_ms, 3),
         "show_over_quiet": round(sh["ms_mean"] / sh["ms_mean_quiet"], 3),
         "bytes_per_frame": g["bytes_per_frame"],
         "bytes_minimum": g_min,

@@ -133,6 +133,93 @@ def _run_budget(args) -> int:
     return 0
 
 
+# --------------------------------------------------------------------------- plan
+
+def _add_plan(subparsers) -> None:
+    from .core import budget as b
+    from .core.variety_plan import MAX_STREAMS
+
+    p = subparsers.add_parser(
+        "plan",
+        help="the M, copies and offsets that repeat least within a memory budget",
+        description="Measure the repetition metric (docs/variety.md) of a crowd's agents "
+                    "through a camera for every choice of M, copies of each speed stream "
+                    "and offset distribution, and propose the one that repeats least "
+                    "within the GPU pose budget and a stream count (the per-frame CPU "
+                    "cost). Agents keep their templates, speeds, bodies and colours. "
+                    "Prints every candidate and the proposal, and plots the metric "
+                    "against M with the chosen point marked.",
+        epilog="example: crowd plan --blend stadium.blend --budget-mb 520 --plot plan.png")
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--config", type=path_arg, metavar="CROWD_JSON",
+                     help="crowd configuration (seen from a camera framing its agents)")
+    src.add_argument("--blend", type=path_arg, metavar="SCENE_BLEND",
+                     help="a .blend with Crowd settings, baked as the panel bakes it, seen "
+                          "through its scene camera (needs the bpy module)")
+    p.add_argument("--scene", default=None, metavar="NAME",
+                   help="scene of the .blend (default: the active scene)")
+    p.add_argument("--budget-mb", type=positive_float, default=float(b.PAPER_BUDGET_MB),
+                   help="GPU pose budget in MB = 10**6 B (default: the paper's %(default)g)")
+    p.add_argument("--max-streams", type=int_at_least(1), default=MAX_STREAMS, metavar="S",
+                   help="most streams a plan may use, the per-frame CPU cost (default: the "
+                        "paper's %(default)s)")
+    p.add_argument("--width", type=int_at_least(1), default=None,
+                   help="screen width in pixels (default: the scene's render size, or 1280)")
+    p.add_argument("--height", type=int_at_least(1), default=None,
+                   help="screen height in pixels (default: the scene's render size, or 720)")
+    add_repetition_arguments(p, frames=False)
+    p.add_argument("--plot", type=path_arg, default="plan.png", metavar="PNG",
+                   help="where to write the plot (default: %(default)s)")
+    p.add_argument("--no-plot", dest="plot", action="store_const", const=None,
+                   help="write no plot")
+    p.add_argument("--json", action="store_true",
+                   help="end with one JSON line: repetition_default, repetition_planned, "
+                        "the default, the plan and every candidate")
+    add_trust_argument(p)
+    p.set_defaults(handler=_run_plan)
+
+
+def _run_plan(args) -> int:
+    import dataclasses
+    import json
+
+    from .core.repetition import RepetitionSettings
+    from .core.variety_plan import plan_input, plan_variety
+    from .gpu.camera import frame_positions
+    from .plan_report import plot, summary_lines, table
+
+    settings = RepetitionSettings(k=args.neighbours)
+    printer = progress_printer("crowd plan")
+    camera = None
+    if args.blend:
+        from .blender.cli_commands import plan_blend
+        config, camera, settings = plan_blend(
+            blend=args.blend, scene=args.scene, settings=settings,
+            trust_scripts=args.trust_scripts,
+            on_bake=lambda done, total, message: print(f"crowd plan: {message}",
+                                                       file=sys.stderr, flush=True))
+    else:
+        from .core.config_io import load_config
+        if args.scene is not None:
+            raise CrowdError("--scene needs --blend (a configuration has no scenes)")
+        config = load_config(args.config)
+    size = {k: v for k, v in (("width", args.width), ("height", args.height)) if v}
+    settings = dataclasses.replace(settings, **size)
+    if camera is None:
+        camera = frame_positions(config.agent_position, settings.width / settings.height)
+    result = plan_variety(plan_input(config), camera.view_projection, args.budget_mb * 1e6,
+                          settings, args.max_streams,
+                          progress=lambda done, total: printer("candidates", done, total))
+    written = plot(result, args.plot) if args.plot else None
+    print(table(result))
+    print("\n".join(summary_lines(result)))
+    if written:
+        print(f"  plot: {written}")
+    if args.json:
+        print(json.dumps({**result.as_dict(), "plot": written}))
+    return 0
+
+
 # ------------------------------------------------------------------------- export
 
 def _add_export(subparsers) -> None:
@@ -595,7 +682,7 @@ def _run_build_extension(args) -> int:
 # --------------------------------------------------------------------------- main
 
 #: One ``_add_<command>`` per subcommand.
-_COMMANDS = (_add_budget, _add_export, _add_snapshot, _add_stitch, _add_farm, _add_preview,
+_COMMANDS = (_add_budget, _add_plan, _add_export, _add_snapshot, _add_stitch, _add_farm, _add_preview,
              _add_demo, _add_build_extension)
 
 

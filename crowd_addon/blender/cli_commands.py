@@ -196,6 +196,22 @@ def preview_blend(out: str, frames: int | None = None, *, blend: str | None = No
     return config, result, None if obj is None else obj.name
 
 
+def plan_blend(*, blend: str | None = None, scene: str | None = None, settings=_DEFAULT,
+               trust_scripts: bool = False, on_bake=None):
+    """What ``crowd plan --blend`` plans from: the scene's Crowd settings baked
+    (:func:`open_scene`, as the exports bake them) and the camera and settings of its
+    repetition metric (:func:`.cameras.metric_view`: the scene camera at the render
+    size; None: the caller frames the agents). Returns ``(config, camera, settings)``."""
+    with blender_output_to_stderr():
+        from .cameras import metric_view
+        from .scene_config import config_from_scene
+        _trust(trust_scripts)
+        found = open_scene(blend, scene)
+        config = config_from_scene(found, on_bake)
+        camera, settings = metric_view(found, settings)
+        return config, camera, settings
+
+
 def snapshot_blend(out: str, frames: tuple | None = None, *, every: int,
                    blend: str | None = None, scene: str | None = None, substeps: int = 1,
                    trust_scripts: bool = False, progress=None, on_bake=None):

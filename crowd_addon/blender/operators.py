@@ -215,6 +215,53 @@ class CROWD_OT_measure_repetition(bpy.types.Operator):
         return {"FINISHED"}
 
 
+class CROWD_OT_plan_variety(bpy.types.Operator):
+    """Find the history length M, copies of each stream and offset distribution that
+    repeat least through the scene camera (or this viewport), within the Budget and
+    Max Streams (docs/variety.md)"""
+
+    bl_idname = "crowd.plan_variety"
+    bl_label = "Plan Variety"
+    bl_options = {"REGISTER"}
+
+    @classmethod
+    def poll(cls, context):
+        return preview.get(context.scene) is not None
+
+    def execute(self, context):
+        try:
+            p = preview.plan_variety(context.scene, context.region_data, context.region)
+        except CrowdError as e:
+            self.report({"ERROR"}, str(e))
+            return {"CANCELLED"}
+        self.report({"INFO"}, f"Plan: M {p.planned.max_offset}, {p.planned.streams} "
+                              f"streams, repetition {p.planned.repetition:.4f} (now "
+                              f"{p.default.repetition:.4f})")
+        return {"FINISHED"}
+
+
+class CROWD_OT_apply_plan(bpy.types.Operator):
+    """Set the plan's M, stream copies and Spread offsets in the Crowd settings, then
+    bake"""
+
+    bl_idname = "crowd.apply_plan"
+    bl_label = "Apply Plan"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        pv = preview.get(context.scene)
+        return pv is not None and pv.plan is not None
+
+    def execute(self, context):
+        try:
+            preview.apply_plan(context.scene)
+        except CrowdError as e:
+            self.report({"ERROR"}, str(e))
+            return {"CANCELLED"}
+        return bpy.ops.crowd.bake("EXEC_DEFAULT")
+
+
 # ---------------------------------------------------------------- list editing
 _COLLECTIONS = (
     ("characters", "Characters", ""), ("lods", "LODs", ""), ("streams", "Streams", ""),
@@ -387,5 +434,5 @@ class CROWD_OT_item_move(_ListOperator, bpy.types.Operator):
 
 
 CLASSES = (CROWD_OT_bake, CROWD_OT_generate_agents, CROWD_OT_preview_toggle,
-           CROWD_OT_measure_repetition,
+           CROWD_OT_measure_repetition, CROWD_OT_plan_variety, CROWD_OT_apply_plan,
            CROWD_OT_item_add, CROWD_OT_item_remove, CROWD_OT_item_move)

@@ -125,6 +125,15 @@ class CROWD_PT_main(_Panel, bpy.types.Panel):
         row.prop(s, "repetition_neighbours", text="k")
         if pv.repetition is not None:
             box.label(text=repetition_line(pv.repetition, pv.repetition_seen))
+        row = box.row(align=True)
+        row.operator("crowd.plan_variety", icon="GRAPH")
+        row.prop(s, "plan_budget_mb", text="MB")
+        row.prop(s, "plan_max_streams", text="S")
+        if pv.plan is not None:
+            from ..plan_report import summary_lines
+            for line in summary_lines(pv.plan):
+                box.label(text=line.strip())
+            box.operator("crowd.apply_plan", icon="CHECKMARK")
         if s.render_crowd and pv.render_stats is not None:
             r = pv.render_stats
             box.label(text=f"Render Crowd: {r.poses:,} pose meshes for {r.agents:,} agents, "

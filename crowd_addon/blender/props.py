@@ -289,6 +289,14 @@ class CROWD_PG_settings(PropertyGroup):
         name="Neighbours", default=6, min=1, max=64,
         description="Repetition metric: screen-space neighbours each agent is compared "
                     "with (docs/variety.md)")
+    plan_budget_mb: FloatProperty(
+        name="Budget (MB)", default=520.0, min=0.001,
+        description="Plan Variety: GPU memory the pose texture may use, MB of 10^6 bytes "
+                    "(default: the paper's 520)")
+    plan_max_streams: IntProperty(
+        name="Max Streams", default=256, min=1,
+        description="Plan Variety: the most streams a plan may use (each costs CPU time "
+                    "every frame; the paper's 256 by default)")
 
 
 CLASSES = show_props.CLASSES + (CROWD_PG_input, CROWD_PG_state_transition, CROWD_PG_node, CROWD_PG_animation,
@@ -321,7 +329,7 @@ _UI_ONLY = {"active_character_index", "active_lod_index", "active_stream_index",
             "active_unique_index", "active_source_index", "active_node_index",
             "active_input_index", "active_transition_index", "preview_enabled",
             "active_cue_index", "active_reaction_index", "active_parameter_index",
-            "render_crowd", "repetition_neighbours"}
+            "render_crowd", "repetition_neighbours", "plan_budget_mb", "plan_max_streams"}
 
 
 def settings_fingerprint(settings) -> int:

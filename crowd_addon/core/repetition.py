@@ -4,8 +4,10 @@ The paper judges diversity by eye; this measures it. Seen from a camera, every v
 agent is paired with its ``k`` nearest visible agents in screen space (pixels). A pair
 *looks alike* when, at that frame, both agents
 
-- play the same stream with offsets at most ``offset_tolerance`` frames apart, or the
-  same unique (which shows one pose to all its agents);
+- play the same stream with offsets at most ``offset_tolerance`` frames apart (on a
+  stream that loops with a period of ``P`` frames, offsets ``P`` apart show the same
+  pose: the distance is taken around the loop, :func:`stream_periods`), or the same
+  unique (which shows one pose to all its agents);
 - use the same body (``look``: the character's mesh, or its variant);
 - have colours within ``color_tolerance`` of each other (largest RGB channel
   difference, 0..1).
@@ -30,10 +32,13 @@ import numpy as np
 from .agents import STREAM, TRANSITION, UNIQUE
 from .errors import CrowdError
 
-__all__ = ["RepetitionSettings", "Repetition", "nearest_neighbours", "screen_points",
+__all__ = ["OFFSET_TOLERANCE", "RepetitionSettings", "Repetition", "nearest_neighbours", "screen_points",
            "pairs_alike", "frame_repetition", "crowd_repetition", "recording_repetition",
-           "recording_repetition_steps", "measure_frames", "describe", "combine"]
+           "recording_repetition_steps", "measure_frames", "describe", "combine",
+           "stream_periods"]
 
+#: offsets at most this many frames apart look alike (the default tolerance)
+OFFSET_TOLERANCE = 2
 #: points at or below which neighbours are found by brute force
 _BRUTE = 2048
 #: distances computed at once by the brute-force comparison
@@ -49,7 +54,7 @@ class RepetitionSettings:
     measured over a shot, spread evenly (the first and the last among them)."""
 
     k: int = 6
-    offset_tolerance: int = 2
+    offset_tolerance: int = OFFSET_TOLERANCE
     color_tolerance: float = 0.05
     width: int = 1280
     height: int = 720
@@ -296,23 +301,57 @@ def screen_points(positions, view_projection, width: int, height: int):
     return xy, visible
 
 
-def pairs_alike(i, j, kind, ref, offset, look, color, settings: RepetitionSettings):
-    """(len(i),) bool: agents ``i[p]`` and ``j[p]`` look alike (module docstring)."""
+def stream_periods(config) -> np.ndarray:
+    """(S,) float64: the period in crowd frames of each of ``config``'s streams, ``inf``
+    when it does not repeat. A stream repeats when every clip its tree plays loops with
+    one period (the clip's length at the player's speed) and no state machine (whose
+    states change with triggers and parameters) is in it; at the stream's speed the
+    period is that over the speed."""
+    from .controllers import ClipPlayer, StateMachine
+    out = np.full(len(config.streams), np.inf)
+    for s, d in enumerate(config.streams):
+        stack, periods, ok = [d.root], set(), True
+        while stack and ok:
+            node = stack.pop()
+            if isinstance(node, StateMachine):
+                ok = False
+            elif isinstance(node, ClipPlayer):
+                clip = config.clips.get(node.clip)
+                if clip is None or not clip.loop or node.speed == 0:
+                    ok = False
+                else:
+                    periods.add(round(clip.frames_at(config.fps) / abs(node.speed), 6))
+            stack.extend(node.children())
+        if ok and len(periods) == 1:
+            out[s] = periods.pop() / d.speed
+    return out
+
+
+def pairs_alike(i, j, kind, ref, offset, look, color, settings: RepetitionSettings,
+                period=None):
+    """(len(i),) bool: agents ``i[p]`` and ``j[p]`` look alike (module docstring);
+    ``period``: (S,) the streams' periods (:func:`stream_periods`; None: none
+    repeats)."""
     kind, ref, offset = np.asarray(kind), np.asarray(ref), np.asarray(offset)
     look, color = np.asarray(look), np.asarray(color, np.float64)
     same = (kind[i] == kind[j]) & (kind[i] != TRANSITION) & (ref[i] == ref[j])
-    same &= (kind[i] == UNIQUE) | (np.abs(offset[i].astype(np.int64) - offset[j])
-                                   <= settings.offset_tolerance)
+    d = np.abs(offset[i].astype(np.float64) - offset[j])
+    if period is not None and len(period):
+        p = np.asarray(period, np.float64)[np.clip(ref[i], 0, len(period) - 1)]
+        loops = (kind[i] == STREAM) & np.isfinite(p)
+        r = np.mod(d[loops], p[loops])
+        d[loops] = np.minimum(r, p[loops] - r)
+    same &= (kind[i] == UNIQUE) | (d <= settings.offset_tolerance + 1e-9)
     same &= look[i] == look[j]
     same &= (np.abs(color[i] - color[j]) <= settings.color_tolerance + 1e-9).all(1)
     return same
 
 
 def frame_repetition(positions, kind, ref, offset, look, color, view_projection,
-                     settings: RepetitionSettings = RepetitionSettings()):
+                     settings: RepetitionSettings = RepetitionSettings(), period=None):
     """One frame: ``(share, visible, pairs)``; share is None without a pair. Arrays are
     per agent: positions (n, 3) metres, kind/ref/offset as ``AgentState``, look (n,)
-    int (body), color (n, 3)."""
+    int (body), color (n, 3); ``period`` as :func:`pairs_alike`."""
     xy, vis = screen_points(positions, view_projection, settings.width, settings.height)
     idx = np.flatnonzero(vis)
     nb = nearest_neighbours(xy[idx], settings.k)
@@ -322,7 +361,7 @@ def frame_repetition(positions, kind, ref, offset, look, color, view_projection,
         return None, int(idx.size), 0
     i = idx[np.repeat(np.arange(idx.size), valid.sum(1))]
     j = idx[nb[valid]]
-    alike = pairs_alike(i, j, kind, ref, offset, look, color, settings)
+    alike = pairs_alike(i, j, kind, ref, offset, look, color, settings, period)
     return float(alike.sum()) / pairs, int(idx.size), pairs
 
 
@@ -351,7 +390,7 @@ def crowd_repetition(view, view_projection, look=None,
     a = view.agents
     look = view.agent_skeleton if look is None else look
     r = frame_repetition(a.position, a.kind, a.ref, a.offset, look, a.color,
-                         view_projection, settings)
+                         view_projection, settings, stream_periods(view.config))
     return _report([view.frame], [r], settings)
 
 
@@ -395,6 +434,7 @@ def recording_repetition_steps(rec, view_projection, frames=None, look=None, age
 
 
 def _recording_steps(rec, view_projection, frames, look, agents, settings):
+    period = stream_periods(rec.config)
     results = []
     for f in frames:
         seg = _last_at(rec.segment_agent, rec.segment_frame, agents, f)
@@ -405,7 +445,8 @@ def _recording_steps(rec, view_projection, frames, look, agents, settings):
             has = mv >= 0
             pos[has] = rec.move_position[mv[has]]
         results.append(frame_repetition(pos, kind, ref, off, look[agents],
-                                        rec.color[agents], view_projection, settings))
+                                        rec.color[agents], view_projection, settings,
+                                        period))
         yield len(results), len(frames)
     return _report(frames, results, settings)
 

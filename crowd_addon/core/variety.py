@@ -27,15 +27,19 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import CrowdError
+from .repetition import OFFSET_TOLERANCE
 
 __all__ = ["Timing", "expand", "choose_variants", "spread_offsets", "MAX_GENERATED",
-           "SPREAD_NEIGHBOURS"]
+           "SPREAD_NEIGHBOURS", "SPREAD_GAP"]
 
 #: the most streams one template may become
 MAX_GENERATED = 256
 #: neighbours (nearest in the ground plane) whose offsets :func:`spread_offsets` keeps
 #: apart
 SPREAD_NEIGHBOURS = 8
+#: the least gap :func:`spread_offsets` keeps between neighbours' offsets: the
+#: repetition metric's default offset tolerance (frames closer than this look alike)
+SPREAD_GAP = OFFSET_TOLERANCE
 
 
 @dataclass(frozen=True)
@@ -123,9 +127,11 @@ def spread_offsets(positions, streams, max_offset: int, seed: int,
     Offsets start uniform at random; then, a few rounds over all agents at once, an
     agent whose offset is within ``gap`` frames of one of its ``neighbours`` nearest
     agents (in x, y) on the same stream draws again, with probability 1/2 so that two
-    such agents seldom both move. ``gap`` is ``M / (2 neighbours + 1)`` frames (at
-    least 1): wide enough that no neighbour is in step, narrow enough that a free
-    offset exists for every agent. Seeded; numpy only, no loop per agent. Agents with
+    such agents seldom both move. ``gap`` is ``M / (2 neighbours + 1)`` frames, but at
+    least :data:`SPREAD_GAP` (what the repetition metric calls in step) and at most
+    ``(M - 1) / 2``: wide enough that no neighbour is in step, narrow enough that a
+    free offset exists for most agents (a short M with many same-stream neighbours
+    may leave a few in step). Seeded; numpy only, no loop per agent. Agents with
     stream ``-1`` (on a unique) keep their uniform draw."""
     from .repetition import nearest_neighbours
     pos = np.asarray(positions, np.float64).reshape(-1, 3)
@@ -137,7 +143,7 @@ def spread_offsets(positions, streams, max_offset: int, seed: int,
         return off.astype(np.int32)
     nb = nearest_neighbours(pos[:, :2], min(int(neighbours), st.size - 1))
     same = (nb >= 0) & (st[np.maximum(nb, 0)] == st[:, None]) & (st[:, None] >= 0)
-    gap = max(1, m // (2 * int(neighbours) + 1))
+    gap = min(max(SPREAD_GAP, m // (2 * int(neighbours) + 1)), (m - 1) // 2)
     for _ in range(int(rounds)):
         clash = same & (np.abs(off[:, None] - off[np.maximum(nb, 0)]) <= gap)
         redo = np.flatnonzero(clash.any(1) & (rng.random(st.size) < 0.5))

@@ -12,7 +12,8 @@ import numpy as np
 
 from ..core.errors import CrowdError
 
-__all__ = ["Camera", "look_at", "perspective", "frame_crowd", "frame_points"]
+__all__ = ["Camera", "look_at", "perspective", "frame_crowd", "frame_points",
+           "frame_positions"]
 
 
 def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
@@ -112,3 +113,13 @@ def frame_crowd(crowd, **kwargs) -> Camera:
     lo = pos.min(0) - np.r_[reach[:2], 0.0]
     hi = pos.max(0) + reach
     return frame_points(lo, hi, **kwargs)
+
+
+def frame_positions(positions, aspect=16 / 9) -> Camera:
+    """:func:`frame_points` around agents standing at ``positions`` (n, 3) (a 2 m tall
+    box each; none: the origin): the view a measurement uses without a camera."""
+    pos = np.asarray(positions, np.float64).reshape(-1, 3)
+    if not pos.size:
+        pos = np.zeros((1, 3))
+    return frame_points(pos.min(0) - 1.0, pos.max(0) + np.array([1.0, 1.0, 2.0]),
+                        aspect=aspect)

@@ -173,11 +173,9 @@ def export_steps(recording, path, agents=None, layout="instanced", camera=None,
 def _view_projection(rec, ids, camera, settings) -> np.ndarray:
     """The repetition metric's camera: ``camera``'s, or one framing the agents ``ids``
     at the settings' aspect."""
-    from ..gpu.camera import frame_points
+    from ..gpu.camera import frame_positions
     if camera is None:
-        pos = rec.position[ids].astype(np.float64) if ids.size else np.zeros((1, 3))
-        camera = frame_points(pos.min(0) - 1.0, pos.max(0) + np.array([1.0, 1.0, 2.0]),
-                              aspect=settings.width / settings.height)
+        camera = frame_positions(rec.position[ids], settings.width / settings.height)
     return camera.view_projection
 
 

@@ -406,3 +406,40 @@ def test_measure_repetition_sees_through_the_scene_camera(running):
     scene.camera = None                           # no camera and no viewport: named
     with pytest.raises(RuntimeError, match="no camera"):
         bpy.ops.crowd.measure_repetition()
+
+
+def test_plan_variety_and_apply_it(running):
+    """The panel's planner on the previewed crowd through the scene camera, then
+    Apply: the Crowd settings take the plan's M, copies and Spread offsets, and the
+    bake that follows builds the plan's streams."""
+    from crowd_addon.blender import panels
+    from crowd_addon.core.repetition import RepetitionSettings, crowd_repetition
+    scene, _rig, _walk, pv = running
+    cam = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
+    scene.collection.objects.link(cam)
+    cam.location, cam.rotation_euler = (4.0, -14.0, 9.0), (0.95, 0.0, 0.2)
+    scene.camera = cam
+    s = scene.crowd
+    s.plan_budget_mb, s.plan_max_streams = 1.0, 4
+    assert bpy.ops.crowd.apply_plan.poll() is False          # nothing planned yet
+    assert bpy.ops.crowd.plan_variety() == {"FINISHED"}
+    plan = pv.plan
+    assert plan.templates == ("walk",) and plan.default.max_offset == 8
+    assert plan.planned.fits and plan.planned.streams <= 4 and plan.planned.bytes <= 1e6
+    assert plan.planned.repetition <= plan.default.repetition
+    seen = []
+    ctx = type("Ctx", (), {"scene": scene})()
+    panels.CROWD_PT_main.draw(type("P", (), {"layout": _Layout(seen)})(), ctx)
+    assert ("operator", "crowd.apply_plan") in seen
+    assert any(t.startswith("planned: M") for k, t in seen if k == "label")
+    p = plan.planned
+    assert bpy.ops.crowd.apply_plan() == {"FINISHED"}
+    assert s.max_offset == p.max_offset and s.characters[0].streams[0].copies == \
+        p.template_copies[0]
+    assert s.agent_sources[0].offset_mode == ("SPREAD" if p.offset_mode == "SPREAD"
+                                              else "UNIFORM")
+    baked = preview.get(scene)
+    assert baked.crowd.config.max_offset == p.max_offset
+    assert len(baked.crowd.config.streams) == p.streams
+    assert crowd_repetition(baked.crowd.view, np.eye(4),
+                            settings=RepetitionSettings()).frames == (scene.frame_current,)

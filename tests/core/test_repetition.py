@@ -225,3 +225,46 @@ def test_bad_input_is_named():
         screen_points(np.zeros((2, 3)), np.eye(3), 10, 10)
     with pytest.raises(CrowdError, match="outside the shot"):
         recording_repetition(type("R", (), {"first": 0, "last": 5})(), np.eye(4), [9])
+
+
+def test_offsets_a_loop_apart_look_alike():
+    """On a stream that loops every P frames, offsets P apart show the same pose: the
+    offset distance is taken around the loop (``stream_periods``): loops of equal
+    period blended repeat, loops of different periods, a clip that holds its last
+    key, or a state machine do not; a stream's speed divides its period."""
+    from crowd_addon.core import (Blend2, ClipPlayer, CrowdConfig, StateMachine,
+                                  StateTransition)
+    from crowd_addon.core.repetition import stream_periods
+    from crowd_addon.core.synthetic import humanoid, periodic_clip
+    sk = humanoid("fan", 8)
+    cfg = CrowdConfig(max_offset=60, fps=30.0)
+    cfg.add_skeleton(sk)
+    for name, frames in (("a", 25), ("b", 25), ("c", 31)):
+        cfg.add_clip(periodic_clip(sk, name, frames=frames, seed=len(name)))
+    import dataclasses
+    cfg.clips["held"] = dataclasses.replace(cfg.clips["c"], name="held", loop=False)
+    cfg.add_stream("loop", "fan", ClipPlayer("a"))
+    cfg.add_stream("fast", "fan", ClipPlayer("a", speed=2.0), speed=1.5)
+    cfg.add_stream("pair", "fan", Blend2(ClipPlayer("a"), ClipPlayer("b")))
+    cfg.add_stream("mixed", "fan", Blend2(ClipPlayer("a"), ClipPlayer("c")))
+    cfg.add_stream("held", "fan", ClipPlayer("held"))
+    cfg.add_stream("fsm", "fan", StateMachine({"x": ClipPlayer("a"), "y": ClipPlayer("b")},
+                                              [StateTransition("x", "y", 3, trigger="t")]))
+    period = stream_periods(cfg)
+    np.testing.assert_allclose(period[:3], [24.0, 8.0, 24.0])   # 24 / 2 / 1.5 = 8
+    assert np.isinf(period[3:]).all()
+    pos = np.array([[0.0, 0, 0], [1.0, 0, 0]])
+    same = dict(kind=np.zeros(2, np.int8), look=np.zeros(2), color=np.zeros((2, 3)))
+    s = RepetitionSettings(k=1)
+
+    def alike(stream, offsets):
+        return frame_repetition(pos, same["kind"], np.array([stream, stream]),
+                                np.array(offsets), same["look"], same["color"], top_view(),
+                                s, period)[0]
+
+    assert alike(0, [0, 24]) == 1.0 and alike(0, [0, 23]) == 1.0 and alike(0, [3, 50]) == 1.0
+    assert alike(0, [0, 12]) == 0.0
+    assert alike(1, [0, 16]) == 1.0 and alike(1, [0, 4]) == 0.0
+    assert alike(3, [0, 24]) == 0.0 and alike(4, [0, 30]) == 0.0
+    assert frame_repetition(pos, same["kind"], np.array([0, 0]), np.array([0, 24]),
+                            same["look"], same["color"], top_view(), s)[0] == 0.0

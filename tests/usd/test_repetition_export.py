@@ -31,7 +31,7 @@ def live_metric(frames, agents, settings):
         if crowd.frame in frames:
             a, v = crowd.view.agents, crowd.view
             sub = type("View", (), {})()
-            sub.frame = crowd.frame
+            sub.frame, sub.config = crowd.frame, v.config
             sub.agent_skeleton = v.agent_skeleton[agents]
             sub.agents = type("A", (), {k: getattr(a, k)[agents] for k in (
                 "position", "kind", "ref", "offset", "color")})()

@@ -1,0 +1,97 @@
+"""What ``crowd plan`` shows: the candidates as a table and as a plot.
+
+:func:`table` lists every candidate of a
+:class:`~crowd_addon.core.variety_plan.VarietyPlan` (M, copies, offsets, streams,
+memory, metric), the default and the chosen one marked; :func:`plot` draws the metric
+against M, one line per copies count and offset mode, with the chosen point and the
+default marked, into a PNG (matplotlib, the ``plot`` extra).
+"""
+
+from __future__ import annotations
+
+from .core.errors import CrowdError
+
+__all__ = ["table", "plot", "summary_lines"]
+
+_MB = 1e6
+
+
+def _value(v) -> str:
+    if v is None:
+        return "-"
+    return f"{v:.4f}" if v >= 1e-3 or v == 0 else f"{v:.1e}"
+
+
+def table(result) -> str:
+    """Every candidate, one line each; ``*`` the planned one."""
+    rows = [f"{'M':>5} {'copies':>6} {'offsets':>8} {'streams':>7} {'memory MB':>10} "
+            f"{'repetition':>10}"]
+    for c in result.candidates:
+        mark = " *" if c == result.planned else ("  (over budget)" if not c.fits else "")
+        rows.append(f"{c.max_offset:>5} {c.copies:>6} {c.offset_mode.lower():>8} "
+                    f"{c.streams:>7} {c.bytes / _MB:>10.2f} {_value(c.repetition):>10}{mark}")
+    return "\n".join(rows)
+
+
+def summary_lines(result) -> list:
+    """The default, the plan and what changes, for a terminal or a panel."""
+    d, p = result.default, result.planned
+    lines = [
+        f"default: M {d.max_offset}, {d.streams} streams, offsets as placed, "
+        f"{d.bytes / _MB:.2f} MB: repetition {_value(d.repetition)}",
+        f"planned: M {p.max_offset}, {p.copies} cop{'ies' if p.copies != 1 else 'y'} of "
+        f"each speed stream, {p.offset_mode.lower()} offsets, {p.streams} streams, "
+        f"{p.bytes / _MB:.2f} MB: repetition {_value(p.repetition)}"]
+    if d.repetition and p.repetition is not None:
+        lines.append(f"  {d.repetition / max(p.repetition, 1e-9):,.0f}x less repetition"
+                     if p.repetition < d.repetition else "  no candidate repeats less")
+    lines.append(f"  budget {result.budget_bytes / _MB:,.1f} MB, at most "
+                 f"{result.max_streams} streams; {result.visible:,} of {result.agents:,} "
+                 f"agents in view, k = {result.settings.k}")
+    return lines + [f"  note: {n}" for n in result.notes]
+
+
+def plot(result, path, title: str = "") -> str:
+    """Write the plot to ``path`` (PNG); returns the path."""
+    try:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        raise CrowdError("the plot needs matplotlib: pip install 'crowd_addon[plot]' (or "
+                         "leave the plot out with --no-plot)") from None
+    fig, ax = plt.subplots(figsize=(8, 5), dpi=120)
+    copies = sorted({c.copies for c in result.candidates})
+    colours = plt.get_cmap("viridis")(
+        [i / max(len(copies) - 1, 1) * 0.85 for i in range(len(copies))])
+    for mode, style in (("UNIFORM", "--"), ("SPREAD", "-")):
+        for colour, k in zip(colours, copies):
+            pts = sorted((c.max_offset, c.repetition) for c in result.candidates
+                         if c.copies == k and c.offset_mode == mode and c.fits
+                         and c.repetition is not None)
+            if pts:
+                ax.plot(*zip(*pts), style, color=colour, marker=".",
+                        label=f"{k} cop{'ies' if k != 1 else 'y'}, {mode.lower()}")
+    d, p = result.default, result.planned
+    if d.repetition is not None:
+        ax.plot([d.max_offset], [d.repetition], "o", color="black", markersize=9,
+                label=f"default (M {d.max_offset}): {_value(d.repetition)}")
+    ax.plot([p.max_offset], [p.repetition], "*", color="crimson", markersize=16,
+            label=f"planned (M {p.max_offset}, {p.copies} copies, "
+                  f"{p.offset_mode.lower()}): {_value(p.repetition)}")
+    ax.set_xlabel("M, frames of pose history per stream")
+    ax.set_ylabel(f"repetition (share of {result.settings.k} nearest on screen alike)")
+    ax.set_yscale("symlog", linthresh=1e-3)
+    ax.grid(True, alpha=0.3)
+    ax.set_title(title or f"{result.agents:,} agents, budget "
+                          f"{result.budget_bytes / _MB:,.0f} MB, at most "
+                          f"{result.max_streams} streams")
+    ax.legend(fontsize=7, ncol=2)
+    fig.tight_layout()
+    try:
+        fig.savefig(path)
+    except OSError as e:
+        raise CrowdError(f"cannot write the plot {path}: {e.strerror or e}") from None
+    finally:
+        plt.close(fig)
+    return str(path)

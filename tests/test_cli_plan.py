@@ -1,0 +1,67 @@
+"""``crowd plan`` from a saved configuration: every candidate printed, the proposal,
+the JSON line with ``repetition_default`` and ``repetition_planned``, and the plot
+(matplotlib) with its chosen point; bad input named with exit code 2."""
+
+import json
+import os
+import sys
+
+import numpy as np
+import pytest
+
+from crowd_addon.cli import main
+from crowd_addon.core.config_io import save_config
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from core.test_variety_plan import config  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def crowd_json(tmp_path_factory):
+    path = tmp_path_factory.mktemp("plan") / "crowd.json"
+    save_config(config(), path)
+    return path
+
+
+def test_plan_prints_the_candidates_the_proposal_and_plots_them(crowd_json, tmp_path,
+                                                                 capsys):
+    png = tmp_path / "plan.png"
+    assert main(["plan", "--config", str(crowd_json), "--budget-mb", "4",
+                 "--max-streams", "12", "--plot", str(png), "--json"]) == 0
+    out, err = capsys.readouterr()
+    lines = out.strip().splitlines()
+    result = json.loads(lines[-1])
+    assert result["repetition_planned"] < result["repetition_default"]
+    assert result["planned"]["bytes"] <= 4e6 and result["planned"]["streams"] <= 12
+    assert result["plot"] == str(png) and result["k"] == 6
+    assert lines[0].split() == ["M", "copies", "offsets", "streams", "memory", "MB",
+                                "repetition"]
+    assert sum(line.endswith(" *") for line in lines) == 1
+    assert "(over budget)" in out and "less repetition" in out
+    assert "crowd plan: candidates" in err
+    from matplotlib.image import imread               # a PNG decoder of its own
+    img = (imread(png)[..., :3] * 255).astype(np.uint8)
+    assert img.shape[0] > 400 and img.shape[1] > 700
+    red = (img[..., 0] > 180) & (img[..., 1] < 60) & (img[..., 2] < 90)   # the star
+    assert red.sum() > 50
+    assert len(np.unique(img.reshape(-1, img.shape[-1]), axis=0)) > 50
+
+
+def test_no_plot_and_options(crowd_json, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert main(["plan", "--config", str(crowd_json), "--no-plot", "--neighbours", "3",
+                 "--width", "640", "--height", "640", "--json"]) == 0
+    result = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert result["plot"] is None and result["k"] == 3
+    assert not (tmp_path / "plan.png").exists()
+
+
+def test_bad_input_is_named(crowd_json, tmp_path, capsys):
+    assert main(["plan", "--config", str(crowd_json), "--budget-mb", "0.001",
+                 "--no-plot"]) == 2
+    assert "crowd plan: error: plan: no candidate fits 1,000 B" in capsys.readouterr().err
+    assert main(["plan", "--config", str(crowd_json), "--scene", "x", "--no-plot"]) == 2
+    assert "--scene needs --blend" in capsys.readouterr().err
+    assert main(["plan", "--config", str(crowd_json),
+                 "--plot", str(tmp_path / "missing" / "p.png")]) == 2
+    assert "cannot write the plot" in capsys.readouterr().err
