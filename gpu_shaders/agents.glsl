@@ -2,7 +2,8 @@
  * in `agent_tex`, in column blocks of the texture's height (block_layout.glsl,
  * crowd_addon/gpu/instances.py):
  *   texel 0 = (position x, y, z in metres, heading in radians about +Z)
- *   texel 1 = (kind, ref, offset, colour as 8-bit r * 65536 + g * 256 + b)
+ *   texel 1 = (kind * 65536 + offset, ref, uniform body scale,
+ *              colour as 8-bit r * 65536 + g * 256 + b)
  * Small integers are exact in float32. A draw instance is mapped to its agent
  * through `agent_list_tex` (R32I, the agents of one (skeleton, LOD) draw from
  * u_draw.x, crowd_vert.glsl), so one instanced draw serves any subset of the crowd.
@@ -14,6 +15,7 @@ struct Agent {
   int kind;
   int ref;
   int offset;
+  float scale;
   vec3 color;
 };
 
@@ -29,12 +31,14 @@ Agent agent_record(int agent)
   vec4 a = texelFetch(agent_tex, at, 0);
   vec4 b = texelFetch(agent_tex, at + ivec2(1, 0), 0);
   int rgb = int(b.w);
+  int kind_offset = int(b.x);
   Agent r;
   r.position = a.xyz;
   r.heading = a.w;
-  r.kind = int(b.x);
+  r.kind = kind_offset >> 16;
   r.ref = int(b.y);
-  r.offset = int(b.z);
+  r.offset = kind_offset & 65535;
+  r.scale = b.z;
   r.color = vec3((rgb >> 16) & 255, (rgb >> 8) & 255, rgb & 255) / 255.0;
   return r;
 }

@@ -1,7 +1,8 @@
 /* The crowd vertex: the current vertex (`pos`, `nor`, `bone_idx`, `bone_w`, `col`, and with
  * INFLUENCES > 4 `bone_idx2`, `bone_w2`: programs.for_influences declares them) of agent
  * `agent_id` skinned from its pose row (paper Eq. 1) and placed in the world --
- * rotated by the agent's heading about +Z, then moved to its position -- into the
+ * scaled by the agent's scale, rotated by its heading about +Z, then moved to its
+ * position -- into the
  * stage outputs v_world, v_normal, v_color. The colour is the vertex's material colour
  * `col` tinted by the agent's colour where that material is unsaturated (white, grey:
  * a shirt takes the team colour, skin and dyed cloth keep theirs; a mesh without
@@ -32,7 +33,7 @@ void crowd_vertex(int agent_id)
   skin_vertex(row, bone_idx, bone_w, uvec4(0u), vec4(0.0), pos, nor, p, n);
 #endif
   vec2 turn = agent_turn(agent);
-  v_world = turn_z(turn, p) + agent.position;
+  v_world = turn_z(turn, p * agent.scale) + agent.position;
   v_normal = turn_z(turn, n);
   v_color = agent_tint(col.rgb, agent.color);
 }

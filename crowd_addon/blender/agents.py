@@ -119,7 +119,8 @@ def placement_policy(source) -> PlacementPolicy:
         offset_mean=source.offset_mean, offset_std=source.offset_std,
         offset_attribute=source.offset_attribute, color_mode=source.color_mode,
         color=tuple(source.color), color_variation=source.color_variation,
-        color_attribute=source.color_attribute)
+        color_attribute=source.color_attribute, scale_min=source.scale_min,
+        scale_max=source.scale_max)
 
 
 def character_streams(settings) -> tuple:

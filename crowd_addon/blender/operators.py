@@ -159,10 +159,9 @@ class CROWD_OT_generate_agents(bpy.types.Operator):
                     agent_unique=np.zeros(0, np.int32), agent_offset=np.zeros(0, np.int32),
                     agent_position=np.zeros((0, 3), np.float32),
                     agent_heading=np.zeros(0, np.float32),
-                    agent_color=np.zeros((0, 3), np.float32))
-                cfg.add_agents(agents.count, streams=agents.streams, offsets=agents.offsets,
-                               positions=agents.positions, headings=agents.headings,
-                               colors=agents.colors)
+                    agent_color=np.zeros((0, 3), np.float32),
+                    agent_scale=np.zeros(0, np.float32))
+                agents.add_to(cfg)
                 cfg.show = show_from_scene(scene, dg, cfg, placed)   # selections: new ids
                 preview.start(scene, cfg)
         except CrowdError as e:

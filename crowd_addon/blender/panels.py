@@ -336,6 +336,9 @@ class CROWD_PT_agents(_Panel, bpy.types.Panel):
                 _stream_search(col, s, src)
             for key in fields.get(getattr(src, mode), ()):
                 col.prop(src, key)
+        sub = col.column(align=True)
+        sub.prop(src, "scale_min")
+        sub.prop(src, "scale_max")
 
 
 def _stream_search(col, s, src):

@@ -222,6 +222,14 @@ class CROWD_PG_agent_source(PropertyGroup):
     color_variation: FloatProperty(name="Variation", default=0.5, min=0.0, max=1.0,
                                    subtype="FACTOR")
     color_attribute: StringProperty(name="Colour Attribute", default="Col")
+    scale_min: FloatProperty(
+        name="Scale Min", default=1.0, min=0.05, soft_max=3.0,
+        description="Each agent's body is scaled uniformly by a factor drawn between Scale "
+                    "Min and Scale Max (seeded): a range of heights")
+    scale_max: FloatProperty(
+        name="Scale Max", default=1.0, min=0.05, soft_max=3.0,
+        description="Each agent's body is scaled uniformly by a factor drawn between Scale "
+                    "Min and Scale Max (seeded): a range of heights")
 
 
 _LOD_VIEW = ("as seen in a 1080-pixel-high view with a 40° field of view (smaller views "

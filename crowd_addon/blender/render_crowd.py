@@ -77,10 +77,13 @@ def agent_lods(crowd, scene) -> np.ndarray:
 
 def _node_group():
     """The Geometry Nodes group: Instance on Points picking ``crowd_pose`` from the
-    pose collection, turned by ``crowd_heading``."""
+    pose collection, turned by ``crowd_heading`` and scaled by ``crowd_scale`` (a
+    group made by an older version, without the scale, is made again)."""
     group = bpy.data.node_groups.get(NODE_GROUP)
-    if group is not None:
+    if group is not None and group.nodes.get("crowd_scale") is not None:
         return group
+    if group is not None:
+        bpy.data.node_groups.remove(group)
     group = bpy.data.node_groups.new(NODE_GROUP, "GeometryNodeTree")
     group.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
     group.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
@@ -100,6 +103,10 @@ def _node_group():
     drawn = nodes.new("GeometryNodeInputNamedAttribute")
     drawn.data_type = "BOOLEAN"
     drawn.inputs["Name"].default_value = "crowd_drawn"
+    scale = nodes.new("GeometryNodeInputNamedAttribute")
+    scale.name = "crowd_scale"
+    scale.data_type = "FLOAT"
+    scale.inputs["Name"].default_value = "crowd_scale"
     euler = nodes.new("ShaderNodeCombineXYZ")
     inst = nodes.new("GeometryNodeInstanceOnPoints")
     inst.inputs["Pick Instance"].default_value = True
@@ -109,6 +116,7 @@ def _node_group():
     links.new(pose.outputs["Attribute"], inst.inputs["Instance Index"])
     links.new(heading.outputs["Attribute"], euler.inputs["Z"])
     links.new(euler.outputs[0], inst.inputs["Rotation"])
+    links.new(scale.outputs["Attribute"], inst.inputs["Scale"])
     links.new(inst.outputs[0], out.inputs[0])
     return group
 
@@ -135,6 +143,7 @@ def _points_object(scene, count: int):
     for name, kind, domain in (("crowd_pose", "INT", "POINT"),
                                ("crowd_drawn", "BOOLEAN", "POINT"),
                                ("crowd_heading", "FLOAT", "POINT"),
+                               ("crowd_scale", "FLOAT", "POINT"),
                                ("crowd_color", "FLOAT_COLOR", "POINT")):
         if mesh.attributes.get(name) is None:
             mesh.attributes.new(name, kind, domain)
@@ -260,6 +269,8 @@ def sync(scene, crowd) -> RenderStats:
     me.attributes["crowd_drawn"].data.foreach_set("value", drawn)
     me.attributes["crowd_heading"].data.foreach_set(
         "value", np.ascontiguousarray(crowd.agents.heading, np.float32))
+    me.attributes["crowd_scale"].data.foreach_set(
+        "value", np.ascontiguousarray(crowd.agents.scale, np.float32))
     color = np.ones((n, 4), np.float32)
     color[:, :3] = crowd.agents.color
     me.attributes["crowd_color"].data.foreach_set("color", color.ravel())

@@ -296,9 +296,7 @@ def config_steps(scene, depsgraph=None, notes=None):
     dg = depsgraph if depsgraph is not None else _depsgraph(scene)
     agents, placed = agent_mod.agents_from_scene(scene, dg)
     if agents.count:
-        cfg.add_agents(agents.count, streams=agents.streams, offsets=agents.offsets,
-                       positions=agents.positions, headings=agents.headings,
-                       colors=agents.colors)
+        agents.add_to(cfg)
     cfg.show = show_from_scene(scene, dg, cfg, placed)
     return cfg
 

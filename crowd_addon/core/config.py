@@ -29,6 +29,8 @@ WHEN_FULL = ("queue", "cut")
 USD_LAYOUTS = ("instanced", "blender")
 #: The most samples per frame a crowd keeps for writers (``Crowd(..., substeps=N)``).
 MAX_SUBSTEPS = 16
+#: The longest pose history M (frames): offsets travel to the GPU in 16 bits.
+MAX_OFFSET = 65535
 #: The deepest controller tree (levels below the root) a crowd accepts.
 MAX_TREE_DEPTH = 64
 
@@ -94,7 +96,9 @@ class CrowdConfig:
     agent_offset : (N,) int offsets (also kept for unique agents: used when they go
         back to a stream without an explicit offset).
     agent_position : (N, 3) float32 world positions (metres); agent_heading : (N,)
-        radians about +Z; agent_color : (N, 3) float32 colour variation 0..1.
+        radians about +Z; agent_color : (N, 3) float32 colour variation 0..1;
+        agent_scale : (N,) float32 uniform scale of each agent's body (empty: all 1;
+        :attr:`scales`).
     show : :class:`~.show.Show`, the cues, reactions and animated parameters the crowd
         runs itself before each step (empty by default).
     """
@@ -116,6 +120,7 @@ class CrowdConfig:
     agent_position: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float32))
     agent_heading: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
     agent_color: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float32))
+    agent_scale: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
     meshes: dict = field(default_factory=dict)
     lod_distances: tuple = (30.0, 90.0, 150.0)
     show: Show = field(default_factory=Show)
@@ -185,9 +190,15 @@ class CrowdConfig:
     def agent_count(self) -> int:
         return int(self.agent_offset.shape[0])
 
+    @property
+    def scales(self) -> np.ndarray:
+        """(N,) float32 scale per agent: :attr:`agent_scale`, or ones when it is empty."""
+        s = np.asarray(self.agent_scale, np.float32).reshape(-1)
+        return s if s.size else np.ones(self.agent_count, np.float32)
+
     def add_agents(self, count, streams=None, stream_weights=None, offsets="uniform",
                    offset_mean=None, offset_std=None, positions=None, headings=None,
-                   colors=None, seed=None):
+                   colors=None, seed=None, scales=None):
         """Append ``count`` streamed agents.
 
         ``streams``: None (all streams, drawn with ``stream_weights``), an int, a
@@ -222,6 +233,11 @@ class CrowdConfig:
         else:
             col = np.asarray(colors, np.float32).reshape(count, 3)
         first = self.agent_count
+        if scales is not None or np.asarray(self.agent_scale).size:
+            old = self.scales
+            new = np.ones(count, np.float32) if scales is None else \
+                np.asarray(scales, np.float32).reshape(count)
+            self.agent_scale = np.concatenate([old, new]).astype(np.float32)
         self.agent_stream = np.concatenate([self.agent_stream, st]).astype(np.int32)
         self.agent_unique = np.concatenate([self.agent_unique,
                                             np.full(count, -1, np.int32)]).astype(np.int32)
@@ -272,6 +288,9 @@ def validate_config(cfg: CrowdConfig) -> dict:
                 or value < least:
             raise CrowdError(f"crowd: {what} must be a whole number >= {least}, got "
                              f"{value!r}")
+    if cfg.max_offset > MAX_OFFSET:
+        raise CrowdError(f"crowd: max offset M must be at most {MAX_OFFSET} frames, got "
+                         f"{cfg.max_offset}")
     if not (np.isfinite(cfg.fps) and cfg.fps > 0):
         raise CrowdError(f"crowd: fps must be positive, got {cfg.fps}")
     if cfg.when_full not in WHEN_FULL:
@@ -328,6 +347,13 @@ def _validate_agents(cfg):
         if getattr(cfg, field_name).shape != (n,):
             raise CrowdError(f"crowd: {field_name} has shape "
                              f"{getattr(cfg, field_name).shape}, expected ({n},)")
+    scale = np.asarray(cfg.agent_scale)
+    if scale.size and scale.shape != (n,):
+        raise CrowdError(f"crowd: agent_scale must be ({n},) or empty, got {scale.shape}")
+    bad = np.flatnonzero(~(np.isfinite(scale) & (scale > 0))) if scale.size else []
+    if len(bad):
+        raise CrowdError(f"agent {int(bad[0])}: agent_scale must be finite and > 0, got "
+                         f"{float(scale[bad[0]])!r}")
     for field_name, shape in (("agent_position", (n, 3)), ("agent_heading", (n,)),
                               ("agent_color", (n, 3))):
         arr = np.asarray(getattr(cfg, field_name))

@@ -502,6 +502,8 @@ def _encode_config(cfg: CrowdConfig) -> tuple:
     m["agents"] = {"count": cfg.agent_count}
     for key, _, _ in _AGENTS:
         m["agents"][key] = e.array(getattr(cfg, f"agent_{key}"), key)
+    if (cfg.scales != 1).any():              # files without scale variation as before
+        m["agents"]["scale"] = e.array(cfg.scales, "scale")
     m["show"] = _encode_show(cfg.show, enc.at("show"))
     return _plain(m, ""), arrays
 
@@ -736,6 +738,8 @@ def _decode_config(m: dict, dec: Decoder) -> CrowdConfig:
     for key, kinds, width in _AGENTS:
         setattr(cfg, f"agent_{key}",
                 d.array(agents, key, kinds, (n,) if width == 1 else (n, width)))
+    if agents.get("scale") is not None:
+        cfg.agent_scale = d.array(agents, "scale", "f", (n,))
     cfg.show = _decode_show(m, dec)
     return cfg
 

@@ -91,7 +91,7 @@ class FrameView:
     @property
     def agents(self):
         """The :class:`~.agents.AgentState`; its arrays (kind, ref, offset, position,
-        heading, color) are read-only views."""
+        heading, color, scale) are read-only views."""
         return self._crowd.agents
 
     @property

@@ -1,5 +1,5 @@
 """Agent placement policy: points of a source -> agents (heading, character, stream,
-offset, colour).
+offset, colour, scale).
 
 An agent source gives world positions (metres) and base headings (radians about
 +Z) of its points; :func:`place_agents` turns them into an :class:`AgentSet` by the
@@ -48,13 +48,16 @@ _CHARACTER_DRAW = 3
 #: added to a character's stream seed for the draw of variants, plus the template's
 #: index
 _VARIANT_DRAW = 7
+#: added to a source's seed for the draw of scales
+_SCALE_DRAW = 4
 
 
 @dataclass(frozen=True)
 class AgentSet:
     """Agents as arrays: positions (n, 3) float32 metres, headings (n,) float32
     radians, streams (n,) int32 stream indices, offsets (n,) int32 frames, colors
-    (n, 3) float32 0..1, characters (n,) int32 character indices."""
+    (n, 3) float32 0..1, characters (n,) int32 character indices, scales (n,) float32
+    uniform body scales."""
 
     positions: np.ndarray
     headings: np.ndarray
@@ -62,10 +65,18 @@ class AgentSet:
     offsets: np.ndarray
     colors: np.ndarray
     characters: np.ndarray
+    scales: np.ndarray
 
     @property
     def count(self) -> int:
         return int(self.offsets.shape[0])
+
+    def add_to(self, cfg):
+        """Append these agents to ``cfg`` (a ``CrowdConfig``); their ids."""
+        return cfg.add_agents(self.count, streams=self.streams, offsets=self.offsets,
+                              positions=self.positions, headings=self.headings,
+                              colors=self.colors,
+                              scales=self.scales if (self.scales != 1).any() else None)
 
     @staticmethod
     def concatenate(sets):
@@ -73,10 +84,11 @@ class AgentSet:
         if not sets:
             return AgentSet(np.zeros((0, 3), np.float32), np.zeros(0, np.float32),
                             np.zeros(0, np.int32), np.zeros(0, np.int32),
-                            np.zeros((0, 3), np.float32), np.zeros(0, np.int32))
+                            np.zeros((0, 3), np.float32), np.zeros(0, np.int32),
+                            np.zeros(0, np.float32))
         return AgentSet(*(np.concatenate([getattr(s, f) for s in sets])
                           for f in ("positions", "headings", "streams", "offsets", "colors",
-                                    "characters")))
+                                    "characters", "scales")))
 
 
 @dataclass(frozen=True)
@@ -127,6 +139,8 @@ class PlacementPolicy:
         ``offset_attribute``).
     color_mode : ``"RANDOM"`` (``color`` (3,) 0..1 moved toward a random colour by
         ``color_variation``) or ``"ATTRIBUTE"`` (per-point ``color_attribute``).
+    scale_min, scale_max : each agent's uniform body scale, drawn uniformly in this
+        range (1, 1: none); seeded like every other draw.
     """
 
     heading_mode: str = "FIXED"
@@ -147,6 +161,8 @@ class PlacementPolicy:
     color: tuple = (0.8, 0.8, 0.8)
     color_variation: float = 0.5
     color_attribute: str = "Col"
+    scale_min: float = 1.0
+    scale_max: float = 1.0
 
 
 def z_angle(matrix: np.ndarray) -> np.ndarray:
@@ -206,9 +222,15 @@ def place_agents(what: str, positions: np.ndarray, base_heading: np.ndarray,
         base = np.asarray(p.color, np.float64)
         col = base + p.color_variation * (rnd - base)
     col = np.clip(col, 0.0, 1.0)
+    lo, hi = float(p.scale_min), float(p.scale_max)
+    if not (np.isfinite(lo) and np.isfinite(hi) and 0 < lo <= hi):
+        raise CrowdError(f"{what}: the scale range must be finite with 0 < min <= max, got "
+                         f"{p.scale_min!r} .. {p.scale_max!r}")
+    scale = np.full(n, lo, np.float32) if lo == hi else \
+        np.random.default_rng(seed + _SCALE_DRAW).uniform(lo, hi, n).astype(np.float32)
     return AgentSet(pos.astype(np.float32), np.asarray(heading).astype(np.float32),
                     np.asarray(st, np.int32), np.asarray(off, np.int32),
-                    np.asarray(col, np.float32), char)
+                    np.asarray(col, np.float32), char, scale)
 
 
 def _headings(what, pos, base_heading, p, forward_axis, values) -> np.ndarray:

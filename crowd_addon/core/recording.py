@@ -47,6 +47,7 @@ class Recording:
     UNIQUE (``ref`` unique) or TRANSITION (``ref`` a row of: ``start_pose`` (K2, B, 10)
     float32 StartP, ``t0``, ``length``, ``target_kind``/``_ref``/``_offset`` (K2,)).
     position (N, 3), heading (N,) float32 and color (N, 3) float32 RGB at ``first``;
+    scale (N,) float32 body scales (constant);
     move_* (K3,): a new position
     and heading from ``move_frame`` on, sorted by (agent, frame).
     events : ``(name, frame, agent ids)`` per event fired while recording, in order.
@@ -94,6 +95,12 @@ class Recording:
     substeps: int = 1
     stream_subposes: np.ndarray | None = None
     unique_subposes: np.ndarray | None = None
+    scale: np.ndarray | None = None
+
+    @property
+    def scales(self) -> np.ndarray:
+        """(N,) float32 each agent's body scale (set once; ones when not recorded)."""
+        return np.ones(self.agent_count, np.float32) if self.scale is None else self.scale
 
     @property
     def agent_count(self) -> int:

@@ -105,7 +105,8 @@ def frame_crowd(crowd, **kwargs) -> Camera:
     pos = np.asarray(crowd.agents.position, np.float64)
     meshes = [levels[0] for levels in crowd.config.meshes.values() if levels]
     if meshes:
-        ext = np.concatenate([m.extent for m in meshes]).astype(np.float64)
+        ext = np.concatenate([m.extent for m in meshes]).astype(np.float64) * float(
+            crowd.agents.scale.max(initial=1.0))
         reach = np.abs(ext).max(0)
         reach[:2] = np.linalg.norm(np.abs(ext[:, :2]).max(0))   # any heading about +Z
     else:

@@ -145,9 +145,11 @@ class FramePlan:
         self.pose_layout = (lay.height, lay.row_texels, lay.max_offset, lay.streams)
         self.instances = InstanceData(view, limit)
         self.proxies = crowd_proxies(view)
+        #: the largest agent scale: bounds and reaches grow with it
+        self.max_scale = float(view.agents.scale.max(initial=1.0))
         self.lists = DrawLists(view.agent_skeleton, [len(p) for p in self.proxies],
-                               [proxy_bounds(p[0].extent) if p else (0.0, 0.0)
-                                for p in self.proxies],
+                               [tuple(self.max_scale * np.asarray(proxy_bounds(p[0].extent)))
+                                if p else (0.0, 0.0) for p in self.proxies],
                                view.config.lod_distances, min(4096, limit))
         self.batch_image = batch_image(lay.row_count) if self.on_gpu else None
         self._list_key = None

@@ -1,7 +1,8 @@
 """Per-agent instance data: the texture the skinning shader reads by agent id.
 
 A row of two RGBA32F texels per agent (``gpu_shaders/agents.glsl``):
-``(x, y, z, heading)`` and ``(kind, ref, offset, rgb24)``, the rows in column
+``(x, y, z, heading)`` and ``(kind * 65536 + offset, ref, scale, rgb24)``, the rows in
+column
 blocks of the texture's height like the pose texture (``block_layout.glsl``), so
 one row-upload path serves both. Built vectorised from a crowd's ``FrameView``;
 each frame :meth:`InstanceData.update` asks the crowd which agents changed since its
@@ -17,7 +18,7 @@ from ..core.errors import CrowdError
 from .programs import AGENT_TEXELS
 from .texture_region import block_image, block_regions
 
-__all__ = ["InstanceData", "pack_colors"]
+__all__ = ["InstanceData", "pack_colors", "pack_kind_offset", "OFFSET_LIMIT"]
 
 
 def pack_colors(colors: np.ndarray) -> np.ndarray:
@@ -25,6 +26,16 @@ def pack_colors(colors: np.ndarray) -> np.ndarray:
     8-bit channels (exact in float32)."""
     c = np.rint(np.clip(np.asarray(colors, np.float64), 0, 1) * 255).astype(np.int64)
     return (c[:, 0] * 65536 + c[:, 1] * 256 + c[:, 2]).astype(np.float32)
+
+
+#: offsets packed beside the kind stay below this (M is at most it, core.config)
+OFFSET_LIMIT = 65536
+
+
+def pack_kind_offset(kind, offset) -> np.ndarray:
+    """``kind * 65536 + offset`` as float32 (exact: below 2**24)."""
+    return (np.asarray(kind, np.int64) * OFFSET_LIMIT + np.asarray(offset, np.int64)) \
+        .astype(np.float32)
 
 
 class InstanceData:
@@ -76,8 +87,8 @@ class InstanceData:
         a, rec = view.agents, self.records
         rec[changed, 0, :3] = a.position[changed]
         rec[changed, 0, 3] = a.heading[changed]
-        rec[changed, 1, 0] = a.kind[changed]
+        rec[changed, 1, 0] = pack_kind_offset(a.kind[changed], a.offset[changed])
         rec[changed, 1, 1] = a.ref[changed]
-        rec[changed, 1, 2] = a.offset[changed]
+        rec[changed, 1, 2] = a.scale[changed]
         rec[changed, 1, 3] = pack_colors(a.color[changed])
         return block_regions(rec, changed, self.block_rows, max_regions)

@@ -84,8 +84,9 @@ class CrowdRenderer:
         self._scene_bounds = None
         self.plan = FramePlan(view, max_texture_size, max_int)
         #: the highest bind-pose point of any proxy (metres): the shadow casters' reach
-        self._tallest = max((float(buf.extent[1, 2]) for levels in self.plan.proxies
-                             for buf in levels), default=2.0)
+        self._tallest = self.plan.max_scale * max(
+            (float(buf.extent[1, 2]) for levels in self.plan.proxies for buf in levels),
+            default=2.0)
         self.textures = {s.name: self._create_texture(s)
                          for s in self.plan.take_initial_textures()}
         self._lit = (self._create_texture(TextureSpec("shadow", (1, 1), "RGBA32F",

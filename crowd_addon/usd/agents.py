@@ -12,7 +12,8 @@
                                        references characters/<skeleton>)
                 rel skel:animationSource -> an offset animation, or
                                             /Crowd/AgentAnimations/agent_<id>
-                xformOp:translate (position), xformOp:rotateZ (heading, degrees)
+                xformOp:translate (position), xformOp:rotateZ (heading, degrees),
+                xformOp:scale (uniform: the agent's body scale; only when not 1)
                 primvars:displayColor (constant: the agent's colour, inherited
                                        by the character's mesh)
         def Scope "AgentAnimations"   (in the sublayer agents.<ext>: per agent that
@@ -38,6 +39,7 @@ __all__ = ["ROOT", "author_offset_animations", "author_agents", "author_agent_an
 ROOT = "Crowd"
 _T = Sdf.ValueTypeNames
 _ORDER = Vt.TokenArray(["xformOp:translate", "xformOp:rotateZ"])
+_SCALED = Vt.TokenArray(["xformOp:translate", "xformOp:rotateZ", "xformOp:scale"])
 #: agent prims authored per step of the export
 _LAYOUT_CHUNK = 4096
 
@@ -88,10 +90,11 @@ def author_agents(root: Sdf.PrimSpec, shot, names, character_assets, sources,
     refs = {k: Sdf.Reference(a) for k, a in character_assets.items()}
     degrees = np.degrees(shot.heading.astype(np.float64)).tolist()
     agents = list(zip(names, shot.agent_skeleton.tolist(), sources, shot.position.tolist(),
-                      degrees, shot.color.tolist()))
+                      degrees, shot.color.tolist(), shot.scale.tolist()))
     for a in range(0, len(agents), _LAYOUT_CHUNK):
         with Sdf.ChangeBlock():
-            for name, skel, source, position, heading, color in agents[a:a + _LAYOUT_CHUNK]:
+            for name, skel, source, position, heading, color, scale in \
+                    agents[a:a + _LAYOUT_CHUNK]:
                 prim = define(parent, name, "SkelRoot")
                 prim.instanceable = instanceable
                 prim.referenceList.Prepend(refs[skel])
@@ -99,7 +102,10 @@ def author_agents(root: Sdf.PrimSpec, shot, names, character_assets, sources,
                 relationship(prim, "skel:animationSource", source)
                 attribute(prim, "xformOp:translate", _T.Float3, Gf.Vec3f(*position))
                 attribute(prim, "xformOp:rotateZ", _T.Double, heading)
-                attribute(prim, "xformOpOrder", _T.TokenArray, _ORDER, uniform=True)
+                if scale != 1.0:
+                    attribute(prim, "xformOp:scale", _T.Float3, Gf.Vec3f(scale, scale, scale))
+                attribute(prim, "xformOpOrder", _T.TokenArray,
+                          _ORDER if scale == 1.0 else _SCALED, uniform=True)
                 attribute(prim, "primvars:displayColor", _T.Color3fArray,
                           Vt.Vec3fArray([Gf.Vec3f(*color)]), interpolation="constant")
         yield "layout", min(a + _LAYOUT_CHUNK, len(agents)), len(agents)

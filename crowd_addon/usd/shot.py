@@ -50,7 +50,7 @@ class Shot:
     agents : (n,) int64 ids; agent_skeleton : (n,) int64 skeleton index per agent.
     static : (n,) bool; stream, offset : (n,) int64 of static agents (-1 otherwise).
     position : (n, 3) float32, heading : (n,) float32 radians, color : (n, 3) float32
-    RGB, at ``first``.
+    RGB, at ``first``; scale : (n,) float32 body scales (constant).
     moving : (n,) bool, position or heading changed during the shot.
     """
 
@@ -67,6 +67,7 @@ class Shot:
         self.offset = np.where(self.static, off, -1).astype(np.int64)
         self.position, self.heading = rec.position[ids], rec.heading[ids]
         self.color = rec.color[ids]
+        self.scale = rec.scales[ids]
         self.moving = rec.moving[ids]
 
     @property

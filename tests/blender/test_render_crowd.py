@@ -31,11 +31,13 @@ extension = cs.extension_fixture()
 
 @pytest.fixture
 def crowd_scene():
-    """Six by five agents of one walking stream (M = 8: eight shared poses), a camera
-    over them, the templates hidden from renders, Render Crowd on at frame 9."""
+    """Six by five agents of one walking stream (M = 8: eight shared poses), scaled
+    0.8 .. 1.2 by their source, a camera over them, the templates hidden from renders,
+    Render Crowd on at frame 9."""
     preview.stop_all()
     scene, rig, body, _ = cs.walking_crowd()
     s = scene.crowd
+    s.agent_sources[0].scale_min, s.agent_sources[0].scale_max = 0.8, 1.2
     for obj in (rig, body):
         obj.hide_render = True
     cam = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
@@ -81,6 +83,7 @@ def _core_world(crowd, agents=None):
     mesh = crowd.config.meshes["Rig"][0]
     local = skin_vertices(mesh.positions, mesh.bone_indices, mesh.bone_weights,
                           crowd.agent_rows(agents))
+    local = local * crowd.agents.scale[agents].astype(np.float64)[:, None, None]
     h = crowd.agents.heading[agents].astype(np.float64)[:, None]
     c, s = np.cos(h), np.sin(h)
     x, y = local[..., 0], local[..., 1]
@@ -98,6 +101,8 @@ def _check_instances(scene, crowd):
 
 def test_instances_are_cores_skinning_with_one_mesh_per_shared_pose(crowd_scene):
     scene, pv = crowd_scene
+    scales = pv.crowd.agents.scale
+    assert 0.8 <= scales.min() < scales.max() <= 1.2 and len(set(scales.tolist())) == 30
     _check_instances(scene, pv.crowd)
     rows = pv.crowd.view.agent_rows_index()
     assert pv.render_stats.poses == len(np.unique(rows)) == 8       # shared, not 30

@@ -35,8 +35,9 @@ def make_config(M=8, streams=3, agents=24, NT=4, bones=24, max_texture_size=1638
                 spacing=1.5, lods=(0.25, 0.06, "card"), lod_distances=(30.0, 90.0, 150.0),
                 uniques=1, influences=None):
     """A small crowd on a grid: ``streams`` streams, ``uniques`` uniques, agents at
-    offsets ``0..M-1`` cycling, varied headings and colours, a proxy with LODs (the
-    humanoid body, or with ``influences`` bones a vertex: :func:`spread_influences`)."""
+    offsets ``0..M-1`` cycling, varied headings, colours and scales (0.8 .. 1.25), a
+    proxy with LODs (the humanoid body, or with ``influences`` bones a vertex:
+    :func:`spread_influences`)."""
     sk = sy.humanoid("fan", bones=bones)
     cfg = CrowdConfig(max_offset=M, transition_slots=NT, max_texture_size=max_texture_size,
                       lod_distances=lod_distances)
@@ -52,7 +53,8 @@ def make_config(M=8, streams=3, agents=24, NT=4, bones=24, max_texture_size=1638
     cfg.add_agents(agents, streams=np.arange(agents) % streams,
                    offsets=(np.arange(agents) * 3) % M,
                    positions=np.c_[grid * spacing, np.zeros(agents)],
-                   headings=np.linspace(0.0, 2 * np.pi, agents, endpoint=False))
+                   headings=np.linspace(0.0, 2 * np.pi, agents, endpoint=False),
+                   scales=np.linspace(0.8, 1.25, agents)[::-1])
     if influences is None:
         mesh = sy.humanoid_mesh(sk)
     else:
@@ -71,11 +73,13 @@ def make_unique(cfg, agents, unique=0):
 
 def world_reference(crowd, agents, mesh, influences=None):
     """CPU reference (core.skin_vertices on crowd.agent_rows) of ``mesh`` for ``agents``,
-    then each agent's heading about +Z and position: (n, V, 3) float64. ``influences``:
+    then each agent's scale, heading about +Z and position: (n, V, 3) float64.
+    ``influences``:
     ``(indices, weights)`` to skin with instead of the mesh's own."""
     agents = np.asarray(agents)
     idx, w = influences or (mesh.bone_indices, mesh.bone_weights)
     local = skin_vertices(mesh.positions, idx, w, crowd.agent_rows(agents))
+    local = local * crowd.agents.scale[agents].astype(np.float64)[:, None, None]
     h = crowd.agents.heading[agents].astype(np.float64)[:, None]
     c, s = np.cos(h), np.sin(h)
     x, y = local[..., 0], local[..., 1]

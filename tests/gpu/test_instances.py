@@ -15,8 +15,10 @@ def test_records_hold_each_agents_placement_reference_and_colour(h):
     rec = inst.records
     np.testing.assert_array_equal(rec[:, 0, :3], crowd.agents.position)
     np.testing.assert_array_equal(rec[:, 0, 3], crowd.agents.heading)
-    np.testing.assert_array_equal(rec[:, 1, :3], np.c_[crowd.agents.kind, crowd.agents.ref,
-                                                       crowd.agents.offset])
+    a = crowd.agents
+    np.testing.assert_array_equal(rec[:, 1, :3], np.c_[a.kind * 65536 + a.offset, a.ref,
+                                                       a.scale])
+    assert len(set(a.scale.tolist())) == 40                # every agent its own scale
     rgb = rec[:, 1, 3].astype(np.int64)
     decoded = np.stack([rgb >> 16, (rgb >> 8) & 255, rgb & 255], 1) / 255
     np.testing.assert_allclose(decoded, crowd.agents.color, atol=0.5 / 255 + 1e-7)
@@ -43,7 +45,7 @@ def test_updates_cover_only_changed_agents(h, renderer):
     texture = np.frombuffer(r.textures["agents"].read(), np.float32).reshape(inst.height,
                                                                            inst.width, 4)
     np.testing.assert_array_equal(texture, inst.texture_image())
-    np.testing.assert_array_equal(inst.records[[5, 17], 1, 0], TRANSITION)
+    np.testing.assert_array_equal(inst.records[[5, 17], 1, 0] // 65536, TRANSITION)
 
 
 def test_block_regions_cover_exactly_the_changed_rows_with_few_writes():

@@ -48,7 +48,9 @@ def make_config() -> CrowdConfig:
     offsets = np.arange(FAN_AGENTS) % 5             # repeated (stream, offset) keys
     cfg.add_agents(FAN_AGENTS, streams=np.arange(FAN_AGENTS) % 3, offsets=offsets,
                    positions=rng.uniform(-8, 8, (FAN_AGENTS, 3)),
-                   headings=rng.uniform(-3, 3, FAN_AGENTS))
+                   headings=rng.uniform(-3, 3, FAN_AGENTS),
+                   scales=np.where(np.arange(FAN_AGENTS) % 4 == 0, 1.0,     # some not scaled
+                                   rng.uniform(0.8, 1.25, FAN_AGENTS)))
     cfg.add_agents(KID_AGENTS, streams="kid play", offsets=np.arange(KID_AGENTS),
                    positions=rng.uniform(-8, 8, (KID_AGENTS, 3)),
                    headings=rng.uniform(-3, 3, KID_AGENTS))
@@ -92,8 +94,8 @@ def oracle():
 
 def core_truth():
     """Core's truth per shot frame: local poses (N, B, 10), positions, headings,
-    ``(kind, ref, offset)`` per agent (N, 3), and every event delivered to each agent
-    as ``(agent, name, frame)``."""
+    ``(kind, ref, offset)`` per agent (N, 3), every event delivered to each agent
+    as ``(agent, name, frame)``, and the agents' scales (constant)."""
     crowd = Crowd(make_config())
     view = crowd.view
     events = set()
@@ -108,6 +110,7 @@ def core_truth():
             out["poses"][crowd.frame] = view.agent_poses()
             out["position"][crowd.frame] = np.array(a.position, np.float64)
             out["heading"][crowd.frame] = np.array(a.heading, np.float64)
+            out["scale"] = np.array(a.scale, np.float64)
             out["animation"][crowd.frame] = np.stack([a.kind, a.ref, a.offset],
                                                      1).astype(np.int64)
     out["events"] = {e for e in events if FIRST <= e[2] <= LAST}

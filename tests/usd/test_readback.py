@@ -47,10 +47,10 @@ def bindings(stage):
     return out
 
 
-def agent_matrix(position, heading):
+def agent_matrix(position, heading, scale=1.0):
     c, s = np.cos(heading), np.sin(heading)
     m = np.eye(4)
-    m[:3, :3] = [[c, -s, 0], [s, c, 0], [0, 0, 1]]
+    m[:3, :3] = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]) * scale
     m[:3, 3] = position
     return m
 
@@ -84,7 +84,8 @@ def test_joint_transforms_match_core(bindings, oracle, frame):
         # the prototype's world transforms are the instance's skeleton-space ones
         in_skel = np.array(query.ComputeJointWorldTransforms(xf_cache)).transpose(0, 2, 1)
         world = to_world(xf_cache, skel_prim) @ in_skel
-        agent = agent_matrix(oracle["position"][frame][a], oracle["heading"][frame][a])
+        agent = agent_matrix(oracle["position"][frame][a], oracle["heading"][frame][a],
+                             oracle["scale"][a])
         expected = agent @ model_matrices(pose, skeleton)[0]
         assert world.shape == expected.shape
         assert rel_err(world, expected) < RTOL, (a, frame)
@@ -106,7 +107,8 @@ def test_skinned_points_match_core(bindings, oracle, frame):
         pose = oracle["poses"][frame][a:a + 1]
         core = skin_vertices(mesh.positions, mesh.bone_indices, mesh.bone_weights,
                              skinning_matrices(pose, skeleton))[0]
-        agent = agent_matrix(oracle["position"][frame][a], oracle["heading"][frame][a])
+        agent = agent_matrix(oracle["position"][frame][a], oracle["heading"][frame][a],
+                             oracle["scale"][a])
         core = core @ agent[:3, :3].T + agent[:3, 3]
         assert rel_err(usd, core) < RTOL, (a, frame)
 
