@@ -1,9 +1,11 @@
-/* Per-agent instance data (docs/architecture.md: a row of two RGBA32F texels per agent
+/* Per-agent instance data (docs/architecture.md: a row of three RGBA32F texels per agent
  * in `agent_tex`, in column blocks of the texture's height (block_layout.glsl,
  * crowd_addon/gpu/instances.py):
  *   texel 0 = (position x, y, z in metres, heading in radians about +Z)
  *   texel 1 = (kind * 65536 + offset, ref, uniform body scale,
  *              colour as 8-bit r * 65536 + g * 256 + b)
+ *   texel 2 = the colours of the agent's palette columns 0..3, each as texel 1's
+ *             colour, -1 where the agent has none
  * Small integers are exact in float32. A draw instance is mapped to its agent
  * through `agent_list_tex` (R32I, the agents of one (skeleton, LOD) draw from
  * u_draw.x, crowd_vert.glsl), so one instanced draw serves any subset of the crowd.
@@ -17,7 +19,15 @@ struct Agent {
   int offset;
   float scale;
   vec3 color;
+  vec4 palette;
 };
+
+/* An 8-bit colour packed as r * 65536 + g * 256 + b, as RGB in 0..1. */
+vec3 unpack_rgb(float code)
+{
+  int rgb = int(code);
+  return vec3((rgb >> 16) & 255, (rgb >> 8) & 255, rgb & 255) / 255.0;
+}
 
 int instance_agent(int instance)
 {
@@ -27,10 +37,9 @@ int instance_agent(int instance)
 
 Agent agent_record(int agent)
 {
-  ivec2 at = block_row_origin(agent, textureSize(agent_tex, 0).y, 2);
+  ivec2 at = block_row_origin(agent, textureSize(agent_tex, 0).y, 3);
   vec4 a = texelFetch(agent_tex, at, 0);
   vec4 b = texelFetch(agent_tex, at + ivec2(1, 0), 0);
-  int rgb = int(b.w);
   int kind_offset = int(b.x);
   Agent r;
   r.position = a.xyz;
@@ -39,7 +48,8 @@ Agent agent_record(int agent)
   r.ref = int(b.y);
   r.offset = kind_offset & 65535;
   r.scale = b.z;
-  r.color = vec3((rgb >> 16) & 255, (rgb >> 8) & 255, rgb & 255) / 255.0;
+  r.palette = texelFetch(agent_tex, at + ivec2(2, 0), 0);
+  r.color = unpack_rgb(b.w);
   return r;
 }
 

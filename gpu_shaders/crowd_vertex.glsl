@@ -6,7 +6,9 @@
  * stage outputs v_world, v_normal, v_color. The colour is the vertex's material colour
  * `col` tinted by the agent's colour where that material is unsaturated (white, grey:
  * a shirt takes the team colour, skin and dyed cloth keep theirs; a mesh without
- * materials is white, so the agent's colour alone). One function for every vertex stage that
+ * materials is white, so the agent's colour alone), or, where the agent's palette
+ * colours that material (column `col.a`, 255: none), the agent's palette colour.
+ * One function for every vertex stage that
  * draws or captures the crowd (crowd_vert.glsl, capture_vert.glsl), so they cannot
  * disagree. Needs block_layout.glsl, pose_layout.glsl, pose_rows.glsl, agents.glsl
  * and skinning.glsl before it.
@@ -36,4 +38,10 @@ void crowd_vertex(int agent_id)
   v_world = turn_z(turn, p * agent.scale) + agent.position;
   v_normal = turn_z(turn, n);
   v_color = agent_tint(col.rgb, agent.color);
+  int column = int(col.a * 255.0 + 0.5);
+  if (column < 4) {
+    float code = agent.palette[column];
+    if (code >= 0.0)
+      v_color = unpack_rgb(code);
+  }
 }

@@ -186,7 +186,8 @@ class AgentState:
     unique or slot index; offset : (N,) int64 stream offset ``O``;
     position : (N, 3) float32 metres; heading : (N,) float32 radians about +Z;
     color : (N, 3) float32 RGB in 0..1; scale : (N,) float32 uniform scale of the
-    body (set once, from the configuration).
+    body; palette : (N, 4, 3) float32 the colours of its character's palette
+    materials (-1: none); scale and palette are set once, from the configuration.
 
     Readers (a renderer's instance texture, a recorder) keep a cursor and ask
     :meth:`changes_since` for the agents changed since, so nobody compares N-sized
@@ -194,13 +195,15 @@ class AgentState:
     whose cursor is older than what was forgotten is told to read every agent.
     """
 
-    def __init__(self, position, heading, color, scale=None):
+    def __init__(self, position, heading, color, scale=None, palette=None):
         self.count = int(np.asarray(heading).shape[0])
         self._position = np.array(position, np.float32).reshape(self.count, 3)
         self._heading = np.array(heading, np.float32).reshape(self.count)
         self._color = np.array(color, np.float32).reshape(self.count, 3)
         self._scale = np.ones(self.count, np.float32) if scale is None else \
             np.array(scale, np.float32).reshape(self.count)
+        self._palette = np.full((self.count, 4, 3), -1.0, np.float32) if palette is None \
+            else np.array(palette, np.float32).reshape(self.count, 4, 3)
         self._kind = np.zeros(self.count, np.int8)
         self._ref = np.zeros(self.count, np.int64)
         self._offset = np.zeros(self.count, np.int64)
@@ -225,6 +228,7 @@ class AgentState:
     heading = property(lambda self: _read_only(self._heading))
     color = property(lambda self: _read_only(self._color))
     scale = property(lambda self: _read_only(self._scale))
+    palette = property(lambda self: _read_only(self._palette))
 
     def reset(self, kind, ref, offset):
         """Every agent's animation reference at once; every agent counts as changed."""

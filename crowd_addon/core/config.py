@@ -29,6 +29,9 @@ WHEN_FULL = ("queue", "cut")
 USD_LAYOUTS = ("instanced", "blender")
 #: The most samples per frame a crowd keeps for writers (``Crowd(..., substeps=N)``).
 MAX_SUBSTEPS = 16
+#: Palette colours an agent carries (one per palette material of its character, at
+#: most this many: the GPU packs them in one texel).
+PALETTE_COLUMNS = 4
 #: The longest pose history M (frames): offsets travel to the GPU in 16 bits.
 MAX_OFFSET = 65535
 #: The deepest controller tree (levels below the root) a crowd accepts.
@@ -98,7 +101,11 @@ class CrowdConfig:
     agent_position : (N, 3) float32 world positions (metres); agent_heading : (N,)
         radians about +Z; agent_color : (N, 3) float32 colour variation 0..1;
         agent_scale : (N,) float32 uniform scale of each agent's body (empty: all 1;
-        :attr:`scales`).
+        :attr:`scales`); agent_palette : (N, 4, 3) float32 the colour each agent's
+        body takes on its character's palette materials (-1: none; empty: none at
+        all; :attr:`palette`).
+    palette_materials : dict skeleton -> tuple of material names: the materials its
+        agents' ``agent_palette`` columns colour, in column order.
     show : :class:`~.show.Show`, the cues, reactions and animated parameters the crowd
         runs itself before each step (empty by default).
     """
@@ -121,6 +128,9 @@ class CrowdConfig:
     agent_heading: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
     agent_color: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float32))
     agent_scale: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
+    agent_palette: np.ndarray = field(
+        default_factory=lambda: np.zeros((0, PALETTE_COLUMNS, 3), np.float32))
+    palette_materials: dict = field(default_factory=dict)
     meshes: dict = field(default_factory=dict)
     lod_distances: tuple = (30.0, 90.0, 150.0)
     show: Show = field(default_factory=Show)
@@ -191,6 +201,14 @@ class CrowdConfig:
         return int(self.agent_offset.shape[0])
 
     @property
+    def palette(self) -> np.ndarray:
+        """(N, 4, 3) float32 palette colours per agent: :attr:`agent_palette`, or -1
+        (none) when it is empty."""
+        p = np.asarray(self.agent_palette, np.float32).reshape(-1, PALETTE_COLUMNS, 3)
+        return p if p.shape[0] else np.full((self.agent_count, PALETTE_COLUMNS, 3), -1.0,
+                                            np.float32)
+
+    @property
     def scales(self) -> np.ndarray:
         """(N,) float32 scale per agent: :attr:`agent_scale`, or ones when it is empty."""
         s = np.asarray(self.agent_scale, np.float32).reshape(-1)
@@ -198,7 +216,7 @@ class CrowdConfig:
 
     def add_agents(self, count, streams=None, stream_weights=None, offsets="uniform",
                    offset_mean=None, offset_std=None, positions=None, headings=None,
-                   colors=None, seed=None, scales=None):
+                   colors=None, seed=None, scales=None, palette=None):
         """Append ``count`` streamed agents.
 
         ``streams``: None (all streams, drawn with ``stream_weights``), an int, a
@@ -238,6 +256,11 @@ class CrowdConfig:
             new = np.ones(count, np.float32) if scales is None else \
                 np.asarray(scales, np.float32).reshape(count)
             self.agent_scale = np.concatenate([old, new]).astype(np.float32)
+        if palette is not None or np.asarray(self.agent_palette).size:
+            old = self.palette
+            new = np.full((count, PALETTE_COLUMNS, 3), -1.0, np.float32) if palette is None \
+                else np.asarray(palette, np.float32).reshape(count, PALETTE_COLUMNS, 3)
+            self.agent_palette = np.concatenate([old, new]).astype(np.float32)
         self.agent_stream = np.concatenate([self.agent_stream, st]).astype(np.int32)
         self.agent_unique = np.concatenate([self.agent_unique,
                                             np.full(count, -1, np.int32)]).astype(np.int32)
@@ -347,6 +370,17 @@ def _validate_agents(cfg):
         if getattr(cfg, field_name).shape != (n,):
             raise CrowdError(f"crowd: {field_name} has shape "
                              f"{getattr(cfg, field_name).shape}, expected ({n},)")
+    pal = np.asarray(cfg.agent_palette)
+    if pal.size and pal.shape != (n, PALETTE_COLUMNS, 3):
+        raise CrowdError(f"crowd: agent_palette must be ({n}, {PALETTE_COLUMNS}, 3) or empty, "
+                         f"got {pal.shape}")
+    if pal.size and not (np.isfinite(pal).all() and (pal <= 1).all()
+                         and ((pal >= 0).all(2) | (pal == -1).all(2)).all()):
+        raise CrowdError("crowd: agent_palette colours must be in 0..1 (or -1 -1 -1: none)")
+    for skel, names in cfg.palette_materials.items():
+        if skel not in cfg.skeletons or len(names) > PALETTE_COLUMNS:
+            raise CrowdError(f"crowd: palette_materials: unknown skeleton {skel!r} or more "
+                             f"than {PALETTE_COLUMNS} materials ({list(names)})")
     scale = np.asarray(cfg.agent_scale)
     if scale.size and scale.shape != (n,):
         raise CrowdError(f"crowd: agent_scale must be ({n},) or empty, got {scale.shape}")

@@ -40,7 +40,7 @@ import numpy as np
 
 from . import pose as sqt
 from .clip import Clip
-from .config import MAX_TREE_DEPTH, WHEN_FULL, AnimationDef, CrowdConfig
+from .config import MAX_TREE_DEPTH, PALETTE_COLUMNS, WHEN_FULL, AnimationDef, CrowdConfig
 from .controllers import (Blend2, BlendMask, BlendSpace2D, ClipPlayer, Layer, StateMachine,
                           StateTransition)
 from .errors import CrowdError
@@ -504,6 +504,9 @@ def _encode_config(cfg: CrowdConfig) -> tuple:
         m["agents"][key] = e.array(getattr(cfg, f"agent_{key}"), key)
     if (cfg.scales != 1).any():              # files without scale variation as before
         m["agents"]["scale"] = e.array(cfg.scales, "scale")
+    if (cfg.palette >= 0).any():             # ... and without palettes
+        m["agents"]["palette"] = e.array(cfg.palette, "palette")
+        m["palette_materials"] = {k: list(v) for k, v in cfg.palette_materials.items()}
     m["show"] = _encode_show(cfg.show, enc.at("show"))
     return _plain(m, ""), arrays
 
@@ -740,6 +743,11 @@ def _decode_config(m: dict, dec: Decoder) -> CrowdConfig:
                 d.array(agents, key, kinds, (n,) if width == 1 else (n, width)))
     if agents.get("scale") is not None:
         cfg.agent_scale = d.array(agents, "scale", "f", (n,))
+    if agents.get("palette") is not None:
+        cfg.agent_palette = d.array(agents, "palette", "f", (n, PALETTE_COLUMNS, 3))
+        mats = dec.get(m, "palette_materials", "object", {})
+        cfg.palette_materials = {k: tuple(dec.at("palette_materials").items(mats, k, "str"))
+                                 for k in mats}
     cfg.show = _decode_show(m, dec)
     return cfg
 

@@ -122,7 +122,7 @@ class Crowd:
         self._sub_streams = np.zeros((m, n, s, self.bones, sqt.WIDTH), np.float32)
         self._sub_uniques = np.zeros((n, u, self.bones, sqt.WIDTH), np.float32)
         self.agents = AgentState(cfg.agent_position, cfg.agent_heading, cfg.agent_color,
-                                 cfg.scales)
+                                 cfg.scales, cfg.palette)
         self.slots = TransitionSlots(int(cfg.transition_slots), self.bones, self.agents,
                                      cfg.when_full, begin=self._begin_transitions)
         self.agents.index_by(self._agent_keys)

@@ -28,11 +28,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from .agents import assign_offsets, assign_streams, check_offsets
+from .config import PALETTE_COLUMNS
 from .errors import CrowdError
 from .variety import Timing, choose_variants, spread_offsets
 
-__all__ = ["AgentSet", "CharacterStreams", "PlacementPolicy", "place_agents", "z_angle",
-           "FORWARD", "SOURCE_SEED", "CHARACTER_SEED"]
+__all__ = ["AgentSet", "CharacterStreams", "Palette", "PlacementPolicy", "place_agents",
+           "z_angle", "FORWARD", "SOURCE_SEED", "CHARACTER_SEED"]
 
 #: the character's rest-pose facing per ``forward_axis`` setting (x, y)
 FORWARD = {"NEG_Y": (0.0, -1.0), "POS_Y": (0.0, 1.0), "POS_X": (1.0, 0.0),
@@ -50,6 +51,9 @@ _CHARACTER_DRAW = 3
 _VARIANT_DRAW = 7
 #: added to a source's seed for the draw of scales
 _SCALE_DRAW = 4
+#: added to a source's seed for the draws of palette colours (plus the character and
+#: palette)
+_PALETTE_DRAW = 5
 
 
 @dataclass(frozen=True)
@@ -57,7 +61,8 @@ class AgentSet:
     """Agents as arrays: positions (n, 3) float32 metres, headings (n,) float32
     radians, streams (n,) int32 stream indices, offsets (n,) int32 frames, colors
     (n, 3) float32 0..1, characters (n,) int32 character indices, scales (n,) float32
-    uniform body scales."""
+    uniform body scales, palette (n, PALETTE_COLUMNS, 3) float32 the colour of each of
+    the agent's character's palette materials (-1 where it has none)."""
 
     positions: np.ndarray
     headings: np.ndarray
@@ -66,6 +71,7 @@ class AgentSet:
     colors: np.ndarray
     characters: np.ndarray
     scales: np.ndarray
+    palette: np.ndarray
 
     @property
     def count(self) -> int:
@@ -76,7 +82,8 @@ class AgentSet:
         return cfg.add_agents(self.count, streams=self.streams, offsets=self.offsets,
                               positions=self.positions, headings=self.headings,
                               colors=self.colors,
-                              scales=self.scales if (self.scales != 1).any() else None)
+                              scales=self.scales if (self.scales != 1).any() else None,
+                              palette=self.palette if (self.palette >= 0).any() else None)
 
     @staticmethod
     def concatenate(sets):
@@ -85,10 +92,24 @@ class AgentSet:
             return AgentSet(np.zeros((0, 3), np.float32), np.zeros(0, np.float32),
                             np.zeros(0, np.int32), np.zeros(0, np.int32),
                             np.zeros((0, 3), np.float32), np.zeros(0, np.int32),
-                            np.zeros(0, np.float32))
+                            np.zeros(0, np.float32),
+                            np.zeros((0, PALETTE_COLUMNS, 3), np.float32))
         return AgentSet(*(np.concatenate([getattr(s, f) for s in sets])
                           for f in ("positions", "headings", "streams", "offsets", "colors",
-                                    "characters", "scales")))
+                                    "characters", "scales", "palette")))
+
+
+@dataclass(frozen=True)
+class Palette:
+    """Colours for one material slot of a character's body (``material``: the
+    material's name): each agent gets one of ``colors`` ((k, 3) 0..1), at random
+    (``mode`` ``"RANDOM"``, seeded) or by an INT point attribute (``"ATTRIBUTE"``:
+    ``attribute`` gives the index into ``colors``, e.g. a team or a section)."""
+
+    material: str
+    colors: tuple
+    mode: str = "RANDOM"
+    attribute: str = "team"
 
 
 @dataclass(frozen=True)
@@ -97,13 +118,15 @@ class CharacterStreams:
     names and weights (in the crowd's order), its ``weight``, the relative share of
     agents a source drawing characters by weight gives it, and per template its
     :class:`~.variety.Timing` (empty: none; the crowd's list holds
-    ``timing.count`` streams per template)."""
+    ``timing.count`` streams per template); ``palettes``: up to
+    :data:`PALETTE_COLUMNS` :class:`Palette` s of its body's materials."""
 
     name: str
     streams: tuple = ()
     stream_weights: tuple = ()
     weight: float = 1.0
     timings: tuple = ()
+    palettes: tuple = ()
 
     def timing(self, i: int) -> Timing:
         return self.timings[i] if self.timings else Timing()
@@ -228,9 +251,39 @@ def place_agents(what: str, positions: np.ndarray, base_heading: np.ndarray,
                          f"{p.scale_min!r} .. {p.scale_max!r}")
     scale = np.full(n, lo, np.float32) if lo == hi else \
         np.random.default_rng(seed + _SCALE_DRAW).uniform(lo, hi, n).astype(np.float32)
+    palette = _palettes(what, n, characters, char, seed, values)
     return AgentSet(pos.astype(np.float32), np.asarray(heading).astype(np.float32),
                     np.asarray(st, np.int32), np.asarray(off, np.int32),
-                    np.asarray(col, np.float32), char, scale)
+                    np.asarray(col, np.float32), char, scale, palette)
+
+
+def _palettes(what, n, characters, char, seed, values) -> np.ndarray:
+    """(n, PALETTE_COLUMNS, 3) float32: per agent the colour of each palette of its
+    character (-1 where there is none)."""
+    out = np.full((n, PALETTE_COLUMNS, 3), -1.0, np.float32)
+    for k in np.unique(char).tolist():
+        c = characters[k]
+        if len(c.palettes) > PALETTE_COLUMNS:
+            raise CrowdError(f"{what}: character {c.name!r} has {len(c.palettes)} palettes; "
+                             f"at most {PALETTE_COLUMNS}")
+        mine = np.flatnonzero(char == k)
+        for j, pal in enumerate(c.palettes):
+            colors = np.asarray(pal.colors, np.float64).reshape(-1, 3)
+            name = f"{what}: character {c.name!r}: palette {pal.material!r}"
+            if not colors.size or not np.isfinite(colors).all():
+                raise CrowdError(f"{name} has no colours (or one that is not finite)")
+            if pal.mode == "ATTRIBUTE":
+                pick = np.asarray(values(pal.attribute, "int"), np.int64)[mine]
+                bad = np.flatnonzero((pick < 0) | (pick >= len(colors)))
+                if bad.size:
+                    raise CrowdError(f"{name}: attribute {pal.attribute!r} gives "
+                                     f"{int(pick[bad[0]])} at point {int(mine[bad[0]])}; "
+                                     f"the palette has colours 0..{len(colors) - 1}")
+            else:
+                pick = np.random.default_rng(seed + _PALETTE_DRAW + 31 * k + j).integers(
+                    0, len(colors), mine.size)
+            out[mine, j] = np.clip(colors[pick], 0.0, 1.0)
+    return out
 
 
 def _headings(what, pos, base_heading, p, forward_axis, values) -> np.ndarray:

@@ -1,8 +1,8 @@
 """Per-agent instance data: the texture the skinning shader reads by agent id.
 
-A row of two RGBA32F texels per agent (``gpu_shaders/agents.glsl``):
-``(x, y, z, heading)`` and ``(kind * 65536 + offset, ref, scale, rgb24)``, the rows in
-column
+A row of three RGBA32F texels per agent (``gpu_shaders/agents.glsl``):
+``(x, y, z, heading)``, ``(kind * 65536 + offset, ref, scale, rgb24)`` and the agent's
+four palette colours as rgb24 (-1: none), the rows in column
 blocks of the texture's height like the pose texture (``block_layout.glsl``), so
 one row-upload path serves both. Built vectorised from a crowd's ``FrameView``;
 each frame :meth:`InstanceData.update` asks the crowd which agents changed since its
@@ -91,4 +91,7 @@ class InstanceData:
         rec[changed, 1, 1] = a.ref[changed]
         rec[changed, 1, 2] = a.scale[changed]
         rec[changed, 1, 3] = pack_colors(a.color[changed])
+        pal = a.palette[changed]                              # (k, 4, 3), -1: none
+        rec[changed, 2] = np.where((pal >= 0).all(2),
+                                   pack_colors(pal.reshape(-1, 3)).reshape(-1, 4), -1.0)
         return block_regions(rec, changed, self.block_rows, max_regions)

@@ -24,7 +24,7 @@ __all__ = ["SHADER_DIR", "Interface", "ProgramSpec", "CROWD_DRAW", "SCENE_DRAW",
 SHADER_DIR = resources.files(".".join(__name__.split(".")[:-3] + ["gpu_shaders"]))
 
 #: RGBA32F texels per agent in the instance texture (gpu_shaders/agents.glsl).
-AGENT_TEXELS = 2
+AGENT_TEXELS = 3
 #: Batch entries (rows) per compute work group of the skinning-rows shader.
 SKIN_GROUP = 64
 #: Texels per compute work group (along a row) of the row upload shader.

@@ -4,7 +4,8 @@ A core :class:`~crowd_addon.core.mesh.ProxyMesh` becomes one
 :class:`ProxyBuffers` per LOD: named attribute arrays matching the ``vertex_in``
 names of :data:`~.programs.CROWD_DRAW` (``pos``, ``nor`` float32 ``(V, 3)``,
 ``bone_idx`` uint16 ``(V, 4)``, ``bone_w`` float32 ``(V, 4)``, ``col`` uint8 ``(V,
-4)``: the base colour of the vertex's material, the form Blender's
+4)``: the base colour of the vertex's material, and in alpha the agent palette
+column that colours that material (255: none; the form Blender's
 ``GPUVertBuf.attr_fill`` takes), an interleaved copy for moderngl, and uint32
 triangle indices. A mesh stored eight influences wide (some vertex has five to
 eight bones) adds ``bone_idx2``/``bone_w2``, influences 5..8, declared by the
@@ -96,30 +97,37 @@ class ProxyBuffers:
         return out
 
 
-def vertex_colors(mesh) -> np.ndarray:
-    """``(V, 4)`` uint8 RGBA base colour of each vertex of a ProxyMesh: its material's
+def vertex_colors(mesh, palette_materials=()) -> np.ndarray:
+    """``(V, 4)`` uint8 of each vertex of a ProxyMesh: RGB its material's base colour
     (:class:`~crowd_addon.core.mesh.Look` colour; a vertex shared by triangles of
     several materials takes the last triangle's), white without looks (the agent's
-    colour alone then: gpu_shaders/crowd_vertex.glsl)."""
+    colour alone then: gpu_shaders/crowd_vertex.glsl); alpha the column of the agent
+    palette colouring that material (its place in ``palette_materials``, material
+    names), 255 where none does."""
     out = np.full((mesh.vertex_count, 4), 255, np.uint8)
     if mesh.looks:
         colors = np.array([look.color for look in mesh.looks], np.float64)
         material = np.zeros(mesh.triangles.shape[0], np.int64) if mesh.material is None \
             else np.asarray(mesh.material, np.int64)
         per_triangle = np.rint(np.clip(colors[material], 0, 1) * 255).astype(np.uint8)
+        names = list(palette_materials)
+        column = np.array([names.index(k.name) if k.name in names else 255
+                           for k in mesh.looks], np.uint8)
+        per_triangle[:, 3] = column[material]
         out[mesh.triangles.reshape(-1)] = np.repeat(per_triangle, 3, axis=0)
     return out
 
 
-def proxy_buffers(mesh) -> ProxyBuffers:
+def proxy_buffers(mesh, palette_materials=()) -> ProxyBuffers:
     """Vertex arrays of a :class:`~crowd_addon.core.mesh.ProxyMesh` (already validated:
-    4 or 8 influences a vertex, strongest first, summing to 1)."""
+    4 or 8 influences a vertex, strongest first, summing to 1); ``palette_materials``
+    as :func:`vertex_colors`."""
     idx, w = mesh.bone_indices, mesh.bone_weights
     attrs = {"pos": np.ascontiguousarray(mesh.positions, np.float32),
              "nor": np.ascontiguousarray(mesh.normals, np.float32),
              "bone_idx": np.ascontiguousarray(idx[:, :4], np.uint16),
              "bone_w": np.ascontiguousarray(w[:, :4], np.float32),
-             "col": vertex_colors(mesh)}
+             "col": vertex_colors(mesh, palette_materials)}
     if idx.shape[1] > 4:
         attrs["bone_idx2"] = np.ascontiguousarray(idx[:, 4:8], np.uint16)
         attrs["bone_w2"] = np.ascontiguousarray(w[:, 4:8], np.float32)
@@ -142,5 +150,6 @@ def crowd_proxies(view) -> list:
             if int(m.bone_indices.max()) >= sk.bone_count:
                 raise CrowdError(f"mesh {m.name!r}: uses bone {int(m.bone_indices.max())} but "
                                  f"skeleton {sk.name!r} has {sk.bone_count} bones")
-        out.append([proxy_buffers(m) for m in levels] if k in used else [])
+        palette = view.config.palette_materials.get(sk.name, ())
+        out.append([proxy_buffers(m, palette) for m in levels] if k in used else [])
     return out

@@ -49,8 +49,8 @@ def test_streamed_agents_match_cpu_skinning_and_only_dirty_rows_travel(blender, 
         # the dirty rows and a 4-byte row number each, never the whole texture
         assert d[f"gpu/bytes{f}"] == d[f"ref/rows{f}"] * (d["ref/row_bytes"] + 4)
         assert d[f"gpu/bytes{f}"] < d[f"ref/texture{f}"].nbytes / 4
-    # agents 0, 5 and 7 moved or turned before frame 1: their two texels + row number
-    assert [int(d[f"gpu/instance_bytes{f}"]) for f in range(3)] == [0, 3 * (32 + 4), 0]
+    # agents 0, 5 and 7 moved or turned before frame 1: their three texels + row number
+    assert [int(d[f"gpu/instance_bytes{f}"]) for f in range(3)] == [0, 3 * (48 + 4), 0]
 
 
 def test_unique_agents_match_cpu_skinning(blender, h):

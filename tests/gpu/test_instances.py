@@ -11,7 +11,7 @@ from crowd_addon.gpu.texture_region import block_regions
 def test_records_hold_each_agents_placement_reference_and_colour(h):
     crowd = h.Crowd(h.make_config(agents=40))
     inst = InstanceData(crowd.view, max_texture_size=16)
-    assert (inst.width, inst.height) == (6, 16)           # three column blocks
+    assert (inst.width, inst.height) == (9, 16)           # three column blocks
     rec = inst.records
     np.testing.assert_array_equal(rec[:, 0, :3], crowd.agents.position)
     np.testing.assert_array_equal(rec[:, 0, 3], crowd.agents.heading)
@@ -23,7 +23,8 @@ def test_records_hold_each_agents_placement_reference_and_colour(h):
     decoded = np.stack([rgb >> 16, (rgb >> 8) & 255, rgb & 255], 1) / 255
     np.testing.assert_allclose(decoded, crowd.agents.color, atol=0.5 / 255 + 1e-7)
     image = inst.texture_image()
-    np.testing.assert_array_equal(image[37 % 16, 2 * (37 // 16):2 * (37 // 16) + 2], rec[37])
+    np.testing.assert_array_equal(image[37 % 16, 3 * (37 // 16):3 * (37 // 16) + 3], rec[37])
+    np.testing.assert_array_equal(rec[:, 2], -1.0)          # no palettes
 
 
 def test_pack_colors_is_exact_in_float32():
@@ -40,7 +41,7 @@ def test_updates_cover_only_changed_agents(h, renderer):
     assert (crowd.agents.kind[res.started] == TRANSITION).all()
     crowd.step()
     stats = r.sync()
-    assert stats.instance_bytes == 2 * 2 * 16          # two agents, two RGBA32F texels
+    assert stats.instance_bytes == 2 * 3 * 16          # two agents, three RGBA32F texels
     inst = r.plan.instances
     texture = np.frombuffer(r.textures["agents"].read(), np.float32).reshape(inst.height,
                                                                            inst.width, 4)

@@ -105,7 +105,7 @@ def test_row_upload_shader_keeps_pose_and_agent_textures_equal_to_core(gl, h):
         rows = crowd.streams.count + crowd.uniques.count + int(crowd.slots.active.sum())
         assert sent == rows * st.row_bytes
         sent = upload_rows(gl, program, agent_tex, agents.block_rows, agents.update(crowd.view))
-        assert sent == (2 * 32 if i == 2 else 0)        # the two agents that changed
+        assert sent == (2 * 48 if i == 2 else 0)        # the two agents that changed
     np.testing.assert_array_equal(np.frombuffer(pose.read(), np.float32).reshape(
         st.height, st.width, 4), st.texture_image())
     np.testing.assert_array_equal(np.frombuffer(agent_tex.read(), np.float32).reshape(

@@ -49,6 +49,16 @@ def cpu_reference_image(gl, h, crowd, camera, light):
         saturation = (base.max(1) - base.min(1)) / np.maximum(base.max(1), 1e-4)
         grey = np.clip(1 - 4 * saturation, 0, 1)[None, :, None]
         color = base[None] * (1 - grey) + base[None] * color * grey
+        # palette materials take each agent's palette colour instead
+        names = list(crowd.config.palette_materials.get("fan", ()))
+        if names:
+            column = np.full(mesh.vertex_count, -1)
+            per_look = [names.index(k.name) if k.name in names else -1 for k in mesh.looks]
+            column[mesh.triangles.reshape(-1)] = np.repeat(np.array(per_look)[mesh.material], 3)
+            pal = np.rint(np.clip(crowd.agents.palette, 0, 1) * 255) / 255      # (n, 4, 3)
+            for c in range(4):
+                on = (crowd.agents.palette[:, c] >= 0).all(1)[:, None] & (column == c)[None]
+                color = np.where(on[..., None], pal[:, c][:, None, :], color)
     verts = np.concatenate([world, normals, color], -1).astype("f4").reshape(-1, 9)
     tris = (mesh.triangles[None].astype(np.int64)
             + (np.arange(crowd.agents.count) * mesh.vertex_count)[:, None, None]).astype("u4")
@@ -174,3 +184,50 @@ def test_camera_rejects_degenerate_input(bad):
     from crowd_addon.gpu.camera import Camera
     with pytest.raises(CrowdError, match="camera"):
         Camera(bad, (0.0, 0.0, 0.0)).view_projection
+
+
+def test_palettes_colour_their_material_per_agent(gl, h, renderer):
+    """A two-colour crowd: the shirt material takes each agent's palette colour (red
+    or blue), the skin keeps its own. The image is the CPU reference's, and the
+    colours are where the agents are: above each agent's feet, its own shirt colour."""
+    from dataclasses import replace
+
+    from crowd_addon.core.mesh import Look
+    from crowd_addon.gpu.camera import Camera
+    far = (1e3, 2e3, 3e3)
+    cfg = h.make_config(M=8, agents=15, spacing=2.5, lod_distances=far)  # apart from above
+    body = cfg.meshes["fan"][0]
+    upper = body.positions[body.triangles].mean(1)[:, 2] > np.median(body.positions[:, 2])
+    looks = (Look("shirt", (0.9, 0.9, 0.9, 1.0)), Look("skin", (0.8, 0.5, 0.35, 1.0)))
+    cfg.meshes["fan"] = [replace(body, material=np.where(upper, 0, 1).astype(np.uint16),
+                                 looks=looks)]
+    red, blue = (0.9, 0.1, 0.1), (0.1, 0.2, 0.9)
+    team = np.arange(15) % 2
+    palette = np.full((15, 4, 3), -1.0, np.float32)
+    palette[:, 0] = np.where(team[:, None] == 0, red, blue)
+    cfg.agent_palette, cfg.palette_materials = palette, {"fan": ("shirt",)}
+    cfg.agent_heading[:] = 0.0
+    crowd = h.Crowd(cfg)
+    crowd.step()
+    camera = frame_crowd(crowd, aspect=SIZE[0] / SIZE[1])
+    image, r = render(renderer, crowd, camera)
+    reference = cpu_reference_image(gl, h, crowd, camera, r.light)
+    assert differing(image, reference) < 0.002
+    # looking down from above, each agent's shirt (its vertices skinned by core) is
+    # drawn in its own palette colour
+    pos = crowd.agents.position.astype(np.float64)
+    top = Camera(pos.mean(0) + (0.0, -0.01, 16.0), pos.mean(0), aspect=SIZE[0] / SIZE[1])
+    image, _ = render(renderer, crowd, top)
+    vp = top.view_projection
+    shirt_vertices = np.unique(body.triangles[upper])
+    hue = np.sign(image[..., 0].astype(int) - image[..., 2].astype(int) - 40) \
+        - np.sign(image[..., 2].astype(int) - image[..., 0].astype(int) - 40)   # +2 red, -2 blue
+    for a in range(15):
+        world = h.world_reference(crowd, [a], body)[0][shirt_vertices]
+        p = np.c_[world, np.ones(len(world))] @ vp.T
+        x = ((p[:, 0] / p[:, 3] + 1) / 2 * SIZE[0]).astype(int)
+        y = ((1 - (p[:, 1] / p[:, 3] + 1) / 2) * SIZE[1]).astype(int)
+        seen = hue[np.clip(y, 0, SIZE[1] - 1), np.clip(x, 0, SIZE[0] - 1)]
+        own, other = ((seen == 2).sum(), (seen == -2).sum()) if team[a] == 0 else \
+            ((seen == -2).sum(), (seen == 2).sum())
+        assert own >= 5 and own > 3 * other, (a, own, other)
