@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.errors import CrowdError
-from ..core.placement import (SOURCE_SEED, AgentSet, CharacterStreams, PlacementPolicy,
+from ..core.placement import (SOURCE_SEED, AgentSet, CharacterStreams, Palette, PlacementPolicy,
                               place_agents, z_angle)
 from ..core.variety import Timing
 
@@ -128,7 +128,9 @@ def character_streams(settings) -> tuple:
     :class:`~crowd_addon.core.placement.CharacterStreams`, in list order."""
     return tuple(CharacterStreams(c.name, tuple(a.name for a in c.streams),
                                   tuple(a.weight for a in c.streams), c.weight,
-                                  tuple(stream_timing(a) for a in c.streams))
+                                  tuple(stream_timing(a) for a in c.streams),
+                                  tuple(Palette(p.material, p.colors(), p.mode, p.attribute)
+                                        for p in c.palettes))
                  for c in settings.characters)
 
 

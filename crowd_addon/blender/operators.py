@@ -267,19 +267,20 @@ _COLLECTIONS = (
     ("uniques", "Uniques", ""), ("nodes", "Nodes", ""), ("inputs", "Inputs", ""),
     ("transitions", "Transitions", ""), ("agent_sources", "Agent Sources", ""),
     ("cues", "Cues", ""), ("reactions", "Reactions", ""), ("parameters", "Parameters", ""),
+    ("palettes", "Palettes", ""),
 )
 _INDEX = {"characters": "active_character_index", "lods": "active_lod_index",
           "streams": "active_stream_index", "uniques": "active_unique_index",
           "nodes": "active_node_index", "inputs": "active_input_index",
           "transitions": "active_transition_index", "agent_sources": "active_source_index",
           "cues": "active_cue_index", "reactions": "active_reaction_index",
-          "parameters": "active_parameter_index"}
+          "parameters": "active_parameter_index", "palettes": "active_palette_index"}
 #: lists held by ``scene.crowd`` (or a struct of it): collection -> its owner
 _SETTINGS_LISTS = {"characters": lambda s: s, "agent_sources": lambda s: s,
                    "cues": lambda s: s.show, "reactions": lambda s: s.show,
                    "parameters": lambda s: s.show}
 #: lists held by the active character
-_CHARACTER_LISTS = ("lods", "streams", "uniques")
+_CHARACTER_LISTS = ("lods", "streams", "uniques", "palettes")
 
 
 def _active(items, index, what):

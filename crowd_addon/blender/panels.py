@@ -24,6 +24,14 @@ class CROWD_UL_animations(bpy.types.UIList):
         row.prop(item, "weight", text="")
 
 
+class CROWD_UL_palettes(bpy.types.UIList):
+    def draw_item(self, _context, layout, _data, item, _icon, _active, _prop):
+        row = layout.row(align=True)
+        row.label(text=item.material or "(no material)", icon="COLOR")
+        for i in range(item.count):
+            row.prop(item, f"color_{i}", text="")
+
+
 class CROWD_UL_characters(bpy.types.UIList):
     def draw_item(self, _context, layout, _data, item, _icon, _active, _prop):
         row = layout.row(align=True)
@@ -191,6 +199,22 @@ def _draw_animation_pool(layout, s, pool):
         _draw_node(layout.box(), anim, anim.nodes[anim.active_node_index], pool)
 
 
+def _draw_palette(layout, char, pal):
+    col = layout.column()
+    col.use_property_split = True
+    if char.body is not None:
+        col.prop_search(pal, "material", char.body, "material_slots")
+    else:
+        col.prop(pal, "material")
+    col.prop(pal, "mode")
+    if pal.mode == "ATTRIBUTE":
+        col.prop(pal, "attribute")
+    col.prop(pal, "count")
+    row = layout.row(align=True)
+    for i in range(pal.count):
+        row.prop(pal, f"color_{i}", text="")
+
+
 def timing_line(anim) -> str:
     """How many streams a stream's timing variation makes, at which speeds."""
     from .agents import stream_timing
@@ -283,6 +307,10 @@ class CROWD_PT_characters(_Panel, bpy.types.Panel):
         col.prop(char, "body")
         layout.label(text="LOD Meshes (empty: automatic)")
         _list(layout, "CROWD_UL_lods", char, "lods", "active_lod_index", rows=2)
+        layout.label(text="Palettes (a colour per agent for a material of the body)")
+        _list(layout, "CROWD_UL_palettes", char, "palettes", "active_palette_index", rows=2)
+        if 0 <= char.active_palette_index < len(char.palettes):
+            _draw_palette(layout.box(), char, char.palettes[char.active_palette_index])
 
 
 class CROWD_PT_streams(_Panel, bpy.types.Panel):
@@ -369,7 +397,8 @@ class CROWD_PT_settings(_Panel, bpy.types.Panel):
         row.prop(s, "lod_card")
 
 
-CLASSES = (CROWD_UL_characters, CROWD_UL_lods, CROWD_UL_animations, CROWD_UL_nodes,
+CLASSES = (CROWD_UL_characters, CROWD_UL_lods, CROWD_UL_palettes, CROWD_UL_animations,
+           CROWD_UL_nodes,
            CROWD_UL_inputs, CROWD_UL_transitions, CROWD_UL_sources, CROWD_PT_main,
            CROWD_PT_characters, CROWD_PT_streams, CROWD_PT_uniques, CROWD_PT_agents,
            CROWD_PT_settings)

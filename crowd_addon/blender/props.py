@@ -152,6 +152,36 @@ class CROWD_PG_lod(PropertyGroup):
                                         "Armature modifier), drawn at this level")
 
 
+#: colours a palette may hold
+PALETTE_COLOURS = 8
+_PALETTE_DEFAULTS = ((0.8, 0.1, 0.1), (0.1, 0.25, 0.8), (0.95, 0.85, 0.2), (0.1, 0.6, 0.2),
+                     (0.9, 0.9, 0.9), (0.1, 0.1, 0.1), (0.9, 0.45, 0.1), (0.5, 0.2, 0.6))
+
+
+class CROWD_PG_palette(PropertyGroup):
+    """Colours for one material slot of the character's body: each agent wears one
+    (docs/variety.md)."""
+
+    material: StringProperty(
+        name="Material", description="The body's material these colours replace on each "
+                                     "agent (shirt, hair...)")
+    mode: EnumProperty(name="Choice", default="RANDOM", items=(
+        ("RANDOM", "Random", "Each agent one of the colours at random (seeded)"),
+        ("ATTRIBUTE", "Attribute", "An INT point attribute of the agent source gives the "
+                                   "colour's index (a team, a section)")))
+    attribute: StringProperty(name="Attribute", default="team",
+                              description="INT point attribute: the colour's index, from 0")
+    count: IntProperty(name="Colours", default=2, min=1, max=PALETTE_COLOURS,
+                       description="How many of the colours below are in the palette")
+    for _i, _c in enumerate(_PALETTE_DEFAULTS):
+        __annotations__[f"color_{_i}"] = FloatVectorProperty(
+            name=f"Colour {_i}", subtype="COLOR", size=3, min=0.0, max=1.0, default=_c)
+    del _i, _c
+
+    def colors(self) -> tuple:
+        return tuple(tuple(getattr(self, f"color_{i}")) for i in range(self.count))
+
+
 class CROWD_PG_character(PropertyGroup):
     """A character: a rig, the body that draws it and the animations it plays."""
 
@@ -169,6 +199,8 @@ class CROWD_PG_character(PropertyGroup):
     weight: FloatProperty(name="Weight", default=1.0, min=0.0,
                           description="Relative share of agents from sources that choose "
                                       "characters by weight")
+    palettes: CollectionProperty(type=CROWD_PG_palette)
+    active_palette_index: IntProperty()
 
 
 class CROWD_PG_agent_source(PropertyGroup):
@@ -308,7 +340,8 @@ class CROWD_PG_settings(PropertyGroup):
 
 
 CLASSES = show_props.CLASSES + (CROWD_PG_input, CROWD_PG_state_transition, CROWD_PG_node, CROWD_PG_animation,
-           CROWD_PG_lod, CROWD_PG_character, CROWD_PG_agent_source, CROWD_PG_settings)
+           CROWD_PG_lod, CROWD_PG_palette, CROWD_PG_character, CROWD_PG_agent_source,
+           CROWD_PG_settings)
 
 
 def _values(struct, skip):
@@ -337,6 +370,7 @@ _UI_ONLY = {"active_character_index", "active_lod_index", "active_stream_index",
             "active_unique_index", "active_source_index", "active_node_index",
             "active_input_index", "active_transition_index", "preview_enabled",
             "active_cue_index", "active_reaction_index", "active_parameter_index",
+            "active_palette_index",
             "render_crowd", "repetition_neighbours", "plan_budget_mb", "plan_max_streams"}
 
 

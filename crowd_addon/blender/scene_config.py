@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from ..core.config import CrowdConfig
+from ..core.config import PALETTE_COLUMNS, CrowdConfig
 from ..core.controller_graph import InputSpec, NodeSpec, TransitionSpec, build_tree
 from ..core.errors import CrowdError
 from ..core.mesh import CARD
@@ -292,6 +292,7 @@ def config_steps(scene, depsgraph=None, notes=None):
         yield len(jobs) + k, total, "reading the proxy mesh" + (
             f" of character {c.name!r}" if several else "")
         _add_mesh(cfg, c, skeletons[c.name], s.lod_cards, [] if notes is None else notes)
+        _add_palettes(cfg, c)
     yield total - 1, total, "placing agents"
     dg = depsgraph if depsgraph is not None else _depsgraph(scene)
     agents, placed = agent_mod.agents_from_scene(scene, dg)
@@ -299,6 +300,25 @@ def config_steps(scene, depsgraph=None, notes=None):
         agents.add_to(cfg)
     cfg.show = show_from_scene(scene, dg, cfg, placed)
     return cfg
+
+
+def _add_palettes(cfg, c):
+    """The character's palette materials (``CrowdConfig.palette_materials``), each a
+    material of its body, named once."""
+    if not len(c.palettes):
+        return
+    what = f"character {c.name!r}"
+    if len(c.palettes) > PALETTE_COLUMNS:
+        raise CrowdError(f"{what}: {len(c.palettes)} palettes; at most {PALETTE_COLUMNS}")
+    looks = [k.name for k in cfg.meshes[c.name][0].looks] if cfg.meshes.get(c.name) else []
+    names = [p.material for p in c.palettes]
+    for name in names:
+        if name not in looks:
+            raise CrowdError(f"{what}: palette material {name!r} is not a material of its "
+                             f"body (its materials: {looks})")
+    if len(set(names)) != len(names):
+        raise CrowdError(f"{what}: two palettes for one material ({names})")
+    cfg.palette_materials[c.name] = tuple(names)
 
 
 def _depsgraph(scene):

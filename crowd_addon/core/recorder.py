@@ -115,6 +115,7 @@ class Recorder:
             start_pose=tr[0], t0=tr[1], length=tr[2], target_kind=tr[3], target_ref=tr[4],
             target_offset=tr[5], position=self._position0, heading=self._heading0,
             color=self._color0, scale=np.array(v.agents.scale, np.float32),
+            palette=np.array(v.agents.palette, np.float32),
             substeps=v.substeps,
             stream_subposes=self._stream_sub, unique_subposes=self._unique_sub,
             move_agent=mv[0], move_frame=mv[1], move_position=mv[2],

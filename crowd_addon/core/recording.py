@@ -47,7 +47,8 @@ class Recording:
     UNIQUE (``ref`` unique) or TRANSITION (``ref`` a row of: ``start_pose`` (K2, B, 10)
     float32 StartP, ``t0``, ``length``, ``target_kind``/``_ref``/``_offset`` (K2,)).
     position (N, 3), heading (N,) float32 and color (N, 3) float32 RGB at ``first``;
-    scale (N,) float32 body scales (constant);
+    scale (N,) float32 body scales and palette (N, 4, 3) float32 palette colours
+    (constant);
     move_* (K3,): a new position
     and heading from ``move_frame`` on, sorted by (agent, frame).
     events : ``(name, frame, agent ids)`` per event fired while recording, in order.
@@ -96,6 +97,13 @@ class Recording:
     stream_subposes: np.ndarray | None = None
     unique_subposes: np.ndarray | None = None
     scale: np.ndarray | None = None
+    palette: np.ndarray | None = None
+
+    @property
+    def palettes(self) -> np.ndarray:
+        """(N, 4, 3) float32 each agent's palette colours (-1: none; constant)."""
+        return np.full((self.agent_count, 4, 3), -1.0, np.float32) if self.palette is None \
+            else self.palette
 
     @property
     def scales(self) -> np.ndarray:

@@ -10,7 +10,7 @@ agent is paired with its ``k`` nearest visible agents in screen space (pixels). 
   unique (which shows one pose to all its agents);
 - use the same body (``look``: the character's mesh, or its variant);
 - have colours within ``color_tolerance`` of each other (largest RGB channel
-  difference, 0..1).
+  difference, 0..1): the agent's colour and its palette colours (:func:`colors_shown`).
 
 Agents blending in a transition slot show a pose of their own and look like nobody.
 The metric is the share of such neighbour pairs that look alike (pairs are ordered:
@@ -35,7 +35,7 @@ from .errors import CrowdError
 __all__ = ["OFFSET_TOLERANCE", "RepetitionSettings", "Repetition", "nearest_neighbours", "screen_points",
            "pairs_alike", "frame_repetition", "crowd_repetition", "recording_repetition",
            "recording_repetition_steps", "measure_frames", "describe", "combine",
-           "stream_periods"]
+           "stream_periods", "colors_shown"]
 
 #: offsets at most this many frames apart look alike (the default tolerance)
 OFFSET_TOLERANCE = 2
@@ -327,6 +327,15 @@ def stream_periods(config) -> np.ndarray:
     return out
 
 
+def colors_shown(color, palette=None) -> np.ndarray:
+    """(n, 3 + 12) the colours an agent shows: its colour (n, 3) and its palette
+    colours (n, 4, 3; -1 where none), side by side, compared channel by channel."""
+    color = np.asarray(color, np.float64).reshape(-1, 3)
+    if palette is None:
+        return color
+    return np.concatenate([color, np.asarray(palette, np.float64).reshape(len(color), -1)], 1)
+
+
 def pairs_alike(i, j, kind, ref, offset, look, color, settings: RepetitionSettings,
                 period=None):
     """(len(i),) bool: agents ``i[p]`` and ``j[p]`` look alike (module docstring);
@@ -389,7 +398,8 @@ def crowd_repetition(view, view_projection, look=None,
     ``look``: (N,) int body per agent; default the agent's skeleton (one mesh each)."""
     a = view.agents
     look = view.agent_skeleton if look is None else look
-    r = frame_repetition(a.position, a.kind, a.ref, a.offset, look, a.color,
+    r = frame_repetition(a.position, a.kind, a.ref, a.offset, look,
+                         colors_shown(a.color, getattr(a, "palette", None)),
                          view_projection, settings, stream_periods(view.config))
     return _report([view.frame], [r], settings)
 
@@ -435,6 +445,7 @@ def recording_repetition_steps(rec, view_projection, frames=None, look=None, age
 
 def _recording_steps(rec, view_projection, frames, look, agents, settings):
     period = stream_periods(rec.config)
+    shown = colors_shown(rec.color, rec.palettes)
     results = []
     for f in frames:
         seg = _last_at(rec.segment_agent, rec.segment_frame, agents, f)
@@ -444,9 +455,8 @@ def _recording_steps(rec, view_projection, frames, look, agents, settings):
             mv = _last_at(rec.move_agent, rec.move_frame, agents, f, missing=True)
             has = mv >= 0
             pos[has] = rec.move_position[mv[has]]
-        results.append(frame_repetition(pos, kind, ref, off, look[agents],
-                                        rec.color[agents], view_projection, settings,
-                                        period))
+        results.append(frame_repetition(pos, kind, ref, off, look[agents], shown[agents],
+                                        view_projection, settings, period))
         yield len(results), len(frames)
     return _report(frames, results, settings)
 

@@ -38,8 +38,8 @@ import numpy as np
 from .agents import STREAM, UNIQUE
 from .budget import plan as budget_plan
 from .errors import CrowdError
-from .repetition import (RepetitionSettings, nearest_neighbours, pairs_alike, screen_points,
-                         stream_periods)
+from .repetition import (RepetitionSettings, colors_shown, nearest_neighbours, pairs_alike,
+                         screen_points, stream_periods)
 from .variety import spread_offsets
 
 __all__ = ["Template", "PlanInput", "Candidate", "VarietyPlan", "plan_input", "plan_variety",
@@ -76,7 +76,8 @@ class Template:
 class PlanInput:
     """The agents a plan places, as arrays over all ``n`` agents.
 
-    positions (n, 3), colors (n, 3) float; look (n,) int body; template (n,) int (an
+    positions (n, 3), colors (n, 3 + 12) float (:func:`.repetition.colors_shown`);
+    look (n,) int body; template (n,) int (an
     index into ``templates``, -1 for agents on a unique); speed (n,) int the agent's
     speed stream within its template; unique (n,) int (-1 for streamed agents).
     ``max_offset``, ``copies`` (per template), ``offsets`` (n,), ``streams`` (n,) and
@@ -196,7 +197,7 @@ def plan_input(cfg, offsets=None, seed=None) -> PlanInput:
     bones = max(sk.bone_count for sk in cfg.skeletons.values())
     return PlanInput(
         positions=np.asarray(cfg.agent_position, np.float64),
-        colors=np.asarray(cfg.agent_color, np.float64), look=look, template=template,
+        colors=colors_shown(cfg.agent_color, cfg.palette), look=look, template=template,
         speed=speed, unique=np.where(streamed, -1, un),
         templates=tuple(Template(t, tuple(speeds[t]), clip_frames[t], period[t])
                         for t in names),

@@ -14,6 +14,8 @@
                                             /Crowd/AgentAnimations/agent_<id>
                 xformOp:translate (position), xformOp:rotateZ (heading, degrees),
                 xformOp:scale (uniform: the agent's body scale; only when not 1)
+                primvars:crowdPalette<c> (constant: the agent's palette colours,
+                                          read by the character's palette materials)
                 primvars:displayColor (constant: the agent's colour, inherited
                                        by the character's mesh)
         def Scope "AgentAnimations"   (in the sublayer agents.<ext>: per agent that
@@ -31,6 +33,7 @@ from __future__ import annotations
 import numpy as np
 from pxr import Gf, Sdf, Vt
 
+from .character import palette_primvar
 from .layers import apply_api, attribute, define, relationship
 
 __all__ = ["ROOT", "author_offset_animations", "author_agents", "author_agent_animations",
@@ -89,11 +92,13 @@ def author_agents(root: Sdf.PrimSpec, shot, names, character_assets, sources,
         parent = define(root, "Agents", "Scope")
     refs = {k: Sdf.Reference(a) for k, a in character_assets.items()}
     degrees = np.degrees(shot.heading.astype(np.float64)).tolist()
+    has = (shot.palette >= 0).all(2)                     # (n, 4): palette colours set
     agents = list(zip(names, shot.agent_skeleton.tolist(), sources, shot.position.tolist(),
-                      degrees, shot.color.tolist(), shot.scale.tolist()))
+                      degrees, shot.color.tolist(), shot.scale.tolist(), has.tolist(),
+                      shot.palette.tolist()))
     for a in range(0, len(agents), _LAYOUT_CHUNK):
         with Sdf.ChangeBlock():
-            for name, skel, source, position, heading, color, scale in \
+            for name, skel, source, position, heading, color, scale, has_c, pal in \
                     agents[a:a + _LAYOUT_CHUNK]:
                 prim = define(parent, name, "SkelRoot")
                 prim.instanceable = instanceable
@@ -108,6 +113,10 @@ def author_agents(root: Sdf.PrimSpec, shot, names, character_assets, sources,
                           _ORDER if scale == 1.0 else _SCALED, uniform=True)
                 attribute(prim, "primvars:displayColor", _T.Color3fArray,
                           Vt.Vec3fArray([Gf.Vec3f(*color)]), interpolation="constant")
+                for c, on in enumerate(has_c):
+                    if on:
+                        attribute(prim, f"primvars:{palette_primvar(c)}", _T.Color3f,
+                                  Gf.Vec3f(*pal[c]), interpolation="constant")
         yield "layout", min(a + _LAYOUT_CHUNK, len(agents)), len(agents)
     moving = np.flatnonzero(shot.moving)
     if moving.size:

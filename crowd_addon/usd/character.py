@@ -18,7 +18,11 @@
                                                    GeomSubset per look
         def Scope "Looks"                          a Material per look: UsdPreviewSurface
                                                    with the base colour, or an
-                                                   UsdUVTexture of the image read at st
+                                                   UsdUVTexture of the image read at st;
+                                                   a palette material's colour is read
+                                                   from the primvar crowdPalette<column>
+                                                   (each agent's, docs/variety.md), its
+                                                   own colour the fallback
 
 ``bindTransforms`` are the joints' model-space (skeleton-space) bind matrices, the
 inverse of core's ``Skeleton.inverse_bind``, so UsdSkel's skinning transform
@@ -36,21 +40,22 @@ from . import convert
 from .layers import apply_api, attribute, connect, define, new_layer, relationship
 from .naming import joint_paths, unique_identifiers
 
-__all__ = ["character_layer", "SKELETON_PRIM"]
+__all__ = ["character_layer", "palette_primvar", "SKELETON_PRIM"]
 
 SKELETON_PRIM = "Skeleton"
 _T = Sdf.ValueTypeNames
 
 
 def character_layer(skeleton, mesh, fmt: str, fps: float, root_name: str, textures=None,
-                    proxy=None):
+                    proxy=None, palette_materials=()):
     """The character layer of ``skeleton`` (core Skeleton) drawn with ``mesh`` (core
     ProxyMesh), its SkelRoot named ``root_name``; returns ``(layer, joints)`` with the
     joint path tokens (shared by every animation of this skeleton). ``textures`` maps
     a look's texture to the asset path the layer names it by (default: as it is).
     ``proxy``: a lighter mesh (an LOD) written beside it with ``purpose = "proxy"``,
     the full mesh then having ``purpose = "render"``: viewers such as usdview draw the
-    proxy, renders the full mesh."""
+    proxy, renders the full mesh. ``palette_materials``: the material (look) names
+    the agents' palette columns colour, in column order."""
     layer = new_layer(fmt, fps, 0, 0, default_prim=root_name,
                       comment=f"crowd character {skeleton.name!r}")
     joints = Vt.TokenArray(joint_paths(skeleton.bone_names, skeleton.parents))
@@ -65,7 +70,7 @@ def character_layer(skeleton, mesh, fmt: str, fps: float, root_name: str, textur
                   convert.matrices(np.linalg.inv(skeleton.inverse_bind)), uniform=True)
         attribute(skel, "restTransforms", _T.Matrix4dArray,
                   convert.matrices(sqt.pose_to_matrices(skeleton.bind_pose)), uniform=True)
-        materials = _materials(root, mesh, textures or {})
+        materials = _materials(root, mesh, textures or {}, tuple(palette_materials))
         meshes = [(mesh, "render" if proxy is not None else None)]
         if proxy is not None:
             meshes.append((proxy, "proxy"))
@@ -102,15 +107,22 @@ def _mesh(root, mesh, name, skeleton_path):
     return prim
 
 
-def _materials(root, mesh, textures) -> list:
+def _materials(root, mesh, textures, palette_materials=()) -> list:
     """A Material per look of ``mesh`` under ``Looks``: ``[(name, material spec)]``."""
     if not mesh.looks:
         return []
     scope = define(root, "Looks", "Scope")
     names = unique_identifiers([k.name for k in mesh.looks])
     return [(name, _material(scope, name, look, mesh.uvs is not None,
-                             textures.get(look.texture, look.texture)))
+                             textures.get(look.texture, look.texture),
+                             palette_materials.index(look.name)
+                             if look.name in palette_materials else None))
             for name, look in zip(names, mesh.looks)]
+
+
+def palette_primvar(column: int) -> str:
+    """The primvar an agent's palette colour ``column`` is written as."""
+    return f"crowdPalette{int(column)}"
 
 
 def _bind_looks(prim, mesh, named_materials):
@@ -137,10 +149,11 @@ def _bind_looks(prim, mesh, named_materials):
         _bind(subset, material)
 
 
-def _material(scope, name, look, has_uvs, texture):
+def _material(scope, name, look, has_uvs, texture, column=None):
     """``Material "<name>"``: a UsdPreviewSurface of the look's base colour and
     opacity; its texture, when it has one and the mesh has texture coordinates, feeds
-    the diffuse colour instead."""
+    the diffuse colour instead; with a palette ``column``, the agent's primvar
+    :func:`palette_primvar` does (the look's colour its fallback)."""
     material = define(scope, name, "Material")
     shader = define(material, "PreviewSurface", "Shader")
     attribute(shader, "info:id", _T.Token, "UsdPreviewSurface", uniform=True)
@@ -149,7 +162,13 @@ def _material(scope, name, look, has_uvs, texture):
     attribute(shader, "inputs:roughness", _T.Float, 0.6)
     surface = attribute(shader, "outputs:surface", _T.Token)
     connect(attribute(material, "outputs:surface", _T.Token), surface)
-    if look.texture and has_uvs:
+    if column is not None:
+        reader = define(material, "Palette", "Shader")
+        attribute(reader, "info:id", _T.Token, "UsdPrimvarReader_float3", uniform=True)
+        attribute(reader, "inputs:varname", _T.String, palette_primvar(column))
+        attribute(reader, "inputs:fallback", _T.Float3, Gf.Vec3f(*look.color[:3]))
+        connect(color, attribute(reader, "outputs:result", _T.Float3))
+    elif look.texture and has_uvs:
         reader = define(material, "st", "Shader")
         attribute(reader, "info:id", _T.Token, "UsdPrimvarReader_float2", uniform=True)
         attribute(reader, "inputs:varname", _T.String, "st")

@@ -283,9 +283,10 @@ def _write_characters(out, rec, meshes) -> tuple:
     for k, name in zip(ids, file_names):
         levels = meshes[k]
         proxies = [m for m in levels[1:] if m.triangle_count >= PROXY_MIN_TRIANGLES]
-        layer, joints_of[k] = character_layer(cfg.skeletons[skeleton_names[k]], levels[0],
-                                              out.files.format, rec.fps, name, textures,
-                                              proxies[-1] if proxies else None)
+        layer, joints_of[k] = character_layer(
+            cfg.skeletons[skeleton_names[k]], levels[0], out.files.format, rec.fps, name,
+            textures, proxies[-1] if proxies else None,
+            cfg.palette_materials.get(skeleton_names[k], ()))
         out.save(layer, f"characters/{name}")
         asset_of[k] = out.files.asset_path(f"characters/{name}")
     return joints_of, asset_of

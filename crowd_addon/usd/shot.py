@@ -50,7 +50,8 @@ class Shot:
     agents : (n,) int64 ids; agent_skeleton : (n,) int64 skeleton index per agent.
     static : (n,) bool; stream, offset : (n,) int64 of static agents (-1 otherwise).
     position : (n, 3) float32, heading : (n,) float32 radians, color : (n, 3) float32
-    RGB, at ``first``; scale : (n,) float32 body scales (constant).
+    RGB, at ``first``; scale : (n,) float32 body scales and palette (n, 4, 3) float32
+    palette colours (-1: none), constant.
     moving : (n,) bool, position or heading changed during the shot.
     """
 
@@ -68,6 +69,7 @@ class Shot:
         self.position, self.heading = rec.position[ids], rec.heading[ids]
         self.color = rec.color[ids]
         self.scale = rec.scales[ids]
+        self.palette = rec.palettes[ids]
         self.moving = rec.moving[ids]
 
     @property

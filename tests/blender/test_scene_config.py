@@ -411,3 +411,44 @@ def test_the_modal_bake_steps_on_timer_events_and_cancels_on_esc(rig_scene):
     op = cs.FakeBakeOperator(scene)
     assert op.modal(bpy.context, timer) == {"CANCELLED"}
     assert op.reports[-1] == ({"ERROR"}, "stream 'idle': node 'clip': no action chosen")
+
+
+def test_palettes_and_scales_from_the_scene(rig_scene):
+    """A palette on the body's "shirt" material (two colours by an INT point attribute
+    "team") and a scale range on the source: the bake gives every agent its team's
+    colour on that column and a scale in range, the same on every bake (seeded), and a
+    palette for a material the body does not have is named."""
+    scene, rig, acts = rig_scene
+    s = scene.crowd
+    body = cs.make_proxy(rig)
+    for name in ("shirt", "skin"):
+        body.data.materials.append(bpy.data.materials.new(name))
+    s.characters[0].body = body
+    cs.add_stream(s, "walk", acts["walk"])
+    seats = cs.make_seats(6, 5)
+    team = (np.arange(30) // 15).astype(np.int32)
+    seats.data.attributes.new("team", "INT", "POINT").data.foreach_set("value", team)
+    src = s.agent_sources.add()
+    src.name, src.object = "seats", seats
+    src.scale_min, src.scale_max = 0.9, 1.3
+    pal = s.characters[0].palettes.add()
+    pal.material, pal.mode, pal.attribute, pal.count = "shirt", "ATTRIBUTE", "team", 2
+    pal.color_0, pal.color_1 = (1.0, 0.0, 0.0), (0.0, 0.0, 1.0)
+    cfg = scene_config.config_from_scene(scene)
+    assert cfg.palette_materials == {"Rig": ("shirt",)}
+    np.testing.assert_allclose(cfg.palette[:, 0], np.where(team[:, None] == 0,
+                                                           (1.0, 0.0, 0.0), (0.0, 0.0, 1.0)))
+    assert (cfg.palette[:, 1:] == -1).all()
+    assert 0.9 <= cfg.scales.min() < cfg.scales.max() <= 1.3
+    again = scene_config.config_from_scene(scene)
+    np.testing.assert_array_equal(again.scales, cfg.scales)
+    crowd = Crowd(cfg)
+    np.testing.assert_array_equal(crowd.agents.palette, cfg.palette)
+    pal.mode = "RANDOM"                                   # seeded: both colours, stable
+    rnd = scene_config.config_from_scene(scene).palette[:, 0]
+    np.testing.assert_array_equal(rnd, scene_config.config_from_scene(scene).palette[:, 0])
+    assert len({tuple(c) for c in rnd.tolist()}) == 2
+    pal.material = "hat"
+    with pytest.raises(CrowdError, match="palette material 'hat' is not a material of its "
+                                         r"body \(its materials: \['shirt', 'skin'\]\)"):
+        scene_config.config_from_scene(scene)

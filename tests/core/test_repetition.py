@@ -268,3 +268,23 @@ def test_offsets_a_loop_apart_look_alike():
     assert alike(3, [0, 24]) == 0.0 and alike(4, [0, 30]) == 0.0
     assert frame_repetition(pos, same["kind"], np.array([0, 0]), np.array([0, 24]),
                             same["look"], same["color"], top_view(), s)[0] == 0.0
+
+
+def test_palette_colours_count_as_colour():
+    """Two neighbours on one stream in step look alike until their palette colours
+    (a shirt) differ; agents without palettes compare by their colour alone."""
+    from crowd_addon.core.repetition import colors_shown
+    pos = np.array([[0.0, 0, 0], [1.0, 0, 0]])
+    same = (np.zeros(2, np.int8), np.zeros(2, int), np.zeros(2, int), np.zeros(2))
+    pal = np.full((2, 4, 3), -1.0)
+    pal[:, 2] = [(0.9, 0.1, 0.1), (0.9, 0.1, 0.1)]
+    s = RepetitionSettings(k=1)
+    shown = colors_shown(np.zeros((2, 3)), pal)
+    assert shown.shape == (2, 15)
+    assert frame_repetition(pos, *same, shown, top_view(), s)[0] == 1.0
+    pal[1, 2] = (0.1, 0.2, 0.9)
+    assert frame_repetition(pos, *same, colors_shown(np.zeros((2, 3)), pal), top_view(),
+                            s)[0] == 0.0
+    pal[1, 2] = -1                                          # one has none: different
+    assert frame_repetition(pos, *same, colors_shown(np.zeros((2, 3)), pal), top_view(),
+                            s)[0] == 0.0
