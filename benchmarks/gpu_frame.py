@@ -19,7 +19,8 @@ that deep in a 540-pixel image); LODs off: the full mesh for every agent. Prints
   draw + finish; ``Crowd.step`` on the CPU is shown apart, see core_frame.py);
 * bytes uploaded per frame against the minimum for GPU skinning: the new local-pose
   slice and unique rows, the StartP row of each transition that started, 16 B of
-  batch entry per row the GPU skins (slice, uniques, active slots), 32 B per agent
+  batch entry per row the GPU skins (slice, uniques, active slots), 48 B (three agent
+  texels: placement, reference and scale, palette colours) per agent
   whose animation changed;
 * whether 65,000 agents reach 10 frames per second with LODs;
 * the scene pass: 65,000 agents with LODs drawn alone and inside a stadium-like scene
@@ -55,6 +56,7 @@ from crowd_addon.core import ClipPlayer, Crowd, CrowdConfig  # noqa: E402
 from crowd_addon.core.mesh import CARD  # noqa: E402
 from crowd_addon.core.synthetic import humanoid, humanoid_mesh, periodic_clip  # noqa: E402
 from crowd_addon.gpu.backends import BACKENDS, make_renderer  # noqa: E402
+from crowd_addon.gpu.programs import AGENT_TEXELS  # noqa: E402
 from crowd_addon.gpu.camera import frame_crowd  # noqa: E402
 from crowd_addon.gpu.scene_geometry import SceneGeometry  # noqa: E402
 
@@ -117,7 +119,7 @@ def frames(crowd, renderer, camera, count, rng, warm=40) -> dict:
         started += report.transitions_started
         own = crowd.streams.count + crowd.uniques.count
         minimum.append((own + started) * row_bytes + 16 * (own + report.transitions_active)
-                       + 32 * (started + report.transitions_finished))
+                       + 16 * AGENT_TEXELS * (started + report.transitions_finished))
         vertices = renderer.stats.vertices
     return {"step_ms": statistics.median(step), "gpu_ms": statistics.median(gpu),
             "bytes": int(statistics.median(sent)), "minimum": int(statistics.median(minimum)),

@@ -13,7 +13,8 @@ same crowd:
   here: ``character`` (0 fan, 1 mocap: 2 % of the home seats), ``stream`` (among the
   character's streams: home seats ``idle_a`` / ``idle_c`` / ``clap``, away seats
   ``idle_b``), ``hit`` (``k`` on the seat of the k-th fan the ball hits, 0 elsewhere)
-  and ``team_colour`` (home red, away blue, varied per seat).
+  and ``team_colour`` (home red, away blue, varied per seat); the source scales the
+  fans 0.93 .. 1.07 (heights vary, docs/variety.md).
 - :func:`setup_show` authors the show (``scene.crowd.show``, docs/show.md) and sets the
   scene's frame range to the run: the **goal** (home fans blend to ``cheer``, away
   fans to ``groan``, both at offset 0 and held for the cheer), the **Mexican wave**
@@ -220,6 +221,7 @@ def setup_crowd(scene, hits=6, slots=800, max_offset=60, seed=5):
     src.stream_mode, src.stream_attribute = "ATTRIBUTE", "stream"
     src.offset_mode = "UNIFORM"
     src.color_mode, src.color_attribute = "ATTRIBUTE", "team_colour"
+    src.scale_min, src.scale_max = 0.93, 1.07            # fans of different heights
     return s
 
 

@@ -60,6 +60,7 @@ def core_vertices(truth, frame, agent) -> np.ndarray:
     pose = truth["poses"][frame][agent:agent + 1]
     v = skin_vertices(mesh.positions, mesh.bone_indices, mesh.bone_weights,
                       skinning_matrices(pose, skeleton))[0].astype(np.float64)
+    v *= float(cfg.scales[agent])                 # the agent's body scale (xformOp:scale)
     c, s_ = np.cos(truth["heading"][frame][agent]), np.sin(truth["heading"][frame][agent])
     rot = np.array([[c, -s_, 0], [s_, c, 0], [0, 0, 1]])
     return v @ rot.T + truth["position"][frame][agent]
