@@ -14,8 +14,10 @@ of ordinary Blender data, with the paper's sharing kept:
 * one **points object** (:data:`POINTS`): a vertex per agent at its position, with
   point attributes ``crowd_pose`` (the index of its pose object), ``crowd_drawn``
   (false for agents of a character without a body: not instanced), ``crowd_heading``
-  (radians about +Z) and ``crowd_color`` (its tint, readable in materials through an
-  Attribute node of type *Instancer*), and a Geometry Nodes modifier that puts the
+  (radians about +Z), ``crowd_scale`` (its body scale), ``crowd_color`` (its tint)
+  and ``crowd_palette0`` .. ``3`` (its palette colours, alpha 0 where it has none;
+  docs/variety.md), readable in materials through an Attribute node of type
+  *Instancer*, and a Geometry Nodes modifier that puts the
   picked pose object on every point (*Instance on Points* with *Pick Instance*
   from a *Collection Info* of :data:`POSES`, whose children come in name order).
 
@@ -144,7 +146,9 @@ def _points_object(scene, count: int):
                                ("crowd_drawn", "BOOLEAN", "POINT"),
                                ("crowd_heading", "FLOAT", "POINT"),
                                ("crowd_scale", "FLOAT", "POINT"),
-                               ("crowd_color", "FLOAT_COLOR", "POINT")):
+                               ("crowd_color", "FLOAT_COLOR", "POINT"),
+                               *((f"crowd_palette{c}", "FLOAT_COLOR", "POINT")
+                                 for c in range(4))):
         if mesh.attributes.get(name) is None:
             mesh.attributes.new(name, kind, domain)
     mod = obj.modifiers.get("Crowd Instances")
@@ -274,6 +278,12 @@ def sync(scene, crowd) -> RenderStats:
     color = np.ones((n, 4), np.float32)
     color[:, :3] = crowd.agents.color
     me.attributes["crowd_color"].data.foreach_set("color", color.ravel())
+    palette = crowd.agents.palette                           # (n, 4, 3), -1: none
+    for c in range(4):
+        rgba = np.zeros((n, 4), np.float32)
+        has = (palette[:, c] >= 0).all(1)
+        rgba[has, :3], rgba[has, 3] = palette[has, c], 1.0
+        me.attributes[f"crowd_palette{c}"].data.foreach_set("color", rgba.ravel())
     me.update()
     stats.poses = poses
     stats.ms = (time.perf_counter() - t0) * 1e3

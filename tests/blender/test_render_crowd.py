@@ -104,6 +104,13 @@ def test_instances_are_cores_skinning_with_one_mesh_per_shared_pose(crowd_scene)
     scales = pv.crowd.agents.scale
     assert 0.8 <= scales.min() < scales.max() <= 1.2 and len(set(scales.tolist())) == 30
     _check_instances(scene, pv.crowd)
+    points = bpy.data.objects[render_crowd.POINTS].data
+    got = np.empty(30, np.float32)
+    points.attributes["crowd_scale"].data.foreach_get("value", got)
+    np.testing.assert_array_equal(got, scales)
+    rgba = np.empty(30 * 4, np.float32)
+    points.attributes["crowd_palette0"].data.foreach_get("color", rgba)
+    assert (rgba.reshape(30, 4)[:, 3] == 0).all()                  # no palettes here
     rows = pv.crowd.view.agent_rows_index()
     assert pv.render_stats.poses == len(np.unique(rows)) == 8       # shared, not 30
     assert len(bpy.data.collections[render_crowd.POSES].objects) == 8
