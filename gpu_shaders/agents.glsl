@@ -19,7 +19,6 @@ struct Agent {
   int offset;
   float scale;
   vec3 color;
-  vec4 palette;
 };
 
 /* An 8-bit colour packed as r * 65536 + g * 256 + b, as RGB in 0..1. */
@@ -48,9 +47,16 @@ Agent agent_record(int agent)
   r.ref = int(b.y);
   r.offset = kind_offset & 65535;
   r.scale = b.z;
-  r.palette = texelFetch(agent_tex, at + ivec2(2, 0), 0);
   r.color = unpack_rgb(b.w);
   return r;
+}
+
+/* The agent's palette colour of column `column` (0..3) as packed by agent_record's
+ * colour, -1 where it has none; fetched only for vertices of a palette material. */
+float agent_palette(int agent, int column)
+{
+  ivec2 at = block_row_origin(agent, textureSize(agent_tex, 0).y, 3);
+  return texelFetch(agent_tex, at + ivec2(2, 0), 0)[column];
 }
 
 /* Rotation by the agent's heading about +Z, as (cos, sin). */

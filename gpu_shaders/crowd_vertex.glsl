@@ -40,7 +40,7 @@ void crowd_vertex(int agent_id)
   v_color = agent_tint(col.rgb, agent.color);
   int column = int(col.a * 255.0 + 0.5);
   if (column < 4) {
-    float code = agent.palette[column];
+    float code = agent_palette(agent_id, column);
     if (code >= 0.0)
       v_color = unpack_rgb(code);
   }
