@@ -67,6 +67,34 @@ def test_frames_and_mp4_are_written_visible_and_moving(config_path, tmp_path, ca
     assert [p.name for p in out_dir.iterdir() if p.name.startswith(".")] == []
 
 
+def test_the_repetition_metric_of_the_frames_shown(config_path, tmp_path, capsys, h):
+    """``--neighbours 3 --repetition-frames 3``: measured through the preview's camera
+    at the frames' size on the frames shown; the oracle is the crowd stepped alone and
+    measured at the same frames through the same camera."""
+    from crowd_addon.core.config_io import load_config
+    from crowd_addon.core.repetition import RepetitionSettings, crowd_repetition
+    from crowd_addon.gpu.camera import frame_crowd
+    code, out, err = run(capsys, "--config", config_path, "--out", tmp_path / "r",
+                         "--frames", 7, "--width", 96, "--height", 64, "--neighbours", 3,
+                         "--repetition-frames", 3, "--json")
+    assert code == 0, err
+    rep = json.loads(out)["repetition"]
+    assert rep["frames"] == [0, 3, 6] and rep["k"] == 3 and rep["screen"] == [96, 64]
+    crowd = h.Crowd(load_config(config_path))
+    camera = frame_crowd(crowd, aspect=96 / 64)
+    want = []
+    for f in range(7):
+        if f:
+            crowd.step()
+        if f in (0, 3, 6):
+            want.append(crowd_repetition(crowd.view, camera.view_projection, settings=
+                                         RepetitionSettings(k=3, width=96, height=64)).value)
+    assert rep["per_frame"] == pytest.approx(want, abs=1e-6)
+    code, out, _ = run(capsys, "--config", config_path, "--out", tmp_path / "r2", "--frames",
+                       2, "--width", 64, "--height", 48)
+    assert "  repetition " in out and "k=6" in out
+
+
 def test_text_summary(config_path, tmp_path, capsys):
     code, out, _ = run(capsys, "--config", config_path, "--out", tmp_path / "s", "--frames", 2,
                        "--width", 64, "--height", 48)
