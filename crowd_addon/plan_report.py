@@ -11,12 +11,14 @@ from __future__ import annotations
 
 from .core.errors import CrowdError
 
-__all__ = ["table", "plot", "summary_lines"]
+__all__ = ["table", "plot", "summary_lines", "metric_text"]
 
 _MB = 1e6
 
 
-def _value(v) -> str:
+def metric_text(v) -> str:
+    """A metric value for people: four decimals, two significant digits when tiny,
+    "-" for none."""
     if v is None:
         return "-"
     return f"{v:.4f}" if v >= 1e-3 or v == 0 else f"{v:.1e}"
@@ -29,7 +31,8 @@ def table(result) -> str:
     for c in result.candidates:
         mark = " *" if c == result.planned else ("  (over budget)" if not c.fits else "")
         rows.append(f"{c.max_offset:>5} {c.copies:>6} {c.offset_mode.lower():>8} "
-                    f"{c.streams:>7} {c.bytes / _MB:>10.2f} {_value(c.repetition):>10}{mark}")
+                    f"{c.streams:>7} {c.bytes / _MB:>10.2f} "
+                    f"{metric_text(c.repetition):>10}{mark}")
     return "\n".join(rows)
 
 
@@ -38,10 +41,10 @@ def summary_lines(result) -> list:
     d, p = result.default, result.planned
     lines = [
         f"default: M {d.max_offset}, {d.streams} streams, offsets as placed, "
-        f"{d.bytes / _MB:.2f} MB: repetition {_value(d.repetition)}",
+        f"{d.bytes / _MB:.2f} MB: repetition {metric_text(d.repetition)}",
         f"planned: M {p.max_offset}, {p.copies} cop{'ies' if p.copies != 1 else 'y'} of "
         f"each speed stream, {p.offset_mode.lower()} offsets, {p.streams} streams, "
-        f"{p.bytes / _MB:.2f} MB: repetition {_value(p.repetition)}"]
+        f"{p.bytes / _MB:.2f} MB: repetition {metric_text(p.repetition)}"]
     if d.repetition and p.repetition is not None:
         lines.append(f"  {d.repetition / max(p.repetition, 1e-9):,.0f}x less repetition"
                      if p.repetition < d.repetition else "  no candidate repeats less")
@@ -75,10 +78,10 @@ def plot(result, path, title: str = "") -> str:
     d, p = result.default, result.planned
     if d.repetition is not None:
         ax.plot([d.max_offset], [d.repetition], "o", color="black", markersize=9,
-                label=f"default (M {d.max_offset}): {_value(d.repetition)}")
+                label=f"default (M {d.max_offset}): {metric_text(d.repetition)}")
     ax.plot([p.max_offset], [p.repetition], "*", color="crimson", markersize=16,
             label=f"planned (M {p.max_offset}, {p.copies} copies, "
-                  f"{p.offset_mode.lower()}): {_value(p.repetition)}")
+                  f"{p.offset_mode.lower()}): {metric_text(p.repetition)}")
     ax.set_xlabel("M, frames of pose history per stream")
     ax.set_ylabel(f"repetition (share of {result.settings.k} nearest on screen alike)")
     ax.set_yscale("symlog", linthresh=1e-3)

@@ -191,7 +191,26 @@ class CROWD_OT_preview_toggle(bpy.types.Operator):
         return bpy.ops.crowd.bake("INVOKE_DEFAULT")
 
 
-class CROWD_OT_measure_repetition(bpy.types.Operator):
+class _OnPreview:
+    """An operator on the running preview (greyed out without one): :meth:`run`; a
+    CrowdError is reported and cancels it."""
+
+    bl_options = {"REGISTER"}
+
+    @classmethod
+    def poll(cls, context):
+        return preview.get(context.scene) is not None
+
+    def execute(self, context):
+        try:
+            self.run(context)
+        except CrowdError as e:
+            self.report({"ERROR"}, str(e))
+            return {"CANCELLED"}
+        return {"FINISHED"}
+
+
+class CROWD_OT_measure_repetition(_OnPreview, bpy.types.Operator):
     """Measure how much the previewed crowd repeats itself at this frame: the share of
     screen-space neighbour pairs that play the same stream in step, with the same body
     and colour (docs/variety.md). Seen through the scene camera, or through this
@@ -199,44 +218,25 @@ class CROWD_OT_measure_repetition(bpy.types.Operator):
 
     bl_idname = "crowd.measure_repetition"
     bl_label = "Measure Repetition"
-    bl_options = {"REGISTER"}
 
-    @classmethod
-    def poll(cls, context):
-        return preview.get(context.scene) is not None
-
-    def execute(self, context):
-        try:
-            preview.measure_repetition(context.scene, context.region_data, context.region)
-        except CrowdError as e:
-            self.report({"ERROR"}, str(e))
-            return {"CANCELLED"}
-        return {"FINISHED"}
+    def run(self, context):
+        preview.measure_repetition(context.scene, context.region_data, context.region)
 
 
-class CROWD_OT_plan_variety(bpy.types.Operator):
+class CROWD_OT_plan_variety(_OnPreview, bpy.types.Operator):
     """Find the history length M, copies of each stream and offset distribution that
     repeat least through the scene camera (or this viewport), within the Budget and
     Max Streams (docs/variety.md)"""
 
     bl_idname = "crowd.plan_variety"
     bl_label = "Plan Variety"
-    bl_options = {"REGISTER"}
 
-    @classmethod
-    def poll(cls, context):
-        return preview.get(context.scene) is not None
-
-    def execute(self, context):
-        try:
-            p = preview.plan_variety(context.scene, context.region_data, context.region)
-        except CrowdError as e:
-            self.report({"ERROR"}, str(e))
-            return {"CANCELLED"}
+    def run(self, context):
+        from ..plan_report import metric_text
+        p = preview.plan_variety(context.scene, context.region_data, context.region)
         self.report({"INFO"}, f"Plan: M {p.planned.max_offset}, {p.planned.streams} "
-                              f"streams, repetition {p.planned.repetition:.4f} (now "
-                              f"{p.default.repetition:.4f})")
-        return {"FINISHED"}
+                              f"streams, repetition {metric_text(p.planned.repetition)} "
+                              f"(now {metric_text(p.default.repetition)})")
 
 
 class CROWD_OT_apply_plan(bpy.types.Operator):
