@@ -194,6 +194,21 @@ def _first(names, most=5) -> str:
     return f"{list(names[:most])}" + (f" (and {more} more)" if more > 0 else "")
 
 
+def _next_keys(keys, start, frames) -> np.ndarray:
+    """Per key of the packed ``keys``, the key after it in its clip (the last key: itself),
+    its rotation negated where it points away from this key's: interpolating toward it
+    is the shortest-arc nlerp of :func:`.pose.blend2` without the sign test."""
+    nxt = np.empty_like(keys)
+    nxt[:-1] = keys[1:]
+    nxt[-1] = keys[-1]
+    last = start + frames - 1
+    nxt[last] = keys[last]
+    rot = slice(3, 7)
+    away = sqt.dot_rotations(keys, nxt) < 0            # the test blend2 makes
+    nxt[..., rot] = np.where(away[..., None], -nxt[..., rot], nxt[..., rot])
+    return nxt
+
+
 class ClipBank:
     """All clips of a crowd packed for vectorised sampling.
 
@@ -261,6 +276,7 @@ class ClipBank:
             keys[s:s + c.frame_count, :c.bone_count] = c.keys if order is None \
                 else c.keys[:, order]
         self.keys = keys
+        self.next_keys = _next_keys(keys, self.start, frames)
         self.loop = np.array([c.loop for c in of], bool)
         self.period = np.maximum(frames - 1, 1).astype(np.float64)
         self.rate = np.array([1.0 if self.fps is None else c.fps / self.fps for c in of],
@@ -328,11 +344,17 @@ class ClipBank:
         if out is None:
             out = np.empty((clip_ids.size,) + self.keys.shape[1:], np.float32)
         np.take(self.keys, base + i0, axis=0, out=out)
-        # at integer times (the common case: speed 1 at whole frames) the key is the pose
+        # at integer times (the common case: speed 1 at whole frames) the key is the pose;
+        # between keys, the next key is already on the shortest arc (``next_keys``), so
+        # the blend is blend2's arithmetic without its sign test (the same floats)
         frac = np.flatnonzero(f)
         if frac.size:
-            b = self.keys[(base + i1)[frac]]
-            out[frac] = sqt.blend2(out[frac], b, f[frac])
+            a = out[frac]
+            b = self.next_keys[(base + i0)[frac]]
+            np.subtract(b, a, out=b)
+            b *= f[frac][:, None, None]
+            b += a
+            out[frac] = sqt.normalize_rotations(b)
         return out
 
     def crossings(self, clip_ids: np.ndarray, t0: np.ndarray, t1: np.ndarray):

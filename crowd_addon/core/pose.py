@@ -84,7 +84,7 @@ def blend2(a: np.ndarray, b: np.ndarray, w, out: np.ndarray | None = None) -> np
     if out is None:
         out = np.empty(np.broadcast_shapes(a.shape, b.shape), a.dtype)
     np.subtract(b, a, out=out)
-    neg = _dot4(a, b) < 0
+    neg = dot_rotations(a, b) < 0
     if neg.any():
         # shortest arc: blend toward -q_b where the quaternions point apart
         for c in (3, 4, 5, 6):
@@ -95,7 +95,8 @@ def blend2(a: np.ndarray, b: np.ndarray, w, out: np.ndarray | None = None) -> np
     return out
 
 
-def _dot4(a, b):
+def dot_rotations(a, b):
+    """(...,) dot products of the rotation quaternions of SQT poses ``a`` and ``b``."""
     d = a[..., 3] * b[..., 3]
     for c in (4, 5, 6):
         d += a[..., c] * b[..., c]
@@ -104,7 +105,7 @@ def _dot4(a, b):
 
 def normalize_rotations(p: np.ndarray) -> np.ndarray:
     """Normalise the rotation quaternions of SQT poses ``p`` in place."""
-    inv = _dot4(p, p)
+    inv = dot_rotations(p, p)
     np.sqrt(inv, out=inv)
     np.divide(1.0, inv, out=inv)
     for c in (3, 4, 5, 6):
@@ -133,7 +134,7 @@ def blend_weighted(poses: np.ndarray, weights: np.ndarray) -> np.ndarray:
     w = w / np.where(total > 0, total, 1)
     heaviest = np.argmax(np.broadcast_to(w, poses.shape[:3]), axis=1)    # (n, B)
     ref = np.take_along_axis(poses, heaviest[:, None, :, None], axis=1)  # (n, 1, B, 10)
-    wq = np.where(_dot4(poses, ref) < 0, -w, w)                             # (n, k, B)
+    wq = np.where(dot_rotations(poses, ref) < 0, -w, w)                             # (n, k, B)
     out = np.einsum("nkbc,nkb->nbc", poses, np.broadcast_to(w, poses.shape[:3]))
     for c in (3, 4, 5, 6):
         out[..., c] = np.einsum("nkb,nkb->nb", poses[..., c], wq)
@@ -149,7 +150,7 @@ def _blend_per_node(poses, w):
     total = w.sum(axis=1, keepdims=True)
     w = w / np.where(total > 0, total, 1)
     ref = poses[np.arange(n), np.argmax(w, axis=1)][:, None]                 # (n, 1, B, 10)
-    away = _dot4(poses, ref) < 0                                             # (n, k, B)
+    away = dot_rotations(poses, ref) < 0                                             # (n, k, B)
     if away.any():
         poses = poses.copy()
         rot = poses[..., ROT]
