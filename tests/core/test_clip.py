@@ -305,3 +305,28 @@ def test_crossings_many_inputs_and_clips():
     got = sorted((int(w), bank.tag_names[bank.tag_name[k]]) for w, k in zip(which, tag))
     assert got == [(0, "x"), (1, "y"), (3, "x")]
     np.testing.assert_array_equal(bank.tag_clip[tag], ids[which])
+
+
+def test_sampling_between_keys_is_the_shortest_arc_blend_of_the_two_keys():
+    """Between keys the bank interpolates toward the next key stored on the shortest
+    arc: exactly :func:`pose.blend2` of the two keys (which tests the sign itself), for
+    keys whose quaternions flip sign from one to the next, in two clips side by side
+    (the last key of one is not blended toward the first of the other)."""
+    rng = np.random.default_rng(5)
+    k1, k2 = random_keys(9, 4, 1), random_keys(6, 4, 2)
+    k1[1::2, :, 3:7] *= -1                        # the same rotations, signs flipped
+    clips = [Clip("a", k1), Clip("b", k2, loop=False)]
+    bank = ClipBank(clips)
+    for clip in (0, 1):
+        keys = clips[clip].keys                           # float32, as stored
+        t = rng.uniform(0, len(keys) - 1, 200)
+        t[:3] = (0.0, len(keys) - 1.0, len(keys) - 1.5)
+        got = bank.sample(np.full(200, clip), t)
+        u = bank.local_time(np.full(200, clip), t)        # the loop wraps its last key
+        i0 = np.floor(u).astype(int)
+        i1 = np.minimum(i0 + 1, len(keys) - 1)
+        f = (u - i0).astype(np.float32)
+        want = keys[i0].copy()
+        part = f > 0
+        want[part] = sqt.blend2(keys[i0[part]], keys[i1[part]], f[part])
+        np.testing.assert_array_equal(got[:, :keys.shape[1]], want)
