@@ -294,3 +294,22 @@ def test_export_from_a_config_needs_frames(tmp_path, capsys):
                  str(tmp_path / "x.usdc")]) == 2
     assert "crowd export: error: --frames FIRST-LAST is required with --config" in \
         capsys.readouterr().err
+
+
+def test_plan_and_export_measure_through_the_scene_camera(blend, tmp_path):
+    """``crowd plan --blend`` bakes the scene as the exports do and sees it through its
+    scene camera at its render size: its default equals the repetition of the export
+    at the scene's first frame (no show: the crowd does not change), both measured in
+    fresh processes; ``--json`` ends with the plan's line."""
+    run = crowd("plan", "--blend", blend, "--budget-mb", "5", "--no-plot", "--json")
+    assert run.returncode == 0, run.stderr[-3000:]
+    plan = json.loads(run.stdout.strip().splitlines()[-1])
+    assert plan["repetition_planned"] <= plan["repetition_default"]
+    assert plan["templates"] == ["idle"] and plan["agents"] == NX * NY
+    out = tmp_path / "shot.usdc"
+    run = crowd("export", "--blend", blend, "--out", out, "--json", "--repetition-frames",
+                "1")
+    assert run.returncode == 0, run.stderr[-3000:]
+    rep = json.loads(run.stdout)["repetition"]
+    assert rep["frames"] == [FIRST] and rep["visible"][0] == plan["visible"]
+    assert rep["value"] == pytest.approx(plan["repetition_default"], abs=1e-9)
