@@ -9,6 +9,8 @@ default marked, into a PNG (matplotlib, the ``plot`` extra).
 
 from __future__ import annotations
 
+import numpy as np
+
 from .core.errors import CrowdError
 
 __all__ = ["table", "plot", "summary_lines", "metric_text"]
@@ -84,7 +86,13 @@ def plot(result, path, title: str = "") -> str:
                   f"{p.offset_mode.lower()}): {metric_text(p.repetition)}")
     ax.set_xlabel("M, frames of pose history per stream")
     ax.set_ylabel(f"repetition (share of {result.settings.k} nearest on screen alike)")
-    ax.set_yscale("symlog", linthresh=1e-3)
+    values = [c.repetition for c in result.candidates if c.repetition is not None]
+    values += [v for v in (d.repetition, p.repetition) if v is not None]
+    positive = [v for v in values if v > 0]
+    if positive and max(positive) > 10 * min(positive):
+        # decades, and 0 (no pair alike) still on the axis below the smallest value
+        ax.set_yscale("symlog", linthresh=10.0 ** np.floor(np.log10(min(positive))))
+    ax.set_ylim(bottom=0.0)
     ax.grid(True, alpha=0.3)
     ax.set_title(title or f"{result.agents:,} agents, budget "
                           f"{result.budget_bytes / _MB:,.0f} MB, at most "

@@ -14,7 +14,8 @@ same crowd:
   character's streams: home seats ``idle_a`` / ``idle_c`` / ``clap``, away seats
   ``idle_b``), ``hit`` (``k`` on the seat of the k-th fan the ball hits, 0 elsewhere)
   and ``team_colour`` (home red, away blue, varied per seat); the source scales the
-  fans 0.93 .. 1.07 (heights vary, docs/variety.md).
+  fans 0.93 .. 1.07 (heights vary), and each fan draws a skin tone and trousers from
+  the fan's palettes (:data:`FAN_PALETTES`, docs/variety.md).
 - :func:`setup_show` authors the show (``scene.crowd.show``, docs/show.md) and sets the
   scene's frame range to the run: the **goal** (home fans blend to ``cheer``, away
   fans to ``groan``, both at offset 0 and held for the cheer), the **Mexican wave**
@@ -119,6 +120,15 @@ def _animation(pool, name, action):
     return anim
 
 
+#: the fans' palettes (docs/variety.md): body material -> colours, one per fan at random
+FAN_PALETTES = {
+    "fan_skin": ((0.92, 0.72, 0.58), (0.80, 0.55, 0.42), (0.62, 0.42, 0.30),
+                 (0.42, 0.27, 0.18), (0.27, 0.17, 0.11)),
+    "fan_trousers": ((0.12, 0.14, 0.25), (0.05, 0.05, 0.06), (0.55, 0.48, 0.36),
+                     (0.25, 0.32, 0.45)),
+}
+
+
 def _add_characters(s, hits):
     s.characters.clear()
     for name, (rig, body) in CHARACTERS.items():
@@ -131,6 +141,11 @@ def _add_characters(s, hits):
         _animation(fan.uniques, f"hit{k}", HIT)
     _action(MOCAP_ACTION).use_cyclic = True     # the jumps loop (its manual frame range)
     _animation(mocap.streams, "mocap", MOCAP_ACTION)
+    for material, colours in FAN_PALETTES.items():    # each fan its skin and trousers
+        pal = fan.palettes.add()
+        pal.material, pal.mode, pal.count = material, "RANDOM", len(colours)
+        for i, c in enumerate(colours):
+            setattr(pal, f"color_{i}", c)
 
 
 def _seat_attribute(me, name, values, kind="INT"):

@@ -22,8 +22,7 @@ bodies and colours, the uniques and the transition slots. Memory is the pose tex
 (:func:`.budget.plan` with S and M given: ``(M x S + uniques + slots)`` rows of
 ``bones x 48`` bytes); candidates over the budget, or with more than ``max_streams`` streams
 (the per-frame CPU cost), are reported and not chosen. Among the others the lowest
-metric wins; within ``TIE`` (2 %) or ``TIE_PAIRS`` (one pair in 2,000) of it, the
-fewest streams, then the least memory.
+metric wins; within ``TIE`` (2 %) of it, the fewest streams, then the least memory.
 
 The screen-space neighbours are found once; each candidate only re-draws streams and
 offsets and compares its pairs (a few milliseconds at 65,000 agents).
@@ -43,7 +42,7 @@ from .repetition import (RepetitionSettings, colors_shown, nearest_neighbours, p
 from .variety import spread_offsets
 
 __all__ = ["Template", "PlanInput", "Candidate", "VarietyPlan", "plan_input", "plan_variety",
-           "M_CHOICES", "COPY_CHOICES", "OFFSET_MODES", "MAX_STREAMS", "TIE", "TIE_PAIRS"]
+           "M_CHOICES", "COPY_CHOICES", "OFFSET_MODES", "MAX_STREAMS", "TIE"]
 
 #: history lengths tried (besides the current one), frames
 M_CHOICES = (15, 20, 30, 40, 60, 90, 120, 180, 240, 300)
@@ -53,11 +52,9 @@ COPY_CHOICES = (1, 2, 3, 4, 6, 8)
 OFFSET_MODES = ("UNIFORM", "SPREAD")
 #: streams a plan may use by default: the paper's 256 (its per-frame CPU cost)
 MAX_STREAMS = 256
-#: metrics within this share of the lowest, or within :data:`TIE_PAIRS` of it, are a
-#: tie (then fewer streams, then less memory, win)
+#: metrics within this share of the lowest are a tie (then fewer streams, then less
+#: memory, win)
 TIE = 0.02
-#: one alike pair in 2,000 more: no viewer sees it
-TIE_PAIRS = 5e-4
 
 
 @dataclass(frozen=True)
@@ -330,7 +327,7 @@ def plan_variety(inp: PlanInput, view_projection, budget_bytes: float,
         raise CrowdError(f"plan: no candidate fits {budget:,.0f} B and {max_streams} "
                          f"streams (the smallest needs {min(c.bytes for c in out):,} B)")
     best = min(c.repetition for c in ok)
-    planned = min((c for c in ok if c.repetition <= max(best * (1 + TIE), best + TIE_PAIRS)),
+    planned = min((c for c in ok if c.repetition <= best * (1 + TIE)),
                   key=lambda c: (c.streams, c.bytes, c.repetition))
     return VarietyPlan(default, planned, tuple(out), budget, int(max_streams), inp.count,
                        pairs.visible, settings, tuple(notes),

@@ -53,7 +53,7 @@ def test_summary_reports_the_show(demo):
     assert {frames[f"hit {k}"] for k in range(1, 7)} == {2 + FRAMES * 70 // 240}
     assert "transitions:" in run.stdout and "events fired" in run.stdout
     rep = s["repetition"]                       # docs/variety.md
-    assert 0 < rep["value"] < 0.5 and rep["k"] == 6 and rep["screen"] == [320, 180]
+    assert 0 <= rep["value"] < 0.1 and rep["k"] == 6 and rep["screen"] == [320, 180]
     assert len(rep["frames"]) == 8 and min(rep["visible"]) >= 30    # a stand in view
     assert f"repetition {rep['value']:.3f}" in run.stdout
     assert "cues: goal home @" in run.stdout
