@@ -16,8 +16,8 @@ def test_records_hold_each_agents_placement_reference_and_colour(h):
     np.testing.assert_array_equal(rec[:, 0, :3], crowd.agents.position)
     np.testing.assert_array_equal(rec[:, 0, 3], crowd.agents.heading)
     a = crowd.agents
-    np.testing.assert_array_equal(rec[:, 1, :3], np.c_[a.kind * 65536 + a.offset, a.ref,
-                                                       a.scale])
+    kind_offset = a.kind.astype(np.int64) * 65536 + a.offset      # int8 kind: widen first
+    np.testing.assert_array_equal(rec[:, 1, :3], np.c_[kind_offset, a.ref, a.scale])
     assert len(set(a.scale.tolist())) == 40                # every agent its own scale
     rgb = rec[:, 1, 3].astype(np.int64)
     decoded = np.stack([rgb >> 16, (rgb >> 8) & 255, rgb & 255], 1) / 255
