@@ -233,7 +233,14 @@ class CROWD_OT_plan_variety(_OnPreview, bpy.types.Operator):
 
     def run(self, context):
         from ..plan_report import metric_text
-        p = preview.plan_variety(context.scene, context.region_data, context.region)
+        wm = context.window_manager
+        wm.progress_begin(0, 1)                 # the cursor shows the candidates tried
+        try:
+            p = preview.plan_variety(context.scene, context.region_data, context.region,
+                                     progress=lambda done, total: wm.progress_update(
+                                         done / max(total, 1)))
+        finally:
+            wm.progress_end()
         self.report({"INFO"}, f"Plan: M {p.planned.max_offset}, {p.planned.streams} "
                               f"streams, repetition {metric_text(p.planned.repetition)} "
                               f"(now {metric_text(p.default.repetition)})")
