@@ -4,8 +4,9 @@ F12 (Workbench, EEVEE, Cycles), viewport renders and playblasts know nothing of 
 preview's GPU drawing, so with ``scene.crowd.render_crowd`` on the crowd is also made
 of ordinary Blender data, with the paper's sharing kept:
 
-* one **pose mesh** per pose in use: a (skeleton, level of detail, pose texture row)
-  triple. Agents of a stream at the same offset read the same row, so they share one
+* one **pose mesh** per pose in use: a (body, level of detail, pose texture row)
+  triple (a body: the agent's mesh variant with its props,
+  :mod:`crowd_addon.core.bodies`). Agents of a stream at the same offset read the same row, so they share one
   mesh; an agent in a transition or playing a unique has a row of its own. Each pose
   mesh is the level's proxy (its triangles, UVs and materials) skinned on the CPU by
   core (:func:`crowd_addon.core.skinning.skin_vertices`) and written with one bulk
@@ -67,14 +68,14 @@ def agent_lods(crowd, scene) -> np.ndarray:
     from .cameras import camera_from_object
     from .cameras import scene_size
 
-    levels = np.array([len(crowd.config.meshes.get(s.name, ())) for s in crowd.view.skeletons])
-    skel = crowd.view.agent_skeleton
+    levels = np.array([len(b.levels) for b in crowd.view.bodies], np.int64)
+    body = crowd.view.agent_body
     if scene.camera is None or scene.camera.type != "CAMERA":
         return np.zeros(crowd.agents.count, np.int64)
     w, h = scene_size(scene)
     camera = camera_from_object(scene.camera, w / h)
     d = view_distances(crowd.agents.position, camera.view_projection, h)
-    return lod_levels(d, crowd.config.lod_distances, levels[skel]).astype(np.int64)
+    return lod_levels(d, crowd.config.lod_distances, levels[body]).astype(np.int64)
 
 
 def _node_group():
@@ -194,13 +195,14 @@ class _Existing:
         self.objects = {o.name: o for o in bpy.data.objects if o.name.startswith(_POSE_PREFIX)}
         self.linked = set(coll.objects.keys())
 
-    def meshes_for(self, proxy, skel: int, lod: int, count: int) -> list:
-        """``count`` pose meshes of one (skeleton, LOD) topology, reused frame to frame."""
+    def meshes_for(self, proxy, body: int, lod: int, count: int) -> list:
+        """``count`` pose meshes of one (body, LOD) topology, reused frame to frame."""
         out = []
         for i in range(count):
-            name = f"{_MESH_PREFIX}{skel}.{lod}.{i:06d}"
+            name = f"{_MESH_PREFIX}{body}.{lod}.{i:06d}"
             mesh = self.meshes.get(name)
-            if mesh is None or len(mesh.vertices) != proxy.vertex_count:
+            if mesh is None or len(mesh.vertices) != proxy.vertex_count \
+                    or len(mesh.polygons) != proxy.triangle_count:
                 if mesh is not None:
                     bpy.data.meshes.remove(mesh)
                 mesh = self.meshes[name] = _mesh_for(proxy, name)
@@ -229,13 +231,12 @@ def sync(scene, crowd) -> RenderStats:
     frame; returns :class:`RenderStats`."""
     t0 = time.perf_counter()
     n = crowd.agents.count
-    skel = np.asarray(crowd.view.agent_skeleton, np.int64)
+    body = crowd.view.agent_body
+    bodies = crowd.view.bodies
     lod = agent_lods(crowd, scene)
     rows = np.asarray(crowd.view.agent_rows_index(), np.int64)
-    skeletons = crowd.view.skeletons
-    drawn = np.array([bool(crowd.config.meshes.get(s.name)) for s in skeletons])[skel] \
-        if n else np.zeros(0, bool)
-    key = (rows * len(skeletons) + skel) * 16 + lod
+    drawn = np.array([bool(b.levels) for b in bodies], bool)[body] if n else np.zeros(0, bool)
+    key = (rows * len(bodies) + body) * 16 + lod
     keys, first, pose_of_agent = np.unique(np.where(drawn, key, -1), return_index=True,
                                            return_inverse=True)
     real = keys >= 0
@@ -246,10 +247,10 @@ def sync(scene, crowd) -> RenderStats:
     pose_index = np.where(drawn, pose_of_agent.reshape(-1) - offset, 0).astype(np.int32)
     coll = _poses_collection()
     existing = _Existing(coll)
-    for k in np.unique(skel[drawn]):
-        levels = crowd.config.meshes[skeletons[k].name]
-        for level in np.unique(lod[drawn & (skel == k)]):
-            sel = np.flatnonzero(real & (((keys // 16) % len(skeletons)) == k)
+    for k in np.unique(body[drawn]):
+        levels = bodies[k].levels
+        for level in np.unique(lod[drawn & (body == k)]):
+            sel = np.flatnonzero(real & (((keys // 16) % len(bodies)) == k)
                                  & ((keys % 16) == level))
             agents = first[sel]
             proxy = levels[int(level)]

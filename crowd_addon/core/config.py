@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .agents import assign_offsets, assign_streams, check_offsets
+from .bodies import MAX_PROPS
 from .controllers import Controller
 from .errors import CrowdError
 from .show import Show
@@ -106,6 +107,13 @@ class CrowdConfig:
         all; :attr:`palette`).
     palette_materials : dict skeleton -> tuple of material names: the materials its
         agents' ``agent_palette`` columns colour, in column order.
+    meshes : dict skeleton -> list of ProxyMesh, its body's LOD levels (mesh variant
+        0; :meth:`add_mesh`); variants : dict skeleton -> list of such lists, its
+        further mesh variants 1, 2, ... (:meth:`add_variant`); props : dict skeleton
+        -> list of :class:`~.bodies.Prop` (:meth:`add_prop`); agent_variant : (N,)
+        int16 each agent's mesh variant (empty: all 0; :attr:`variant_ids`);
+        agent_props : (N,) uint8 the props each agent carries, a bit per prop of its
+        character (empty: none; :attr:`prop_masks`). See :mod:`.bodies`.
     show : :class:`~.show.Show`, the cues, reactions and animated parameters the crowd
         runs itself before each step (empty by default).
     """
@@ -132,6 +140,10 @@ class CrowdConfig:
         default_factory=lambda: np.zeros((0, PALETTE_COLUMNS, 3), np.float32))
     palette_materials: dict = field(default_factory=dict)
     meshes: dict = field(default_factory=dict)
+    variants: dict = field(default_factory=dict)
+    props: dict = field(default_factory=dict)
+    agent_variant: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int16))
+    agent_props: np.ndarray = field(default_factory=lambda: np.zeros(0, np.uint8))
     lod_distances: tuple = (30.0, 90.0, 150.0)
     show: Show = field(default_factory=Show)
 
@@ -154,6 +166,48 @@ class CrowdConfig:
         ready :class:`~.mesh.ProxyMesh` levels (of the same skeleton), optionally
         followed by ``"card"`` (the card of ``mesh``). LOD ``k`` is drawn from
         ``lod_distances[k - 1]`` metres."""
+        levels = self._levels(mesh, lods)
+        self.meshes[mesh.skeleton] = levels
+        return levels
+
+    def add_variant(self, mesh, lods=(0.25, 0.06, "card")):
+        """Add ``mesh`` as a further mesh variant of its skeleton (after the body of
+        :meth:`add_mesh`, which must be set); ``lods`` as for :meth:`add_mesh`. Returns
+        the variant's index."""
+        if not self.meshes.get(mesh.skeleton):
+            raise CrowdError(f"mesh variant {mesh.name!r}: skeleton {mesh.skeleton!r} has no "
+                             "body yet (add_mesh first: it is variant 0)")
+        names = [lv[0].name for lv in self.mesh_variants(mesh.skeleton)]
+        if mesh.name in names:
+            raise CrowdError(f"mesh variant {mesh.name!r}: skeleton {mesh.skeleton!r} has a "
+                             f"variant of that name already ({names})")
+        self.variants.setdefault(mesh.skeleton, []).append(self._levels(mesh, lods))
+        return len(names)
+
+    def mesh_variants(self, skeleton: str) -> list:
+        """The LOD level lists of ``skeleton``'s mesh variants, variant 0 first (empty
+        when it has no mesh)."""
+        first = self.meshes.get(skeleton)
+        return [first, *self.variants.get(skeleton, [])] if first else []
+
+    def add_prop(self, prop):
+        """Add a :class:`~.bodies.Prop` to its skeleton; returns its index (its bit in
+        ``agent_props``)."""
+        if prop.skeleton not in self.skeletons:
+            raise CrowdError(f"prop {prop.name!r}: unknown skeleton {prop.skeleton!r} "
+                             f"(known: {sorted(self.skeletons)})")
+        self._check_mesh(prop.mesh, f"prop {prop.name!r}: ")
+        have = self.props.setdefault(prop.skeleton, [])
+        if prop.name in [p.name for p in have]:
+            raise CrowdError(f"prop {prop.name!r}: skeleton {prop.skeleton!r} has a prop of "
+                             "that name already")
+        if len(have) >= MAX_PROPS:
+            raise CrowdError(f"prop {prop.name!r}: skeleton {prop.skeleton!r} has "
+                             f"{MAX_PROPS} props already, the most a character has")
+        have.append(prop)
+        return len(have) - 1
+
+    def _levels(self, mesh, lods) -> list:
         from .mesh import CARD, ProxyMesh, build_lods, card_lod
         self._check_mesh(mesh)
         ready = [m for m in lods if isinstance(m, ProxyMesh)]
@@ -174,7 +228,6 @@ class CrowdConfig:
                                      f"skeleton {level.skeleton!r}, not {mesh.skeleton!r}")
                 self._check_mesh(level, f"mesh {mesh.name!r}: LOD {k}: ")
             levels = [mesh, *ready] + ([card_lod(mesh)] if rest else [])
-        self.meshes[mesh.skeleton] = levels
         return levels
 
     def _check_mesh(self, mesh, what=""):
@@ -209,6 +262,18 @@ class CrowdConfig:
                                             np.float32)
 
     @property
+    def variant_ids(self) -> np.ndarray:
+        """(N,) int16 mesh variant per agent: :attr:`agent_variant`, or zeros."""
+        v = np.asarray(self.agent_variant, np.int16).reshape(-1)
+        return v if v.size else np.zeros(self.agent_count, np.int16)
+
+    @property
+    def prop_masks(self) -> np.ndarray:
+        """(N,) uint8 props per agent (a bit each): :attr:`agent_props`, or zeros."""
+        m = np.asarray(self.agent_props, np.uint8).reshape(-1)
+        return m if m.size else np.zeros(self.agent_count, np.uint8)
+
+    @property
     def scales(self) -> np.ndarray:
         """(N,) float32 scale per agent: :attr:`agent_scale`, or ones when it is empty."""
         s = np.asarray(self.agent_scale, np.float32).reshape(-1)
@@ -216,12 +281,15 @@ class CrowdConfig:
 
     def add_agents(self, count, streams=None, stream_weights=None, offsets="uniform",
                    offset_mean=None, offset_std=None, positions=None, headings=None,
-                   colors=None, seed=None, scales=None, palette=None):
+                   colors=None, seed=None, scales=None, palette=None, variants=None,
+                   props=None):
         """Append ``count`` streamed agents.
 
         ``streams``: None (all streams, drawn with ``stream_weights``), an int, a
         name, or an array of stream indices per agent. ``offsets``: ``"uniform"``,
-        ``"normal"`` or an array. Returns the new agents' ids.
+        ``"normal"`` or an array. ``variants``: each agent's mesh variant, ``props``
+        the props it carries (a bit per prop of its character; :mod:`.bodies`); None:
+        variant 0 and no props. Returns the new agents' ids.
         """
         seed = self.seed + self.agent_count if seed is None else seed
         names = [s.name for s in self.streams]
@@ -256,6 +324,19 @@ class CrowdConfig:
             new = np.ones(count, np.float32) if scales is None else \
                 np.asarray(scales, np.float32).reshape(count)
             self.agent_scale = np.concatenate([old, new]).astype(np.float32)
+        for name, given, dtype in (("agent_variant", variants, np.int16),
+                                   ("agent_props", props, np.uint8)):
+            if given is not None or np.asarray(getattr(self, name)).size:
+                old = self.variant_ids if name == "agent_variant" else self.prop_masks
+                arr = np.zeros(count, np.int64) if given is None else \
+                    np.asarray(given).reshape(count)
+                top = np.iinfo(dtype).max
+                if arr.size and not (np.issubdtype(arr.dtype, np.integer)
+                                     and 0 <= arr.min() and arr.max() <= top):
+                    raise CrowdError(f"agents: {name[6:]} must be integers in 0..{top}, got "
+                                     f"{arr.dtype} {arr.min()}..{arr.max()}")
+                new = arr.astype(dtype)
+                setattr(self, name, np.concatenate([old, new]).astype(dtype))
         if palette is not None or np.asarray(self.agent_palette).size:
             old = self.palette
             new = np.full((count, PALETTE_COLUMNS, 3), -1.0, np.float32) if palette is None \
@@ -413,3 +494,41 @@ def _validate_agents(cfg):
     if bad.size:
         raise CrowdError(f"agent {int(bad[0])}: unknown unique index {un[bad[0]]} "
                          f"({len(cfg.uniques)} uniques)")
+    _validate_bodies(cfg, st, un)
+
+
+def _validate_bodies(cfg, st, un):
+    """Each agent's mesh variant and props exist for its character."""
+    n = st.shape[0]
+    for name in ("agent_variant", "agent_props"):
+        arr = np.asarray(getattr(cfg, name))
+        if arr.size and arr.shape != (n,):
+            raise CrowdError(f"crowd: {name} must be ({n},) or empty, got {arr.shape}")
+    for skel, props in cfg.props.items():
+        if skel not in cfg.skeletons or len(props) > MAX_PROPS:
+            raise CrowdError(f"crowd: props: unknown skeleton {skel!r} or more than "
+                             f"{MAX_PROPS} props")
+    for skel in cfg.variants:
+        if not cfg.meshes.get(skel):
+            raise CrowdError(f"crowd: skeleton {skel!r} has mesh variants but no body "
+                             "(variant 0: CrowdConfig.add_mesh)")
+    if not (np.asarray(cfg.agent_variant).size or np.asarray(cfg.agent_props).size):
+        return
+    names = list(cfg.skeletons)
+    owner = [names.index(d.skeleton) for d in cfg.streams] or [0]
+    own_u = [names.index(d.skeleton) for d in cfg.uniques] or [0]
+    skel = np.where(st >= 0, np.asarray(owner)[np.clip(st, 0, None)],
+                    np.asarray(own_u)[np.clip(un, 0, None)])
+    variant, mask = cfg.variant_ids.astype(np.int64), cfg.prop_masks.astype(np.int64)
+    count = np.array([max(1, len(cfg.mesh_variants(k))) for k in names])
+    props = np.array([len(cfg.props.get(k, ())) for k in names])
+    bad = np.flatnonzero((variant < 0) | (variant >= count[skel]))
+    if bad.size:
+        a = int(bad[0])
+        raise CrowdError(f"agent {a}: mesh variant {int(variant[a])}, but character "
+                         f"{names[skel[a]]!r} has variants 0..{count[skel[a]] - 1}")
+    bad = np.flatnonzero(mask >> props[skel])
+    if bad.size:
+        a = int(bad[0])
+        raise CrowdError(f"agent {a}: carries props {int(mask[a]):#b}, but character "
+                         f"{names[skel[a]]!r} has {props[skel[a]]} props")

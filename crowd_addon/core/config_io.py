@@ -45,6 +45,7 @@ from .controllers import (Blend2, BlendMask, BlendSpace2D, ClipPlayer, Layer, St
                           StateTransition)
 from .errors import CrowdError
 from .files import file_mode
+from .bodies import Prop
 from .mesh import Look, ProxyMesh
 from .show import Action, Cue, Reaction, Show, Sweep, Track
 from .skeleton import Skeleton
@@ -53,7 +54,7 @@ __all__ = ["FORMAT", "VERSION", "save_config", "load_config", "config_digest", "
            "unregister_kind", "controller_kinds", "ControllerKind", "Encoder", "Decoder"]
 
 FORMAT = "crowd_addon.config"
-VERSION = (1, 3)            # (major, minor): readers accept any minor of their major
+VERSION = (1, 4)            # (major, minor): readers accept any minor of their major
 _REQUIRED = object()
 
 
@@ -492,12 +493,16 @@ def _encode_config(cfg: CrowdConfig) -> tuple:
     for i, (skel, levels) in enumerate(cfg.meshes.items()):
         e = enc.at("meshes", i)
         m["meshes"].append({"skeleton": skel, "levels": [
-            {"name": lv.name, **{k: e.at("levels", j).array(getattr(lv, k), k)
-                                 for k in (*_MESH_ARRAYS, *_LOOK_ARRAYS)
-                                 if getattr(lv, k) is not None},
-             "looks": [{"name": k.name, "color": list(k.color), "texture": k.texture}
-                       for k in lv.looks]}
-            for j, lv in enumerate(levels)]})
+            _encode_level(lv, e.at("levels", j)) for j, lv in enumerate(levels)]})
+        if cfg.variants.get(skel):          # files without variants as before
+            m["meshes"][-1]["variants"] = [
+                [_encode_level(lv, e.at("variants", v, j)) for j, lv in enumerate(lvs)]
+                for v, lvs in enumerate(cfg.variants[skel])]
+    props = [p for ps in cfg.props.values() for p in ps]
+    if props:
+        m["props"] = [{"name": p.name, "skeleton": p.skeleton, "bone": p.bone,
+                       "mesh": _encode_level(p.mesh, enc.at("props", i, "mesh"))}
+                      for i, p in enumerate(props)]
     e = enc.at("agents")
     m["agents"] = {"count": cfg.agent_count}
     for key, _, _ in _AGENTS:
@@ -507,8 +512,48 @@ def _encode_config(cfg: CrowdConfig) -> tuple:
     if (cfg.palette >= 0).any():             # ... and without palettes
         m["agents"]["palette"] = e.array(cfg.palette, "palette")
         m["palette_materials"] = {k: list(v) for k, v in cfg.palette_materials.items()}
+    if (cfg.variant_ids != 0).any():         # ... and without mesh variants or props
+        m["agents"]["variant"] = e.array(cfg.variant_ids, "variant")
+    if (cfg.prop_masks != 0).any():
+        m["agents"]["props"] = e.array(cfg.prop_masks, "props")
     m["show"] = _encode_show(cfg.show, enc.at("show"))
     return _plain(m, ""), arrays
+
+
+def _encode_level(lv, e) -> dict:
+    """A mesh level (ProxyMesh) as the file holds it."""
+    return {"name": lv.name, **{k: e.array(getattr(lv, k), k)
+                                for k in (*_MESH_ARRAYS, *_LOOK_ARRAYS)
+                                if getattr(lv, k) is not None},
+            "looks": [{"name": k.name, "color": list(k.color), "texture": k.texture}
+                      for k in lv.looks]}
+
+
+def _decode_level(lv, dl, skel, cfg):
+    """The ProxyMesh of a mesh level of skeleton ``skel`` read at ``dl``."""
+    arrays = {k: dl.array(lv, k, kinds, shape) for k, (kinds, shape) in _MESH_ARRAYS.items()}
+    for k in ("bone_indices", "bone_weights"):
+        if arrays[k].shape[1] not in _INFLUENCE_WIDTHS:
+            raise dl.at(k).error(f"array {lv[k]['array']!r} has shape {arrays[k].shape}, "
+                                 f"expected (*, 4) or (*, 8)", dl.npz_file)
+    for k, (kinds, shape) in _LOOK_ARRAYS.items():
+        if lv.get(k) is not None:
+            arrays[k] = dl.array(lv, k, kinds, shape)
+    looks = []
+    for n, look in enumerate(dl.items(lv, "looks", "object", [])):
+        dk = dl.at("looks", n)
+        try:
+            looks.append(Look(dk.get(look, "name", "name"),
+                              tuple(dk.items(look, "color", "number")),
+                              dk.get(look, "texture", "str", "")))
+        except CrowdError as e:
+            raise dk.error(str(e)) from None
+    try:
+        return ProxyMesh(dl.get(lv, "name", "name"), skel,
+                         bone_count=cfg.skeletons[skel].bone_count, looks=tuple(looks),
+                         **arrays)
+    except CrowdError as e:
+        raise dl.error(str(e)) from None
 
 
 # ------------------------------------------------------------------------- show
@@ -704,37 +749,32 @@ def _decode_config(m: dict, dec: Decoder) -> CrowdConfig:
                                          f"meshes[{mesh_of[skel]}]); give each skeleton one "
                                          "mesh with its LOD levels")
         mesh_of[skel] = i
-        levels = []
-        for j, lv in enumerate(d.items(mesh, "levels", "object")):
-            dl = d.at("levels", j)
-            arrays = {k: dl.array(lv, k, kinds, shape) for k, (kinds, shape) in
-                      _MESH_ARRAYS.items()}
-            for k in ("bone_indices", "bone_weights"):
-                if arrays[k].shape[1] not in _INFLUENCE_WIDTHS:
-                    raise dl.at(k).error(f"array {lv[k]['array']!r} has shape "
-                                         f"{arrays[k].shape}, expected (*, 4) or (*, 8)",
-                                         dl.npz_file)
-            for k, (kinds, shape) in _LOOK_ARRAYS.items():
-                if lv.get(k) is not None:
-                    arrays[k] = dl.array(lv, k, kinds, shape)
-            looks = []
-            for n, look in enumerate(dl.items(lv, "looks", "object", [])):
-                dk = dl.at("looks", n)
-                try:
-                    looks.append(Look(dk.get(look, "name", "name"),
-                                      tuple(dk.items(look, "color", "number")),
-                                      dk.get(look, "texture", "str", "")))
-                except CrowdError as e:
-                    raise dk.error(str(e)) from None
-            try:
-                levels.append(ProxyMesh(dl.get(lv, "name", "name"), skel,
-                                        bone_count=cfg.skeletons[skel].bone_count,
-                                        looks=tuple(looks), **arrays))
-            except CrowdError as e:
-                raise dl.error(str(e)) from None
+        levels = [_decode_level(lv, d.at("levels", j), skel, cfg)
+                  for j, lv in enumerate(d.items(mesh, "levels", "object"))]
         if not levels:
             raise d.at("levels").error("a mesh needs at least one level")
         cfg.meshes[skel] = levels
+        for v, lvs in enumerate(d.items(mesh, "variants", "list", [])):
+            dv = d.at("variants", v)
+            if not lvs:
+                raise dv.error("a mesh variant needs at least one level")
+            for j, lv in enumerate(lvs):
+                if not isinstance(lv, dict):
+                    raise dv.at(j).error(f"must be an object, got {json.dumps(lv)[:60]}")
+            cfg.variants.setdefault(skel, []).append(
+                [_decode_level(lv, dv.at(j), skel, cfg) for j, lv in enumerate(lvs)])
+    for i, prop in enumerate(dec.items(m, "props", "object", [])):
+        d = dec.at("props", i)
+        skel = d.get(prop, "skeleton", "str")
+        if skel not in cfg.skeletons:
+            raise d.at("skeleton").error(f"unknown skeleton {skel!r} "
+                                         f"(known: {sorted(cfg.skeletons)})")
+        try:
+            cfg.add_prop(Prop(d.get(prop, "name", "name"), skel, d.get(prop, "bone", "int"),
+                              _decode_level(d.get(prop, "mesh", "object"), d.at("mesh"), skel,
+                                            cfg)))
+        except CrowdError as e:
+            raise d.error(str(e)) from None
     agents = dec.get(m, "agents", "object")
     d = dec.at("agents")
     n = d.get(agents, "count", "int")
@@ -748,6 +788,10 @@ def _decode_config(m: dict, dec: Decoder) -> CrowdConfig:
         mats = dec.get(m, "palette_materials", "object", {})
         cfg.palette_materials = {k: tuple(dec.at("palette_materials").items(mats, k, "str"))
                                  for k in mats}
+    if agents.get("variant") is not None:
+        cfg.agent_variant = d.array(agents, "variant", "iu", (n,)).astype(np.int16)
+    if agents.get("props") is not None:
+        cfg.agent_props = d.array(agents, "props", "iu", (n,)).astype(np.uint8)
     cfg.show = _decode_show(m, dec)
     return cfg
 

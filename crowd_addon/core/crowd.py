@@ -25,6 +25,7 @@ import numpy as np
 
 from . import pose as sqt
 from .agents import STREAM, TRANSITION, UNIQUE, AgentState
+from .bodies import crowd_bodies
 from .clip import ClipBank
 from .config import MAX_SUBSTEPS, CrowdConfig, validate_config
 from .config_io import config_digest
@@ -130,6 +131,7 @@ class Crowd:
         self.agent_skeleton = np.where(st >= 0, skel[np.clip(st, 0, None)],
                                        skel[s + np.asarray(cfg.agent_unique, np.int64)]
                                        if u else 0).astype(np.int64)
+        self._bodies = None
         self.events = EventDispatcher()
         self.view = FrameView(self)
         self.skinning.bind(self)
@@ -534,6 +536,14 @@ class Crowd:
                              f"{name!r}, it uses another skeleton")
 
     # ------------------------------------------------------------------ agents
+    @property
+    def bodies(self) -> tuple:
+        """``(bodies, agent_body)`` of :func:`~.bodies.crowd_bodies`, made on first use
+        (agents keep their bodies for the crowd's life)."""
+        if self._bodies is None:
+            self._bodies = crowd_bodies(self.config, self.agent_skeleton)
+        return self._bodies
+
     def place_agents(self, agents, position=None, heading=None, color=None):
         """Move, turn or recolour agents (see :meth:`AgentState.place`)."""
         self._changed()

@@ -100,6 +100,17 @@ class FrameView:
         configured with; transitions never change it)."""
         return self._crowd.agent_skeleton.copy()
 
+    @property
+    def bodies(self) -> tuple:
+        """The :class:`~.bodies.Body` s the agents are drawn with (mesh variant and
+        props; :mod:`.bodies`), in :func:`~.bodies.crowd_bodies` order."""
+        return self._crowd.bodies[0]
+
+    @property
+    def agent_body(self) -> np.ndarray:
+        """(N,) int64 each agent's index in :attr:`bodies`."""
+        return self._crowd.bodies[1].copy()
+
     def agent_changes(self, cursor: int):
         """Agents changed since ``cursor`` (:class:`~.agents.AgentChanges`; start with 0)."""
         return self._crowd.agents.changes_since(cursor)

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .agents import assign_offsets, assign_streams, check_offsets
+from .bodies import MAX_PROPS
 from .config import PALETTE_COLUMNS
 from .errors import CrowdError
 from .variety import Timing, choose_variants, spread_offsets
@@ -54,6 +55,10 @@ _SCALE_DRAW = 4
 #: added to a source's seed for the draws of palette colours (plus the character and
 #: palette)
 _PALETTE_DRAW = 5
+#: added to a source's seed for the draw of mesh variants (plus 31 x the character),
+#: and of props (plus 31 x the character and the prop): far from the draws above
+_VARIANT_MESH_DRAW = 1009
+_PROP_DRAW = 2003
 
 
 @dataclass(frozen=True)
@@ -62,7 +67,9 @@ class AgentSet:
     radians, streams (n,) int32 stream indices, offsets (n,) int32 frames, colors
     (n, 3) float32 0..1, characters (n,) int32 character indices, scales (n,) float32
     uniform body scales, palette (n, PALETTE_COLUMNS, 3) float32 the colour of each of
-    the agent's character's palette materials (-1 where it has none)."""
+    the agent's character's palette materials (-1 where it has none), variants (n,)
+    int16 mesh variants, props (n,) uint8 the props each carries (a bit each;
+    :mod:`.bodies`)."""
 
     positions: np.ndarray
     headings: np.ndarray
@@ -72,6 +79,8 @@ class AgentSet:
     characters: np.ndarray
     scales: np.ndarray
     palette: np.ndarray
+    variants: np.ndarray
+    props: np.ndarray
 
     @property
     def count(self) -> int:
@@ -83,7 +92,9 @@ class AgentSet:
                               positions=self.positions, headings=self.headings,
                               colors=self.colors,
                               scales=self.scales if (self.scales != 1).any() else None,
-                              palette=self.palette if (self.palette >= 0).any() else None)
+                              palette=self.palette if (self.palette >= 0).any() else None,
+                              variants=self.variants if self.variants.any() else None,
+                              props=self.props if self.props.any() else None)
 
     @staticmethod
     def concatenate(sets):
@@ -93,10 +104,11 @@ class AgentSet:
                             np.zeros(0, np.int32), np.zeros(0, np.int32),
                             np.zeros((0, 3), np.float32), np.zeros(0, np.int32),
                             np.zeros(0, np.float32),
-                            np.zeros((0, PALETTE_COLUMNS, 3), np.float32))
+                            np.zeros((0, PALETTE_COLUMNS, 3), np.float32),
+                            np.zeros(0, np.int16), np.zeros(0, np.uint8))
         return AgentSet(*(np.concatenate([getattr(s, f) for s in sets])
                           for f in ("positions", "headings", "streams", "offsets", "colors",
-                                    "characters", "scales", "palette")))
+                                    "characters", "scales", "palette", "variants", "props")))
 
 
 @dataclass(frozen=True)
@@ -119,7 +131,12 @@ class CharacterStreams:
     agents a source drawing characters by weight gives it, and per template its
     :class:`~.variety.Timing` (empty: none; the crowd's list holds
     ``timing.count`` streams per template); ``palettes``: up to
-    :data:`PALETTE_COLUMNS` :class:`Palette` s of its body's materials."""
+    :data:`PALETTE_COLUMNS` :class:`Palette` s of its body's materials;
+    ``variant_weights``: the relative share of agents of each of its mesh variants
+    (empty: one body), drawn at random (``variant_mode`` ``"RANDOM"``, seeded) or read
+    from the INT point attribute ``variant_attribute`` (``"ATTRIBUTE"``);
+    ``prop_shares``: per prop (:mod:`.bodies`) the share of its agents, 0..1, that
+    carry it (each drawn on its own, seeded)."""
 
     name: str
     streams: tuple = ()
@@ -127,6 +144,10 @@ class CharacterStreams:
     weight: float = 1.0
     timings: tuple = ()
     palettes: tuple = ()
+    variant_weights: tuple = ()
+    variant_mode: str = "RANDOM"
+    variant_attribute: str = "variant"
+    prop_shares: tuple = ()
 
     def timing(self, i: int) -> Timing:
         return self.timings[i] if self.timings else Timing()
@@ -252,9 +273,44 @@ def place_agents(what: str, positions: np.ndarray, base_heading: np.ndarray,
     scale = np.full(n, lo, np.float32) if lo == hi else \
         np.random.default_rng(seed + _SCALE_DRAW).uniform(lo, hi, n).astype(np.float32)
     palette = _palettes(what, n, characters, char, seed, values)
+    variants, props = _bodies(what, n, characters, char, seed, values)
     return AgentSet(pos.astype(np.float32), np.asarray(heading).astype(np.float32),
                     np.asarray(st, np.int32), np.asarray(off, np.int32),
-                    np.asarray(col, np.float32), char, scale, palette)
+                    np.asarray(col, np.float32), char, scale, palette, variants, props)
+
+
+def _bodies(what, n, characters, char, seed, values) -> tuple:
+    """``(variants (n,) int16, props (n,) uint8)``: each agent's mesh variant among
+    its character's, and the props it carries."""
+    variants, props = np.zeros(n, np.int16), np.zeros(n, np.uint8)
+    for k in np.unique(char).tolist():
+        c, mine = characters[k], np.flatnonzero(char == k)
+        name = f"{what}: character {c.name!r}"
+        count = len(c.variant_weights)
+        if count > 1 and c.variant_mode == "ATTRIBUTE":
+            pick = np.asarray(values(c.variant_attribute, "int"), np.int64)[mine]
+            bad = np.flatnonzero((pick < 0) | (pick >= count))
+            if bad.size:
+                raise CrowdError(f"{name}: attribute {c.variant_attribute!r} gives mesh "
+                                 f"variant {int(pick[bad[0]])} at point {int(mine[bad[0]])}; "
+                                 f"it has variants 0..{count - 1}")
+            variants[mine] = pick
+        elif count > 1:
+            w = np.asarray(c.variant_weights, np.float64)
+            if not np.isfinite(w).all() or (w < 0).any() or w.sum() <= 0:
+                raise CrowdError(f"{name}: mesh variant weights must be non-negative with "
+                                 f"a positive sum, got {list(c.variant_weights)}")
+            rng = np.random.default_rng(seed + _VARIANT_MESH_DRAW + 31 * k)
+            variants[mine] = rng.choice(count, size=mine.size, p=w / w.sum())
+        if len(c.prop_shares) > MAX_PROPS:
+            raise CrowdError(f"{name}: {len(c.prop_shares)} props; at most {MAX_PROPS}")
+        for j, share in enumerate(c.prop_shares):
+            if not (np.isfinite(share) and 0 <= share <= 1):
+                raise CrowdError(f"{name}: prop {j}'s share must be in 0..1, got {share!r}")
+            rng = np.random.default_rng(seed + _PROP_DRAW + 31 * k + j)
+            on = rng.uniform(0.0, 1.0, mine.size) < share
+            props[mine[on]] |= np.uint8(1 << j)
+    return variants, props
 
 
 def _palettes(what, n, characters, char, seed, values) -> np.ndarray:

@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .agents import STREAM, TRANSITION, UNIQUE
+from .bodies import body_keys
 from .errors import CrowdError
 
 __all__ = ["OFFSET_TOLERANCE", "RepetitionSettings", "Repetition", "nearest_neighbours", "screen_points",
@@ -395,9 +396,10 @@ def _report(frames, results, settings) -> Repetition:
 def crowd_repetition(view, view_projection, look=None,
                      settings: RepetitionSettings = RepetitionSettings()) -> Repetition:
     """The metric of a running crowd at its current frame (``view``: ``crowd.view``).
-    ``look``: (N,) int body per agent; default the agent's skeleton (one mesh each)."""
+    ``look``: (N,) int body per agent; default the crowd's (``view.agent_body``: the
+    mesh variant and props of each, :mod:`.bodies`)."""
     a = view.agents
-    look = view.agent_skeleton if look is None else look
+    look = view.agent_body if look is None else look
     r = frame_repetition(a.position, a.kind, a.ref, a.offset, look,
                          colors_shown(a.color, getattr(a, "palette", None)),
                          view_projection, settings, stream_periods(view.config))
@@ -437,7 +439,8 @@ def recording_repetition_steps(rec, view_projection, frames=None, look=None, age
     if bad:
         raise CrowdError(f"repetition: frame {bad[0]} is outside the shot "
                          f"{rec.first}..{rec.last}")
-    look = rec.agent_skeleton if look is None else np.asarray(look)
+    look = body_keys(rec.config, rec.agent_skeleton)[1] if look is None \
+        else np.asarray(look)
     agents = np.arange(rec.agent_count, dtype=np.int64) if agents is None \
         else np.asarray(agents, np.int64)
     return _recording_steps(rec, view_projection, frames, look, agents, settings)

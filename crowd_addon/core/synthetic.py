@@ -161,6 +161,23 @@ def humanoid_mesh(skeleton: Skeleton, sides=8, rings=4, name=None):
                                      bone_count=skeleton.bone_count)
 
 
+def box_prop(skeleton: Skeleton, bone: str, name: str = "box", size=(0.06, 0.06, 0.3),
+             offset=(0.0, 0.0, 0.0), look=None):
+    """A :class:`~.bodies.Prop`: a box ``size`` (metres) centred ``offset`` from the
+    head of bone ``bone`` at the bind pose (armature space), rigid on that bone (a
+    flag pole, a cup); ``look``: a :class:`~.mesh.Look` for it (None: none)."""
+    from .bodies import Prop, rigid_mesh
+
+    b = skeleton.bone_index(bone)
+    corners = np.array(np.meshgrid([-.5, .5], [-.5, .5], [-.5, .5], indexing="ij"))
+    pos = corners.reshape(3, -1).T * np.asarray(size) + skeleton.bind_model[b, :3, 3] + offset
+    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+    tris = np.array([t for a, b_, c, d in quads for t in ((a, b_, c), (a, c, d))])
+    looks = {} if look is None else {"looks": (look,)}
+    return Prop(name, skeleton.name, b, rigid_mesh(name, skeleton.name, b, pos, tris,
+                                                   skeleton.bone_count, **looks))
+
+
 def spread_weights(skeleton: Skeleton, k: int, seed=0):
     """The :func:`humanoid_mesh` body with every vertex weighted to the ``k`` bones whose
     heads are nearest, by 1 / (distance + 5 cm)^2 with some noise (a smooth rig, as an

@@ -35,6 +35,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from .agents import STREAM, UNIQUE
+from .bodies import body_keys
 from .budget import plan as budget_plan
 from .errors import CrowdError
 from .repetition import (RepetitionSettings, colors_shown, nearest_neighbours, pairs_alike,
@@ -74,7 +75,7 @@ class PlanInput:
     """The agents a plan places, as arrays over all ``n`` agents.
 
     positions (n, 3), colors (n, 3 + 12) float (:func:`.repetition.colors_shown`);
-    look (n,) int body; template (n,) int (an
+    look (n,) int body (:func:`~.bodies.body_keys`); template (n,) int (an
     index into ``templates``, -1 for agents on a unique); speed (n,) int the agent's
     speed stream within its template; unique (n,) int (-1 for streamed agents).
     ``max_offset``, ``copies`` (per template), ``offsets`` (n,), ``streams`` (n,) and
@@ -190,7 +191,7 @@ def plan_input(cfg, offsets=None, seed=None) -> PlanInput:
     stream_skel = np.array([skeletons.index(d.skeleton) for d in cfg.streams] + [0], np.int64)
     unique_skel = np.array([skeletons.index(d.skeleton) for d in cfg.uniques] + [0], np.int64)
     un = np.asarray(cfg.agent_unique, np.int64)
-    look = np.where(streamed, stream_skel[st], unique_skel[un])
+    look = body_keys(cfg, np.where(streamed, stream_skel[st], unique_skel[un]))[1]
     bones = max(sk.bone_count for sk in cfg.skeletons.values())
     return PlanInput(
         positions=np.asarray(cfg.agent_position, np.float64),

@@ -103,7 +103,7 @@ def frame_crowd(crowd, **kwargs) -> Camera:
     """:func:`frame_points` around every agent's bind-pose proxy (or a 2 m box per agent
     when the crowd has no proxies)."""
     pos = np.asarray(crowd.agents.position, np.float64)
-    meshes = [levels[0] for levels in crowd.config.meshes.values() if levels]
+    meshes = [body.levels[0] for body in crowd.view.bodies if body.levels]
     if meshes:
         ext = np.concatenate([m.extent for m in meshes]).astype(np.float64) * float(
             crowd.agents.scale.max(initial=1.0))

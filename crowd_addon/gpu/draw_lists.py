@@ -1,15 +1,16 @@
-"""Which agents each instanced draw covers: one draw per (skeleton, LOD).
+"""Which agents each instanced draw covers: one draw per (body, LOD).
 
-Agents outside the camera's view (a bounding sphere per skeleton's proxy) are left
-out. An agent's LOD follows how big it looks: LOD ``k`` is used from
+A body is what an agent is drawn with: its character's mesh variant with the props
+it carries (:mod:`crowd_addon.core.bodies`). Agents outside the camera's view (a
+bounding sphere per body) are left out. An agent's LOD follows how big it looks: LOD ``k`` is used from
 ``lod_distances[k - 1]`` metres on (``CrowdConfig.lod_distances``), clamped to the
-levels its skeleton's proxy has, where the distance is the one at which the agent
+levels its body has, where the distance is the one at which the agent
 would look as big in the *reference view* -- 1080 pixels high with a 40 degree
 vertical field of view (:data:`REFERENCE_FOCAL_PX`). In that view it is the agent's
 depth in front of the camera; zooming in (a longer lens) or a taller viewport
 shrinks it, so close-ups keep their detail, and a small or wide view (or an
 orthographic one, zoomed out) gets the coarse levels sooner. The visible agents are
-grouped by (skeleton, LOD) in one flat list (an R32I texture,
+grouped by (body, LOD) in one flat list (an R32I texture,
 ``gpu_shaders/agents.glsl``); draw ``g`` reads its instances from ``base[g]``. The list
 is rebuilt only when the camera, the viewport's height or the agents move.
 """
@@ -75,22 +76,22 @@ def proxy_bounds(extent: np.ndarray, margin: float = 1.5) -> tuple:
 
 @dataclass(frozen=True)
 class DrawGroup:
-    """Instances ``base .. base + count`` of the list: agents of ``skeleton`` at ``lod``."""
+    """Instances ``base .. base + count`` of the list: agents of ``body`` at ``lod``."""
 
-    skeleton: int
+    body: int
     lod: int
     base: int
     count: int
 
 
 class DrawLists:
-    """Visible agent ids grouped per (skeleton, LOD), laid out as a flat int32 texture.
+    """Visible agent ids grouped per (body, LOD), laid out as a flat int32 texture.
 
     Parameters
     ----------
-    agent_skeleton : (N,) int skeleton index per agent.
-    lod_counts : (K,) int LOD levels of each skeleton's proxy (0: not drawn).
-    bounds : (K, 2) float ``(centre height, radius)`` per skeleton (:func:`proxy_bounds`).
+    agent_body : (N,) int body index per agent.
+    lod_counts : (K,) int LOD levels of each body (0: not drawn).
+    bounds : (K, 2) float ``(centre height, radius)`` per body (:func:`proxy_bounds`).
     lod_distances : increasing thresholds in metres.
     max_width : texture width limit in texels.
 
@@ -100,8 +101,8 @@ class DrawLists:
     lod : (N,) int LOD of each agent, ``-1`` where it is not drawn.
     """
 
-    def __init__(self, agent_skeleton, lod_counts, bounds, lod_distances, max_width=4096):
-        self.agent_skeleton = np.asarray(agent_skeleton, np.int64)
+    def __init__(self, agent_body, lod_counts, bounds, lod_distances, max_width=4096):
+        self.agent_body = np.asarray(agent_body, np.int64)
         self.lod_counts = np.asarray(lod_counts, np.int64)
         self.bounds = np.asarray(bounds, np.float64).reshape(-1, 2)
         d = np.asarray(lod_distances, np.float64).reshape(-1)
@@ -110,11 +111,11 @@ class DrawLists:
                              f"{list(lod_distances)}")
         self.lod_distances = d
         self.levels = max(1, int(self.lod_counts.max(initial=1)))
-        n = self.agent_skeleton.size
+        n = self.agent_body.size
         self.width = max(1, min(max_width, n))
         self.height = max(1, -(-n // self.width))
         self.image = np.zeros((self.height, self.width, 1), np.int32)
-        self.agent_levels = self.lod_counts[self.agent_skeleton]
+        self.agent_levels = self.lod_counts[self.agent_body]
         self.groups = []
         self.lod = np.full(n, -1, np.int64)
 
@@ -123,18 +124,18 @@ class DrawLists:
         """Regroup the agents at ``positions`` (N, 3) seen through ``view_projection``
         (4, 4) in a viewport ``pixels_high`` pixels high (LOD by :func:`view_distances`),
         leaving out those outside the view when ``cull``; returns the texture regions to
-        upload. Agents whose skeleton has no proxy are never drawn."""
+        upload. Agents whose body has no levels are never drawn."""
         pos = np.asarray(positions, np.float64)
         centre = pos.copy()
-        centre[:, 2] += self.bounds[self.agent_skeleton, 0]
+        centre[:, 2] += self.bounds[self.agent_body, 0]
         drawn = self.agent_levels > 0
         if cull:
             planes = frustum_planes(view_projection)
             dist = centre @ planes[:, :3].T + planes[:, 3]
-            drawn &= (dist >= -self.bounds[self.agent_skeleton, 1][:, None]).all(1)
+            drawn &= (dist >= -self.bounds[self.agent_body, 1][:, None]).all(1)
         dist = view_distances(centre, view_projection, pixels_high)
         self.lod = np.where(drawn, lod_levels(dist, self.lod_distances, self.agent_levels), -1)
-        key = (self.agent_skeleton * self.levels + self.lod)[drawn]
+        key = (self.agent_body * self.levels + self.lod)[drawn]
         key = key.astype(np.int16 if key.size and key.max() < 2 ** 15 else np.int64)
         order = np.flatnonzero(drawn)[np.argsort(key, kind="stable")]
         counts = np.bincount(key, minlength=self.lod_counts.size * self.levels)

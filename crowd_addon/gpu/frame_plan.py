@@ -93,7 +93,7 @@ class SkinningWork:
 
 @dataclass(frozen=True)
 class Draw:
-    """One instanced call: the mesh of ``key`` = (skeleton, LOD), ``instances``
+    """One instanced call: the mesh of ``key`` = (body, LOD), ``instances``
     instances drawing ``agents`` agents (``vertices`` skinned vertices), ``uniforms``
     of the draw program."""
 
@@ -106,7 +106,7 @@ class Draw:
 
 @dataclass(frozen=True)
 class Capture:
-    """A vertex read-back: ``agents`` (n,) int64 of one skeleton, the mesh ``key``,
+    """A vertex read-back: ``agents`` (n,) int64 of one body, the mesh ``key``,
     ``ids`` (their ids laid out like the draw list, an R32I region at the origin),
     and the capture pass's ``uniforms`` (no view: world positions)."""
 
@@ -147,7 +147,7 @@ class FramePlan:
         self.proxies = crowd_proxies(view)
         #: the largest agent scale: bounds and reaches grow with it
         self.max_scale = float(view.agents.scale.max(initial=1.0))
-        self.lists = DrawLists(view.agent_skeleton, [len(p) for p in self.proxies],
+        self.lists = DrawLists(view.agent_body, [len(p) for p in self.proxies],
                                [tuple(self.max_scale * np.asarray(proxy_bounds(p[0].extent)))
                                 if p else (0.0, 0.0) for p in self.proxies],
                                view.config.lod_distances, min(4096, limit))
@@ -176,7 +176,7 @@ class FramePlan:
         return specs
 
     def meshes(self) -> dict:
-        """``{(skeleton, lod): (ProxyBuffers, copies an instance)}`` of every level."""
+        """``{(body, lod): (ProxyBuffers, copies an instance)}`` of every level."""
         return {(k, lod): (buf, copies_per_instance(buf.vertex_count))
                 for k, levels in enumerate(self.proxies) for lod, buf in enumerate(levels)}
 
@@ -234,20 +234,20 @@ class FramePlan:
         return self.lists.rebuild(self.view.agents.position, vp, pixels_high, cull)
 
     def draws(self, view_projection, light) -> list:
-        """One :class:`Draw` per (skeleton, LOD) group of the current draw lists."""
+        """One :class:`Draw` per (body, LOD) group of the current draw lists."""
         common = self._draw_uniforms(view_projection, light)
         return [self._draw(g, g.lod, common) for g in self.lists.groups]
 
     def caster_draws(self, view_projection, light) -> list:
         """The shadow map's crowd draws (:mod:`.shadows`), seen through the sun's
         ``view_projection``: the agents of the current draw lists, each group as its
-        skeleton's coarsest level, except those drawn at that level already (far
+        body's coarsest level, except those drawn at that level already (far
         away, a few pixels tall: their shadows would not show, and at 65k agents
         they are nearly all of them)."""
         common = self._draw_uniforms(view_projection, light)
         out = []
         for g in self.lists.groups:
-            coarsest = len(self.proxies[g.skeleton]) - 1
+            coarsest = len(self.proxies[g.body]) - 1
             if g.lod < coarsest or coarsest == 0:
                 out.append(self._draw(g, coarsest, common))
         return out
@@ -259,27 +259,29 @@ class FramePlan:
 
     def _draw(self, group, lod: int, common: dict) -> Draw:
         """The instanced call drawing ``group``'s agents with level ``lod``."""
-        buf = self.proxies[group.skeleton][lod]
+        buf = self.proxies[group.body][lod]
         copies = copies_per_instance(buf.vertex_count)
-        return Draw((group.skeleton, lod), -(-group.count // copies), group.count,
+        return Draw((group.body, lod), -(-group.count // copies), group.count,
                     group.count * buf.vertex_count,
                     {**common, "u_draw": (group.base, group.count, buf.vertex_count, copies)})
 
     def capture(self, agents, lod: int) -> Capture:
-        """Check a vertex read-back request: ``agents`` (ids of one skeleton) at
-        ``lod``. Raises CrowdError naming what is wrong."""
+        """Check a vertex read-back request: ``agents`` (ids of one body: the same mesh
+        variant and props) at ``lod``. Raises CrowdError naming what is wrong."""
         agents = np.asarray(agents, np.int64).reshape(-1)
         n = self.view.agent_count
         if agents.size == 0 or agents.min() < 0 or agents.max() >= n:
             raise CrowdError(f"skinned_positions: agent ids must be in 0..{n - 1}")
-        skel = np.unique(self.lists.agent_skeleton[agents])
-        if skel.size != 1:
-            raise CrowdError("skinned_positions: the agents use several skeletons; ask for "
-                             "one skeleton's agents at a time")
-        k = int(skel[0])
+        body = np.unique(self.lists.agent_body[agents])
+        if body.size != 1:
+            names = [self.view.bodies[int(b)].name for b in body]
+            raise CrowdError(f"skinned_positions: the agents have several bodies {names} "
+                             "(skeletons, mesh variants or props); ask for one body's "
+                             "agents at a time")
+        k = int(body[0])
         if not 0 <= lod < len(self.proxies[k]):
-            raise CrowdError(f"skinned_positions: skeleton {self.view.skeletons[k].name!r} "
-                             f"has no LOD {lod}")
+            raise CrowdError(f"skinned_positions: body {self.view.bodies[k].name!r} has no "
+                             f"LOD {lod}")
         width = min(agents.size, self.lists.width)
         ids = np.zeros(-(-agents.size // width) * width, np.int32)
         ids[:agents.size] = agents

@@ -136,20 +136,20 @@ def proxy_buffers(mesh, palette_materials=()) -> ProxyBuffers:
 
 
 def crowd_proxies(view) -> list:
-    """Per skeleton of ``view.skeletons`` (a crowd's ``FrameView``), its LOD list of
-    :class:`ProxyBuffers` (empty for a skeleton no agent uses). A skeleton that agents
-    use but that has no proxy mesh (``CrowdConfig.add_mesh``) is an error naming it."""
-    used = np.unique(view.agent_skeleton)
+    """Per body of ``view.bodies`` (a crowd's ``FrameView``: each mesh variant and set
+    of props in use, :mod:`crowd_addon.core.bodies`), its LOD list of
+    :class:`ProxyBuffers`. A character that agents use but that has no proxy mesh
+    (``CrowdConfig.add_mesh``) is an error naming it."""
     out = []
-    for k, sk in enumerate(view.skeletons):
-        levels = view.config.meshes.get(sk.name, [])
-        if k in used and not levels:
+    for body in view.bodies:
+        sk = view.skeletons[body.skeleton]
+        if not body.levels:
             raise CrowdError(f"skeleton {sk.name!r}: its agents need a proxy mesh to be "
                              "drawn (CrowdConfig.add_mesh)")
-        for m in levels:
+        for m in body.levels:
             if int(m.bone_indices.max()) >= sk.bone_count:
                 raise CrowdError(f"mesh {m.name!r}: uses bone {int(m.bone_indices.max())} but "
                                  f"skeleton {sk.name!r} has {sk.bone_count} bones")
         palette = view.config.palette_materials.get(sk.name, ())
-        out.append([proxy_buffers(m, palette) for m in levels] if k in used else [])
+        out.append([proxy_buffers(m, palette) for m in body.levels])
     return out

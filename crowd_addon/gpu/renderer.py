@@ -191,8 +191,8 @@ class CrowdRenderer:
         return self._read_texture(self.textures["pose"]).reshape(lay.height, lay.width, 4)
 
     def skinned_positions(self, agents, lod: int = 0) -> np.ndarray:
-        """World positions ``(n, V, 3)`` float32 of ``agents`` (all of one skeleton)
-        skinned by the draw program's vertex stage with LOD ``lod``."""
+        """World positions ``(n, V, 3)`` float32 of ``agents`` (all of one body: the
+        same skeleton, mesh variant and props) skinned by the draw program's vertex stage with LOD ``lod``."""
         capture = self.plan.capture(agents, lod)
         return self._capture(self.meshes[capture.key], capture)
 

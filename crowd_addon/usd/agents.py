@@ -9,7 +9,8 @@
                                                  layer offset +O (paper's (SI, O))
         def Scope "Agents"
             def SkelRoot "agent_<id>" (instanceable, SkelBindingAPI,
-                                       references characters/<skeleton>)
+                                       references characters/<body>: its skeleton,
+                                       mesh variant and props)
                 rel skel:animationSource -> an offset animation, or
                                             /Crowd/AgentAnimations/agent_<id>
                 xformOp:translate (position), xformOp:rotateZ (heading, degrees),
@@ -84,7 +85,7 @@ def author_agents(root: Sdf.PrimSpec, shot, names, character_assets, sources,
     root : the ``/Crowd`` prim spec.
     shot : the :class:`~.shot.Shot`.
     names : prim name per exported agent.
-    character_assets : asset path per skeleton index.
+    character_assets : asset path per body index (``shot.agent_body``).
     sources : ``skel:animationSource`` target (Sdf.Path) per exported agent.
     instanceable : whether the agent prims are instanceable.
     """
@@ -93,16 +94,16 @@ def author_agents(root: Sdf.PrimSpec, shot, names, character_assets, sources,
     refs = {k: Sdf.Reference(a) for k, a in character_assets.items()}
     degrees = np.degrees(shot.heading.astype(np.float64)).tolist()
     has = (shot.palette >= 0).all(2)                     # (n, 4): palette colours set
-    agents = list(zip(names, shot.agent_skeleton.tolist(), sources, shot.position.tolist(),
+    agents = list(zip(names, shot.agent_body.tolist(), sources, shot.position.tolist(),
                       degrees, shot.color.tolist(), shot.scale.tolist(), has.tolist(),
                       shot.palette.tolist()))
     for a in range(0, len(agents), _LAYOUT_CHUNK):
         with Sdf.ChangeBlock():
-            for name, skel, source, position, heading, color, scale, has_c, pal in \
+            for name, body, source, position, heading, color, scale, has_c, pal in \
                     agents[a:a + _LAYOUT_CHUNK]:
                 prim = define(parent, name, "SkelRoot")
                 prim.instanceable = instanceable
-                prim.referenceList.Prepend(refs[skel])
+                prim.referenceList.Prepend(refs[body])
                 apply_api(prim, "SkelBindingAPI")
                 relationship(prim, "skel:animationSource", source)
                 attribute(prim, "xformOp:translate", _T.Float3, Gf.Vec3f(*position))

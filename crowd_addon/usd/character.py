@@ -6,7 +6,8 @@
     def SkelRoot "<skeleton>"                      (defaultPrim)
         def Skeleton "Skeleton"                    joints, jointNames, bindTransforms,
                                                    restTransforms
-        def Mesh "<mesh>"  (SkelBindingAPI)        points, triangles, normals, extent,
+        def Mesh "<mesh>"  (SkelBindingAPI)        the body (a mesh variant): points,
+                                                   triangles, normals, extent,
                                                    primvars:skel:jointIndices/jointWeights
                                                    (vertex, elementSize = the mesh's
                                                    influence width: 4, or 8),
@@ -16,6 +17,9 @@
                                                    mesh has texture coordinates,
                                                    material:binding (one look) or a
                                                    GeomSubset per look
+        def Mesh "<prop>"  (SkelBindingAPI)        per prop the body carries: its points
+                                                   bound rigidly to its joint (constant
+                                                   jointIndices [bone], jointWeights [1])
         def Scope "Looks"                          a Material per look: UsdPreviewSurface
                                                    with the base colour, or an
                                                    UsdUVTexture of the image read at st;
@@ -37,6 +41,8 @@ from pxr import Gf, Sdf, Vt
 
 from ..core import pose as sqt
 from . import convert
+from ..core.bodies import merge_meshes
+from ..core.mesh import Look
 from .layers import apply_api, attribute, connect, define, new_layer, relationship
 from .naming import joint_paths, unique_identifiers
 
@@ -47,7 +53,7 @@ _T = Sdf.ValueTypeNames
 
 
 def character_layer(skeleton, mesh, fmt: str, fps: float, root_name: str, textures=None,
-                    proxy=None, palette_materials=()):
+                    proxy=None, palette_materials=(), props=(), variant=0):
     """The character layer of ``skeleton`` (core Skeleton) drawn with ``mesh`` (core
     ProxyMesh), its SkelRoot named ``root_name``; returns ``(layer, joints)`` with the
     joint path tokens (shared by every animation of this skeleton). ``textures`` maps
@@ -55,13 +61,19 @@ def character_layer(skeleton, mesh, fmt: str, fps: float, root_name: str, textur
     ``proxy``: a lighter mesh (an LOD) written beside it with ``purpose = "proxy"``,
     the full mesh then having ``purpose = "render"``: viewers such as usdview draw the
     proxy, renders the full mesh. ``palette_materials``: the material (look) names
-    the agents' palette columns colour, in column order."""
+    the agents' palette columns colour, in column order. ``props``: the
+    :class:`~crowd_addon.core.bodies.Prop` s the body carries, each a mesh of its own
+    bound rigidly to its joint; ``variant``: the mesh variant ``mesh`` is (recorded in
+    the root's ``customData``)."""
     layer = new_layer(fmt, fps, 0, 0, default_prim=root_name,
                       comment=f"crowd character {skeleton.name!r}")
     joints = Vt.TokenArray(joint_paths(skeleton.bone_names, skeleton.parents))
     with Sdf.ChangeBlock():
         root = define(layer, root_name, "SkelRoot")
-        root.customData = {"crowd": {"skeleton": skeleton.name, "mesh": mesh.name}}
+        info = {"skeleton": skeleton.name, "mesh": mesh.name}
+        if variant or props:
+            info.update(variant=int(variant), props=Vt.StringArray([p.name for p in props]))
+        root.customData = {"crowd": info}
         skel = define(root, SKELETON_PRIM, "Skeleton")
         attribute(skel, "joints", _T.TokenArray, joints, uniform=True)
         attribute(skel, "jointNames", _T.TokenArray, Vt.TokenArray(skeleton.bone_names),
@@ -70,20 +82,31 @@ def character_layer(skeleton, mesh, fmt: str, fps: float, root_name: str, textur
                   convert.matrices(np.linalg.inv(skeleton.inverse_bind)), uniform=True)
         attribute(skel, "restTransforms", _T.Matrix4dArray,
                   convert.matrices(sqt.pose_to_matrices(skeleton.bind_pose)), uniform=True)
-        materials = _materials(root, mesh, textures or {}, tuple(palette_materials))
-        meshes = [(mesh, "render" if proxy is not None else None)]
+        whole = merge_meshes(mesh.name, [mesh, *(p.mesh for p in props)])
+        materials = _materials(root, whole, textures or {}, tuple(palette_materials))
+        look_of = {k.name: i for i, k in enumerate(whole.looks)}
+        # (mesh, purpose, rigid bone, the look of a part without looks: as merged)
+        meshes = [(mesh, "render" if proxy is not None else None, None, mesh.name)]
         if proxy is not None:
-            meshes.append((proxy, "proxy"))
-        names = unique_identifiers([m.name for m, _ in meshes] + [SKELETON_PRIM, "Looks"])
-        for (m, purpose), name in zip(meshes, names):
-            prim = _mesh(root, m, name, root.path.AppendChild(SKELETON_PRIM))
+            meshes.append((proxy, "proxy", None, mesh.name))
+        meshes += [(p.mesh, None, p.bone, p.mesh.name) for p in props]
+        names = unique_identifiers([m[0].name for m in meshes] + [SKELETON_PRIM, "Looks"])
+        for (m, purpose, bone, bare), name in zip(meshes, names):
+            prim = _mesh(root, m, name, root.path.AppendChild(SKELETON_PRIM), bone)
             if purpose:
                 attribute(prim, "purpose", _T.Token, purpose, uniform=True)
-            _bind_looks(prim, m, materials)
+            if materials:
+                which = np.array([look_of[k.name] for k in m.looks or (Look(bare),)],
+                                 np.int64)
+                local = np.zeros(m.triangle_count, np.int64) if m.material is None \
+                    else m.material.astype(np.int64)
+                _bind_looks(prim, which[local], materials)
     return layer, joints
 
 
-def _mesh(root, mesh, name, skeleton_path):
+def _mesh(root, mesh, name, skeleton_path, bone=None):
+    """A skinned Mesh prim of ``mesh``; with ``bone``, bound rigidly to that joint (a
+    prop: constant joint influence)."""
     prim = define(root, name, "Mesh")
     apply_api(prim, "SkelBindingAPI")
     attribute(prim, "points", _T.Point3fArray, convert.vec3f(mesh.positions))
@@ -94,11 +117,17 @@ def _mesh(root, mesh, name, skeleton_path):
               convert.ints(np.full(mesh.triangle_count, 3)))
     attribute(prim, "faceVertexIndices", _T.IntArray, convert.ints(mesh.triangles))
     attribute(prim, "subdivisionScheme", _T.Token, "none", uniform=True)
-    width = int(mesh.bone_indices.shape[1])          # 4, or 8 past four influences
-    attribute(prim, "primvars:skel:jointIndices", _T.IntArray,
-              convert.ints(mesh.bone_indices), interpolation="vertex", elementSize=width)
-    attribute(prim, "primvars:skel:jointWeights", _T.FloatArray,
-              convert.floats(mesh.bone_weights), interpolation="vertex", elementSize=width)
+    if bone is not None:
+        attribute(prim, "primvars:skel:jointIndices", _T.IntArray, convert.ints([bone]),
+                  interpolation="constant", elementSize=1)
+        attribute(prim, "primvars:skel:jointWeights", _T.FloatArray, convert.floats([1.0]),
+                  interpolation="constant", elementSize=1)
+    else:
+        width = int(mesh.bone_indices.shape[1])      # 4, or 8 past four influences
+        attribute(prim, "primvars:skel:jointIndices", _T.IntArray,
+                  convert.ints(mesh.bone_indices), interpolation="vertex", elementSize=width)
+        attribute(prim, "primvars:skel:jointWeights", _T.FloatArray,
+                  convert.floats(mesh.bone_weights), interpolation="vertex", elementSize=width)
     attribute(prim, "primvars:skel:geomBindTransform", _T.Matrix4d, Gf.Matrix4d(1.0))
     relationship(prim, "skel:skeleton", skeleton_path)
     if mesh.uvs is not None:
@@ -125,17 +154,15 @@ def palette_primvar(column: int) -> str:
     return f"crowdPalette{int(column)}"
 
 
-def _bind_looks(prim, mesh, named_materials):
-    """Bind the looks' materials to the mesh (one look) or to a GeomSubset of its
-    triangles per look."""
-    if not named_materials:
-        return
+def _bind_looks(prim, which, named_materials):
+    """Bind the materials to the mesh, ``which`` (T,) the index of each triangle's
+    among ``named_materials``: the one material when all use one, else a GeomSubset of
+    its triangles per material."""
     names, materials = zip(*named_materials)
-    if len(materials) == 1:
-        _bind(prim, materials[0])
+    used = np.unique(which)
+    if used.size == 1:
+        _bind(prim, materials[int(used[0])])
         return
-    which = np.zeros(mesh.triangle_count, np.int64) if mesh.material is None else \
-        mesh.material.astype(np.int64)
     attribute(prim, "subsetFamily:materialBind:familyType", _T.Token, "nonOverlapping",
               uniform=True)
     for k, (name, material) in enumerate(zip(names, materials)):

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 from pxr import Sdf, Vt
 
+from ..core.bodies import body_keys, crowd_bodies, prop_names
 from ..core.config import USD_LAYOUTS, validate_config
 from ..core.config_io import config_digest
 from ..core.errors import CrowdError
@@ -163,7 +164,7 @@ def export_steps(recording, path, agents=None, layout="instanced", camera=None,
                          f"{type(recording).__name__}")
     check_layout(layout)
     ids = _agent_ids(agents, recording.agent_count)
-    meshes = _meshes(recording.config, recording.agent_skeleton[ids])
+    meshes = _bodies(recording.config, recording.agent_skeleton, ids)
     measure = None if repetition is None else recording_repetition_steps(
         recording, _view_projection(recording, ids, camera, repetition), agents=ids,
         settings=repetition)
@@ -182,18 +183,18 @@ def _view_projection(rec, ids, camera, settings) -> np.ndarray:
 def check_export(config, path, agents=None, layout="instanced") -> None:
     """Check, before recording ``config``'s shot, what :func:`export_steps` would
     refuse: the output (extension, folder, writable), the agent count, the layout and
-    a proxy mesh for every exported agent's skeleton. Raises CrowdError."""
+    a proxy mesh for every exported agent's character. Raises CrowdError."""
     check_layout(layout)
     validate_config(config)
     with ExportFiles(path):
         pass
     ids = _agent_ids(agents, config.agent_count)
     names = list(config.skeletons)
-    st = np.asarray(config.agent_stream, np.int64)[ids]
-    un = np.asarray(config.agent_unique, np.int64)[ids]
+    st = np.asarray(config.agent_stream, np.int64)
+    un = np.asarray(config.agent_unique, np.int64)
     of_stream = np.array([names.index(d.skeleton) for d in config.streams] + [0], np.int64)
     of_unique = np.array([names.index(d.skeleton) for d in config.uniques] + [0], np.int64)
-    _meshes(config, np.where(st >= 0, of_stream[st], of_unique[un]))
+    _bodies(config, np.where(st >= 0, of_stream[st], of_unique[un]), ids)
 
 
 def _steps(rec, ids, meshes, files, layout, measure):
@@ -269,27 +270,42 @@ class _Output:
         self.write += time.perf_counter() - t
 
 
-def _write_characters(out, rec, meshes) -> tuple:
-    """One layer per skeleton in ``meshes`` (its full mesh, and its lightest LOD as a
-    proxy), and a copy of each texture their looks use (``textures/``, so the export
-    stands on its own on another machine); returns ``(joints_of, asset_of)`` keyed by
-    skeleton index."""
+def _write_characters(out, rec, bodies) -> tuple:
+    """One layer per body in ``bodies`` (``{body index: Body}``: its mesh variant's full
+    mesh, its lightest LOD as a proxy, and its props), named after the skeleton (plus
+    the variant and props, for a body with them), and a copy of each texture their
+    looks use (``textures/``, so the export stands on its own on another machine);
+    returns ``(joints_of, asset_of)``, keyed by skeleton index and by body index."""
     cfg = rec.config
     skeleton_names = list(cfg.skeletons)
-    ids = sorted(meshes)
-    file_names = unique_identifiers([skeleton_names[k] for k in ids], casefold=True)
-    textures = _copy_textures(out.files, [meshes[k][0] for k in ids])
+    ids = sorted(bodies)
+    file_names = unique_identifiers([_body_file(cfg, bodies[b]) for b in ids], casefold=True)
+    parts = [(cfg.mesh_variants(skeleton_names[bodies[b].skeleton])[bodies[b].variant],
+              [cfg.props[skeleton_names[bodies[b].skeleton]][j] for j in bodies[b].prop_ids])
+             for b in ids]
+    textures = _copy_textures(out.files, [m for levels, props in parts
+                                          for m in (levels[0], *(p.mesh for p in props))])
     joints_of, asset_of = {}, {}
-    for k, name in zip(ids, file_names):
-        levels = meshes[k]
+    for b, name, (levels, props) in zip(ids, file_names, parts):
+        k = bodies[b].skeleton
         proxies = [m for m in levels[1:] if m.triangle_count >= PROXY_MIN_TRIANGLES]
         layer, joints_of[k] = character_layer(
             cfg.skeletons[skeleton_names[k]], levels[0], out.files.format, rec.fps, name,
             textures, proxies[-1] if proxies else None,
-            cfg.palette_materials.get(skeleton_names[k], ()))
+            cfg.palette_materials.get(skeleton_names[k], ()), props, bodies[b].variant)
         out.save(layer, f"characters/{name}")
-        asset_of[k] = out.files.asset_path(f"characters/{name}")
+        asset_of[b] = out.files.asset_path(f"characters/{name}")
     return joints_of, asset_of
+
+
+def _body_file(cfg, body) -> str:
+    """A body's character layer name: its skeleton's, then its mesh variant's (variants
+    past the first) and its props' names."""
+    skeleton = list(cfg.skeletons)[body.skeleton]
+    parts = [skeleton]
+    if body.variant:
+        parts.append(cfg.mesh_variants(skeleton)[body.variant][0].name)
+    return "_".join(parts + prop_names(cfg, skeleton, body.props))
 
 
 def _write_streams(out, rec, shot, joints_of):
@@ -393,21 +409,26 @@ def _agent_ids(agents, count) -> np.ndarray:
     return np.arange(int(agents), dtype=np.int64)
 
 
-def _meshes(config, agent_skeleton) -> dict:
-    """Proxy mesh levels (LOD 0 first) per skeleton index in ``agent_skeleton``."""
+def _bodies(config, agent_skeleton, ids) -> dict:
+    """``{body index: Body}`` of the bodies agents ``ids`` use (indices among the
+    bodies of all agents, :func:`~crowd_addon.core.bodies.crowd_bodies`), checked:
+    each has a mesh, and the textures its looks name are files."""
     skeleton_names = list(config.skeletons)
-    out = {}
-    for k in np.unique(agent_skeleton).tolist():
-        levels = config.meshes.get(skeleton_names[k])
-        if not levels:
-            raise CrowdError(f"export: skeleton {skeleton_names[k]!r} has no proxy mesh "
+    keys, agent_body = body_keys(config, agent_skeleton)
+    used = np.unique(agent_body[ids]).tolist()
+    for b in used:
+        name = skeleton_names[int(keys[b, 0])]
+        if not config.meshes.get(name):
+            raise CrowdError(f"export: skeleton {name!r} has no proxy mesh "
                              "(CrowdConfig.add_mesh); its agents cannot be drawn")
-        for look in levels[0].looks:
-            if look.texture and not os.path.isfile(look.texture):
-                raise CrowdError(f"export: look {look.name!r} of mesh {levels[0].name!r} "
-                                 f"uses texture {look.texture!r}, which is not a file")
-        out[k] = levels
-    return out
+    bodies = crowd_bodies(config, agent_skeleton)[0]
+    for b in used:
+        for mesh in bodies[b].levels[:1]:
+            for look in mesh.looks:
+                if look.texture and not os.path.isfile(look.texture):
+                    raise CrowdError(f"export: look {look.name!r} of mesh {mesh.name!r} "
+                                     f"uses texture {look.texture!r}, which is not a file")
+    return {b: bodies[b] for b in used}
 
 
 def _samples(whole, sub, i) -> np.ndarray:

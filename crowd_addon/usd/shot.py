@@ -15,6 +15,7 @@ from functools import cached_property
 import numpy as np
 
 from ..core.agents import STREAM, TRANSITION, UNIQUE
+from ..core.bodies import body_keys
 
 __all__ = ["Shot", "Pieces", "STREAM", "UNIQUE", "TRANSITION"]
 
@@ -47,7 +48,9 @@ class Shot:
     Attributes
     ----------
     recording : the Recording; first, last, fps, max_offset : its own.
-    agents : (n,) int64 ids; agent_skeleton : (n,) int64 skeleton index per agent.
+    agents : (n,) int64 ids; agent_skeleton : (n,) int64 skeleton index per agent;
+    agent_body : (n,) int64 body index per agent (mesh variant and props,
+    :func:`~crowd_addon.core.bodies.body_keys` of all the recording's agents).
     static : (n,) bool; stream, offset : (n,) int64 of static agents (-1 otherwise).
     position : (n, 3) float32, heading : (n,) float32 radians, color : (n, 3) float32
     RGB, at ``first``; scale : (n,) float32 body scales and palette (n, 4, 3) float32
@@ -62,6 +65,7 @@ class Shot:
         self.substeps = rec.substeps
         self.max_offset = rec.max_offset
         self.agent_skeleton = rec.agent_skeleton[ids]
+        self.agent_body = body_keys(rec.config, rec.agent_skeleton)[1][ids]
         self.static = rec.static[ids]
         _, ref, off = rec.playing(rec.first, ids)
         self.stream = np.where(self.static, ref, -1).astype(np.int64)

@@ -204,7 +204,7 @@ def test_loaded_crowd_animates_identically(saved):
 
 def test_manifest_is_readable_json(saved):
     m = json.loads(saved.read_text())
-    assert m["format"] == config_io.FORMAT and m["version"] == "1.3"
+    assert m["format"] == config_io.FORMAT and m["version"] == "1.4"
     assert m["arrays"]["uri"] == "crowd.npz"
     assert m["settings"] == {"max_offset": 12, "transition_slots": 4, "fps": 24.0, "seed": 7,
                              "when_full": "cut", "max_texture_size": 2048, "start_frame": 5}

@@ -32,7 +32,7 @@ def live_metric(frames, agents, settings):
             a, v = crowd.view.agents, crowd.view
             sub = type("View", (), {})()
             sub.frame, sub.config = crowd.frame, v.config
-            sub.agent_skeleton = v.agent_skeleton[agents]
+            sub.agent_body = v.agent_body[agents]
             sub.agents = type("A", (), {k: getattr(a, k)[agents] for k in (
                 "position", "kind", "ref", "offset", "color")})()
             out.append(crowd_repetition(sub, CAMERA.view_projection,
