@@ -130,7 +130,11 @@ def character_streams(settings) -> tuple:
                                   tuple(a.weight for a in c.streams), c.weight,
                                   tuple(stream_timing(a) for a in c.streams),
                                   tuple(Palette(p.material, p.colors(), p.mode, p.attribute)
-                                        for p in c.palettes))
+                                        for p in c.palettes),
+                                  (c.body_weight, *(v.weight for v in c.variants))
+                                  if len(c.variants) else (),
+                                  c.variant_mode, c.variant_attribute,
+                                  tuple(p.share for p in c.props))
                  for c in settings.characters)
 
 

@@ -28,7 +28,7 @@ from ..core.skeleton import Skeleton
 from .looks import mesh_looks
 
 __all__ = ["skeleton_from_armature", "check_skeleton", "skeleton_and_rest", "matrices",
-           "object_to_armature", "proxy_mesh_from_object"]
+           "object_to_armature", "proxy_mesh_from_object", "prop_from_object"]
 
 
 def _checked(obj, kind: str, noun: str):
@@ -182,3 +182,49 @@ def proxy_mesh_from_object(mesh_obj, armature_obj, skeleton: Skeleton | None = N
                                      tris.reshape(-1, 3), idx, wt,
                                      bone_count=skeleton.bone_count,
                                      **mesh_looks(mesh_obj, me, loops.reshape(-1, 3)))
+
+
+def prop_from_object(obj, armature_obj, skeleton: Skeleton, bone: str = ""):
+    """A mesh object as a core :class:`~crowd_addon.core.bodies.Prop` moving rigidly with
+    bone ``bone`` of ``armature_obj`` (empty: the bone the object is parented to).
+
+    The prop keeps where it sits on the bone now: its vertices (the base mesh, in the
+    object's current world placement) are taken into the bone's space at its current
+    pose and out again at the bone's rest, so the bind-pose positions are
+    ``bone.matrix_local @ inv(pose_bone.matrix) @ inv(armature) @ obj.matrix_world @ co``.
+    Skinned with weight 1 to the bone (``M_pose @ inv(M_rest)``), that is exactly where
+    Blender puts an object parented to the bone, at every pose. Materials and the
+    active UV map come along (:func:`.looks.mesh_looks`)."""
+    from ..core.bodies import Prop, rigid_mesh
+    _checked(obj, "MESH", "mesh")
+    _armature(armature_obj)
+    if not bone:
+        if obj.parent != armature_obj or obj.parent_type != "BONE" or not obj.parent_bone:
+            raise CrowdError(f"object {obj.name!r}: choose its bone (or parent it to a bone "
+                             f"of {armature_obj.name!r})")
+        bone = obj.parent_bone
+    if bone not in skeleton.bone_names:
+        raise CrowdError(f"object {obj.name!r}: armature {armature_obj.name!r} has no bone "
+                         f"{bone!r}")
+    if obj.mode == "EDIT":
+        obj.update_from_editmode()
+    me = obj.data
+    v = len(me.vertices)
+    me.calc_loop_triangles()
+    if v == 0 or not len(me.loop_triangles):
+        raise CrowdError(f"object {obj.name!r} has no faces")
+    co = np.empty(v * 3, np.float32)
+    me.vertices.foreach_get("co", co)
+    rest = np.array(armature_obj.data.bones[bone].matrix_local, np.float64)
+    pose = np.array(armature_obj.pose.bones[bone].matrix, np.float64)
+    m = rest @ np.linalg.inv(pose) @ object_to_armature(obj, armature_obj)
+    pos = co.reshape(v, 3).astype(np.float64) @ m[:3, :3].T + m[:3, 3]
+    tris = np.empty(len(me.loop_triangles) * 3, np.int32)
+    me.loop_triangles.foreach_get("vertices", tris)
+    loops = np.empty(tris.size, np.int32)
+    me.loop_triangles.foreach_get("loops", loops)
+    b = skeleton.bone_names.index(bone)
+    return Prop(obj.name, skeleton.name, b,
+                rigid_mesh(obj.name, skeleton.name, b, pos, tris.reshape(-1, 3),
+                           skeleton.bone_count,
+                           **mesh_looks(obj, me, loops.reshape(-1, 3))))

@@ -32,6 +32,21 @@ class CROWD_UL_palettes(bpy.types.UIList):
             row.prop(item, f"color_{i}", text="")
 
 
+class CROWD_UL_variants(bpy.types.UIList):
+    def draw_item(self, _context, layout, _data, item, _icon, _active, _prop):
+        row = layout.row(align=True)
+        row.prop(item, "object", text="", icon="OUTLINER_OB_MESH")
+        row.prop(item, "weight", text="")
+
+
+class CROWD_UL_props(bpy.types.UIList):
+    def draw_item(self, _context, layout, _data, item, _icon, _active, _prop):
+        row = layout.row(align=True)
+        row.prop(item, "object", text="", icon="OBJECT_DATA")
+        row.label(text=item.bone or (item.object.parent_bone if item.object else "") or "?")
+        row.prop(item, "share", text="")
+
+
 class CROWD_UL_characters(bpy.types.UIList):
     def draw_item(self, _context, layout, _data, item, _icon, _active, _prop):
         row = layout.row(align=True)
@@ -311,6 +326,27 @@ class CROWD_PT_characters(_Panel, bpy.types.Panel):
         _list(layout, "CROWD_UL_palettes", char, "palettes", "active_palette_index", rows=2)
         if 0 <= char.active_palette_index < len(char.palettes):
             _draw_palette(layout.box(), char, char.palettes[char.active_palette_index])
+        layout.label(text="Mesh Variants (other bodies on the same armature)")
+        _list(layout, "CROWD_UL_variants", char, "variants", "active_variant_index", rows=2)
+        if len(char.variants):
+            col = layout.column()
+            col.use_property_split = True
+            col.prop(char, "body_weight")
+            col.prop(char, "variant_mode")
+            if char.variant_mode == "ATTRIBUTE":
+                col.prop(char, "variant_attribute")
+        layout.label(text="Props (objects carried on a bone by a share of agents)")
+        _list(layout, "CROWD_UL_props", char, "props", "active_prop_index", rows=2)
+        if 0 <= char.active_prop_index < len(char.props):
+            prop = char.props[char.active_prop_index]
+            col = layout.box().column()
+            col.use_property_split = True
+            col.prop(prop, "object")
+            if char.armature is not None:
+                col.prop_search(prop, "bone", char.armature.data, "bones")
+            else:
+                col.prop(prop, "bone")
+            col.prop(prop, "share")
 
 
 class CROWD_PT_streams(_Panel, bpy.types.Panel):
@@ -397,7 +433,8 @@ class CROWD_PT_settings(_Panel, bpy.types.Panel):
         row.prop(s, "lod_card")
 
 
-CLASSES = (CROWD_UL_characters, CROWD_UL_lods, CROWD_UL_palettes, CROWD_UL_animations,
+CLASSES = (CROWD_UL_characters, CROWD_UL_lods, CROWD_UL_palettes, CROWD_UL_variants,
+           CROWD_UL_props, CROWD_UL_animations,
            CROWD_UL_nodes,
            CROWD_UL_inputs, CROWD_UL_transitions, CROWD_UL_sources, CROWD_PT_main,
            CROWD_PT_characters, CROWD_PT_streams, CROWD_PT_uniques, CROWD_PT_agents,

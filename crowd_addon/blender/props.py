@@ -182,6 +182,33 @@ class CROWD_PG_palette(PropertyGroup):
         return tuple(tuple(getattr(self, f"color_{i}")) for i in range(self.count))
 
 
+class CROWD_PG_variant(PropertyGroup):
+    """A further body of a character (a mesh variant): skinned to the same armature,
+    worn by a share of its agents (docs/variety.md)."""
+
+    object: PointerProperty(name="Mesh", type=bpy.types.Object, poll=_is_mesh,
+                            description="Mesh skinned to the character's armature (by an "
+                                        "Armature modifier): another body for its agents")
+    weight: FloatProperty(name="Weight", default=1.0, min=0.0,
+                          description="Relative share of the character's agents wearing "
+                                      "this body (the main body has Body Weight)")
+
+
+class CROWD_PG_prop(PropertyGroup):
+    """An object a share of the character's agents carry, moving rigidly with one bone
+    (a flag, a scarf, a cup; docs/variety.md)."""
+
+    object: PointerProperty(name="Object", type=bpy.types.Object, poll=_is_mesh,
+                            description="Mesh placed where it sits on the character now; "
+                                        "it follows the bone rigidly (parent it to the "
+                                        "bone to see it move in Blender too)")
+    bone: StringProperty(name="Bone", description="The armature bone it moves with "
+                                                 "(empty: the bone it is parented to)")
+    share: FloatProperty(name="Share", default=0.5, min=0.0, max=1.0, subtype="FACTOR",
+                         description="Share of the character's agents that carry it "
+                                     "(each agent drawn at random, seeded)")
+
+
 class CROWD_PG_character(PropertyGroup):
     """A character: a rig, the body that draws it and the animations it plays."""
 
@@ -201,6 +228,20 @@ class CROWD_PG_character(PropertyGroup):
                                       "characters by weight")
     palettes: CollectionProperty(type=CROWD_PG_palette)
     active_palette_index: IntProperty()
+    body_weight: FloatProperty(name="Body Weight", default=1.0, min=0.0,
+                               description="Relative share of the agents wearing the main "
+                                           "body when the character has mesh variants")
+    variants: CollectionProperty(type=CROWD_PG_variant)
+    active_variant_index: IntProperty()
+    variant_mode: EnumProperty(name="Variant", default="RANDOM", items=(
+        ("RANDOM", "Random", "Each agent a body at random by the weights (seeded)"),
+        ("ATTRIBUTE", "Attribute", "An INT point attribute of the agent source gives the "
+                                   "body: 0 the main body, 1 the first variant...")))
+    variant_attribute: StringProperty(name="Attribute", default="variant",
+                                      description="INT point attribute: 0 the main body, 1 "
+                                                  "the first variant, ...")
+    props: CollectionProperty(type=CROWD_PG_prop)
+    active_prop_index: IntProperty()
 
 
 class CROWD_PG_agent_source(PropertyGroup):
@@ -340,7 +381,8 @@ class CROWD_PG_settings(PropertyGroup):
 
 
 CLASSES = show_props.CLASSES + (CROWD_PG_input, CROWD_PG_state_transition, CROWD_PG_node, CROWD_PG_animation,
-           CROWD_PG_lod, CROWD_PG_palette, CROWD_PG_character, CROWD_PG_agent_source,
+           CROWD_PG_lod, CROWD_PG_palette, CROWD_PG_variant, CROWD_PG_prop,
+           CROWD_PG_character, CROWD_PG_agent_source,
            CROWD_PG_settings)
 
 

@@ -225,10 +225,11 @@ def _lod_levels(c, skeleton, cards, notes) -> tuple:
 
 
 def _add_mesh(cfg, c, skeleton, cards, notes):
-    from .armature import proxy_mesh_from_object
+    from .armature import prop_from_object, proxy_mesh_from_object
     if c.body is None:
-        if len(c.lods):
-            raise CrowdError(f"character {c.name!r}: LOD meshes need a body (LOD 0)")
+        if len(c.lods) or len(c.variants) or len(c.props):
+            raise CrowdError(f"character {c.name!r}: LOD meshes, mesh variants and props "
+                             "need a body")
         return
     try:
         body = proxy_mesh_from_object(c.body, c.armature, skeleton)
@@ -236,6 +237,25 @@ def _add_mesh(cfg, c, skeleton, cards, notes):
         raise CrowdError(f"character {c.name!r}: body: {e}") from None
     notes.extend(body.notes)            # e.g. vertices with more than eight bones
     cfg.add_mesh(body, lods=_lod_levels(c, skeleton, cards, notes))
+    auto = (0.25, 0.06) + ((CARD,) if cards else ())
+    for k, v in enumerate(c.variants, start=1):
+        what = f"character {c.name!r}: mesh variant {k}"
+        if v.object is None:
+            raise CrowdError(f"{what} has no mesh")
+        try:
+            mesh = proxy_mesh_from_object(v.object, c.armature, skeleton)
+            cfg.add_variant(mesh, lods=auto)
+        except CrowdError as e:
+            raise CrowdError(f"{what}: {e}") from None
+        notes.extend(n for n in mesh.notes if n not in notes)
+    for k, p in enumerate(c.props):
+        what = f"character {c.name!r}: prop {k + 1}"
+        if p.object is None:
+            raise CrowdError(f"{what} has no object")
+        try:
+            cfg.add_prop(prop_from_object(p.object, c.armature, skeleton, p.bone))
+        except CrowdError as e:
+            raise CrowdError(f"{what}: {e}") from None
 
 
 def config_steps(scene, depsgraph=None, notes=None):

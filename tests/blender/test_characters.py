@@ -258,7 +258,7 @@ def test_user_lod_meshes_replace_the_automatic_levels(two):
      r"^character 'Rig': 3 LOD meshes; there are 2 levels"),
     (lambda s, o: (cs.add_lod(s.characters["Rig"], o["Body"]),
                    setattr(s.characters["Rig"], "body", None)),
-     r"^character 'Rig': LOD meshes need a body"),
+     r"^character 'Rig': LOD meshes, mesh variants and props need a body"),
 ])
 def test_bad_lod_meshes_are_named(two, change, message):
     scene, *_ = two
