@@ -188,10 +188,14 @@ def prop_from_object(obj, armature_obj, skeleton: Skeleton, bone: str = ""):
     """A mesh object as a core :class:`~crowd_addon.core.bodies.Prop` moving rigidly with
     bone ``bone`` of ``armature_obj`` (empty: the bone the object is parented to).
 
-    The prop keeps where it sits on the bone now: its vertices (the base mesh, in the
-    object's current world placement) are taken into the bone's space at its current
-    pose and out again at the bone's rest, so the bind-pose positions are
-    ``bone.matrix_local @ inv(pose_bone.matrix) @ inv(armature) @ obj.matrix_world @ co``.
+    The prop keeps where it sits on the bone. Parented to that bone, an object is at
+    ``armature @ pose_bone.matrix @ T(0, length, 0) @ matrix_parent_inverse @
+    matrix_basis`` (Blender hangs bone children on the bone's tail), so at the rest
+    pose its vertices are ``bone.matrix_local @ T(0, length, 0) @
+    matrix_parent_inverse @ matrix_basis @ co`` in armature space, whatever the pose
+    now. Otherwise its vertices (the base mesh where the object is now) are taken into
+    the bone's space at its current pose and out again at the bone's rest:
+    ``bone.matrix_local @ inv(pose_bone.matrix) @ inv(armature) @ obj.matrix_world``.
     Skinned with weight 1 to the bone (``M_pose @ inv(M_rest)``), that is exactly where
     Blender puts an object parented to the bone, at every pose. Materials and the
     active UV map come along (:func:`.looks.mesh_looks`)."""
@@ -215,9 +219,16 @@ def prop_from_object(obj, armature_obj, skeleton: Skeleton, bone: str = ""):
         raise CrowdError(f"object {obj.name!r} has no faces")
     co = np.empty(v * 3, np.float32)
     me.vertices.foreach_get("co", co)
-    rest = np.array(armature_obj.data.bones[bone].matrix_local, np.float64)
-    pose = np.array(armature_obj.pose.bones[bone].matrix, np.float64)
-    m = rest @ np.linalg.inv(pose) @ object_to_armature(obj, armature_obj)
+    b = armature_obj.data.bones[bone]
+    rest = np.array(b.matrix_local, np.float64)
+    if obj.parent == armature_obj and obj.parent_type == "BONE" and obj.parent_bone == bone:
+        tail = np.eye(4)
+        tail[1, 3] = b.length
+        m = rest @ tail @ np.array(obj.matrix_parent_inverse, np.float64) @ \
+            np.array(obj.matrix_basis, np.float64)
+    else:
+        pose = np.array(armature_obj.pose.bones[bone].matrix, np.float64)
+        m = rest @ np.linalg.inv(pose) @ object_to_armature(obj, armature_obj)
     pos = co.reshape(v, 3).astype(np.float64) @ m[:3, :3].T + m[:3, 3]
     tris = np.empty(len(me.loop_triangles) * 3, np.int32)
     me.loop_triangles.foreach_get("vertices", tris)

@@ -15,7 +15,10 @@ same crowd:
   ``idle_b``), ``hit`` (``k`` on the seat of the k-th fan the ball hits, 0 elsewhere)
   and ``team_colour`` (home red, away blue, varied per seat); the source scales the
   fans 0.93 .. 1.07 (heights vary), and each fan draws a skin tone and trousers from
-  the fan's palettes (:data:`FAN_PALETTES`, docs/variety.md).
+  the fan's palettes (:data:`FAN_PALETTES`, docs/variety.md), a body (a third of the
+  fans wear the broader ``FanBodyBroad``, made from ``FanBody``) and props: a flag in
+  the right hand for about one fan in seven, a cap for three in ten (:data:`FAN_PROPS`,
+  objects parented to the fan rig's bones), both in the fan's team colour.
 - :func:`setup_show` authors the show (``scene.crowd.show``, docs/show.md) and sets the
   scene's frame range to the run: the **goal** (home fans blend to ``cheer``, away
   fans to ``groan``, both at offset 0 and held for the cheer), the **Mexican wave**
@@ -129,6 +132,95 @@ FAN_PALETTES = {
 }
 
 
+#: the fan's second body (docs/variety.md): "FanBodyBroad", FanBody with its torso
+#: (the vertices between the hips and the shoulders, near the spine) this much wider
+BROAD_TORSO = 1.22
+BROAD_SHARE = 0.35                      # of the fans; FanBody has the rest
+#: the fans' props: object -> (bone it rides on, share of the fans carrying it, boxes
+#: (centre and half sizes in the bone's rest frame -- y along the bone, from its head
+#: -- and material)). White materials take each fan's team colour, as the shirt does.
+#: The flag's pole carries on from the hand, so raised arms raise the flag.
+FAN_PROPS = {
+    "FanFlag": ("hand.R", 0.15, (((0.0, 0.40, 0.0), (0.012, 0.42, 0.012), "fan_pole"),
+                                 ((0.0, 0.66, 0.23), (0.006, 0.15, 0.22), "fan_flag"))),
+    "FanCap": ("head", 0.30, (((0.0, 0.195, 0.01), (0.095, 0.05, 0.105), "fan_cap"),
+                              ((0.0, 0.16, 0.14), (0.075, 0.01, 0.05), "fan_cap"))),
+}
+_PROP_COLOURS = {"fan_pole": (0.30, 0.20, 0.12, 1.0), "fan_flag": (0.95, 0.95, 0.95, 1.0),
+                 "fan_cap": (0.9, 0.9, 0.9, 1.0)}
+
+
+def _material(name, colour):
+    mat = bpy.data.materials.get(name) or bpy.data.materials.new(name)
+    mat.diffuse_color = colour
+    return mat
+
+
+def _broad_body(rig, body):
+    """``FanBodyBroad`` (made once): a copy of the fan's body, skinned the same, with a
+    wider torso."""
+    obj = bpy.data.objects.get("FanBodyBroad")
+    if obj is not None:
+        return obj
+    obj = body.copy()
+    obj.data = body.data.copy()
+    obj.name = obj.data.name = "FanBodyBroad"
+    for coll in body.users_collection:
+        coll.objects.link(obj)
+    me = obj.data
+    co = np.empty(3 * len(me.vertices), np.float64)
+    me.vertices.foreach_get("co", co)
+    co = co.reshape(-1, 3)
+    torso = (np.abs(co[:, 0]) < 0.17) & (co[:, 2] > 0.9) & (co[:, 2] < 1.42)
+    co[torso, :2] *= BROAD_TORSO
+    me.vertices.foreach_set("co", co.astype(np.float32).ravel())
+    me.update()
+    obj.hide_render = body.hide_render
+    return obj
+
+
+def _fan_prop(rig, name, bone, boxes):
+    """The prop object ``name`` (made once): its boxes as one mesh, parented to
+    ``bone`` of ``rig`` where it sits at rest."""
+    obj = bpy.data.objects.get(name)
+    if obj is not None:
+        return obj
+    b = rig.data.bones[bone]
+    frame = np.array(b.matrix_local, np.float64)
+    unit = np.array([(x, y, z) for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)
+    quads = ((0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4),
+             (1, 5, 7, 3))
+    verts, faces, mats, names = [], [], [], []
+    for centre, half, material in boxes:
+        base = len(verts)
+        local = np.array(centre) + unit * half
+        verts += [tuple(v) for v in local @ frame[:3, :3].T + frame[:3, 3]]
+        faces += [tuple(base + i for i in q) for q in quads]
+        if material not in names:
+            names.append(material)
+        mats += [names.index(material)] * len(quads)
+    me = bpy.data.meshes.new(name)
+    me.from_pydata(verts, [], faces)
+    for material in names:
+        me.materials.append(_material(material, _PROP_COLOURS[material]))
+    me.polygons.foreach_set("material_index", np.array(mats, np.int32))
+    obj = bpy.data.objects.new(name, me)
+    for coll in rig.users_collection:
+        coll.objects.link(obj)
+    world = rig.matrix_world @ obj.matrix_world
+    tail = rig.matrix_world @ b.matrix_local @ _translation(b.length)
+    obj.parent, obj.parent_type, obj.parent_bone = rig, "BONE", bone
+    obj.matrix_parent_inverse = tail.inverted()
+    obj.matrix_basis = world
+    obj.hide_render = rig.hide_render   # a template, like the rig
+    return obj
+
+
+def _translation(y):
+    from mathutils import Matrix
+    return Matrix.Translation((0.0, y, 0.0))
+
+
 def _add_characters(s, hits):
     s.characters.clear()
     for name, (rig, body) in CHARACTERS.items():
@@ -146,6 +238,12 @@ def _add_characters(s, hits):
         pal.material, pal.mode, pal.count = material, "RANDOM", len(colours)
         for i, c in enumerate(colours):
             setattr(pal, f"color_{i}", c)
+    variant = fan.variants.add()                      # heavier builds
+    variant.object = _broad_body(fan.armature, fan.body)
+    fan.body_weight, variant.weight = 1.0 - BROAD_SHARE, BROAD_SHARE
+    for name, (bone, share, boxes) in FAN_PROPS.items():   # flags and caps
+        prop = fan.props.add()
+        prop.object, prop.share = _fan_prop(fan.armature, name, bone, boxes), share
 
 
 def _seat_attribute(me, name, values, kind="INT"):

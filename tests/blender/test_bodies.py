@@ -103,6 +103,20 @@ def test_a_prop_moves_as_blender_moves_an_object_parented_to_its_bone(dressed):
     assert worst < 2e-5, f"the prop is {worst:.3g} m from Blender's child-of-bone object"
 
 
+def test_a_prop_not_parented_follows_the_bone_it_names_from_where_it_is(dressed):
+    """An object only placed near the bone (not parented), with *Bone* set: it keeps
+    where it is relative to the bone's current pose, as parenting it now would."""
+    scene, rig, walk, _slim, flag = dressed
+    parented = scene_config.config_from_scene(scene).props["Rig"][0].mesh.positions
+    world = flag.matrix_world.copy()
+    flag.parent = None
+    flag.matrix_world = world
+    bpy.context.view_layer.update()
+    scene.crowd.characters[0].props[0].bone = "arm.L"
+    loose = scene_config.config_from_scene(scene).props["Rig"][0].mesh.positions
+    np.testing.assert_allclose(loose, parented, atol=1e-5)
+
+
 def test_variants_and_props_are_seeded_and_drawn_on_their_agents(dressed):
     scene, rig, walk, slim, flag = dressed
     cfg = scene_config.config_from_scene(scene)
