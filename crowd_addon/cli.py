@@ -286,7 +286,7 @@ def _run_export(args) -> int:
         f"{result.clip_agents:,} changing animation on value clips ({result.blend_frames:,} "
         f"blend frames), {result.moving_agents:,} moving",
         f"  {result.stream_animations:,} stream animations, {result.characters} "
-        f"character{'s' if result.characters != 1 else ''}",
+        f"character layer{'s' if result.characters != 1 else ''}",
         f"  {s['total']:.1f} s (simulate {s['simulate']:.1f} s, author "
         f"{s['author']:.1f} s, write {s['write']:.1f} s)"]
         + ([f"  {describe(result.repetition)}"] if result.repetition else [])

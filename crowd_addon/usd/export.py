@@ -5,7 +5,8 @@ simulated once by :func:`crowd_addon.core.recorder.record`; nothing here runs a
 crowd) as::
 
     shot.usdc                         layout: offset animations, agents (main layer)
-    shot.layers/vN/characters/*.usdc  one SkelRoot + Skeleton + Mesh per character
+    shot.layers/vN/characters/*.usdc  one SkelRoot + Skeleton + Mesh per body (a character,
+                                      or its mesh variant and props)
     shot.layers/vN/streams/*.usdc     one baked SkelAnimation per stream used
     shot.layers/vN/agents.usdc        own animations of agents that are not static
                                       (sublayer of the main layer; only if any)
@@ -75,7 +76,8 @@ class ExportResult:
         over the whole shot); blend_frames : the frames of their blends, the only
         poses written per agent; moving_agents : those whose transform is
         time-sampled.
-    offset_animations, stream_animations, characters : prims/layers written.
+    offset_animations, stream_animations, characters : prims/layers written
+        (``characters``: character layers, one per body).
     seconds : dict ``simulate`` (the recording's), ``author``, ``write``, ``total``
         (wall clock).
     substeps : samples written per frame (the recording's).

@@ -151,7 +151,11 @@ def test_export_of_the_saved_blend_is_the_demos_stage(demo, export_from_blend):
     out, _ = demo
     usd, result = export_from_blend
     summary = json.loads((out / "summary.json").read_text())
-    assert result["characters"] == 2 and result["frames"] == [1, FRAMES]
+    layers = sorted(Path(f).stem for f in result["files"] if "/characters/" in f)
+    # a layer per body: the fan's two builds with and without flag and cap, the mocap
+    assert result["characters"] == len(layers) and result["frames"] == [1, FRAMES]
+    assert {"Fan", "Mocap", "Fan_FanFlag", "Fan_FanCap"} <= set(layers)
+    assert any(k.startswith("Fan_FanBodyBroad") for k in layers)
     assert {k: result[k] for k in summary["usd_export"]} == summary["usd_export"]
     # measured through the scene camera at the render size: the demo's camera and frames
     assert result["repetition"] == summary["repetition"]
