@@ -5,10 +5,7 @@ Every operator reports bad input as an ERROR naming what is at fault
 crowd only once the new one is complete.
 """
 
-import dataclasses
 import time
-
-import numpy as np
 
 import bpy
 from bpy.props import EnumProperty, IntProperty
@@ -154,13 +151,7 @@ class CROWD_OT_generate_agents(bpy.types.Operator):
             agents, placed = agents_from_scene(scene, dg)
             pv = preview.get(scene)
             if pv is not None:
-                cfg = dataclasses.replace(
-                    pv.crowd.config, agent_stream=np.zeros(0, np.int32),
-                    agent_unique=np.zeros(0, np.int32), agent_offset=np.zeros(0, np.int32),
-                    agent_position=np.zeros((0, 3), np.float32),
-                    agent_heading=np.zeros(0, np.float32),
-                    agent_color=np.zeros((0, 3), np.float32),
-                    agent_scale=np.zeros(0, np.float32))
+                cfg = pv.crowd.config.without_agents()
                 agents.add_to(cfg)
                 cfg.show = show_from_scene(scene, dg, cfg, placed)   # selections: new ids
                 preview.start(scene, cfg)

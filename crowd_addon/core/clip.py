@@ -338,7 +338,6 @@ class ClipBank:
         i0 = np.floor(u).astype(np.int64)
         last = self.frames[clip_ids] - 1
         i0 = np.minimum(i0, last)
-        i1 = np.minimum(i0 + 1, last)
         f = (u - i0).astype(np.float32)
         base = self.start[clip_ids]
         if out is None:

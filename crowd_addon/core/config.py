@@ -8,7 +8,7 @@ building the runtime).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
@@ -248,6 +248,13 @@ class CrowdConfig:
     def add_unique(self, name, skeleton, root):
         self.uniques.append(AnimationDef(str(name), str(skeleton), root))
         return len(self.uniques) - 1
+
+    def without_agents(self) -> "CrowdConfig":
+        """A copy of this configuration without its agents: every per-agent array
+        (``agent_*``) empty, the rest shared."""
+        empty = CrowdConfig()
+        return replace(self, **{f.name: getattr(empty, f.name) for f in fields(self)
+                                if f.name.startswith("agent_")})
 
     @property
     def agent_count(self) -> int:

@@ -52,13 +52,12 @@ _CHARACTER_DRAW = 3
 _VARIANT_DRAW = 7
 #: added to a source's seed for the draw of scales
 _SCALE_DRAW = 4
-#: added to a source's seed for the draws of palette colours (plus the character and
-#: palette)
-_PALETTE_DRAW = 5
-#: added to a source's seed for the draw of mesh variants (plus 31 x the character),
-#: and of props (plus 31 x the character and the prop): far from the draws above
+#: added to a source's seed for the draws of mesh variants (plus 31 x the character),
+#: props (plus 31 x the character and the prop) and palette colours (plus 31 x the
+#: character and the palette): apart from each other and from the draws above
 _VARIANT_MESH_DRAW = 1009
 _PROP_DRAW = 2003
+_PALETTE_DRAW = 3003
 
 
 @dataclass(frozen=True)

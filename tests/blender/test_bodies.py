@@ -200,3 +200,20 @@ def test_a_prop_without_a_bone_or_a_variant_without_a_mesh_is_named(dressed):
     char.variants[0].object = None
     with pytest.raises(CrowdError, match=r"character 'Rig': mesh variant 1 has no mesh"):
         scene_config.config_from_scene(scene)
+
+
+def test_generate_agents_on_a_running_preview_redraws_bodies_and_palettes(dressed):
+    """*Generate Agents* with the preview running replaces every per-agent array (it
+    once kept the old agents' variants, props and palette colours beside the new
+    agents', and the crowd refused the mismatch)."""
+    scene, rig, walk, slim, flag = dressed
+    rig.animation_data.action = None
+    assert bpy.ops.crowd.bake() == {"FINISHED"}
+    before = preview.get(scene).crowd
+    assert before.agents.count == 30 and before.config.prop_masks.any()
+    scene.crowd.agent_sources[0].object = cs.make_seats(3, 4, name="Few")
+    assert bpy.ops.crowd.generate_agents() == {"FINISHED"}
+    now = preview.get(scene).crowd
+    assert now.agents.count == 12 and now.config.clips is before.config.clips
+    assert now.config.variant_ids.shape == now.config.prop_masks.shape == (12,)
+    assert now.view.agent_body.shape == (12,)

@@ -200,3 +200,26 @@ def test_a_character_or_stream_that_does_not_fit_is_named():
                   characters=mute).characters == 0).all()
     with pytest.raises(CrowdError, match="there are no characters"):
         place(characters=())
+
+
+def test_each_kind_of_draw_has_a_random_stream_of_its_own():
+    """Speed streams, palette colours, mesh variants and props are drawn from separate
+    seeds: over 4,000 agents no two of them are correlated (a draw sharing another's
+    seed and method would repeat it: correlation 1)."""
+    from crowd_addon.core.placement import Palette
+    from crowd_addon.core.variety import Timing
+    colours = tuple((i / 8, 0.5, 0.5) for i in range(8))
+    cast = (CharacterStreams(
+        "fan", ("idle",), (1.0,), timings=(Timing(0.6, 1.4, 8),),
+        palettes=tuple(Palette(f"m{j}", colours) for j in range(3)),
+        variant_weights=(1.0,) * 8, prop_shares=(0.5, 0.5)),)
+    a = place(points=grid(80, 50), characters=cast)
+    draws = {"speed": a.streams, "variant": a.variants, "prop0": a.props & 1,
+             "prop1": a.props >> 1 & 1,
+             **{f"palette{j}": a.palette[:, j, 0] for j in range(3)}}
+    names = list(draws)
+    for i, p in enumerate(names):
+        assert len(np.unique(draws[p])) > 1, p
+        for q in names[i + 1:]:
+            r = np.corrcoef(draws[p].astype(float), draws[q].astype(float))[0, 1]
+            assert abs(r) < 0.08, (p, q, r)
