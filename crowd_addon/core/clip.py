@@ -347,7 +347,13 @@ class ClipBank:
         # between keys, the next key is already on the shortest arc (``next_keys``), so
         # the blend is blend2's arithmetic without its sign test (the same floats)
         frac = np.flatnonzero(f)
-        if frac.size:
+        if frac.size == clip_ids.size:          # every one between keys: in place
+            b = np.take(self.next_keys, base + i0, axis=0)
+            np.subtract(b, out, out=b)
+            b *= f[:, None, None]
+            out += b
+            sqt.normalize_rotations(out)
+        elif frac.size:
             a = out[frac]
             b = self.next_keys[(base + i0)[frac]]
             np.subtract(b, a, out=b)

@@ -321,12 +321,13 @@ def test_sampling_between_keys_is_the_shortest_arc_blend_of_the_two_keys():
         keys = clips[clip].keys                           # float32, as stored
         t = rng.uniform(0, len(keys) - 1, 200)
         t[:3] = (0.0, len(keys) - 1.0, len(keys) - 1.5)
-        got = bank.sample(np.full(200, clip), t)
-        u = bank.local_time(np.full(200, clip), t)        # the loop wraps its last key
-        i0 = np.floor(u).astype(int)
-        i1 = np.minimum(i0 + 1, len(keys) - 1)
-        f = (u - i0).astype(np.float32)
-        want = keys[i0].copy()
-        part = f > 0
-        want[part] = sqt.blend2(keys[i0[part]], keys[i1[part]], f[part])
-        np.testing.assert_array_equal(got[:, :keys.shape[1]], want)
+        for t in (t, t[3:]):          # some at keys; all between keys (done in place)
+            got = bank.sample(np.full(t.size, clip), t)
+            u = bank.local_time(np.full(t.size, clip), t)    # the loop wraps its last key
+            i0 = np.floor(u).astype(int)
+            i1 = np.minimum(i0 + 1, len(keys) - 1)
+            f = (u - i0).astype(np.float32)
+            want = keys[i0].copy()
+            part = f > 0
+            want[part] = sqt.blend2(keys[i0[part]], keys[i1[part]], f[part])
+            np.testing.assert_array_equal(got[:, :keys.shape[1]], want)
