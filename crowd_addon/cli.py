@@ -168,6 +168,10 @@ def _add_plan(subparsers) -> None:
     p.add_argument("--height", type=int_at_least(1), default=None,
                    help="screen height in pixels (default: the scene's render size, or 720)")
     add_repetition_arguments(p, frames=False)
+    p.add_argument("--motion-only", action="store_true",
+                   help="compare motion alone: agents alike when in step, whatever their "
+                        "bodies and colours (what M, copies and offsets change; a crowd "
+                        "whose looks never repeat measures 0 otherwise)")
     p.add_argument("--plot", type=path_arg, default="plan.png", metavar="PNG",
                    help="where to write the plot (default: %(default)s)")
     p.add_argument("--no-plot", dest="plot", action="store_const", const=None,
@@ -188,7 +192,7 @@ def _run_plan(args) -> int:
     from .gpu.camera import frame_positions
     from .plan_report import plot, summary_lines, table
 
-    settings = RepetitionSettings(k=args.neighbours)
+    settings = RepetitionSettings(k=args.neighbours, appearance=not args.motion_only)
     printer = progress_printer("crowd plan")
     camera = None
     if args.blend:

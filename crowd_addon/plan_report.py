@@ -52,7 +52,8 @@ def summary_lines(result) -> list:
                      if p.repetition < d.repetition else "  no candidate repeats less")
     lines.append(f"  budget {result.budget_bytes / _MB:,.1f} MB, at most "
                  f"{result.max_streams} streams; {result.visible:,} of {result.agents:,} "
-                 f"agents in view, k = {result.settings.k}")
+                 f"agents in view, k = {result.settings.k}"
+                 + ("" if result.settings.appearance else "; motion only"))
     return lines + [f"  note: {n}" for n in result.notes]
 
 
@@ -96,7 +97,8 @@ def plot(result, path, title: str = "") -> str:
     ax.grid(True, alpha=0.3)
     ax.set_title(title or f"{result.agents:,} agents, budget "
                           f"{result.budget_bytes / _MB:,.0f} MB, at most "
-                          f"{result.max_streams} streams")
+                          f"{result.max_streams} streams"
+                          + ("" if result.settings.appearance else ", motion only"))
     ax.legend(fontsize=7, ncol=2)
     fig.tight_layout()
     try:

@@ -56,6 +56,25 @@ def test_no_plot_and_options(crowd_json, tmp_path, capsys, monkeypatch):
     assert not (tmp_path / "plan.png").exists()
 
 
+def test_motion_only_leaves_looks_out(crowd_json, tmp_path, capsys):
+    """``--motion-only`` measures agents in step whatever their bodies and colours: the
+    default repeats more than with looks compared (agents here in random colours), and
+    the JSON says so."""
+    cfg = config()
+    cfg.agent_color = np.random.default_rng(2).uniform(0, 1, cfg.agent_color.shape)
+    save_config(cfg, tmp_path / "colours.json")
+    args = ["plan", "--config", str(tmp_path / "colours.json"), "--no-plot", "--json"]
+    assert main(args) == 0
+    full = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert main(args + ["--motion-only"]) == 0
+    out = capsys.readouterr().out
+    motion = json.loads(out.strip().splitlines()[-1])
+    assert full["appearance"] is True and motion["appearance"] is False
+    assert motion["repetition_default"] > full["repetition_default"]
+    assert motion["repetition_planned"] < motion["repetition_default"]
+    assert "; motion only" in out
+
+
 def test_bad_input_is_named(crowd_json, tmp_path, capsys):
     assert main(["plan", "--config", str(crowd_json), "--budget-mb", "0.001",
                  "--no-plot"]) == 2

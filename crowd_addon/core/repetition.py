@@ -52,7 +52,9 @@ class RepetitionSettings:
     most ``offset_tolerance`` frames apart (2 frames: 1/15 s at 30 fps, too close for a
     viewer to tell apart); colours within ``color_tolerance`` per RGB channel;
     ``width`` x ``height`` pixels of the screen the camera's image fills; ``frames``
-    measured over a shot, spread evenly (the first and the last among them)."""
+    measured over a shot, spread evenly (the first and the last among them);
+    ``appearance`` False compares motion alone (bodies and colours are not compared:
+    the part of the likeness the planner's choices change)."""
 
     k: int = 6
     offset_tolerance: int = OFFSET_TOLERANCE
@@ -60,6 +62,7 @@ class RepetitionSettings:
     width: int = 1280
     height: int = 720
     frames: int = 8
+    appearance: bool = True
 
     def __post_init__(self):
         for name in ("k", "width", "height", "frames"):
@@ -77,6 +80,9 @@ class RepetitionSettings:
             raise CrowdError(f"repetition: color_tolerance must be in 0..1, got "
                              f"{self.color_tolerance!r}")
         object.__setattr__(self, "color_tolerance", c)
+        if not isinstance(self.appearance, (bool, np.bool_)):
+            raise CrowdError(f"repetition: appearance must be True or False, got "
+                             f"{self.appearance!r}")
 
 
 @dataclass(frozen=True)
@@ -352,8 +358,9 @@ def pairs_alike(i, j, kind, ref, offset, look, color, settings: RepetitionSettin
         r = np.mod(d[loops], p[loops])
         d[loops] = np.minimum(r, p[loops] - r)
     same &= (kind[i] == UNIQUE) | (d <= settings.offset_tolerance + 1e-9)
-    same &= look[i] == look[j]
-    same &= (np.abs(color[i] - color[j]) <= settings.color_tolerance + 1e-9).all(1)
+    if settings.appearance:
+        same &= look[i] == look[j]
+        same &= (np.abs(color[i] - color[j]) <= settings.color_tolerance + 1e-9).all(1)
     return same
 
 

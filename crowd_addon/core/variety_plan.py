@@ -146,6 +146,7 @@ class VarietyPlan:
                 "budget_bytes": self.budget_bytes, "max_streams": self.max_streams,
                 "agents": self.agents, "visible": self.visible, "k": self.settings.k,
                 "offset_tolerance": self.settings.offset_tolerance,
+                "appearance": self.settings.appearance,
                 "templates": list(self.templates),
                 "candidates": [asdict(c) for c in self.candidates],
                 "notes": list(self.notes)}

@@ -107,8 +107,9 @@ def brute_metric(pos, kind, ref, offset, look, color, vp, s):
             same = kind[i] == kind[j] and kind[i] != TRANSITION and ref[i] == ref[j]
             same = same and (kind[i] == UNIQUE or abs(int(offset[i]) - int(offset[j]))
                              <= s.offset_tolerance)
-            same = same and look[i] == look[j]
-            same = same and np.abs(color[i] - color[j]).max() <= s.color_tolerance
+            if s.appearance:
+                same = same and look[i] == look[j]
+                same = same and np.abs(color[i] - color[j]).max() <= s.color_tolerance
             alike += same
     return alike / pairs
 
@@ -137,6 +138,24 @@ def test_spread_agents_match_brute_force(streams, offsets, colors, k):
     assert share == pytest.approx(brute_metric(pos, kind, ref, offset, look, color, vp, s),
                                   abs=1e-12)
     assert 0 < share < 1
+
+
+def test_motion_only_compares_no_bodies_or_colours():
+    """``appearance=False``: agents in step are alike whatever they wear; the value is
+    the brute-force one with bodies and colours left out, and at least the full
+    metric's."""
+    rng = np.random.default_rng(8)
+    pos, kind, ref, offset, look, color = crowd_arrays(600, rng, 3, 8, 3)
+    look[rng.random(600) < 0.5] = 1
+    vp = top_view()
+    full = RepetitionSettings(k=6, width=640, height=480)
+    motion = RepetitionSettings(k=6, width=640, height=480, appearance=False)
+    got = frame_repetition(pos, kind, ref, offset, look, color, vp, motion)[0]
+    assert got == pytest.approx(brute_metric(pos, kind, ref, offset, look, color, vp,
+                                             motion), abs=1e-12)
+    assert got > 2 * frame_repetition(pos, kind, ref, offset, look, color, vp, full)[0] > 0
+    with pytest.raises(CrowdError, match="appearance must be True or False"):
+        RepetitionSettings(appearance="no")
 
 
 def test_each_difference_breaks_likeness():
