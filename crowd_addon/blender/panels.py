@@ -152,6 +152,7 @@ class CROWD_PT_main(_Panel, bpy.types.Panel):
         row.operator("crowd.plan_variety", icon="GRAPH")
         row.prop(s, "plan_budget_mb", text="MB")
         row.prop(s, "plan_max_streams", text="S")
+        row.prop(s, "plan_motion_only", text="", icon="ANIM")
         if pv.plan is not None:
             from ..plan_report import summary_lines
             for line in summary_lines(pv.plan):

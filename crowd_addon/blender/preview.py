@@ -416,13 +416,15 @@ def measure_repetition(scene, region_data=None, region=None):
 def plan_variety(scene, region_data=None, region=None, progress=None):
     """Run the variety planner (:mod:`crowd_addon.core.variety_plan`) on the previewed
     crowd's configuration, seen as :func:`measure_repetition` sees it, within the
-    settings' *Budget* and *Max Streams*; kept in :attr:`Preview.plan`.
+    settings' *Budget* and *Max Streams* (and *Motion Only*: motion compared alone);
+    kept in :attr:`Preview.plan`.
     ``progress(done, total)`` after each candidate."""
     from ..core.variety_plan import plan_input
     from ..core.variety_plan import plan_variety as plan
     pv = _running(scene)
     vp, settings, seen = _metric_view(scene, region_data, region)
     s = scene.crowd
+    settings = dataclasses.replace(settings, appearance=not s.plan_motion_only)
     pv.plan = plan(plan_input(pv.crowd.config), vp, s.plan_budget_mb * 1e6, settings,
                    s.plan_max_streams, progress=progress)
     pv.repetition_seen = seen

@@ -378,6 +378,10 @@ class CROWD_PG_settings(PropertyGroup):
         name="Max Streams", default=256, min=1,
         description="Plan Variety: the most streams a plan may use (each costs CPU time "
                     "every frame; the paper's 256 by default)")
+    plan_motion_only: BoolProperty(
+        name="Motion Only", default=False,
+        description="Plan Variety: compare motion alone (agents in step are alike "
+                    "whatever their bodies and colours): what a plan changes")
 
 
 CLASSES = show_props.CLASSES + (CROWD_PG_input, CROWD_PG_state_transition, CROWD_PG_node, CROWD_PG_animation,
@@ -412,8 +416,9 @@ _UI_ONLY = {"active_character_index", "active_lod_index", "active_stream_index",
             "active_unique_index", "active_source_index", "active_node_index",
             "active_input_index", "active_transition_index", "preview_enabled",
             "active_cue_index", "active_reaction_index", "active_parameter_index",
-            "active_palette_index",
-            "render_crowd", "repetition_neighbours", "plan_budget_mb", "plan_max_streams"}
+            "active_palette_index", "active_variant_index", "active_prop_index",
+            "render_crowd", "repetition_neighbours", "plan_budget_mb", "plan_max_streams",
+            "plan_motion_only"}
 
 
 def settings_fingerprint(settings) -> int:

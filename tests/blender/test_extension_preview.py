@@ -427,6 +427,13 @@ def test_plan_variety_and_apply_it(running):
     assert plan.templates == ("walk",) and plan.default.max_offset == 8
     assert plan.planned.fits and plan.planned.streams <= 4 and plan.planned.bytes <= 1e6
     assert plan.planned.repetition <= plan.default.repetition
+    assert plan.settings.appearance
+    s.plan_motion_only = True                               # motion alone: looks left out
+    assert bpy.ops.crowd.plan_variety() == {"FINISHED"}
+    assert not pv.plan.settings.appearance
+    assert pv.plan.default.repetition >= plan.default.repetition
+    assert pv.plan.planned.repetition <= pv.plan.default.repetition
+    plan = pv.plan
     seen = []
     ctx = type("Ctx", (), {"scene": scene})()
     panels.CROWD_PT_main.draw(type("P", (), {"layout": _Layout(seen)})(), ctx)
