@@ -217,3 +217,18 @@ def test_generate_agents_on_a_running_preview_redraws_bodies_and_palettes(dresse
     assert now.agents.count == 12 and now.config.clips is before.config.clips
     assert now.config.variant_ids.shape == now.config.prop_masks.shape == (12,)
     assert now.view.agent_body.shape == (12,)
+
+
+def test_picking_a_variant_or_prop_in_its_list_is_no_change_to_bake(dressed):
+    """The lists' active rows are UI state: the preview's settings fingerprint (what
+    asks for a new bake) ignores them, and sees a prop's share."""
+    from crowd_addon.blender.props import settings_fingerprint
+    scene, *_ = dressed
+    char = scene.crowd.characters[0]
+    char.variants.add()
+    char.props.add()
+    before = settings_fingerprint(scene.crowd)
+    char.active_variant_index, char.active_prop_index = 1, 1
+    assert settings_fingerprint(scene.crowd) == before
+    char.props[0].share = 0.9
+    assert settings_fingerprint(scene.crowd) != before
