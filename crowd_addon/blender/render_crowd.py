@@ -4,21 +4,27 @@ F12 (Workbench, EEVEE, Cycles), viewport renders and playblasts know nothing of 
 preview's GPU drawing, so with ``scene.crowd.render_crowd`` on the crowd is also made
 of ordinary Blender data, with the paper's sharing kept:
 
-* one **pose mesh** per pose in use: a (body, level of detail, pose texture row)
-  triple (a body: the agent's mesh variant with its props,
-  :mod:`crowd_addon.core.bodies`). Agents of a stream at the same offset read the same row, so they share one
-  mesh; an agent in a transition or playing a unique has a row of its own. Each pose
-  mesh is the level's proxy (its triangles, UVs and materials) skinned on the CPU by
-  core (:func:`crowd_addon.core.skinning.skin_vertices`) and written with one bulk
-  ``foreach_set``. The meshes hang on objects ``CrowdPose.000000 ...`` of the
-  collection :data:`POSES`, which is not linked to the scene (only instanced);
-* one **points object** (:data:`POINTS`): a vertex per agent at its position, with
-  point attributes ``crowd_pose`` (the index of its pose object), ``crowd_drawn``
-  (false for agents of a character without a body: not instanced), ``crowd_heading``
-  (radians about +Z), ``crowd_scale`` (its body scale), ``crowd_color`` (its tint)
-  and ``crowd_palette0`` .. ``3`` (its palette colours, alpha 0 where it has none;
-  docs/variety.md), readable in materials through an Attribute node of type
-  *Instancer*, and a Geometry Nodes modifier that puts the
+* one **pose mesh** per pose in use: a (part, level of detail, pose texture row)
+  triple, a part being a mesh variant of a character or one of its props
+  (:mod:`crowd_addon.core.bodies`). Agents of a stream at the same offset read the
+  same row, so they share one mesh; an agent in a transition or playing a unique has
+  a row of its own. A prop is a piece of its own, not merged into the body as the GPU
+  draws it: a flag's pose mesh is shared by every agent whose hand is in that pose,
+  whatever else it wears, and no combination of props multiplies the body's pose
+  meshes. Each pose mesh is the level's proxy (its triangles, UVs and materials)
+  skinned on the CPU by core (:func:`crowd_addon.core.skinning.skin_vertices`) and
+  written with one bulk ``foreach_set``. The meshes hang on objects
+  ``CrowdPose.000000 ...`` of the collection :data:`POSES`, which is not linked to the
+  scene (only instanced);
+* one **points object** (:data:`POINTS`): a vertex per piece, each agent's body first
+  (vertex ``i`` is agent ``i``), then one per prop an agent carries, at the agent's
+  position, with point attributes ``crowd_pose`` (the index of its pose object),
+  ``crowd_drawn`` (false for agents of a character without a body: not instanced),
+  ``crowd_agent`` (the agent), ``crowd_prop`` (the prop's index in its character, -1
+  for the body), ``crowd_heading`` (radians about +Z), ``crowd_scale`` (its body
+  scale), ``crowd_color`` (its tint) and ``crowd_palette0`` .. ``3`` (its palette
+  colours, alpha 0 where it has none; docs/variety.md), readable in materials through
+  an Attribute node of type *Instancer*, and a Geometry Nodes modifier that puts the
   picked pose object on every point (*Instance on Points* with *Pick Instance*
   from a *Collection Info* of :data:`POSES`, whose children come in name order).
 
@@ -145,6 +151,8 @@ def _points_object(scene, count: int):
         mesh.vertices.add(count)
     for name, kind, domain in (("crowd_pose", "INT", "POINT"),
                                ("crowd_drawn", "BOOLEAN", "POINT"),
+                               ("crowd_agent", "INT", "POINT"),
+                               ("crowd_prop", "INT", "POINT"),
                                ("crowd_heading", "FLOAT", "POINT"),
                                ("crowd_scale", "FLOAT", "POINT"),
                                ("crowd_color", "FLOAT_COLOR", "POINT"),
@@ -195,11 +203,11 @@ class _Existing:
         self.objects = {o.name: o for o in bpy.data.objects if o.name.startswith(_POSE_PREFIX)}
         self.linked = set(coll.objects.keys())
 
-    def meshes_for(self, proxy, body: int, lod: int, count: int) -> list:
-        """``count`` pose meshes of one (body, LOD) topology, reused frame to frame."""
+    def meshes_for(self, proxy, part: int, lod: int, count: int) -> list:
+        """``count`` pose meshes of one (part, LOD) topology, reused frame to frame."""
         out = []
         for i in range(count):
-            name = f"{_MESH_PREFIX}{body}.{lod}.{i:06d}"
+            name = f"{_MESH_PREFIX}{part}.{lod}.{i:06d}"
             mesh = self.meshes.get(name)
             if mesh is None or len(mesh.vertices) != proxy.vertex_count \
                     or len(mesh.polygons) != proxy.triangle_count:
@@ -226,37 +234,70 @@ class _Existing:
             self.linked.add(name)
 
 
+def _pieces(crowd, lod):
+    """What the points instance: each agent's mesh variant, then one piece per prop an
+    agent carries (props are small and rigid: their pose meshes are shared by every
+    agent whose bone is in the same pose, instead of a pose mesh per combination of
+    props; at the card level, as on the GPU, no prop). Returns ``(agent, drawable,
+    prop, lod, levels)``: per piece its agent, drawable index (a (skeleton, variant)
+    or (skeleton, prop) pair), prop index (-1: the body) and level, and per drawable
+    its LOD meshes (empty: not drawn)."""
+    from ..core.bodies import is_card
+    cfg = crowd.config
+    names = list(cfg.skeletons)
+    skel = np.asarray(crowd.view.agent_skeleton, np.int64)
+    variant = cfg.variant_ids.astype(np.int64)
+    mask = cfg.prop_masks.astype(np.int64)
+    pairs, of_agent = np.unique(skel * 65536 + variant, return_inverse=True)
+    levels = [tuple(cfg.mesh_variants(names[k >> 16])[k & 0xFFFF])
+              if cfg.meshes.get(names[k >> 16]) else () for k in pairs.tolist()]
+    agent = [np.arange(skel.size)]
+    drawable, prop, level = [of_agent.reshape(-1)], [np.full(skel.size, -1)], [lod]
+    card = np.array([bool(lv) and is_card(lv[-1]) for lv in levels] + [False])
+    last = np.array([len(lv) - 1 for lv in levels] + [0])
+    for k, name in enumerate(names):
+        for j, p in enumerate(cfg.props.get(name, ())):
+            on = (skel == k) & (mask >> j & 1 == 1)
+            on &= ~(card[of_agent.reshape(-1)] & (lod == last[of_agent.reshape(-1)]))
+            ids = np.flatnonzero(on)
+            if ids.size:
+                agent.append(ids)
+                drawable.append(np.full(ids.size, len(levels)))
+                prop.append(np.full(ids.size, j))
+                level.append(np.zeros(ids.size, np.int64))
+                levels.append((p.mesh,))
+    return (np.concatenate(agent), np.concatenate(drawable), np.concatenate(prop),
+            np.concatenate(level), levels)
+
+
 def sync(scene, crowd) -> RenderStats:
     """Make the render data (see the module docstring) show ``crowd`` at its current
     frame; returns :class:`RenderStats`."""
     t0 = time.perf_counter()
-    n = crowd.agents.count
-    body = crowd.view.agent_body
-    bodies = crowd.view.bodies
-    lod = agent_lods(crowd, scene)
-    rows = np.asarray(crowd.view.agent_rows_index(), np.int64)
-    drawn = np.array([bool(b.levels) for b in bodies], bool)[body] if n else np.zeros(0, bool)
-    key = (rows * len(bodies) + body) * 16 + lod
-    keys, first, pose_of_agent = np.unique(np.where(drawn, key, -1), return_index=True,
+    agent, part, prop, lod, levels = _pieces(crowd, agent_lods(crowd, scene))
+    n = agent.size
+    rows = np.asarray(crowd.view.agent_rows_index(), np.int64)[agent]
+    drawn = np.array([bool(lv) for lv in levels], bool)[part] if n else np.zeros(0, bool)
+    key = (rows * len(levels) + part) * 16 + lod
+    keys, first, pose_of_piece = np.unique(np.where(drawn, key, -1), return_index=True,
                                            return_inverse=True)
     real = keys >= 0
-    stats = RenderStats(agents=int(drawn.sum()))
-    # pose objects 0..P-1 in key order; an agent without a mesh is not instanced
+    stats = RenderStats(agents=int(drawn[prop < 0].sum()))
+    # pose objects 0..P-1 in key order; a piece without a mesh is not instanced
     poses = int(real.sum())
     offset = int((~real).sum())                 # the -1 key sorts first
-    pose_index = np.where(drawn, pose_of_agent.reshape(-1) - offset, 0).astype(np.int32)
+    pose_index = np.where(drawn, pose_of_piece.reshape(-1) - offset, 0).astype(np.int32)
     coll = _poses_collection()
     existing = _Existing(coll)
-    for k in np.unique(body[drawn]):
-        levels = bodies[k].levels
-        for level in np.unique(lod[drawn & (body == k)]):
-            sel = np.flatnonzero(real & (((keys // 16) % len(bodies)) == k)
+    for k in np.unique(part[drawn]):
+        for level in np.unique(lod[drawn & (part == k)]):
+            sel = np.flatnonzero(real & (((keys // 16) % len(levels)) == k)
                                  & ((keys % 16) == level))
-            agents = first[sel]
-            proxy = levels[int(level)]
+            pieces = first[sel]
+            proxy = levels[k][int(level)]
             verts = skin_vertices(proxy.positions, proxy.bone_indices, proxy.bone_weights,
-                                  crowd.view.agent_rows(agents)).astype(np.float32)
-            meshes = existing.meshes_for(proxy, int(k), int(level), agents.size)
+                                  crowd.view.agent_rows(agent[pieces])).astype(np.float32)
+            meshes = existing.meshes_for(proxy, int(k), int(level), pieces.size)
             for j, mesh, co in zip(sel - offset, meshes, verts):
                 mesh.vertices.foreach_set("co", co.ravel())
                 mesh.update()
@@ -268,18 +309,20 @@ def sync(scene, crowd) -> RenderStats:
                             else coll.objects[name])
     points = _points_object(scene, n)
     me = points.data
-    me.vertices.foreach_set("co", np.ascontiguousarray(crowd.agents.position, np.float32)
-                            .ravel())
+    a = crowd.agents
+    me.vertices.foreach_set("co", np.ascontiguousarray(a.position[agent], np.float32).ravel())
     me.attributes["crowd_pose"].data.foreach_set("value", pose_index)
     me.attributes["crowd_drawn"].data.foreach_set("value", drawn)
+    me.attributes["crowd_agent"].data.foreach_set("value", agent.astype(np.int32))
+    me.attributes["crowd_prop"].data.foreach_set("value", prop.astype(np.int32))
     me.attributes["crowd_heading"].data.foreach_set(
-        "value", np.ascontiguousarray(crowd.agents.heading, np.float32))
+        "value", np.ascontiguousarray(a.heading[agent], np.float32))
     me.attributes["crowd_scale"].data.foreach_set(
-        "value", np.ascontiguousarray(crowd.agents.scale, np.float32))
+        "value", np.ascontiguousarray(a.scale[agent], np.float32))
     color = np.ones((n, 4), np.float32)
-    color[:, :3] = crowd.agents.color
+    color[:, :3] = a.color[agent]
     me.attributes["crowd_color"].data.foreach_set("color", color.ravel())
-    palette = crowd.agents.palette                           # (n, 4, 3), -1: none
+    palette = a.palette[agent]                               # (n, 4, 3), -1: none
     for c in range(4):
         rgba = np.zeros((n, 4), np.float32)
         has = (palette[:, c] >= 0).all(1)

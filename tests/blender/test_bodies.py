@@ -145,7 +145,10 @@ def test_variants_and_props_are_seeded_and_drawn_on_their_agents(dressed):
     np.testing.assert_allclose(got, co.reshape(-1, 3), atol=2e-5)
 
 
-def test_render_crowd_instances_each_agents_body(dressed):
+def test_render_crowd_instances_each_agents_variant_and_its_props(dressed):
+    """*Render Crowd* instances every agent's mesh variant and, as pieces of their own,
+    the props it carries: each instance is core's skinning of that mesh for its agent;
+    a prop's pose mesh is shared by all agents whose bone is in the same pose."""
     scene, rig, walk, slim, flag = dressed
     rig.animation_data.action = None
     for obj in (rig, slim, flag, bpy.data.objects["Body"]):
@@ -155,19 +158,30 @@ def test_render_crowd_instances_each_agents_body(dressed):
     scene.crowd.render_crowd = True
     pv = preview.get(scene)
     assert pv.render_error == ""
-    crowd = pv.crowd
-    bodies, body = crowd.view.bodies, crowd.view.agent_body
-    assert len(bodies) == 4 and {b.name for b in bodies} == {
-        "Body", "Body+Flag", "Slim", "Slim+Flag"}
-    depsgraph = bpy.context.evaluated_depsgraph_get()
+    crowd, cfg = pv.crowd, pv.crowd.config
+    carriers = np.flatnonzero(cfg.prop_masks & 1)
     points = bpy.data.objects[render_crowd.POINTS].data
-    seen = 0
+    n = crowd.agents.count
+    assert len(points.vertices) == n + carriers.size
+    agent, prop = np.empty(len(points.vertices), np.int32), np.empty(len(points.vertices),
+                                                                     np.int32)
+    points.attributes["crowd_agent"].data.foreach_get("value", agent)
+    points.attributes["crowd_prop"].data.foreach_get("value", prop)
+    np.testing.assert_array_equal(agent, np.r_[np.arange(n), carriers])
+    np.testing.assert_array_equal(prop, np.r_[np.full(n, -1), np.zeros(carriers.size)])
+    rows = crowd.view.agent_rows_index()
+    bodies = len(np.unique(rows * 2 + cfg.variant_ids))
+    assert pv.render_stats.poses == bodies + len(np.unique(rows[carriers]))
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    seen = {}
     for inst in depsgraph.object_instances:
         if not (inst.is_instance and inst.parent is not None
                 and inst.parent.original.name == render_crowd.POINTS):
             continue
-        a = int(inst.persistent_id[0])
-        mesh = bodies[body[a]].levels[0]
+        i = int(inst.persistent_id[0])              # every point is drawn here
+        a = int(agent[i])
+        mesh = cfg.props["Rig"][0].mesh if prop[i] >= 0 else \
+            cfg.mesh_variants("Rig")[int(cfg.variant_ids[a])][0]
         assert len(inst.object.data.vertices) == mesh.vertex_count
         local = skin_vertices(mesh.positions, mesh.bone_indices, mesh.bone_weights,
                               crowd.view.agent_rows([a]))[0] * float(crowd.agents.scale[a])
@@ -181,8 +195,8 @@ def test_render_crowd_instances_each_agents_body(dressed):
         inst.object.data.vertices.foreach_get("co", co)
         got = co.reshape(-1, 3) @ m[:3, :3].T + m[:3, 3]
         np.testing.assert_allclose(got, want, atol=1e-5)
-        seen += 1
-    assert seen == crowd.agents.count == len(points.vertices)
+        seen[i] = True
+    assert len(seen) == len(points.vertices)
 
 
 def test_a_prop_without_a_bone_or_a_variant_without_a_mesh_is_named(dressed):
