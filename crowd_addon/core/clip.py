@@ -194,10 +194,12 @@ def _first(names, most=5) -> str:
     return f"{list(names[:most])}" + (f" (and {more} more)" if more > 0 else "")
 
 
-def _next_keys(keys, start, frames) -> np.ndarray:
+def _key_deltas(keys, start, frames) -> np.ndarray:
     """Per key of the packed ``keys``, the key after it in its clip (the last key: itself),
-    its rotation negated where it points away from this key's: interpolating toward it
-    is the shortest-arc nlerp of :func:`.pose.blend2` without the sign test."""
+    its rotation negated where it points away from this key's, minus this key: the
+    shortest-arc nlerp of :func:`.pose.blend2` toward the next key is ``key + f *
+    delta`` (normalised), without the sign test and the subtraction (the same float32
+    operations, done once)."""
     nxt = np.empty_like(keys)
     nxt[:-1] = keys[1:]
     nxt[-1] = keys[-1]
@@ -206,7 +208,7 @@ def _next_keys(keys, start, frames) -> np.ndarray:
     rot = slice(3, 7)
     away = sqt.dot_rotations(keys, nxt) < 0            # the test blend2 makes
     nxt[..., rot] = np.where(away[..., None], -nxt[..., rot], nxt[..., rot])
-    return nxt
+    return np.subtract(nxt, keys, out=nxt)
 
 
 class ClipBank:
@@ -276,7 +278,7 @@ class ClipBank:
             keys[s:s + c.frame_count, :c.bone_count] = c.keys if order is None \
                 else c.keys[:, order]
         self.keys = keys
-        self.next_keys = _next_keys(keys, self.start, frames)
+        self.key_deltas = _key_deltas(keys, self.start, frames)
         self.loop = np.array([c.loop for c in of], bool)
         self.period = np.maximum(frames - 1, 1).astype(np.float64)
         self.rate = np.array([1.0 if self.fps is None else c.fps / self.fps for c in of],
@@ -344,21 +346,19 @@ class ClipBank:
             out = np.empty((clip_ids.size,) + self.keys.shape[1:], np.float32)
         np.take(self.keys, base + i0, axis=0, out=out)
         # at integer times (the common case: speed 1 at whole frames) the key is the pose;
-        # between keys, the next key is already on the shortest arc (``next_keys``), so
-        # the blend is blend2's arithmetic without its sign test (the same floats)
+        # between keys, the step to the next key is stored on the shortest arc
+        # (``key_deltas``), so the blend is blend2's arithmetic without its sign test and
+        # its subtraction (the same floats)
         frac = np.flatnonzero(f)
         if frac.size == clip_ids.size:          # every one between keys: in place
-            b = np.take(self.next_keys, base + i0, axis=0)
-            np.subtract(b, out, out=b)
+            b = np.take(self.key_deltas, base + i0, axis=0)
             b *= f[:, None, None]
             out += b
             sqt.normalize_rotations(out)
         elif frac.size:
-            a = out[frac]
-            b = self.next_keys[(base + i0)[frac]]
-            np.subtract(b, a, out=b)
+            b = self.key_deltas[(base + i0)[frac]]
             b *= f[frac][:, None, None]
-            b += a
+            b += out[frac]
             out[frac] = sqt.normalize_rotations(b)
         return out
 
