@@ -529,6 +529,15 @@ def _encode_level(lv, e) -> dict:
                       for k in lv.looks]}
 
 
+def _skeleton_of(entry, d, cfg) -> str:
+    """The ``skeleton`` an entry read at ``d`` names, one of ``cfg``'s."""
+    skel = d.get(entry, "skeleton", "str")
+    if skel not in cfg.skeletons:
+        raise d.at("skeleton").error(f"unknown skeleton {skel!r} "
+                                     f"(known: {sorted(cfg.skeletons)})")
+    return skel
+
+
 def _decode_level(lv, dl, skel, cfg):
     """The ProxyMesh of a mesh level of skeleton ``skel`` read at ``dl``."""
     arrays = {k: dl.array(lv, k, kinds, shape) for k, (kinds, shape) in _MESH_ARRAYS.items()}
@@ -740,10 +749,7 @@ def _decode_config(m: dict, dec: Decoder) -> CrowdConfig:
     mesh_of = {}
     for i, mesh in enumerate(dec.items(m, "meshes", "object", [])):
         d = dec.at("meshes", i)
-        skel = d.get(mesh, "skeleton", "str")
-        if skel not in cfg.skeletons:
-            raise d.at("skeleton").error(f"unknown skeleton {skel!r} "
-                                         f"(known: {sorted(cfg.skeletons)})")
+        skel = _skeleton_of(mesh, d, cfg)
         if skel in mesh_of:
             raise d.at("skeleton").error(f"a second mesh for skeleton {skel!r} (the first is "
                                          f"meshes[{mesh_of[skel]}]); give each skeleton one "
@@ -765,10 +771,7 @@ def _decode_config(m: dict, dec: Decoder) -> CrowdConfig:
                 [_decode_level(lv, dv.at(j), skel, cfg) for j, lv in enumerate(lvs)])
     for i, prop in enumerate(dec.items(m, "props", "object", [])):
         d = dec.at("props", i)
-        skel = d.get(prop, "skeleton", "str")
-        if skel not in cfg.skeletons:
-            raise d.at("skeleton").error(f"unknown skeleton {skel!r} "
-                                         f"(known: {sorted(cfg.skeletons)})")
+        skel = _skeleton_of(prop, d, cfg)
         try:
             cfg.add_prop(Prop(d.get(prop, "name", "name"), skel, d.get(prop, "bone", "int"),
                               _decode_level(d.get(prop, "mesh", "object"), d.at("mesh"), skel,

@@ -87,6 +87,99 @@ def world_reference(crowd, agents, mesh, influences=None):
     return world + crowd.agents.position[agents].astype(np.float64)[:, None]
 
 
+REFERENCE_VS = """#version 430 core
+layout(location = 0) in vec3 in_world;
+layout(location = 1) in vec3 in_normal;
+layout(location = 2) in vec3 in_color;
+uniform mat4 u_view_proj;
+smooth out vec3 v_world;
+smooth out vec3 v_normal;
+flat out vec3 v_color;
+void main() {
+  v_world = in_world; v_normal = in_normal; v_color = in_color;
+  gl_Position = u_view_proj * vec4(in_world, 1.0);
+}
+"""
+
+
+def _reference_colors(crowd, agents, mesh, skeleton):
+    """(n, V, 3) the colour each vertex of ``mesh`` takes for ``agents``: the agent's
+    tint where there are no looks, else the material's colour tinted where it is grey,
+    and a palette material the agent's palette colour."""
+    color = np.rint(np.clip(crowd.agents.color[agents], 0, 1) * 255) / 255
+    color = np.broadcast_to(color[:, None], (agents.size, mesh.vertex_count, 3))
+    if not mesh.looks:
+        return color
+    base = np.ones((mesh.vertex_count, 3))
+    looks = np.array([look.color[:3] for look in mesh.looks])
+    material = np.zeros(mesh.triangle_count, np.int64) if mesh.material is None \
+        else mesh.material.astype(np.int64)
+    base[mesh.triangles.reshape(-1)] = np.repeat(looks[material], 3, axis=0)
+    base = np.rint(base * 255) / 255
+    saturation = (base.max(1) - base.min(1)) / np.maximum(base.max(1), 1e-4)
+    grey = np.clip(1 - 4 * saturation, 0, 1)[None, :, None]
+    color = base[None] * (1 - grey) + base[None] * color * grey
+    names = list(crowd.config.palette_materials.get(skeleton, ()))
+    if names:                 # palette materials take each agent's palette colour instead
+        column = np.full(mesh.vertex_count, -1)
+        per_look = [names.index(k.name) if k.name in names else -1 for k in mesh.looks]
+        column[mesh.triangles.reshape(-1)] = np.repeat(np.array(per_look)[material], 3)
+        palette = crowd.agents.palette[agents]
+        pal = np.rint(np.clip(palette, 0, 1) * 255) / 255                # (n, 4, 3)
+        for c in range(4):
+            on = (palette[:, c] >= 0).all(1)[:, None] & (column == c)[None]
+            color = np.where(on[..., None], pal[:, c][:, None, :], color)
+    return color
+
+
+def reference_image(gl, crowd, camera, light, size):
+    """Every agent's body (its LOD 0: mesh variant and props, ``crowd.view.bodies``)
+    skinned on the CPU (core.skin_vertices), uploaded as one static mesh and drawn with
+    the crowd's own fragment shader: ``(H, W, 4)`` uint8, top row first."""
+    from crowd_addon.gpu.assembler import gl_sources
+    from crowd_addon.gpu.programs import CROWD_DRAW
+    view = crowd.view
+    names = list(crowd.config.skeletons)
+    verts, tris, base = [], [], 0
+    for b, body in enumerate(view.bodies):
+        mesh = body.levels[0]
+        agents = np.flatnonzero(view.agent_body == b)
+        world = world_reference(crowd, agents, mesh)
+        rows = crowd.agent_rows(agents)
+        normals = skin_vertices(mesh.normals, mesh.bone_indices, mesh.bone_weights, rows) - \
+            skin_vertices(np.zeros_like(mesh.normals), mesh.bone_indices, mesh.bone_weights,
+                          rows)
+        hd = crowd.agents.heading[agents].astype(np.float64)[:, None]
+        c, s = np.cos(hd), np.sin(hd)
+        normals = np.stack([c * normals[..., 0] - s * normals[..., 1],
+                            s * normals[..., 0] + c * normals[..., 1], normals[..., 2]], -1)
+        color = _reference_colors(crowd, agents, mesh, names[body.skeleton])
+        verts.append(np.concatenate([world, normals, color], -1).reshape(-1, 9))
+        tris.append((mesh.triangles[None].astype(np.int64) + base
+                     + (np.arange(agents.size) * mesh.vertex_count)[:, None, None]).reshape(-1, 3))
+        base += agents.size * mesh.vertex_count
+    verts = np.concatenate(verts).astype("f4")
+    tris = np.concatenate(tris).astype("u4")
+    prog = gl.program(vertex_shader=REFERENCE_VS,
+                      fragment_shader=gl_sources(CROWD_DRAW, {"INFLUENCES": 4, "SHADOWS": 0})
+                      ["fragment_shader"])
+    prog["u_view_proj"].write(np.asarray(camera.view_projection, "f4").T.tobytes())
+    prog["u_light"].value = light
+    vbo, ibo = gl.buffer(verts.tobytes()), gl.buffer(tris.tobytes())
+    vao = gl.vertex_array(prog, [(vbo, "3f 3f 3f", "in_world", "in_normal", "in_color")], ibo,
+                          index_element_size=4)
+    fbo = gl.framebuffer(color_attachments=[gl.renderbuffer(size, 4)],
+                         depth_attachment=gl.depth_renderbuffer(size))
+    fbo.use()
+    fbo.clear(0.62, 0.66, 0.72, 1.0, depth=1.0)
+    gl.enable(gl.DEPTH_TEST)
+    vao.render()
+    img = np.frombuffer(fbo.read(components=4, alignment=1), np.uint8)
+    for obj in (vao, vbo, ibo, prog, fbo):
+        obj.release()
+    return img.reshape(size[1], size[0], 4)[::-1]
+
+
 def assert_close_relative(actual, expected, rtol=1e-4):
     """``|actual - expected| <= rtol * max|expected|`` everywhere (relative to the scale
     of the values, as positions near 0 make per-element relative errors meaningless)."""
@@ -100,7 +193,7 @@ def h():
     """The helpers above (test modules are imported by path, not as a package)."""
     return SimpleNamespace(make_config=make_config, make_unique=make_unique,
                            spread_influences=spread_influences,
-                           world_reference=world_reference,
+                           world_reference=world_reference, reference_image=reference_image,
                            assert_close_relative=assert_close_relative, Crowd=Crowd)
 
 

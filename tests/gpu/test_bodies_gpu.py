@@ -10,12 +10,10 @@ and fragment shader (as tests/gpu/test_render_images.py does for one body)."""
 import numpy as np
 import pytest
 
-from crowd_addon.core import CrowdError, skin_vertices
+from crowd_addon.core import CrowdError
 from crowd_addon.core import synthetic as sy
 from crowd_addon.core.bodies import is_card
-from crowd_addon.gpu.assembler import gl_sources
 from crowd_addon.gpu.camera import frame_crowd
-from crowd_addon.gpu.programs import CROWD_DRAW
 
 SIZE = (200, 150)
 FAR = (1e3, 2e3, 3e3)           # every agent at LOD 0 in the images
@@ -91,67 +89,6 @@ def test_reading_back_agents_of_several_bodies_is_an_error_naming_them(h, render
         r.skinned_positions([b], lod=4)
 
 
-REFERENCE_VS = """#version 430 core
-layout(location = 0) in vec3 in_world;
-layout(location = 1) in vec3 in_normal;
-layout(location = 2) in vec3 in_color;
-uniform mat4 u_view_proj;
-smooth out vec3 v_world;
-smooth out vec3 v_normal;
-flat out vec3 v_color;
-void main() {
-  v_world = in_world; v_normal = in_normal; v_color = in_color;
-  gl_Position = u_view_proj * vec4(in_world, 1.0);
-}
-"""
-
-
-def cpu_reference_image(gl, h, crowd, camera, light):
-    """Every agent's body (LOD 0, no looks: the agent's colour) skinned on the CPU and
-    drawn as one static mesh with the crowd's own fragment shader."""
-    view = crowd.view
-    verts, tris, base = [], [], 0
-    for b, body in enumerate(view.bodies):
-        mesh = body.levels[0]
-        assert not mesh.looks
-        agents = np.flatnonzero(view.agent_body == b)
-        world = h.world_reference(crowd, agents, mesh)
-        rows = crowd.agent_rows(agents)
-        normals = skin_vertices(mesh.normals, mesh.bone_indices, mesh.bone_weights, rows) - \
-            skin_vertices(np.zeros_like(mesh.normals), mesh.bone_indices, mesh.bone_weights,
-                          rows)
-        hd = crowd.agents.heading[agents].astype(np.float64)[:, None]
-        c, s = np.cos(hd), np.sin(hd)
-        normals = np.stack([c * normals[..., 0] - s * normals[..., 1],
-                            s * normals[..., 0] + c * normals[..., 1], normals[..., 2]], -1)
-        color = np.rint(np.clip(crowd.agents.color[agents], 0, 1) * 255) / 255
-        color = np.broadcast_to(color[:, None], world.shape)
-        verts.append(np.concatenate([world, normals, color], -1).reshape(-1, 9))
-        tris.append((mesh.triangles[None].astype(np.int64) + base
-                     + (np.arange(agents.size) * mesh.vertex_count)[:, None, None]).reshape(-1, 3))
-        base += agents.size * mesh.vertex_count
-    verts = np.concatenate(verts).astype("f4")
-    tris = np.concatenate(tris).astype("u4")
-    prog = gl.program(vertex_shader=REFERENCE_VS,
-                      fragment_shader=gl_sources(CROWD_DRAW, {"INFLUENCES": 4, "SHADOWS": 0})
-                      ["fragment_shader"])
-    prog["u_view_proj"].write(np.asarray(camera.view_projection, "f4").T.tobytes())
-    prog["u_light"].value = light
-    vbo, ibo = gl.buffer(verts.tobytes()), gl.buffer(tris.tobytes())
-    vao = gl.vertex_array(prog, [(vbo, "3f 3f 3f", "in_world", "in_normal", "in_color")], ibo,
-                          index_element_size=4)
-    fbo = gl.framebuffer(color_attachments=[gl.renderbuffer(SIZE, 4)],
-                         depth_attachment=gl.depth_renderbuffer(SIZE))
-    fbo.use()
-    fbo.clear(0.62, 0.66, 0.72, 1.0, depth=1.0)
-    gl.enable(gl.DEPTH_TEST)
-    vao.render()
-    img = np.frombuffer(fbo.read(components=4, alignment=1), np.uint8)
-    for obj in (vao, vbo, ibo, prog, fbo):
-        obj.release()
-    return img.reshape(SIZE[1], SIZE[0], 4)[::-1]
-
-
 def differs(a, b, level=12):
     """(H, W) bool: pixels whose channels differ by more than ``level``."""
     return np.abs(a.astype(int) - b.astype(int)).max(-1) > level
@@ -180,7 +117,7 @@ def test_props_show_in_the_image_where_they_are(gl, h, renderer):
         r.render(camera)
         images.append(r.read_image())
     image, plain = images
-    reference = cpu_reference_image(gl, h, with_props, camera, r.light)
+    reference = h.reference_image(gl, with_props, camera, r.light, SIZE)
     assert differs(image, reference).mean() < 0.002
     changed = differs(image, plain)
     assert changed.mean() > 0.003, changed.mean()                     # the props show

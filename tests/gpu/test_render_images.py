@@ -5,81 +5,9 @@ texture that must not, and the attached-context path."""
 import numpy as np
 import pytest
 
-from crowd_addon.core import skin_vertices
-from crowd_addon.gpu.assembler import gl_sources
 from crowd_addon.gpu.camera import frame_crowd
-from crowd_addon.gpu.programs import CROWD_DRAW
 
 SIZE = (200, 150)
-REFERENCE_VS = """#version 430 core
-layout(location = 0) in vec3 in_world;
-layout(location = 1) in vec3 in_normal;
-layout(location = 2) in vec3 in_color;
-uniform mat4 u_view_proj;
-smooth out vec3 v_world;
-smooth out vec3 v_normal;
-flat out vec3 v_color;
-void main() {
-  v_world = in_world; v_normal = in_normal; v_color = in_color;
-  gl_Position = u_view_proj * vec4(in_world, 1.0);
-}
-"""
-
-
-def cpu_reference_image(gl, h, crowd, camera, light):
-    """Every agent skinned on the CPU (core.skin_vertices), uploaded as one static
-    mesh and drawn with the crowd's own fragment shader."""
-    mesh = crowd.config.meshes["fan"][0]
-    agents = np.arange(crowd.agents.count)
-    world = h.world_reference(crowd, agents, mesh)
-    rows = crowd.agent_rows(agents)
-    normals = skin_vertices(mesh.normals, mesh.bone_indices, mesh.bone_weights, rows) - \
-        skin_vertices(np.zeros_like(mesh.normals), mesh.bone_indices, mesh.bone_weights, rows)
-    hd = crowd.agents.heading.astype(np.float64)[:, None]
-    c, s = np.cos(hd), np.sin(hd)
-    normals = np.stack([c * normals[..., 0] - s * normals[..., 1],
-                        s * normals[..., 0] + c * normals[..., 1], normals[..., 2]], -1)
-    color = np.rint(np.clip(crowd.agents.color, 0, 1) * 255) / 255
-    color = np.broadcast_to(color[:, None], world.shape)
-    if mesh.looks:                       # the material's colour, tinted where it is grey
-        base = np.ones((mesh.vertex_count, 3))
-        looks = np.array([look.color[:3] for look in mesh.looks])
-        base[mesh.triangles.reshape(-1)] = np.repeat(looks[mesh.material], 3, axis=0)
-        base = np.rint(base * 255) / 255
-        saturation = (base.max(1) - base.min(1)) / np.maximum(base.max(1), 1e-4)
-        grey = np.clip(1 - 4 * saturation, 0, 1)[None, :, None]
-        color = base[None] * (1 - grey) + base[None] * color * grey
-        # palette materials take each agent's palette colour instead
-        names = list(crowd.config.palette_materials.get("fan", ()))
-        if names:
-            column = np.full(mesh.vertex_count, -1)
-            per_look = [names.index(k.name) if k.name in names else -1 for k in mesh.looks]
-            column[mesh.triangles.reshape(-1)] = np.repeat(np.array(per_look)[mesh.material], 3)
-            pal = np.rint(np.clip(crowd.agents.palette, 0, 1) * 255) / 255      # (n, 4, 3)
-            for c in range(4):
-                on = (crowd.agents.palette[:, c] >= 0).all(1)[:, None] & (column == c)[None]
-                color = np.where(on[..., None], pal[:, c][:, None, :], color)
-    verts = np.concatenate([world, normals, color], -1).astype("f4").reshape(-1, 9)
-    tris = (mesh.triangles[None].astype(np.int64)
-            + (np.arange(crowd.agents.count) * mesh.vertex_count)[:, None, None]).astype("u4")
-    prog = gl.program(vertex_shader=REFERENCE_VS,
-                      fragment_shader=gl_sources(CROWD_DRAW, {"INFLUENCES": 4, "SHADOWS": 0})
-                      ["fragment_shader"])
-    prog["u_view_proj"].write(np.asarray(camera.view_projection, "f4").T.tobytes())
-    prog["u_light"].value = light
-    vbo, ibo = gl.buffer(verts.tobytes()), gl.buffer(tris.tobytes())
-    vao = gl.vertex_array(prog, [(vbo, "3f 3f 3f", "in_world", "in_normal", "in_color")], ibo,
-                          index_element_size=4)
-    fbo = gl.framebuffer(color_attachments=[gl.renderbuffer(SIZE, 4)],
-                         depth_attachment=gl.depth_renderbuffer(SIZE))
-    fbo.use()
-    fbo.clear(0.62, 0.66, 0.72, 1.0, depth=1.0)
-    gl.enable(gl.DEPTH_TEST)
-    vao.render()
-    img = np.frombuffer(fbo.read(components=4, alignment=1), np.uint8)
-    for obj in (vao, vbo, ibo, prog, fbo):
-        obj.release()
-    return img.reshape(SIZE[1], SIZE[0], 4)[::-1]
 
 
 def differing(a, b, level=12):
@@ -107,7 +35,7 @@ def test_render_matches_cpu_skinning_and_a_wrong_offset_shows(gl, h, renderer):
     camera = frame_crowd(crowd, aspect=SIZE[0] / SIZE[1])
     image, r = render(renderer, crowd, camera)
     image0, _ = render(renderer, crowd0, camera)
-    reference = cpu_reference_image(gl, h, crowd, camera, r.light)
+    reference = h.reference_image(gl, crowd, camera, r.light, SIZE)
     assert differing(image, reference) < 0.002
     assert differing(image0, reference) > 0.02
     assert (image[..., :3] != image[0, 0, :3]).any(-1).mean() > 0.04    # agents are on screen
@@ -128,7 +56,7 @@ def test_materials_colour_the_body_and_the_agent_tints_its_grey_parts(gl, h, ren
     crowd.step()
     camera = frame_crowd(crowd, aspect=SIZE[0] / SIZE[1])
     image, r = render(renderer, crowd, camera)
-    reference = cpu_reference_image(gl, h, crowd, camera, r.light)
+    reference = h.reference_image(gl, crowd, camera, r.light, SIZE)
     assert differing(image, reference) < 0.002
     # the skin keeps its colour on every agent: the upper halves look alike
     plain = h.Crowd(h.make_config(M=8, agents=15, spacing=0.9, lod_distances=far))
@@ -211,7 +139,7 @@ def test_palettes_colour_their_material_per_agent(gl, h, renderer):
     crowd.step()
     camera = frame_crowd(crowd, aspect=SIZE[0] / SIZE[1])
     image, r = render(renderer, crowd, camera)
-    reference = cpu_reference_image(gl, h, crowd, camera, r.light)
+    reference = h.reference_image(gl, crowd, camera, r.light, SIZE)
     assert differing(image, reference) < 0.002
     # looking down from above, each agent's shirt (its vertices skinned by core) is
     # drawn in its own palette colour

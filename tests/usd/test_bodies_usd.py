@@ -19,6 +19,7 @@ from crowd_addon.core.synthetic import box_prop, humanoid_mesh
 from crowd_addon.usd import export_crowd
 
 from .conftest import FIRST, LAST, make_config, recording, simulate
+from .test_readback import agent_matrix
 
 SEED = 11
 FRAMES = (FIRST, 7, LAST)                 # before, among and after the shot's changes
@@ -159,14 +160,6 @@ def core_poses(cfg, frames):
             out[crowd.frame] = (crowd.view.agent_poses(), np.array(a.position, np.float64),
                                 np.array(a.heading, np.float64), np.array(a.scale, np.float64))
     return out
-
-
-def agent_matrix(position, heading, scale):
-    c, s = np.cos(heading), np.sin(heading)
-    m = np.eye(4)
-    m[:3, :3] = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]) * scale
-    m[:3, 3] = position
-    return m
 
 
 def test_usdskel_skins_bodies_and_props_as_core_does(shot, crowd):
