@@ -324,18 +324,20 @@ def config_steps(scene, depsgraph=None, notes=None):
 
 def _add_palettes(cfg, c):
     """The character's palette materials (``CrowdConfig.palette_materials``), each a
-    material of its body, named once."""
+    material of its body, of a mesh variant or of a prop, named once."""
     if not len(c.palettes):
         return
     what = f"character {c.name!r}"
     if len(c.palettes) > PALETTE_COLUMNS:
         raise CrowdError(f"{what}: {len(c.palettes)} palettes; at most {PALETTE_COLUMNS}")
-    looks = [k.name for k in cfg.meshes[c.name][0].looks] if cfg.meshes.get(c.name) else []
+    meshes = [lv[0] for lv in cfg.mesh_variants(c.name)] + \
+        [p.mesh for p in cfg.props.get(c.name, ())]
+    looks = list(dict.fromkeys(k.name for m in meshes for k in m.looks))
     names = [p.material for p in c.palettes]
     for name in names:
         if name not in looks:
             raise CrowdError(f"{what}: palette material {name!r} is not a material of its "
-                             f"body (its materials: {looks})")
+                             f"body, mesh variants or props (their materials: {looks})")
     if len(set(names)) != len(names):
         raise CrowdError(f"{what}: two palettes for one material ({names})")
     cfg.palette_materials[c.name] = tuple(names)

@@ -11,9 +11,11 @@ are placed and stored in the configuration.
 A **body** is one (skeleton, variant, props) triple that some agent uses: the
 variant's levels with the props' triangles merged into each level but the card (far
 agents a dozen pixels tall show no prop), so that a body draws, skins and exports
-as one mesh, and everything that draws or writes agents (the GPU preview, *Render
-Crowd*, the USD export, the repetition metric) sees the same bodies in the same
-order: :func:`crowd_bodies`. A prop skinned by a single bone with weight 1 is the
+as one mesh; the GPU preview, the USD export (a layer per body) and the repetition
+metric see the same bodies in the same order: :func:`crowd_bodies`. (*Render Crowd*,
+whose cost is a pose mesh per pose in use, instances the variant and each prop as
+pieces of their own instead, so that props share pose meshes across bodies; it too
+leaves props out at the card level.) A prop skinned by a single bone with weight 1 is the
 bone's rigid motion: the vertex moves by the bone's skinning matrix, as Blender moves
 an object parented to that bone.
 """

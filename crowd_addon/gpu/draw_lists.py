@@ -2,9 +2,9 @@
 
 A body is what an agent is drawn with: its character's mesh variant with the props
 it carries (:mod:`crowd_addon.core.bodies`). Agents outside the camera's view (a
-bounding sphere per body) are left out. An agent's LOD follows how big it looks: LOD ``k`` is used from
-``lod_distances[k - 1]`` metres on (``CrowdConfig.lod_distances``), clamped to the
-levels its body has, where the distance is the one at which the agent
+bounding sphere per body) are left out. An agent's LOD follows how big it looks: LOD
+``k`` is used from ``lod_distances[k - 1]`` metres on (``CrowdConfig.lod_distances``),
+clamped to the levels its body has, where the distance is the one at which the agent
 would look as big in the *reference view* -- 1080 pixels high with a 40 degree
 vertical field of view (:data:`REFERENCE_FOCAL_PX`). In that view it is the agent's
 depth in front of the camera; zooming in (a longer lens) or a taller viewport

@@ -192,7 +192,8 @@ class CrowdRenderer:
 
     def skinned_positions(self, agents, lod: int = 0) -> np.ndarray:
         """World positions ``(n, V, 3)`` float32 of ``agents`` (all of one body: the
-        same skeleton, mesh variant and props) skinned by the draw program's vertex stage with LOD ``lod``."""
+        same skeleton, mesh variant and props) skinned by the draw program's vertex
+        stage with LOD ``lod``."""
         capture = self.plan.capture(agents, lod)
         return self._capture(self.meshes[capture.key], capture)
 

@@ -246,3 +246,28 @@ def test_picking_a_variant_or_prop_in_its_list_is_no_change_to_bake(dressed):
     assert settings_fingerprint(scene.crowd) == before
     char.props[0].share = 0.9
     assert settings_fingerprint(scene.crowd) != before
+
+
+def test_a_palette_may_colour_a_props_material(dressed):
+    """A palette naming the flag's material gives every agent a colour for it, which
+    the GPU vertex colours of the bodies with the flag take (the palette column on the
+    flag's triangles), as they would on the body."""
+    from crowd_addon.gpu.proxies import vertex_colors
+    scene, rig, walk, slim, flag = dressed
+    cloth = bpy.data.materials.new("cloth")
+    flag.data.materials.append(cloth)
+    pal = scene.crowd.characters[0].palettes.add()
+    pal.material, pal.count = "cloth", 2
+    cfg = scene_config.config_from_scene(scene)
+    assert cfg.palette_materials["Rig"] == ("cloth",)
+    assert (cfg.palette[:, 0] >= 0).all()
+    crowd = Crowd(cfg)
+    flagged = [b for b in crowd.view.bodies if b.props]
+    assert flagged
+    for body in flagged:
+        mesh = body.levels[0]
+        alpha = vertex_colors(mesh, cfg.palette_materials["Rig"])[:, 3]
+        names = [k.name for k in mesh.looks]
+        cloth_tris = mesh.material == names.index("cloth")
+        assert (alpha[mesh.triangles[cloth_tris].ravel()] == 0).all()
+        assert (alpha[mesh.triangles[~cloth_tris].ravel()] == 255).all()

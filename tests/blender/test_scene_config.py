@@ -450,5 +450,6 @@ def test_palettes_and_scales_from_the_scene(rig_scene):
     assert len({tuple(c) for c in rnd.tolist()}) == 2
     pal.material = "hat"
     with pytest.raises(CrowdError, match="palette material 'hat' is not a material of its "
-                                         r"body \(its materials: \['shirt', 'skin'\]\)"):
+                                         r"body, mesh variants or props \(their materials: "
+                                         r"\['shirt', 'skin'\]\)"):
         scene_config.config_from_scene(scene)
