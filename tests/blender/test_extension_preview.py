@@ -326,9 +326,16 @@ def test_panels_draw_existing_properties_and_operators(running):
     cs.add_node(anim, "lay", "LAYER", ["clip", "clip"], layer_mode="ADDITIVE",
                 mask_source="COLLECTION")
     cs.add_lod(scene.crowd.characters[0], None)
+    char = scene.crowd.characters[0]
+    char.variants.add().object = char.body
+    char.props.add().object = char.body
+    char.variant_mode = "ATTRIBUTE"
     src = scene.crowd.agent_sources[0]
     ctx = type("Ctx", (), {"scene": scene})()
     seen = []
+    for ul, items in ((panels.CROWD_UL_variants, char.variants),
+                      (panels.CROWD_UL_props, char.props)):
+        ul.draw_item(None, None, _Layout(seen), char, items[0], 0, True, "")
     for kind, character, stream in (("sm", "FIXED", "FIXED"), ("bs", "ATTRIBUTE", "ATTRIBUTE"),
                                     ("lay", "WEIGHTS", "FIXED"), ("clip", "FIXED", "RANDOM")):
         src.character_mode, src.stream_mode = character, stream
@@ -340,6 +347,8 @@ def test_panels_draw_existing_properties_and_operators(running):
     assert any("30 agents, 1 streams" in t for t in labels)
     assert ("operator", "crowd.bake") in seen and ("prop", "transition_slots") in seen
     assert ("prop", "body") in seen and ("prop", "character_attribute") in seen
+    assert {("prop", "body_weight"), ("prop", "variant_attribute"), ("prop", "share"),
+            ("prop", "weight"), ("prop", "plan_motion_only")} <= set(seen)
 
 
 def test_blender_still_draws_right_after_the_crowd(running):
