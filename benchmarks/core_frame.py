@@ -6,9 +6,10 @@ blends). Prints ms per ``Crowd.step()`` (median) and bytes uploaded per frame at
 1k, 8k and 65k agents (CPU cost should be flat in agent count), the mean ms per step
 at 65k agents running a cue-heavy show instead (a Mexican wave over every agent, and
 a cue every 10 frames: a held transition of 500 agents, a trigger or a parameter), the
-ms per step at 65k agents with timing variation on (the same 256 streams made from 64
-templates at two speeds in two copies, Spread offsets) against the plain streams,
-interleaved, then
+ms per step at 65k agents with all variation on (the same 256 streams made from 64
+templates at two speeds in two copies, Spread offsets; mesh variants, props, scales and
+palette colours, which cost the step nothing) against the plain streams, interleaved,
+then
 the time to evaluate the same 256 streams with a naive per-stream Python loop as a
 ratio, and ends with one JSON line.
 
@@ -45,12 +46,26 @@ def build(agents: int, skinning: str = "cpu", variety: bool = False) -> Crowd:
 
 
 def variety_config(agents: int):
-    """The paper's configuration with timing variation on (docs/variety.md): its 256
+    """The paper's configuration with all variation on (docs/variety.md): its 256
     streams made from 64 templates (every fourth stream's tree), each at two speeds
     (0.85 .. 1.15) in two copies, agents on a grid, each on a template at random and
-    its nearest speed and a copy (``choose_variants``), with Spread offsets. The same
-    stream count as the plain configuration, so the two compare per stream."""
+    its nearest speed and a copy (``choose_variants``), with Spread offsets; and the
+    appearance: a body with a second mesh variant and two props, each agent a variant,
+    props, a scale and a palette colour at random. The same stream count as the plain
+    configuration, so the two compare per stream."""
+    from crowd_addon.core.synthetic import box_prop, humanoid_mesh
     cfg = paper_config(agents, STREAMS, M, SLOTS, BONES)
+    sk = cfg.skeletons["fan"]
+    cfg.add_mesh(humanoid_mesh(sk), lods=(0.25, "card"))
+    cfg.add_variant(humanoid_mesh(sk, sides=6, name="slim"), lods=(0.25, "card"))
+    cfg.add_prop(box_prop(sk, "head", "cap", (0.2, 0.2, 0.06), (0.0, 0.0, 0.21)))
+    cfg.add_prop(box_prop(sk, "hand.R", "flag", (0.03, 0.03, 0.7), (0.0, 0.0, 0.3)))
+    look = np.random.default_rng(6)
+    cfg.agent_variant = look.integers(0, 2, agents).astype(np.int16)
+    cfg.agent_props = look.integers(0, 4, agents).astype(np.uint8)
+    cfg.agent_scale = look.uniform(0.93, 1.07, agents).astype(np.float32)
+    cfg.agent_palette = np.full((agents, 4, 3), -1.0, np.float32)
+    cfg.agent_palette[:, 0] = look.uniform(0, 1, (agents, 3))
     templates, cfg.streams = cfg.streams[::4], []
     timing = Timing(0.85, 1.15, 2, 2)
     for d in templates:
@@ -219,8 +234,9 @@ def main(argv=None):
         plain_ms.append(run(65_000, steps, rng, skinning="gpu")["ms_median"])
         variety_ms.append(run(65_000, steps, rng, skinning="gpu", variety=True)["ms_median"])
     v_ms, p_ms = statistics.median(variety_ms), statistics.median(plain_ms)
-    print(f"  65k agents with timing variation (64 templates x 2 speeds x 2 copies = "
-          f"{STREAMS} streams, Spread offsets), GPU skinning: {v_ms:.2f} ms/step median "
+    print(f"  65k agents with all variation on (64 templates x 2 speeds x 2 copies = "
+          f"{STREAMS} streams, Spread offsets; 2 mesh variants, 2 props, scales and "
+          f"palettes), GPU skinning: {v_ms:.2f} ms/step median "
           f"against {p_ms:.2f} ms for {STREAMS} plain streams, interleaved "
           f"(variety/plain {v_ms / p_ms:.2f})", flush=True)
     show_frames = 60 if args.quick else 240
