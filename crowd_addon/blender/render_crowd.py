@@ -68,20 +68,19 @@ class RenderStats:
     ms: float = 0.0
 
 
-def agent_lods(crowd, scene) -> np.ndarray:
+def agent_lods(crowd, scene, levels) -> np.ndarray:
     """``(N,)`` level of detail of each agent seen through ``scene``'s camera at its
-    render resolution (every agent's finest level when the scene has no camera)."""
+    render resolution (every agent's finest level when the scene has no camera);
+    ``levels`` (N,): the levels each agent's mesh has."""
     from .cameras import camera_from_object
     from .cameras import scene_size
 
-    levels = np.array([len(b.levels) for b in crowd.view.bodies], np.int64)
-    body = crowd.view.agent_body
     if scene.camera is None or scene.camera.type != "CAMERA":
         return np.zeros(crowd.agents.count, np.int64)
     w, h = scene_size(scene)
     camera = camera_from_object(scene.camera, w / h)
     d = view_distances(crowd.agents.position, camera.view_projection, h)
-    return lod_levels(d, crowd.config.lod_distances, levels[body]).astype(np.int64)
+    return lod_levels(d, crowd.config.lod_distances, levels).astype(np.int64)
 
 
 def _node_group():
@@ -234,14 +233,15 @@ class _Existing:
             self.linked.add(name)
 
 
-def _pieces(crowd, lod):
+def _pieces(crowd, scene):
     """What the points instance: each agent's mesh variant, then one piece per prop an
     agent carries (props are small and rigid: their pose meshes are shared by every
     agent whose bone is in the same pose, instead of a pose mesh per combination of
     props; at the card level, as on the GPU, no prop). Returns ``(agent, drawable,
     prop, lod, levels)``: per piece its agent, drawable index (a (skeleton, variant)
-    or (skeleton, prop) pair), prop index (-1: the body) and level, and per drawable
-    its LOD meshes (empty: not drawn)."""
+    or (skeleton, prop) pair), prop index (-1: the body) and level (through
+    ``scene``'s camera: :func:`agent_lods`), and per drawable its LOD meshes (empty:
+    not drawn)."""
     from ..core.bodies import is_card
     cfg = crowd.config
     names = list(cfg.skeletons)
@@ -251,14 +251,16 @@ def _pieces(crowd, lod):
     pairs, of_agent = np.unique(skel * 65536 + variant, return_inverse=True)
     levels = [tuple(cfg.mesh_variants(names[k >> 16])[k & 0xFFFF])
               if cfg.meshes.get(names[k >> 16]) else () for k in pairs.tolist()]
+    of_agent = of_agent.reshape(-1)
+    lod = agent_lods(crowd, scene, np.array([len(lv) for lv in levels], np.int64)[of_agent])
     agent = [np.arange(skel.size)]
-    drawable, prop, level = [of_agent.reshape(-1)], [np.full(skel.size, -1)], [lod]
+    drawable, prop, level = [of_agent], [np.full(skel.size, -1)], [lod]
     card = np.array([bool(lv) and is_card(lv[-1]) for lv in levels] + [False])
     last = np.array([len(lv) - 1 for lv in levels] + [0])
     for k, name in enumerate(names):
         for j, p in enumerate(cfg.props.get(name, ())):
             on = (skel == k) & (mask >> j & 1 == 1)
-            on &= ~(card[of_agent.reshape(-1)] & (lod == last[of_agent.reshape(-1)]))
+            on &= ~(card[of_agent] & (lod == last[of_agent]))
             ids = np.flatnonzero(on)
             if ids.size:
                 agent.append(ids)
@@ -274,7 +276,7 @@ def sync(scene, crowd) -> RenderStats:
     """Make the render data (see the module docstring) show ``crowd`` at its current
     frame; returns :class:`RenderStats`."""
     t0 = time.perf_counter()
-    agent, part, prop, lod, levels = _pieces(crowd, agent_lods(crowd, scene))
+    agent, part, prop, lod, levels = _pieces(crowd, scene)
     n = agent.size
     rows = np.asarray(crowd.view.agent_rows_index(), np.int64)[agent]
     drawn = np.array([bool(lv) for lv in levels], bool)[part] if n else np.zeros(0, bool)
