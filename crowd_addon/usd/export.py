@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from pxr import Sdf, Vt
 
-from ..core.bodies import body_keys, crowd_bodies, prop_names
+from ..core.bodies import crowd_bodies, prop_names
 from ..core.config import USD_LAYOUTS, validate_config
 from ..core.config_io import config_digest
 from ..core.errors import CrowdError
@@ -416,14 +416,13 @@ def _bodies(config, agent_skeleton, ids) -> dict:
     bodies of all agents, :func:`~crowd_addon.core.bodies.crowd_bodies`), checked:
     each has a mesh, and the textures its looks name are files."""
     skeleton_names = list(config.skeletons)
-    keys, agent_body = body_keys(config, agent_skeleton)
+    bodies, agent_body = crowd_bodies(config, agent_skeleton)
     used = np.unique(agent_body[ids]).tolist()
     for b in used:
-        name = skeleton_names[int(keys[b, 0])]
-        if not config.meshes.get(name):
-            raise CrowdError(f"export: skeleton {name!r} has no proxy mesh "
-                             "(CrowdConfig.add_mesh); its agents cannot be drawn")
-    bodies = crowd_bodies(config, agent_skeleton)[0]
+        if not bodies[b].levels:
+            raise CrowdError(f"export: skeleton {skeleton_names[bodies[b].skeleton]!r} has "
+                             "no proxy mesh (CrowdConfig.add_mesh); its agents cannot be "
+                             "drawn")
     for b in used:
         for mesh in bodies[b].levels[:1]:
             for look in mesh.looks:
