@@ -15,7 +15,8 @@ that deep in a 540-pixel image); LODs off: the full mesh for every agent. Prints
   lists; moderngl only), this renderer's draw alone, and the real work (pose and
   local-pose upload + instance updates + skinning-rows compute shader + draw); and
   the vertex stage alone (rasterizer discard) of the prototype and the draw;
-* ms per frame for 1k / 10k / 65k agents with LODs on and off (GPU side: sync +
+* ms per frame for 1k / 10k / 65k agents (``--agents`` for others, 1M say) with LODs
+  on and off (GPU side: sync +
   draw + finish; ``Crowd.step`` on the CPU is shown apart, see core_frame.py);
 * bytes uploaded per frame against the minimum for GPU skinning: the new local-pose
   slice and unique rows, the StartP row of each transition that started, 16 B of
@@ -36,7 +37,7 @@ that deep in a 540-pixel image); LODs off: the full mesh for every agent. Prints
 then one line of JSON with the figures.
 
     .venv/bin/python benchmarks/gpu_frame.py [--quick] [--backend moderngl|blender]
-                                             [--size 960x540]
+                                             [--size 960x540] [--agents 1000,10000,65000]
 """
 
 from __future__ import annotations
@@ -252,24 +253,27 @@ def throughput(backend, size, rounds, rng) -> dict:
     return best, device
 
 
-def sizes(backend, size, quick, rng) -> dict:
-    """ms per frame for 1k / 10k / 65k agents, LODs on and off."""
+def sizes(backend, size, quick, rng, counts=(1_000, 10_000, 65_000)) -> dict:
+    """ms per frame for each agent count in ``counts``, LODs on and off (``quick``: no
+    full-mesh frame from 65k agents up)."""
     n_on, n_off = (2, 1) if quick else (5, 2)
     table = {}
-    for agents in (1_000, 10_000, 65_000):
+    for agents in counts:
         for lods in (True, False):
-            if agents == 65_000 and not lods and quick:
+            if agents >= 65_000 and not lods and quick:
                 continue
+            t = time.perf_counter()
             crowd = build(agents, lods)
             r = make_renderer(crowd.view, backend, size)
-            count = n_on if lods else max(1, n_off - (agents == 65_000))
+            count = n_on if lods else max(1, n_off - (agents >= 65_000))
             res = frames(crowd, r, frame_crowd(crowd, aspect=size[0] / size[1]), count, rng)
             r.release()
             table[agents, lods] = res
             print(f"  {agents:>6} agents, LODs {'on ' if lods else 'off'}: "
                   f"{res['gpu_ms']:8.1f} ms/frame GPU side ({1e3 / res['gpu_ms']:5.1f} fps), "
                   f"step {res['step_ms']:5.1f} ms, {res['vertices']:>11,} skinned vertices, "
-                  f"LOD counts {res['lods']}", flush=True)
+                  f"LOD counts {res['lods']} ({time.perf_counter() - t:.0f} s with the "
+                  f"build)", flush=True)
     return table
 
 
@@ -402,7 +406,17 @@ def main(argv=None):
                     help="smoke run: fewer frames, no 65k full-mesh frame")
     ap.add_argument("--backend", choices=BACKENDS, default="moderngl")
     ap.add_argument("--size", default="960x540", help="image WIDTHxHEIGHT (default 960x540)")
+    ap.add_argument("--agents", default="1000,10000,65000",
+                    help="comma-separated agent counts of the ms-per-frame table; 65000 is "
+                         "always among them (the upload and fps figures are read there); "
+                         "default 1000,10000,65000")
     args = ap.parse_args(argv)
+    try:
+        counts = sorted({int(v) for v in args.agents.split(",") if v.strip()} | {65_000})
+    except ValueError:
+        ap.error(f"--agents takes whole numbers separated by commas, got {args.agents!r}")
+    if counts[0] < 1:
+        ap.error(f"--agents: each count must be at least 1, got {counts[0]}")
     size = tuple(int(v) for v in args.size.lower().split("x"))
     backend = args.backend
     if backend == "blender":                  # bpy in background mode: wake its GPU
@@ -420,7 +434,7 @@ def main(argv=None):
         print(f"  vertex stage alone (rasterizer discard): plain prototype "
               f"{best['prototype_vertex_stage'] / 1e6:.1f} M, this renderer's draw "
               f"{best['draw_vertex_stage'] / 1e6:.1f} M skinned vertices/s", flush=True)
-    table = sizes(backend, size, args.quick, rng)
+    table = sizes(backend, size, args.quick, rng, counts)
     big = table[65_000, True]
     ratio = big["bytes"] / big["minimum"]
     print(f"  upload per frame at 65k: {big['bytes']:,} B, minimum {big['minimum']:,} B "
