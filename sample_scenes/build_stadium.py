@@ -12,7 +12,7 @@ The scene holds (see sample_scenes/README.md for the details):
 - the fan character "FanRig" (23 bones) with its skinned "FanBody" and ten
   authored actions with event markers (``fan_actions.ACTIONS``);
 - "MocapRig"/"MocapBody" with the action "mocap_01_01" from CMU motion capture;
-- a camera framing the bowl, a sun, 30 fps, and scene custom properties
+- a camera framing the bowl, a sun, a sky-coloured world, 30 fps, and scene custom properties
   ``crowd_seat_count``, ``crowd_builder_version`` and friends.
 
 Everything is deterministic: the same arguments give the same scene. Import
@@ -42,24 +42,22 @@ import fan_actions  # noqa: E402
 import fan_rig  # noqa: E402
 import mocap  # noqa: E402
 import stadium_layout as layout  # noqa: E402
+from crowd_addon.blender.looks import plain_material  # noqa: E402
 from crowd_addon.core.errors import CrowdError  # noqa: E402
 
 __all__ = ["build_stadium", "BUILDER_VERSION", "DEFAULT_SEATS", "PAPER_SEATS"]
 
-BUILDER_VERSION = "1.0.0"
+BUILDER_VERSION = "1.1.0"
 DEFAULT_SEATS = 2000
 PAPER_SEATS = 65000
 FPS = 30
 
+#: linear RGB of the GPU preview's background (``gpu.renderer.BACKGROUND``, display values)
+SKY = (0.342, 0.392, 0.479)
 _COLOURS = {"concrete": (0.55, 0.55, 0.52, 1.0), "home": (0.30, 0.09, 0.09, 1.0),
             "away": (0.08, 0.13, 0.32, 1.0), "pitch": (0.12, 0.45, 0.12, 1.0),
             "apron": (0.09, 0.30, 0.10, 1.0)}
 
-
-def _material(name):
-    mat = bpy.data.materials.get(name) or bpy.data.materials.new(name)
-    mat.diffuse_color = _COLOURS[name]
-    return mat
 
 
 def _mesh_object(name, collection, verts, faces, materials=()):
@@ -67,7 +65,7 @@ def _mesh_object(name, collection, verts, faces, materials=()):
     mesh.from_pydata(np.asarray(verts, np.float64).tolist(), [], np.asarray(faces).tolist())
     mesh.validate()
     for m in materials:
-        mesh.materials.append(_material(m))
+        mesh.materials.append(plain_material(m, _COLOURS[m]))
     obj = bpy.data.objects.new(name, mesh)
     collection.objects.link(obj)
     return obj
@@ -121,6 +119,8 @@ def _build_seats(seats, collection):
 
 
 def _camera_and_sun(scene, bowl, rows, collection):
+    """The camera framing the bowl, the sun over the home stand and a world of the
+    preview's sky colour."""
     a, b = bowl.half_straight
     reach = bowl.corner_radius + rows * bowl.tread + 0.4
     radius = math.hypot(a + reach, b + reach)
@@ -137,6 +137,14 @@ def _camera_and_sun(scene, bowl, rows, collection):
     sun.data.energy = 3.0
     sun.rotation_euler = (math.radians(40), 0.0, math.radians(210))   # lights the home stand
     collection.objects.link(sun)
+    world = bpy.data.worlds.new("Sky")     # the preview's sky, lighting F12 renders too
+    world.color = SKY
+    if world.node_tree is None:             # Blender before 5.0: nodes on request
+        world.use_nodes = True
+    for node in world.node_tree.nodes:
+        if node.type == "BACKGROUND":
+            node.inputs["Color"].default_value = SKY + (1.0,)
+    scene.world = world
     return cam, sun
 
 

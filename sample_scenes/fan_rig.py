@@ -15,6 +15,8 @@ from typing import NamedTuple
 import bpy
 import numpy as np
 
+from crowd_addon.blender.looks import plain_material
+
 __all__ = ["BONES", "build_fan"]
 
 _C = 0.5 ** 0.5
@@ -196,19 +198,6 @@ def _create_armature(collection, name):
     return rig
 
 
-def _material(name, colour):
-    """A material of base colour ``colour`` (linear RGBA) for Workbench (its viewport
-    colour) and EEVEE/Cycles (its Principled BSDF)."""
-    mat = bpy.data.materials.get(name) or bpy.data.materials.new(name)
-    mat.diffuse_color = colour
-    if mat.node_tree is None:              # Blender before 5.0: nodes on request
-        mat.use_nodes = True
-    for node in mat.node_tree.nodes if mat.node_tree is not None else ():
-        if node.type == "BSDF_PRINCIPLED":
-            node.inputs["Base Color"].default_value = colour
-    return mat
-
-
 def build_fan(collection, rig_name="FanRig", body_name="FanBody"):
     """Create the armature and its skinned body in ``collection``; returns (rig, body)."""
     rig = _create_armature(collection, rig_name)
@@ -235,7 +224,7 @@ def build_fan(collection, rig_name="FanRig", body_name="FanBody"):
     # one material a body region (what renders, exports and the preview colour by),
     # each face the region of its first corner
     for name in names:
-        mesh.materials.append(_material(f"fan_{name}", _COLOURS[name]))
+        mesh.materials.append(plain_material(f"fan_{name}", _COLOURS[name]))
     region = np.concatenate(regions)
     mesh.polygons.foreach_set("material_index",
                               region[[face[0] for face in faces]].astype(np.int32))

@@ -17,7 +17,7 @@ import numpy as np
 
 from ..core.mesh import Look
 
-__all__ = ["mesh_looks"]
+__all__ = ["mesh_looks", "plain_material", "principled"]
 
 #: the look of an empty material slot
 EMPTY = (0.8, 0.8, 0.8, 1.0)
@@ -57,7 +57,7 @@ def mesh_looks(mesh_obj, me, loops: np.ndarray) -> dict:
 def _look(material) -> Look:
     if material is None:
         return Look("empty slot", EMPTY)
-    bsdf = _principled(material)
+    bsdf = principled(material)
     if bsdf is None:
         return Look(material.name, tuple(material.diffuse_color))
     base = bsdf.inputs["Base Color"]
@@ -72,7 +72,7 @@ def _look(material) -> Look:
     return Look(material.name, tuple(min(max(c, 0.0), 1.0) for c in color), texture)
 
 
-def _principled(material):
+def principled(material):
     """The Principled BSDF feeding the material's output, or None."""
     tree = material.node_tree
     if tree is None:
@@ -84,3 +84,19 @@ def _principled(material):
                 if link.from_node.type == "BSDF_PRINCIPLED":
                     return link.from_node
     return None
+
+
+def plain_material(name: str, colour):
+    """Material ``name`` (made when missing) of one linear RGBA ``colour``, the same in
+    every engine and in the crowd's looks: its viewport colour (Workbench) and its
+    Principled BSDF's *Base Color* (EEVEE, Cycles, :func:`mesh_looks`). Blender 5
+    gives a new material a Principled BSDF of its own grey; setting the viewport
+    colour alone would leave that grey."""
+    mat = bpy.data.materials.get(name) or bpy.data.materials.new(name)
+    mat.diffuse_color = colour
+    if mat.node_tree is None:              # Blender before 5.0: nodes on request
+        mat.use_nodes = True
+    bsdf = principled(mat)
+    if bsdf is not None:
+        bsdf.inputs["Base Color"].default_value = colour
+    return mat

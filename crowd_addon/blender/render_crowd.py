@@ -11,8 +11,9 @@ of ordinary Blender data, with the paper's sharing kept:
   a row of its own. A prop is a piece of its own, not merged into the body as the GPU
   draws it: a flag's pose mesh is shared by every agent whose hand is in that pose,
   whatever else it wears, and no combination of props multiplies the body's pose
-  meshes. Each pose mesh is the level's proxy (its triangles, UVs and materials)
-  skinned on the CPU by core (:func:`crowd_addon.core.skinning.skin_vertices`) and
+  meshes. Each pose mesh is the level's proxy (its triangles, UVs and materials,
+  as the crowd's copies that tint each agent as the preview does:
+  :mod:`.crowd_materials`) skinned on the CPU by core (:func:`crowd_addon.core.skinning.skin_vertices`) and
   written with one bulk ``foreach_set``. The meshes hang on objects
   ``CrowdPose.000000 ...`` of the collection :data:`POSES`, which is not linked to the
   scene (only instanced);
@@ -23,8 +24,9 @@ of ordinary Blender data, with the paper's sharing kept:
   ``crowd_agent`` (the agent), ``crowd_prop`` (the prop's index in its character, -1
   for the body), ``crowd_heading`` (radians about +Z), ``crowd_scale`` (its body
   scale), ``crowd_color`` (its tint) and ``crowd_palette0`` .. ``3`` (its palette
-  colours, alpha 0 where it has none; docs/variety.md), readable in materials through
-  an Attribute node of type *Instancer*, and a Geometry Nodes modifier that puts the
+  colours, alpha 0 where it has none; docs/variety.md), which the crowd's material
+  copies read through Attribute nodes of type *Instancer* (a material of your own can
+  too), and a Geometry Nodes modifier that puts the
   picked pose object on every point (*Instance on Points* with *Pick Instance*
   from a *Collection Info* of :data:`POSES`, whose children come in name order).
 
@@ -37,6 +39,7 @@ use (not the agents) and a ``foreach_set`` each, plus three point attributes.
 
 from __future__ import annotations
 
+import hashlib
 import time
 from dataclasses import dataclass
 
@@ -47,6 +50,7 @@ import bpy
 from ..core.errors import CrowdError
 from ..core.skinning import skin_vertices
 from ..gpu.draw_lists import lod_levels, view_distances
+from .crowd_materials import crowd_material, refresh_all, remove_all as crowd_materials
 
 __all__ = ["POINTS", "POSES", "NODE_GROUP", "RenderStats", "sync", "remove", "agent_lods"]
 
@@ -167,9 +171,11 @@ def _points_object(scene, count: int):
     return obj
 
 
-def _mesh_for(proxy, name: str):
+def _mesh_for(proxy, name: str, palette=()):
     """A new Blender mesh of ``proxy`` (a core ``ProxyMesh``) in its bind pose: its
-    triangles, its UVs and the materials its looks name (when they exist)."""
+    triangles, its UVs and the crowd copies (:mod:`.crowd_materials`) of the materials
+    its looks name (when they exist); ``palette``: the character's palette materials,
+    whose place is a material's palette column."""
     mesh = bpy.data.meshes.new(name)
     v, t = proxy.vertex_count, proxy.triangles.shape[0]
     mesh.vertices.add(v)
@@ -179,8 +185,10 @@ def _mesh_for(proxy, name: str):
     mesh.polygons.add(t)
     mesh.polygons.foreach_set("loop_start", np.arange(0, 3 * t, 3, dtype=np.int32))
     mesh.polygons.foreach_set("loop_total", np.full(t, 3, np.int32))
+    palette = tuple(palette)
     for look in proxy.looks:
-        mesh.materials.append(bpy.data.materials.get(look.name))
+        mesh.materials.append(crowd_material(
+            look.name, palette.index(look.name) if look.name in palette else None))
     if proxy.material is not None and proxy.looks:
         mesh.polygons.foreach_set("material_index", proxy.material.astype(np.int32))
     if proxy.uvs is not None:
@@ -189,6 +197,21 @@ def _mesh_for(proxy, name: str):
     mesh.update()
     mesh.validate()
     return mesh
+
+
+#: custom property of a pose mesh: :func:`_made_from` of what it was made from
+_MADE_FROM = "crowd_made_from"
+
+
+def _made_from(proxy, palette) -> str:
+    """A digest of what a pose mesh takes from ``proxy`` besides its skinned vertex
+    positions: its topology, UVs, looks and the palette columns of their materials
+    (a re-bake that changes any of them makes the meshes again)."""
+    h = hashlib.sha1()
+    for a in (proxy.positions, proxy.triangles, proxy.uvs, proxy.material):
+        h.update(b"-" if a is None else np.ascontiguousarray(a).tobytes())
+    h.update(repr((proxy.looks, tuple(palette))).encode())
+    return h.hexdigest()
 
 
 class _Existing:
@@ -202,17 +225,19 @@ class _Existing:
         self.objects = {o.name: o for o in bpy.data.objects if o.name.startswith(_POSE_PREFIX)}
         self.linked = set(coll.objects.keys())
 
-    def meshes_for(self, proxy, part: int, lod: int, count: int) -> list:
-        """``count`` pose meshes of one (part, LOD) topology, reused frame to frame."""
-        out = []
+    def meshes_for(self, proxy, part: int, lod: int, count: int, palette=()) -> list:
+        """``count`` pose meshes of one (part, LOD) topology, reused frame to frame
+        (``palette``: :func:`_mesh_for`'s)."""
+        out, made = [], _made_from(proxy, palette)
         for i in range(count):
             name = f"{_MESH_PREFIX}{part}.{lod}.{i:06d}"
             mesh = self.meshes.get(name)
-            if mesh is None or len(mesh.vertices) != proxy.vertex_count \
-                    or len(mesh.polygons) != proxy.triangle_count:
-                if mesh is not None:
+            if mesh is None or mesh.get(_MADE_FROM) != made:
+                if mesh is not None:              # its objects go with it
                     bpy.data.meshes.remove(mesh)
-                mesh = self.meshes[name] = _mesh_for(proxy, name)
+                    self.__init__(self.coll)
+                mesh = self.meshes[name] = _mesh_for(proxy, name, palette)
+                mesh[_MADE_FROM] = made
             out.append(mesh)
         return out
 
@@ -238,10 +263,10 @@ def _pieces(crowd, scene):
     agent carries (props are small and rigid: their pose meshes are shared by every
     agent whose bone is in the same pose, instead of a pose mesh per combination of
     props; at the card level, as on the GPU, no prop). Returns ``(agent, drawable,
-    prop, lod, levels)``: per piece its agent, drawable index (a (skeleton, variant)
+    prop, lod, levels, palettes)``: per piece its agent, drawable index (a (skeleton, variant)
     or (skeleton, prop) pair), prop index (-1: the body) and level (through
     ``scene``'s camera: :func:`agent_lods`), and per drawable its LOD meshes (empty:
-    not drawn)."""
+    not drawn) and its character's palette materials."""
     from ..core.bodies import is_card
     cfg = crowd.config
     names = list(cfg.skeletons)
@@ -251,6 +276,7 @@ def _pieces(crowd, scene):
     pairs, of_agent = np.unique(skel * 65536 + variant, return_inverse=True)
     levels = [tuple(cfg.mesh_variants(names[k >> 16])[k & 0xFFFF])
               if cfg.meshes.get(names[k >> 16]) else () for k in pairs.tolist()]
+    palettes = [cfg.palette_materials.get(names[k >> 16], ()) for k in pairs.tolist()]
     of_agent = of_agent.reshape(-1)
     lod = agent_lods(crowd, scene, np.array([len(lv) for lv in levels], np.int64)[of_agent])
     agent = [np.arange(skel.size)]
@@ -268,15 +294,16 @@ def _pieces(crowd, scene):
                 prop.append(np.full(ids.size, j))
                 level.append(np.zeros(ids.size, np.int64))
                 levels.append((p.mesh,))
+                palettes.append(cfg.palette_materials.get(name, ()))
     return (np.concatenate(agent), np.concatenate(drawable), np.concatenate(prop),
-            np.concatenate(level), levels)
+            np.concatenate(level), levels, palettes)
 
 
 def sync(scene, crowd) -> RenderStats:
     """Make the render data (see the module docstring) show ``crowd`` at its current
     frame; returns :class:`RenderStats`."""
     t0 = time.perf_counter()
-    agent, part, prop, lod, levels = _pieces(crowd, scene)
+    agent, part, prop, lod, levels, palettes = _pieces(crowd, scene)
     n = agent.size
     rows = np.asarray(crowd.view.agent_rows_index(), np.int64)[agent]
     drawn = np.array([bool(lv) for lv in levels], bool)[part] if n else np.zeros(0, bool)
@@ -289,6 +316,7 @@ def sync(scene, crowd) -> RenderStats:
     poses = int(real.sum())
     offset = int((~real).sum())                 # the -1 key sorts first
     pose_index = np.where(drawn, pose_of_piece.reshape(-1) - offset, 0).astype(np.int32)
+    refresh_all()                               # material edits reach the next frame
     coll = _poses_collection()
     existing = _Existing(coll)
     for k in np.unique(part[drawn]):
@@ -299,7 +327,8 @@ def sync(scene, crowd) -> RenderStats:
             proxy = levels[k][int(level)]
             verts = skin_vertices(proxy.positions, proxy.bone_indices, proxy.bone_weights,
                                   crowd.view.agent_rows(agent[pieces])).astype(np.float32)
-            meshes = existing.meshes_for(proxy, int(k), int(level), pieces.size)
+            meshes = existing.meshes_for(proxy, int(k), int(level), pieces.size,
+                                         palettes[k])
             for j, mesh, co in zip(sel - offset, meshes, verts):
                 mesh.vertices.foreach_set("co", co.ravel())
                 mesh.update()
@@ -338,13 +367,14 @@ def sync(scene, crowd) -> RenderStats:
 
 def remove(scene) -> None:
     """Take the render data away: the points object, the pose objects and meshes, the
-    collection and the node group (one batch: removing thousands of IDs one by one
+    crowd's material copies, the collection and the node group (one batch: removing thousands of IDs one by one
     walks Blender's lists each time)."""
     ids = [o for o in bpy.data.objects if o.name == POINTS or o.name.startswith(_POSE_PREFIX)]
     points = bpy.data.objects.get(POINTS)
     if points is not None and points.type == "MESH":
         ids.append(points.data)
     ids += [m for m in bpy.data.meshes if m.name.startswith(_MESH_PREFIX)]
+    ids += crowd_materials()
     for name, data in ((POSES, bpy.data.collections), (NODE_GROUP, bpy.data.node_groups)):
         if data.get(name) is not None:
             ids.append(data[name])

@@ -48,6 +48,7 @@ import numpy as np
 
 from ..core.config import CrowdConfig
 from ..core.errors import CrowdError
+from .looks import plain_material
 
 __all__ = ["STREAMS", "HOME_MIX", "AWAY_MIX", "FAN", "MOCAP", "BEATS", "CUES", "CAMERA",
            "setup_crowd", "setup_show", "add_stand_camera", "stadium_config", "Stadium",
@@ -150,11 +151,6 @@ _PROP_COLOURS = {"fan_pole": (0.30, 0.20, 0.12, 1.0), "fan_flag": (0.95, 0.95, 0
                  "fan_cap": (0.9, 0.9, 0.9, 1.0)}
 
 
-def _material(name, colour):
-    mat = bpy.data.materials.get(name) or bpy.data.materials.new(name)
-    mat.diffuse_color = colour
-    return mat
-
 
 def _broad_body(rig, body):
     """``FanBodyBroad`` (made once): a copy of the fan's body, skinned the same, with a
@@ -202,7 +198,7 @@ def _fan_prop(rig, name, bone, boxes):
     me = bpy.data.meshes.new(name)
     me.from_pydata(verts, [], faces)
     for material in names:
-        me.materials.append(_material(material, _PROP_COLOURS[material]))
+        me.materials.append(plain_material(material, _PROP_COLOURS[material]))
     me.polygons.foreach_set("material_index", np.array(mats, np.int32))
     obj = bpy.data.objects.new(name, me)
     for coll in rig.users_collection:

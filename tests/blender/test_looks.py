@@ -110,3 +110,20 @@ def test_blenders_importer_shows_the_same_uvs_and_materials(dressed, tmp_path):
             os.path.realpath(copied)
         polygon_material = np.array([p.material_index for p in me.polygons])
         assert set(polygon_material.tolist()) == {0, 1}
+
+
+def test_a_plain_material_looks_the_same_in_every_engine_and_in_the_crowd():
+    """``plain_material``: the viewport colour (Workbench), the Principled BSDF's base
+    colour (EEVEE, Cycles) and the crowd's look all hold the colour. Before it, the
+    demo set the viewport colour alone, which Blender 5's default node tree ignores:
+    its props and stadium rendered in that tree's grey, and the preview drew them so."""
+    from crowd_addon.blender.looks import _look, plain_material, principled as bsdf_of
+    cs.reset()
+    pole = (0.30, 0.20, 0.12, 1.0)
+    mat = plain_material("pole", pole)
+    np.testing.assert_allclose(mat.diffuse_color, pole, atol=1e-6)
+    np.testing.assert_allclose(bsdf_of(mat).inputs["Base Color"].default_value, pole,
+                               atol=1e-6)
+    np.testing.assert_allclose(_look(mat).color, pole, atol=1e-6)
+    assert plain_material("pole", (1.0, 0.0, 0.0, 1.0)) == mat        # reused, recoloured
+    np.testing.assert_allclose(_look(mat).color, (1.0, 0.0, 0.0, 1.0), atol=1e-6)

@@ -19,6 +19,7 @@ import crowd_scene as cs  # noqa: E402
 
 from crowd_addon.blender import preview, render_crowd  # noqa: E402
 from crowd_addon.blender.cameras import camera_from_object  # noqa: E402
+from crowd_addon.blender.looks import plain_material, principled  # noqa: E402
 from crowd_addon.core import Crowd  # noqa: E402
 from crowd_addon.core.skinning import skin_vertices  # noqa: E402
 from crowd_addon.gpu.backends import make_renderer  # noqa: E402
@@ -264,3 +265,107 @@ def test_agents_of_a_character_without_a_body_are_not_instanced(crowd_scene):
     expected = _core_world(pv.crowd, np.flatnonzero(skel == bodied))
     for row, agent in enumerate(np.flatnonzero(skel == bodied)):
         assert np.abs(got[agent] - expected[row]).max() < 1e-5
+
+
+def _dress_in_colours(scene):
+    """The fixture's crowd in colours: the body's upper boxes in a white "shirt" that
+    takes each agent's colour (red for the first three rows of seats, blue for the
+    others, by a colour attribute), the lower boxes in "trousers" that a palette
+    colours green or yellow by an INT attribute "team" (alternate columns of seats);
+    a sun to see them by."""
+    s = scene.crowd
+    ch, src = s.characters[0], s.agent_sources[0]
+    body, seats = ch.body, src.object
+    shirt = plain_material("shirt", (1.0, 1.0, 1.0, 1.0))
+    trousers = plain_material("trousers", (0.5, 0.5, 0.5, 1.0))
+    body.data.materials.append(shirt)
+    body.data.materials.append(trousers)
+    # one material a box (six faces a bone, cs.make_proxy): the preview colours a vertex
+    # by one of its faces' materials, so a box of two materials would differ in F12
+    z = np.array([min(body.data.vertices[v].co.z for v in p.vertices)
+                  for p in body.data.polygons]).reshape(-1, 6).min(1)
+    lower = np.repeat(z < np.median(z), 6)
+    body.data.polygons.foreach_set("material_index", lower.astype(np.int32))
+    n = len(seats.data.vertices)
+    red = np.arange(n) < n // 2
+    col = np.where(red[:, None], (1.0, 0.05, 0.05, 1.0), (0.05, 0.05, 1.0, 1.0))
+    seats.data.attributes.new("Col", "FLOAT_COLOR", "POINT").data.foreach_set(
+        "color", col.astype(np.float32).ravel())
+    team = (np.arange(n) % 2).astype(np.int32)
+    seats.data.attributes.new("team", "INT", "POINT").data.foreach_set("value", team)
+    src.color_mode = "ATTRIBUTE"
+    pal = ch.palettes.add()
+    pal.material, pal.mode, pal.attribute, pal.count = "trousers", "ATTRIBUTE", "team", 2
+    pal.color_0, pal.color_1 = (0.05, 0.9, 0.05), (0.9, 0.9, 0.05)
+    sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN"))
+    sun.data.energy, sun.rotation_euler = 3.0, (np.radians(30), 0.0, 0.0)
+    scene.collection.objects.link(sun)
+    assert bpy.ops.crowd.bake() == {"FINISHED"}
+
+
+def _hues(rgba, covered):
+    """Per pixel: 0 red, 1 green, 2 blue, 3 yellow (red and green), -1 grey or not
+    ``covered``."""
+    rgb = rgba[..., :3]
+    hi, lo = rgb.max(-1), rgb.min(-1)
+    strong = rgb > lo[..., None] + 0.5 * (hi - lo)[..., None]
+    kind = np.where(strong[..., 0] & strong[..., 1] & ~strong[..., 2], 3,
+                    np.argmax(rgb, -1))
+    return np.where(covered & (hi - lo > 0.25 * np.maximum(hi, 1e-6)), kind, -1)
+
+
+@pytest.mark.parametrize("engine", ["CYCLES", "EEVEE"])
+def test_f12_colours_each_agent_as_the_preview_does(crowd_scene, tmp_path, engine):
+    """Team colours on white shirts and palette colours on trousers: in an F12 render
+    (EEVEE, Cycles) each agent's pixels have the hues the preview draws them in. Before
+    the crowd's material copies, F12 showed every shirt white and every pair of
+    trousers grey."""
+    scene, pv = crowd_scene
+    _dress_in_colours(scene)
+    pv = preview.get(scene)
+    assert scene.crowd.render_crowd and pv.render_error == ""
+    names = {m.name for o in bpy.data.meshes if o.name.startswith("CrowdPoseMesh.")
+             for m in o.materials}
+    assert names == {"CrowdMaterial.shirt", "CrowdMaterial.trousers.0"}
+    _workbench(scene, tmp_path / "f12.png", engine=_eevee() if engine == "EEVEE" else engine)
+    rendered = cs.image_pixels(tmp_path / "f12.png")[::-1]
+    cs.init_gpu()
+    twin = Crowd(pv.crowd.config, skinning="gpu")
+    twin.reset(pv.crowd.frame)
+    r = make_renderer(twin.view, "blender", SIZE)
+    try:
+        r.sync()
+        r.render(camera_from_object(scene.camera, SIZE[0] / SIZE[1]),
+                 clear=(0.0, 0.0, 0.0, 0.0))
+        drawn = r.read_image().astype(np.float32) / 255.0
+    finally:
+        r.release()
+    covered = (rendered[..., 3] > 0.5) & (drawn[..., 3] > 0.5)
+    want, got = _hues(drawn, covered), _hues(rendered, covered)
+    counts = {k: int((want == k).sum()) for k in range(4)}
+    assert min(counts.values()) > 20, counts
+    inner = want >= 0            # pixels inside one colour in the preview: not its edges
+    for dy, dx in ((-1, 0), (1, 0), (0, -1), (0, 1)):
+        inner &= want == np.roll(want, (dy, dx), (0, 1))
+    judged = inner & (got >= 0)
+    agree = float((want[judged] == got[judged]).mean())
+    assert judged.sum() > 0.5 * inner.sum() and agree > 0.9, (agree, judged.sum(), counts)
+
+
+def test_the_crowd_materials_follow_their_source(crowd_scene):
+    """A material edited while Render Crowd is on: the next frame's pose meshes wear a
+    copy made from the edited material, and switching off removes the copies."""
+    scene, pv = crowd_scene
+    _dress_in_colours(scene)
+    copy = bpy.data.materials["CrowdMaterial.trousers.0"]
+    bsdf = principled(bpy.data.materials["trousers"])
+    bsdf.inputs["Roughness"].default_value = 0.123
+    scene.frame_set(scene.frame_current + 1)
+    copy = bpy.data.materials["CrowdMaterial.trousers.0"]
+    assert abs(principled(copy).inputs["Roughness"].default_value - 0.123) < 1e-6
+    users = [m for m in bpy.data.meshes if m.name.startswith("CrowdPoseMesh.")
+             and copy.name in m.materials]
+    assert users and all(m.materials[1] == copy for m in users)
+    scene.crowd.render_crowd = False
+    assert not [m for m in bpy.data.materials if m.name.startswith("CrowdMaterial.")]
+    assert {"shirt", "trousers"} <= set(bpy.data.materials.keys())
