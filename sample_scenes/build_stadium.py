@@ -12,7 +12,7 @@ The scene holds (see sample_scenes/README.md for the details):
 - the fan character "FanRig" (23 bones) with its skinned "FanBody" and ten
   authored actions with event markers (``fan_actions.ACTIONS``);
 - "MocapRig"/"MocapBody" with the action "mocap_01_01" from CMU motion capture;
-- a camera framing the bowl, a sun, a sky-coloured world, 30 fps, and scene custom properties
+- a camera framing the bowl, a sun, a sky-coloured world (Standard view transform), 30 fps, and scene custom properties
   ``crowd_seat_count``, ``crowd_builder_version`` and friends.
 
 Everything is deterministic: the same arguments give the same scene. Import
@@ -119,8 +119,8 @@ def _build_seats(seats, collection):
 
 
 def _camera_and_sun(scene, bowl, rows, collection):
-    """The camera framing the bowl, the sun over the home stand and a world of the
-    preview's sky colour."""
+    """The camera framing the bowl, the sun over the home stand, a world of the
+    preview's sky colour and the Standard view transform."""
     a, b = bowl.half_straight
     reach = bowl.corner_radius + rows * bowl.tread + 0.4
     radius = math.hypot(a + reach, b + reach)
@@ -145,6 +145,9 @@ def _camera_and_sun(scene, bowl, rows, collection):
         if node.type == "BACKGROUND":
             node.inputs["Color"].default_value = SKY + (1.0,)
     scene.world = world
+    # F12 shows the sky in the preview's colour, and colours without the AgX curve's
+    # fading (the preview draws its lit colours as they are)
+    scene.view_settings.view_transform = "Standard"
     return cam, sun
 
 

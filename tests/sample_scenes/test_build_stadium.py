@@ -82,6 +82,27 @@ def test_scene_settings_and_summary(built):
     assert Path(built["path"]).stat().st_size == built["bytes"] < 3e6
 
 
+def test_every_engine_sees_the_same_colours(built):
+    """Each material's Principled BSDF base colour is its viewport colour, so Workbench,
+    EEVEE, Cycles and the crowd's looks agree (Blender 5 gives new materials a grey
+    node tree of their own: the pitch rendered grey in F12 before); the world is the
+    preview's sky, seen through the Standard view transform."""
+    from crowd_addon.blender.looks import principled
+    from crowd_addon.gpu.renderer import BACKGROUND
+    for mat in bpy.data.materials:
+        bsdf = principled(mat)
+        assert bsdf is not None, mat.name
+        np.testing.assert_allclose(bsdf.inputs["Base Color"].default_value,
+                                   mat.diffuse_color, atol=1e-6, err_msg=mat.name)
+    scene = bpy.context.scene
+    assert scene.view_settings.view_transform == "Standard"
+    sky = [n for n in scene.world.node_tree.nodes if n.type == "BACKGROUND"][0]
+    linear = np.asarray(sky.inputs["Color"].default_value[:3])
+    display = np.where(linear <= 0.0031308, 12.92 * linear,
+                       1.055 * linear ** (1 / 2.4) - 0.055)          # sRGB encoding
+    np.testing.assert_allclose(display, BACKGROUND[:3], atol=2e-3)
+
+
 def test_camera_frames_every_seat(built):
     scene = bpy.context.scene
     seats = bpy.data.objects["Seats"]
