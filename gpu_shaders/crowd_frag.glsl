@@ -8,7 +8,14 @@
  * Shadows (SHADOWS 1): `shadow_view_tex` holds the sun's view-projection matrix (4
  * RGBA32F texels, its columns) and `shadow_tex` the depth the sun sees through it
  * (crowd_addon/gpu/shadows.py). SHADOWS 0 (no shadows, and the shadow map's own
- * pass) reads neither: the sun is never hidden. */
+ * pass) reads neither: the sun is never hidden.
+ *
+ * Colours are linear (Blender's material colours, the agents' tints); the lit colour
+ * is linear light. ENCODE_SRGB 1 writes it sRGB-encoded, for an image of plain 8-bit
+ * values (the renderers' own offscreen images: PNG frames, reads); ENCODE_SRGB 0
+ * writes it linear, for a framebuffer that encodes on write, as the sRGB overlay
+ * buffer of Blender's viewport does. Either way the display shows what Blender's
+ * Standard view transform shows for the same light. */
 
 const float SHADOW_BIAS = 0.0015;       /* in the map's 0..1 depth */
 
@@ -47,5 +54,11 @@ void main()
     diffuse *= sun_visibility(v_world);
   }
   float sky = mix(1.0 / 3.0, 1.0, 0.5 + 0.5 * n.z);
-  frag_color = vec4(v_color * (u_light.w * sky + (1.0 - u_light.w) * diffuse), 1.0);
+  vec3 lit = v_color * (u_light.w * sky + (1.0 - u_light.w) * diffuse);
+#if ENCODE_SRGB
+  lit = clamp(lit, 0.0, 1.0);
+  lit = mix(lit * 12.92, 1.055 * pow(lit, vec3(1.0 / 2.4)) - 0.055,
+            step(vec3(0.0031308), lit));
+#endif
+  frag_color = vec4(lit, 1.0);
 }

@@ -176,6 +176,9 @@ class BlenderGPURenderer(CrowdRenderer):
         self.gpu.compute.dispatch(shader, work.groups, 1, 1)
         return work.image.nbytes
 
+    def _owns_image(self) -> bool:
+        return self.framebuffer is not None
+
     @contextmanager
     def _bind_target(self, target, clear):
         gpu = self.gpu
@@ -209,7 +212,7 @@ class BlenderGPURenderer(CrowdRenderer):
     def _draw(self, mesh, draw):
         n = mesh.buffers.influences
         shader = program(self.gpu, for_influences(CROWD_DRAW, n),
-                         {"INFLUENCES": n, "SHADOWS": int(self.sampling_shadows)})
+                         {"INFLUENCES": n, **self._fragment_defines()})
         self._bind(shader, CROWD_DRAW, draw.uniforms, self.textures["lists"])
         mesh.triangles.draw_instanced(shader, instance_count=draw.instances)
 
@@ -224,7 +227,7 @@ class BlenderGPURenderer(CrowdRenderer):
         return self.gpu.types.GPUBatch(type="TRIS", buf=vbo)
 
     def _draw_scene(self, scene, uniforms):
-        shader = program(self.gpu, SCENE_DRAW, {"SHADOWS": int(self.sampling_shadows)})
+        shader = program(self.gpu, SCENE_DRAW, self._fragment_defines())
         self._bind(shader, SCENE_DRAW, uniforms)
         scene.draw(shader)
 
@@ -260,7 +263,7 @@ class BlenderGPURenderer(CrowdRenderer):
         framebuffer = gpu.types.GPUFrameBuffer(color_slots=(target,))
         influences = mesh.buffers.influences
         shader = program(gpu, for_influences(CROWD_CAPTURE, influences),
-                         {"INFLUENCES": influences, "SHADOWS": 0})
+                         {"INFLUENCES": influences, "SHADOWS": 0, "ENCODE_SRGB": 0})
         with framebuffer.bind():
             framebuffer.clear(color=(0.0, 0.0, 0.0, 0.0))
             gpu.state.viewport_set(0, 0, *size)

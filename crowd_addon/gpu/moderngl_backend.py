@@ -29,7 +29,8 @@ _FORMATS = {"RGBA32F": (4, "f4"), "R32I": (1, "i4")}
 class _Mesh:
     """GL objects of one (skeleton, LOD) proxy: vertex arrays for drawing (indexed
     triangles, ``copies`` agents an instance; one per draw program variant, made when
-    first drawn: with and without shadows) and for transform-feedback capture (the
+    first drawn: with and without shadows, sRGB-encoded or linear) and for
+    transform-feedback capture (the
     first copy's vertices, one agent an instance)."""
 
     def __init__(self, ctx, buffers, copies, draw_program, capture_program):
@@ -42,15 +43,16 @@ class _Mesh:
         self.capture = ctx.vertex_array(capture_program,
                                         [_layout(self.vbo, capture_program, buffers.format)])
 
-    def draw(self, shadows: bool):
-        """(program, vertex array) of the draw variant that does or does not read the
-        shadow map."""
-        if shadows not in self.draws:
-            prog = self.draw_program(shadows)
-            self.draws[shadows] = prog, self.ctx.vertex_array(
+    def draw(self, defines: dict):
+        """(program, vertex array) of the draw variant of the fragment ``defines``
+        (:meth:`~.renderer.CrowdRenderer._fragment_defines`)."""
+        key = tuple(sorted(defines.items()))
+        if key not in self.draws:
+            prog = self.draw_program(defines)
+            self.draws[key] = prog, self.ctx.vertex_array(
                 prog, [_layout(self.vbo, prog, self.buffers.format)], self.ibo,
                 index_element_size=4)
-        return self.draws[shadows]
+        return self.draws[key]
 
     def objects(self):
         return [vao for _, vao in self.draws.values()] + [self.capture, self.vbo, self.ibo]
@@ -168,9 +170,9 @@ class ModernGLRenderer(CrowdRenderer):
         n = buffers.influences
         spec = for_influences(CROWD_DRAW, n)
         return _Mesh(self.ctx, buffers, copies,
-                     lambda shadows: self._program(spec, {"INFLUENCES": n,
-                                                          "SHADOWS": int(shadows)}),
-                     self._program(spec, {"INFLUENCES": n, "SHADOWS": 0}, True))
+                     lambda defines: self._program(spec, {"INFLUENCES": n, **defines}),
+                     self._program(spec, {"INFLUENCES": n, "SHADOWS": 0, "ENCODE_SRGB": 0},
+                                   True))
 
     def _skin(self, work) -> int:
         if "batch" not in self.textures:
@@ -185,6 +187,9 @@ class ModernGLRenderer(CrowdRenderer):
         prog.run(work.groups)
         self.ctx.memory_barrier()
         return sent
+
+    def _owns_image(self) -> bool:
+        return True
 
     @contextmanager
     def _bind_target(self, target, clear):
@@ -203,7 +208,7 @@ class ModernGLRenderer(CrowdRenderer):
             tex.use(slot)
 
     def _draw(self, mesh, draw):
-        program, vao = mesh.draw(self.sampling_shadows)
+        program, vao = mesh.draw(self._fragment_defines())
         self._bind(program, draw.uniforms, self.textures["lists"])
         vao.render(self._mgl.TRIANGLES, instances=draw.instances)
 
@@ -225,12 +230,13 @@ class ModernGLRenderer(CrowdRenderer):
         return {"vbo": vbo}
 
     def _draw_scene(self, scene, uniforms):
-        shadows = self.sampling_shadows
-        if shadows not in scene:                  # one vertex array a program variant
-            prog = self._program(SCENE_DRAW, {"SHADOWS": int(shadows)})
-            scene[shadows] = self.ctx.vertex_array(
+        defines = self._fragment_defines()
+        key = tuple(sorted(defines.items()))
+        if key not in scene:                      # one vertex array a program variant
+            prog = self._program(SCENE_DRAW, defines)
+            scene[key] = self.ctx.vertex_array(
                 prog, [(scene["vbo"], "3f 3f 3f", "pos", "nor", "col")])
-        vao = scene[shadows]
+        vao = scene[key]
         _set_uniforms(vao.program, uniforms)
         for slot, _, name in SCENE_DRAW.samplers:
             self.textures[DRAW_SAMPLERS[name]].use(slot)

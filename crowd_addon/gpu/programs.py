@@ -92,7 +92,7 @@ CROWD_DRAW = ProgramSpec(
               (2, "INT_2D", "agent_list_tex"), (3, "FLOAT_2D", "shadow_tex"),
               (4, "FLOAT_2D", "shadow_view_tex")),
     fragment_out=((0, "VEC4", "frag_color"),),
-    defines=("INFLUENCES", "SHADOWS"),
+    defines=("INFLUENCES", "SHADOWS", "ENCODE_SRGB"),
 )
 
 #: The scene around the crowd (:class:`~.scene_geometry.SceneGeometry`): plain
@@ -106,7 +106,7 @@ SCENE_DRAW = ProgramSpec(
     push_constants=(("MAT4", "u_view_proj"), ("VEC4", "u_light")),
     samplers=((3, "FLOAT_2D", "shadow_tex"), (4, "FLOAT_2D", "shadow_view_tex")),
     fragment_out=CROWD_DRAW.fragment_out,
-    defines=("SHADOWS",),
+    defines=("SHADOWS", "ENCODE_SRGB"),
 )
 
 #: The vertex inputs a skinning program adds for meshes of five to eight influences a

@@ -96,6 +96,11 @@ class CrowdRenderer:
         self.textures["shadow"], self.textures["shadow_view"] = self._lit
         #: whether the draws now read the shadow map (the programs' ``SHADOWS``)
         self.sampling_shadows = False
+        #: whether the draws now write sRGB-encoded colours (the programs'
+        #: ``ENCODE_SRGB``, gpu_shaders/crowd_frag.glsl): into this renderer's own
+        #: image, yes; into a framebuffer the caller passes or has bound (Blender's
+        #: viewport overlay, an sRGB buffer that encodes on write), no
+        self.encoding_srgb = True
         self.meshes = {key: self._create_mesh(buf, copies)
                        for key, (buf, copies) in self.plan.meshes().items()}
         work = self.plan.take_skinning()          # GPU skinning: fill the pose texture
@@ -141,10 +146,13 @@ class CrowdRenderer:
         None: this renderer's offscreen image, or for a renderer without one the
         framebuffer bound now), over its scene when one is set (:meth:`set_scene`).
         LODs follow the target's viewport height. ``clear``: RGBA to clear colour and
-        depth to first, None to draw over what is there (its depth hides agents)."""
+        depth to first, None to draw over what is there (its depth hides agents).
+        Colours go to the renderer's own image sRGB-encoded (as Blender's Standard view
+        transform shows them), to any other target linear (:attr:`encoding_srgb`)."""
         vp = np.asarray(camera.view_projection, np.float64)
         s = self.stats
         s.draws = s.instances = s.vertices = 0
+        self.encoding_srgb = target is None and self._owns_image()
         with self._bind_target(target, clear) as pixels_high:
             for region in self.plan.regroup(vp, pixels_high, self.culling):
                 s.list_bytes += self._write_ints(self.textures["lists"], region)
@@ -161,6 +169,11 @@ class CrowdRenderer:
                 s.instances += draw.agents
                 s.vertices += draw.vertices
         return s
+
+    def _fragment_defines(self) -> dict:
+        """The fragment stage's defines for the draws now: ``SHADOWS`` and
+        ``ENCODE_SRGB``."""
+        return {"SHADOWS": int(self.sampling_shadows), "ENCODE_SRGB": int(self.encoding_srgb)}
 
     def _shadow_pass(self):
         """Draw the sun's shadow map (the scene, then the agents of the current draw
@@ -220,6 +233,10 @@ class CrowdRenderer:
         raise NotImplementedError
 
     def _bind_target(self, target, clear):
+        raise NotImplementedError
+
+    def _owns_image(self) -> bool:
+        """Whether ``render`` without a target draws into this renderer's own image."""
         raise NotImplementedError
 
     def _draw(self, mesh, draw):

@@ -26,8 +26,10 @@ NO_GPU = 3
 
 
 def viewport(make):
-    """The image scene drawn into a bound GPUOffScreen by a renderer without an image
-    of its own (what a SpaceView3D draw handler does), against its own image."""
+    """The image scene drawn into a bound framebuffer by a renderer without an image
+    of its own (what a SpaceView3D draw handler does), against its own image. The
+    framebuffer is sRGB (``SRGB8_A8``), as the viewport's overlay buffer that draw
+    handlers draw into: it encodes on write what the renderer writes linear."""
     import gpu
     own = scenes.image(make)
     crowd = scenes.c.Crowd(scenes.c.make_config(M=8, agents=16, spacing=0.9))
@@ -36,16 +38,22 @@ def viewport(make):
         crowd.step()
         r.sync()
     w, h = scenes.SIZE
-    offscreen = gpu.types.GPUOffScreen(w, h)
-    with offscreen.bind():
-        gpu.state.active_framebuffer_get().clear(color=(0.62, 0.66, 0.72, 1.0), depth=1.0)
+    colour = gpu.types.GPUTexture((w, h), format="SRGB8_A8")
+    depth = gpu.types.GPUTexture((w, h), format="DEPTH_COMPONENT32F")
+    framebuffer = gpu.types.GPUFrameBuffer(color_slots=(colour,), depth_slot=depth)
+    with framebuffer.bind():
+        gpu.state.viewport_set(0, 0, w, h)
+        background = [((c + 0.055) / 1.055) ** 2.4 for c in (0.62, 0.66, 0.72)]  # linear
+        framebuffer.clear(color=(*background, 1.0), depth=1.0)
         r.render(frame_crowd(crowd, aspect=w / h), clear=None)
-    buf = offscreen.texture_color.read()
+    buf = colour.read()
     buf.dimensions = w * h * 4
-    image = np.frombuffer(buf, np.uint8).reshape(h, w, 4)[::-1]
-    offscreen.free()
-    return {"gpu/image": image, "ref/image": own["gpu/image"], "gpu/lod": r.plan.lists.lod,
-            "ref/lod": own["gpu/lod"]}
+    image = np.asarray(buf, np.float64).reshape(h, w, 4)[::-1]
+    if image.max() <= 1.0:                        # read back as floats (decoded or not)
+        image = image * 255.0
+    return {"gpu/image": np.rint(image).astype(np.uint8), "ref/image": own["gpu/image"],
+            "gpu/lod": r.plan.lists.lod, "ref/lod": own["gpu/lod"],
+            "gpu/encoding": np.array(r.encoding_srgb)}
 
 
 def main(path):

@@ -161,7 +161,8 @@ def reference_image(gl, crowd, camera, light, size):
     verts = np.concatenate(verts).astype("f4")
     tris = np.concatenate(tris).astype("u4")
     prog = gl.program(vertex_shader=REFERENCE_VS,
-                      fragment_shader=gl_sources(CROWD_DRAW, {"INFLUENCES": 4, "SHADOWS": 0})
+                      fragment_shader=gl_sources(CROWD_DRAW, {"INFLUENCES": 4, "SHADOWS": 0,
+                                                              "ENCODE_SRGB": 1})
                       ["fragment_shader"])
     prog["u_view_proj"].write(np.asarray(camera.view_projection, "f4").T.tobytes())
     prog["u_light"].value = light

@@ -15,10 +15,10 @@ from crowd_addon.gpu.programs import (CROWD_DRAW, ROW_UPLOAD, SCENE_DRAW, SKIN_R
                                       WIDE_INPUTS, ProgramSpec, for_influences)
 
 CROWD_DRAW_WIDE = for_influences(CROWD_DRAW, 7)
-DEFINES = {CROWD_DRAW.name: {"INFLUENCES": 2, "SHADOWS": 1},
+DEFINES = {CROWD_DRAW.name: {"INFLUENCES": 2, "SHADOWS": 1, "ENCODE_SRGB": 1},
            SKIN_ROWS.name: {"MAX_BONES": 30}, ROW_UPLOAD.name: {},
-           CROWD_DRAW_WIDE.name: {"INFLUENCES": 7, "SHADOWS": 1},
-           SCENE_DRAW.name: {"SHADOWS": 1}}
+           CROWD_DRAW_WIDE.name: {"INFLUENCES": 7, "SHADOWS": 1, "ENCODE_SRGB": 1},
+           SCENE_DRAW.name: {"SHADOWS": 1, "ENCODE_SRGB": 1}}
 
 
 def test_programs_for_more_than_four_influences_declare_the_second_pair():
@@ -80,10 +80,11 @@ def test_programs_compile_in_blenders_gpu_module():
         from crowd_addon.gpu.assembler import blender_create_info
         from crowd_addon.gpu.programs import (CROWD_DRAW, ROW_UPLOAD, SCENE_DRAW, SKIN_ROWS,
                                               for_influences)
-        for spec, defines in ((CROWD_DRAW, {"INFLUENCES": 4, "SHADOWS": 0}),
-                              (CROWD_DRAW, {"INFLUENCES": 4, "SHADOWS": 1}),
-                              (for_influences(CROWD_DRAW, 8), {"INFLUENCES": 8, "SHADOWS": 1}),
-                              (SCENE_DRAW, {"SHADOWS": 1}),
+        for spec, defines in ((CROWD_DRAW, {"INFLUENCES": 4, "SHADOWS": 0, "ENCODE_SRGB": 0}),
+                              (CROWD_DRAW, {"INFLUENCES": 4, "SHADOWS": 1, "ENCODE_SRGB": 1}),
+                              (for_influences(CROWD_DRAW, 8), {"INFLUENCES": 8, "SHADOWS": 1,
+                                                               "ENCODE_SRGB": 1}),
+                              (SCENE_DRAW, {"SHADOWS": 1, "ENCODE_SRGB": 0}),
                               (SKIN_ROWS, {"MAX_BONES": 30}), (ROW_UPLOAD, {})):
             gpu.shader.create_from_info(blender_create_info(spec, defines).build(gpu))
             print("compiled", spec.name)

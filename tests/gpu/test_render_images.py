@@ -61,7 +61,8 @@ def test_materials_colour_the_body_and_the_agent_tints_its_grey_parts(gl, h, ren
     # the skin keeps its colour on every agent: the upper halves look alike
     plain = h.Crowd(h.make_config(M=8, agents=15, spacing=0.9, lod_distances=far))
     plain.step()
-    assert differing(image, render(renderer, plain, camera)[0]) > 0.02
+    assert differing(image, render(renderer, plain, camera)[0]) > 0.01   # (sRGB: brights
+    # are close together; the 8-bit steps between the two are fewer than in linear)
 
 
 def test_wrapped_pose_texture_renders_identically(h, renderer):
@@ -84,26 +85,69 @@ def test_wrapped_pose_texture_renders_identically(h, renderer):
     np.testing.assert_array_equal(positions[0], positions[1])
 
 
+GL_SRGB8_ALPHA8, GL_FRAMEBUFFER_SRGB = 0x8C43, 0x8DB9
+
+
 def test_attached_context_renders_the_same_image(gl, h, renderer):
+    """Drawn into the framebuffer a viewport draw handler finds bound -- Blender's
+    viewport overlay: sRGB, encoding on write -- the attached renderer writes linear
+    colours, which the framebuffer encodes: the image is the one the renderer's own
+    image holds (which the shader encodes), to the last bit of 8-bit rounding."""
     from crowd_addon.gpu.moderngl_backend import ModernGLRenderer
     crowd = h.Crowd(h.make_config())
     crowd.step()
     camera = frame_crowd(crowd, aspect=SIZE[0] / SIZE[1])
     own, _ = render(renderer, crowd, camera)
-    target = gl.framebuffer(color_attachments=[gl.renderbuffer(SIZE, 4)],
+    colour = gl.texture(SIZE, 4, internal_format=GL_SRGB8_ALPHA8)
+    target = gl.framebuffer(color_attachments=[colour],
                             depth_attachment=gl.depth_renderbuffer(SIZE))
-    target.use()                          # what a viewport draw handler finds bound
+    target.use()
+    gl.enable_direct(GL_FRAMEBUFFER_SRGB)
     other = h.Crowd(h.make_config())
     attached = ModernGLRenderer.attach(other.view, SIZE)
     try:
         other.step()
         attached.sync()
         attached.render(camera, target=attached.ctx.detect_framebuffer())
+        assert not attached.encoding_srgb
         image = np.frombuffer(target.read(components=4, alignment=1), np.uint8)
     finally:
+        gl.disable_direct(GL_FRAMEBUFFER_SRGB)
         attached.release()
         target.release()
-    np.testing.assert_array_equal(image.reshape(SIZE[1], SIZE[0], 4)[::-1], own)
+        colour.release()
+    image = image.reshape(SIZE[1], SIZE[0], 4)[::-1].astype(np.int16)
+    covered = (own[..., :3] != own[0, 0, :3]).any(-1)          # not the background
+    assert covered.sum() > 200
+    assert np.abs(image[covered] - own[covered].astype(np.int16)).max() <= 1
+
+
+def test_the_own_image_is_srgb_encoded(gl, h, renderer):
+    """The renderer's own image holds the lit colours sRGB-encoded, as Blender's
+    Standard view transform shows them: the same frame drawn linear (into a plain
+    target) and encoded here on the CPU gives the own image. Before, the own image
+    held the linear values, darker than Blender shows the same colours."""
+    crowd = h.Crowd(h.make_config())
+    crowd.step()
+    camera = frame_crowd(crowd, aspect=SIZE[0] / SIZE[1])
+    own, r = render(renderer, crowd, camera)
+    plain = gl.framebuffer(color_attachments=[gl.renderbuffer(SIZE, 4)],
+                           depth_attachment=gl.depth_renderbuffer(SIZE))
+    try:
+        r.render(camera, target=plain)
+        assert not r.encoding_srgb
+        linear = np.frombuffer(plain.read(components=4, alignment=1), np.uint8)
+    finally:
+        plain.release()
+    linear = linear.reshape(SIZE[1], SIZE[0], 4)[::-1, :, :3] / 255.0
+    encoded = np.where(linear <= 0.0031308, 12.92 * linear,
+                       1.055 * linear ** (1 / 2.4) - 0.055) * 255.0
+    background = own[0, 0, :3]                      # the clear colour, in both images
+    covered = (own[..., :3] != background).any(-1) & \
+        (np.rint(linear * 255.0) != background).any(-1) & (linear.max(-1) > 0.02)
+    assert covered.sum() > 200
+    assert np.abs(encoded[covered] - own[..., :3][covered]).max() <= 8   # 8-bit linear input
+    assert (own[..., :3][covered].astype(np.float64) >= linear[covered] * 255.0 - 1).all()
 
 
 @pytest.mark.parametrize("bad", [(0.0, 0.0, 0.0), (np.nan, 1.0, 1.0)])
