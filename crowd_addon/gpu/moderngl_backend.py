@@ -30,8 +30,7 @@ class _Mesh:
     """GL objects of one (skeleton, LOD) proxy: vertex arrays for drawing (indexed
     triangles, ``copies`` agents an instance; one per draw program variant, made when
     first drawn: with and without shadows, sRGB-encoded or linear) and for
-    transform-feedback capture (the
-    first copy's vertices, one agent an instance)."""
+    transform-feedback capture (the first copy's vertices, one agent an instance)."""
 
     def __init__(self, ctx, buffers, copies, draw_program, capture_program):
         self.ctx, self.buffers, self.copies = ctx, buffers, copies
