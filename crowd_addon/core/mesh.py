@@ -19,7 +19,8 @@ import numpy as np
 
 from .errors import CrowdError
 
-__all__ = ["ProxyMesh", "Look", "vertex_normals", "build_lods", "INFLUENCES", "MAX_INFLUENCES"]
+__all__ = ["ProxyMesh", "Look", "tint_weight", "tinted", "vertex_normals", "build_lods",
+           "INFLUENCES", "MAX_INFLUENCES"]
 
 #: Influence columns of a mesh whose vertices have at most four bones (the GPU vertex
 #: format's first ``uvec4``/``vec4`` pair).
@@ -55,6 +56,25 @@ class Look:
             raise CrowdError(f"look {self.name!r}: texture must be a file path or \"\", "
                              f"got {self.texture!r}")
         object.__setattr__(self, "color", color)
+
+
+def tint_weight(base) -> np.ndarray:
+    """How much an agent's colour tints a material of linear colour ``base`` (..., 3):
+    ``clamp(1 - 4 * saturation)``, saturation as HSV's (``(max - min) / max``): grey
+    and white take the tint fully, saturation 0.25 and above (skin, dyed cloth) not at
+    all. The GPU preview's rule (``agent_tint`` in gpu_shaders/crowd_vertex.glsl), which
+    Render Crowd's materials and the USD export follow too."""
+    base = np.asarray(base, np.float64)
+    high, low = base.max(-1), base.min(-1)
+    return np.clip(1.0 - 4.0 * (high - low) / np.maximum(high, 1e-4), 0.0, 1.0)
+
+
+def tinted(base, tint) -> np.ndarray:
+    """Material colour ``base`` (3,) tinted by agents' colours ``tint`` (..., 3):
+    ``mix(base, base * tint, tint_weight(base))``."""
+    base = np.asarray(base, np.float64)[:3]
+    w = tint_weight(base)
+    return base * (1.0 - w) + base * np.asarray(tint, np.float64) * w
 
 
 @dataclass(frozen=True, eq=False)

@@ -19,6 +19,9 @@
                                           read by the character's palette materials)
                 primvars:displayColor (constant: the agent's colour, inherited
                                        by the character's mesh)
+                primvars:crowdTint_<look> (constant: each grey or white look's
+                                           colour tinted by the agent's, read by
+                                           that look's material)
         def Scope "AgentAnimations"   (in the sublayer agents.<ext>: per agent that
                                        is not static, a SkelAnimation whose value
                                        clips read streams, uniques and blends)
@@ -34,6 +37,7 @@ from __future__ import annotations
 import numpy as np
 from pxr import Gf, Sdf, Vt
 
+from ..core.mesh import tinted
 from .character import palette_primvar
 from .layers import apply_api, attribute, define, relationship
 
@@ -76,7 +80,7 @@ def author_offset_animations(root: Sdf.PrimSpec, shot, stream_names, stream_asse
 
 
 def author_agents(root: Sdf.PrimSpec, shot, names, character_assets, sources,
-                  instanceable=True):
+                  instanceable=True, tints=None):
     """The agent prims: a generator yielding ``("layout", done, total)`` after each
     batch of agents.
 
@@ -88,6 +92,9 @@ def author_agents(root: Sdf.PrimSpec, shot, names, character_assets, sources,
     character_assets : asset path per body index (``shot.agent_body``).
     sources : ``skel:animationSource`` target (Sdf.Path) per exported agent.
     instanceable : whether the agent prims are instanceable.
+    tints : per body index, the looks agents' colours tint
+        (:func:`~.character.tinted_looks`: ``[(primvar, colour)]``): each agent gets
+        the look's colour tinted by its own (:func:`~crowd_addon.core.mesh.tinted`).
     """
     with Sdf.ChangeBlock():
         parent = define(root, "Agents", "Scope")
@@ -96,10 +103,10 @@ def author_agents(root: Sdf.PrimSpec, shot, names, character_assets, sources,
     has = (shot.palette >= 0).all(2)                     # (n, 4): palette colours set
     agents = list(zip(names, shot.agent_body.tolist(), sources, shot.position.tolist(),
                       degrees, shot.color.tolist(), shot.scale.tolist(), has.tolist(),
-                      shot.palette.tolist()))
+                      shot.palette.tolist(), _tinted(shot, tints or {})))
     for a in range(0, len(agents), _LAYOUT_CHUNK):
         with Sdf.ChangeBlock():
-            for name, body, source, position, heading, color, scale, has_c, pal in \
+            for name, body, source, position, heading, color, scale, has_c, pal, tint in \
                     agents[a:a + _LAYOUT_CHUNK]:
                 prim = define(parent, name, "SkelRoot")
                 prim.instanceable = instanceable
@@ -118,11 +125,28 @@ def author_agents(root: Sdf.PrimSpec, shot, names, character_assets, sources,
                     if on:
                         attribute(prim, f"primvars:{palette_primvar(c)}", _T.Color3f,
                                   Gf.Vec3f(*pal[c]), interpolation="constant")
+                for primvar, rgb in tint:
+                    attribute(prim, f"primvars:{primvar}", _T.Color3f, Gf.Vec3f(*rgb),
+                              interpolation="constant")
         yield "layout", min(a + _LAYOUT_CHUNK, len(agents)), len(agents)
     moving = np.flatnonzero(shot.moving)
     if moving.size:
         with Sdf.ChangeBlock():
             _author_moves(parent, shot, names, moving)
+
+
+def _tinted(shot, tints) -> list:
+    """Per exported agent, ``[(primvar, (r, g, b))]``: each look its body's colours
+    tint (``tints``), tinted by the agent's colour; computed per body at once."""
+    out = [()] * shot.agent_body.size
+    for body, looks in tints.items():
+        ids = np.flatnonzero(shot.agent_body == body)
+        if not looks or not ids.size:
+            continue
+        colours = [tinted(rgb, shot.color[ids]).tolist() for _, rgb in looks]
+        for i, agent in enumerate(ids.tolist()):
+            out[agent] = [(p, c[i]) for (p, _), c in zip(looks, colours)]
+    return out
 
 
 def _author_moves(parent, shot, names, moving):

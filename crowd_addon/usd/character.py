@@ -36,17 +36,19 @@ inverse of core's ``Skeleton.inverse_bind``, so UsdSkel's skinning transform
 
 from __future__ import annotations
 
+import hashlib
+
 import numpy as np
-from pxr import Gf, Sdf, Vt
+from pxr import Gf, Sdf, Tf, Vt
 
 from ..core import pose as sqt
 from . import convert
 from ..core.bodies import merge_meshes
-from ..core.mesh import Look
+from ..core.mesh import Look, tint_weight
 from .layers import apply_api, attribute, connect, define, new_layer, relationship
 from .naming import joint_paths, unique_identifiers
 
-__all__ = ["character_layer", "palette_primvar", "SKELETON_PRIM"]
+__all__ = ["character_layer", "palette_primvar", "tint_primvar", "tinted_looks", "SKELETON_PRIM"]
 
 SKELETON_PRIM = "Skeleton"
 _T = Sdf.ValueTypeNames
@@ -154,6 +156,29 @@ def palette_primvar(column: int) -> str:
     return f"crowdPalette{int(column)}"
 
 
+def tint_primvar(look_name: str) -> str:
+    """The primvar an agent's tinted colour of look ``look_name`` is written as:
+    ``crowdTint_<name>`` (a name that is no identifier made one, with a digest of
+    it so that two such names cannot meet)."""
+    valid = Tf.MakeValidIdentifier(look_name)
+    if valid != look_name:
+        valid += "_" + hashlib.sha1(look_name.encode()).hexdigest()[:6]
+    return f"crowdTint_{valid}"
+
+
+def tinted_looks(looks, palette_materials=()) -> list:
+    """Of ``looks``, those that agents' colours tint in the export: with a tint weight
+    (:func:`~crowd_addon.core.mesh.tint_weight`) above 0, in no palette and without a
+    texture; ``[(primvar, (r, g, b))]``, one per name."""
+    out = {}
+    for look in looks:
+        if look.name in palette_materials or look.texture:
+            continue
+        if tint_weight(look.color[:3]) > 0:
+            out[tint_primvar(look.name)] = tuple(look.color[:3])
+    return list(out.items())
+
+
 def _bind_looks(prim, which, named_materials):
     """Bind the materials to the mesh, ``which`` (T,) the index of each triangle's
     among ``named_materials``: the one material when all use one, else a GeomSubset of
@@ -180,7 +205,9 @@ def _material(scope, name, look, has_uvs, texture, column=None):
     """``Material "<name>"``: a UsdPreviewSurface of the look's base colour and
     opacity; its texture, when it has one and the mesh has texture coordinates, feeds
     the diffuse colour instead; with a palette ``column``, the agent's primvar
-    :func:`palette_primvar` does (the look's colour its fallback)."""
+    :func:`palette_primvar` does, and for a look agents' colours tint (grey, white:
+    :func:`tinted_looks`), the agent's primvar :func:`tint_primvar` (the look's colour
+    the fallback of both)."""
     material = define(scope, name, "Material")
     shader = define(material, "PreviewSurface", "Shader")
     attribute(shader, "info:id", _T.Token, "UsdPreviewSurface", uniform=True)
@@ -189,10 +216,12 @@ def _material(scope, name, look, has_uvs, texture, column=None):
     attribute(shader, "inputs:roughness", _T.Float, 0.6)
     surface = attribute(shader, "outputs:surface", _T.Token)
     connect(attribute(material, "outputs:surface", _T.Token), surface)
-    if column is not None:
-        reader = define(material, "Palette", "Shader")
+    tint = not look.texture and tint_weight(look.color[:3]) > 0
+    if column is not None or tint:
+        reader = define(material, "Palette" if column is not None else "Tint", "Shader")
         attribute(reader, "info:id", _T.Token, "UsdPrimvarReader_float3", uniform=True)
-        attribute(reader, "inputs:varname", _T.String, palette_primvar(column))
+        attribute(reader, "inputs:varname", _T.String, palette_primvar(column)
+                  if column is not None else tint_primvar(look.name))
         attribute(reader, "inputs:fallback", _T.Float3, Gf.Vec3f(*look.color[:3]))
         connect(color, attribute(reader, "outputs:result", _T.Float3))
     elif look.texture and has_uvs:

@@ -38,7 +38,7 @@ from ..core.repetition import RepetitionSettings, recording_repetition_steps
 from .agents import (ROOT, agent_names, author_agent_animations, author_agents,
                      author_offset_animations)
 from .animation import author_animation
-from .character import character_layer
+from .character import character_layer, tinted_looks
 from .clips import PRIM, bank_layer, bank_layout, clip_sets, manifest_layer
 from .files import ExportFiles
 from .layers import new_layer
@@ -204,7 +204,7 @@ def _steps(rec, ids, meshes, files, layout, measure):
     out = _Output(files)
     with files:
         shot = Shot(rec, ids)
-        joints_of, char_assets = _write_characters(out, rec, meshes)
+        joints_of, char_assets, tints = _write_characters(out, rec, meshes)
         yield "characters", len(meshes), len(meshes)
         stream_names, stream_assets = yield from _write_streams(out, rec, shot, joints_of)
         clip_assets = yield from _write_clip_layers(out, rec, shot, joints_of, stream_names,
@@ -223,7 +223,7 @@ def _steps(rec, ids, meshes, files, layout, measure):
             offsets = author_offset_animations(root, shot, stream_names, stream_assets)
         yield from author_agents(root, shot, names, char_assets,
                                  _sources(shot, offsets, own_paths),
-                                 instanceable=layout == "instanced")
+                                 instanceable=layout == "instanced", tints=tints)
         out.save(layer)
         files.commit()
     author = time.perf_counter() - t0 - out.write
@@ -277,7 +277,8 @@ def _write_characters(out, rec, bodies) -> tuple:
     mesh, its lightest LOD as a proxy, and its props), named after the skeleton (plus
     the variant and props, for a body with them), and a copy of each texture their
     looks use (``textures/``, so the export stands on its own on another machine);
-    returns ``(joints_of, asset_of)``, keyed by skeleton index and by body index."""
+    returns ``(joints_of, asset_of, tints_of)``, keyed by skeleton index and by body
+    index (``tints_of[b]``: the looks agents' colours tint, :func:`tinted_looks`)."""
     cfg = rec.config
     skeleton_names = list(cfg.skeletons)
     ids = sorted(bodies)
@@ -287,17 +288,19 @@ def _write_characters(out, rec, bodies) -> tuple:
              for b in ids]
     textures = _copy_textures(out.files, [m for levels, props in parts
                                           for m in (levels[0], *(p.mesh for p in props))])
-    joints_of, asset_of = {}, {}
+    joints_of, asset_of, tints_of = {}, {}, {}
     for b, name, (levels, props) in zip(ids, file_names, parts):
         k = bodies[b].skeleton
         proxies = [m for m in levels[1:] if m.triangle_count >= PROXY_MIN_TRIANGLES]
+        palette = cfg.palette_materials.get(skeleton_names[k], ())
         layer, joints_of[k] = character_layer(
             cfg.skeletons[skeleton_names[k]], levels[0], out.files.format, rec.fps, name,
-            textures, proxies[-1] if proxies else None,
-            cfg.palette_materials.get(skeleton_names[k], ()), props, bodies[b].variant)
+            textures, proxies[-1] if proxies else None, palette, props, bodies[b].variant)
         out.save(layer, f"characters/{name}")
         asset_of[b] = out.files.asset_path(f"characters/{name}")
-    return joints_of, asset_of
+        tints_of[b] = tinted_looks([*levels[0].looks, *(look for p in props
+                                                         for look in p.mesh.looks)], palette)
+    return joints_of, asset_of, tints_of
 
 
 def _body_file(cfg, body) -> str:

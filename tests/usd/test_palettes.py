@@ -10,9 +10,10 @@ import pytest
 from pxr import Usd, UsdGeom, UsdShade
 
 from crowd_addon.core import Crowd
-from crowd_addon.core.mesh import Look
+from crowd_addon.core.mesh import Look, tint_weight, tinted
 from crowd_addon.gpu.instances import InstanceData, pack_colors
 from crowd_addon.usd import export_crowd
+from crowd_addon.usd.character import tint_primvar
 
 from .conftest import FAN_AGENTS, make_config, recording
 from .test_looks import dressed
@@ -81,3 +82,57 @@ def test_the_palette_material_reads_the_primvar(stage):
     skin = UsdShade.Shader(layer_root.GetPrimAtPath("/fan/Looks/skin/PreviewSurface"))
     assert not skin.GetInput("diffuseColor").HasConnectedSource()
     assert shirt
+
+
+def test_grey_looks_take_each_agents_tint(tmp_path):
+    """Without a palette on it, the grey shirt takes each agent's colour as the GPU
+    draws it (``tinted``: 0.9 x the agent's colour), through the constant primvar
+    ``crowdTint_shirt`` on the agent, which the shirt's material reads (the look's
+    colour its fallback); the saturated skin keeps its own colour and gets none.
+    Before, the export carried the agent's colour only as ``displayColor``, which
+    materials ignore: every shirt rendered grey."""
+    cfg = make_config()
+    cfg.meshes["fan"] = [dressed(cfg.meshes["fan"][0], (SHIRT, SKIN))]
+    n = cfg.agent_count
+    cfg.agent_color = np.where((np.arange(n) % 2 == 0)[:, None], RED, BLUE).astype(np.float32)
+    stage = Usd.Stage.Open(str(export_crowd(recording(cfg), tmp_path / "shot.usda").path))
+    crowd = Crowd(cfg)
+    assert tint_primvar("shirt") == "crowdTint_shirt"
+    seen = 0
+    for prim in Usd.PrimRange(stage.GetPrimAtPath("/Crowd/Agents"),
+                              Usd.TraverseInstanceProxies()):
+        if not prim.IsA(UsdGeom.Mesh) or UsdGeom.Imageable(prim).GetPurposeAttr().Get() \
+                == "proxy":
+            continue
+        agent = int(prim.GetParent().GetName().split("_")[1])
+        api = UsdGeom.PrimvarsAPI(prim)
+        found = api.FindPrimvarWithInheritance("crowdTint_shirt")
+        if agent < FAN_AGENTS:
+            colour = np.array(found.Get(), np.float64)
+            np.testing.assert_allclose(colour, 0.9 * np.array(RED if agent % 2 == 0 else BLUE),
+                                       atol=1e-6)
+            np.testing.assert_allclose(colour, tinted(SHIRT.color, crowd.agents.color[agent]),
+                                       atol=1e-7)
+            assert not api.FindPrimvarWithInheritance("crowdTint_skin").IsDefined()
+            seen += 1
+        else:                                              # kids wear no looks
+            assert not found.IsDefined()
+    assert seen == FAN_AGENTS
+    character = next(Usd.Stage.Open(layer) for layer in stage.GetUsedLayers()
+                     if "characters/fan" in layer.identifier)
+    surface = UsdShade.Shader(character.GetPrimAtPath("/fan/Looks/shirt/PreviewSurface"))
+    (source,) = surface.GetInput("diffuseColor").GetConnectedSources()[0]
+    reader = UsdShade.Shader(source.source.GetPrim())
+    assert reader.GetInput("varname").Get() == "crowdTint_shirt"
+    np.testing.assert_allclose(reader.GetInput("fallback").Get(), SHIRT.color[:3], atol=1e-6)
+    skin = UsdShade.Shader(character.GetPrimAtPath("/fan/Looks/skin/PreviewSurface"))
+    assert not skin.GetInput("diffuseColor").HasConnectedSource()
+
+
+def test_tint_weight_is_the_previews_rule():
+    """Grey and white take the tint fully, saturation 0.25 and above not at all, and
+    linearly between (what gpu_shaders/crowd_vertex.glsl's agent_tint computes)."""
+    np.testing.assert_allclose(tint_weight([(1, 1, 1), (0.5, 0.5, 0.5), (0.8, 0.5, 0.35),
+                                            (1.0, 0.9, 0.9)]), [1, 1, 0, 0.6], atol=1e-12)
+    assert tint_primvar("Fan Shirt.001") != tint_primvar("Fan_Shirt_001")
+    assert tint_primvar("Fan Shirt.001").startswith("crowdTint_Fan_Shirt_001_")
