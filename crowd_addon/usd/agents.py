@@ -119,15 +119,16 @@ def author_agents(root: Sdf.PrimSpec, shot, names, character_assets, sources,
                     attribute(prim, "xformOp:scale", _T.Float3, Gf.Vec3f(scale, scale, scale))
                 attribute(prim, "xformOpOrder", _T.TokenArray,
                           _ORDER if scale == 1.0 else _SCALED, uniform=True)
+                # primvars whose interpolation is not authored are constant (UsdGeom's
+                # fallback): one metadata call fewer a primvar of 65k agents
                 attribute(prim, "primvars:displayColor", _T.Color3fArray,
-                          Vt.Vec3fArray([Gf.Vec3f(*color)]), interpolation="constant")
+                          Vt.Vec3fArray([Gf.Vec3f(*color)]))
                 for c, on in enumerate(has_c):
                     if on:
                         attribute(prim, f"primvars:{palette_primvar(c)}", _T.Color3f,
-                                  Gf.Vec3f(*pal[c]), interpolation="constant")
+                                  Gf.Vec3f(*pal[c]))
                 for primvar, rgb in tint:
-                    attribute(prim, f"primvars:{primvar}", _T.Color3f, Gf.Vec3f(*rgb),
-                              interpolation="constant")
+                    attribute(prim, f"primvars:{primvar}", _T.Color3f, Gf.Vec3f(*rgb))
         yield "layout", min(a + _LAYOUT_CHUNK, len(agents)), len(agents)
     moving = np.flatnonzero(shot.moving)
     if moving.size:
