@@ -13,8 +13,9 @@ of ordinary Blender data, with the paper's sharing kept:
   whatever else it wears, and no combination of props multiplies the body's pose
   meshes. Each pose mesh is the level's proxy (its triangles, UVs and materials,
   as the crowd's copies that tint each agent as the preview does:
-  :mod:`.crowd_materials`) skinned on the CPU by core (:func:`crowd_addon.core.skinning.skin_vertices`) and
-  written with one bulk ``foreach_set``. The meshes hang on objects
+  :mod:`.crowd_materials`) skinned on the CPU by core
+  (:func:`crowd_addon.core.skinning.skin_vertices`) and written with one bulk
+  ``foreach_set``. The meshes hang on objects
   ``CrowdPose.000000 ...`` of the collection :data:`POSES`, which is not linked to the
   scene (only instanced);
 * one **points object** (:data:`POINTS`): a vertex per piece, each agent's body first
@@ -221,9 +222,13 @@ class _Existing:
 
     def __init__(self, coll):
         self.coll = coll
+        self._read()
+
+    def _read(self):
+        """(Re)read them: also after removing a mesh, which removes its objects."""
         self.meshes = {m.name: m for m in bpy.data.meshes if m.name.startswith(_MESH_PREFIX)}
         self.objects = {o.name: o for o in bpy.data.objects if o.name.startswith(_POSE_PREFIX)}
-        self.linked = set(coll.objects.keys())
+        self.linked = set(self.coll.objects.keys())
 
     def meshes_for(self, proxy, part: int, lod: int, count: int, palette=()) -> list:
         """``count`` pose meshes of one (part, LOD) topology, reused frame to frame
@@ -235,7 +240,7 @@ class _Existing:
             if mesh is None or mesh.get(_MADE_FROM) != made:
                 if mesh is not None:              # its objects go with it
                     bpy.data.meshes.remove(mesh)
-                    self.__init__(self.coll)
+                    self._read()
                 mesh = self.meshes[name] = _mesh_for(proxy, name, palette)
                 mesh[_MADE_FROM] = made
             out.append(mesh)
@@ -263,8 +268,8 @@ def _pieces(crowd, scene):
     agent carries (props are small and rigid: their pose meshes are shared by every
     agent whose bone is in the same pose, instead of a pose mesh per combination of
     props; at the card level, as on the GPU, no prop). Returns ``(agent, drawable,
-    prop, lod, levels, palettes)``: per piece its agent, drawable index (a (skeleton, variant)
-    or (skeleton, prop) pair), prop index (-1: the body) and level (through
+    prop, lod, levels, palettes)``: per piece its agent, drawable index (a (skeleton,
+    variant) or (skeleton, prop) pair), prop index (-1: the body) and level (through
     ``scene``'s camera: :func:`agent_lods`), and per drawable its LOD meshes (empty:
     not drawn) and its character's palette materials."""
     from ..core.bodies import is_card
