@@ -41,17 +41,22 @@ def stage(tmp_path_factory):
     return Usd.Stage.Open(str(result.path))
 
 
+def agent_meshes(stage):
+    """(agent index, its render mesh prim) for every agent mesh of ``stage`` (through
+    the instances; proxies left out)."""
+    for prim in Usd.PrimRange(stage.GetPrimAtPath("/Crowd/Agents"),
+                              Usd.TraverseInstanceProxies()):
+        if prim.IsA(UsdGeom.Mesh) and UsdGeom.Imageable(prim).GetPurposeAttr().Get() \
+                != "proxy":
+            yield int(prim.GetParent().GetName().split("_")[1]), prim
+
+
 def test_each_agent_reads_its_palette_colour(stage):
     cfg = palette_config()
     crowd = Crowd(cfg, skinning="gpu")
     drawn = InstanceData(crowd.view).records[:, 2]          # what the GPU reads
     seen = 0
-    for prim in Usd.PrimRange(stage.GetPrimAtPath("/Crowd/Agents"),
-                              Usd.TraverseInstanceProxies()):
-        if not prim.IsA(UsdGeom.Mesh) or UsdGeom.Imageable(prim).GetPurposeAttr().Get() \
-                == "proxy":
-            continue
-        agent = int(prim.GetParent().GetName().split("_")[1])
+    for agent, prim in agent_meshes(stage):
         found = UsdGeom.PrimvarsAPI(prim).FindPrimvarWithInheritance("crowdPalette1")
         if agent < FAN_AGENTS:
             colour = np.array(found.Get(), np.float64)
@@ -99,12 +104,7 @@ def test_grey_looks_take_each_agents_tint(tmp_path):
     crowd = Crowd(cfg)
     assert tint_primvar("shirt") == "crowdTint_shirt"
     seen = 0
-    for prim in Usd.PrimRange(stage.GetPrimAtPath("/Crowd/Agents"),
-                              Usd.TraverseInstanceProxies()):
-        if not prim.IsA(UsdGeom.Mesh) or UsdGeom.Imageable(prim).GetPurposeAttr().Get() \
-                == "proxy":
-            continue
-        agent = int(prim.GetParent().GetName().split("_")[1])
+    for agent, prim in agent_meshes(stage):
         api = UsdGeom.PrimvarsAPI(prim)
         found = api.FindPrimvarWithInheritance("crowdTint_shirt")
         if agent < FAN_AGENTS:
