@@ -55,7 +55,8 @@ _T = Sdf.ValueTypeNames
 
 
 def character_layer(skeleton, mesh, fmt: str, fps: float, root_name: str, textures=None,
-                    proxy=None, palette_materials=(), props=(), variant=0):
+                    proxy=None, palette_materials=(), props=(), variant=0,
+                    agent_colours=True):
     """The character layer of ``skeleton`` (core Skeleton) drawn with ``mesh`` (core
     ProxyMesh), its SkelRoot named ``root_name``; returns ``(layer, joints)`` with the
     joint path tokens (shared by every animation of this skeleton). ``textures`` maps
@@ -66,7 +67,10 @@ def character_layer(skeleton, mesh, fmt: str, fps: float, root_name: str, textur
     the agents' palette columns colour, in column order. ``props``: the
     :class:`~crowd_addon.core.bodies.Prop` s the body carries, each a mesh of its own
     bound rigidly to its joint; ``variant``: the mesh variant ``mesh`` is (recorded in
-    the root's ``customData``)."""
+    the root's ``customData``). ``agent_colours``: whether the materials read each
+    agent's palette and tint primvars (False: the looks' own colours; for Blender's
+    importer, which turns a primvar reader into an Attribute node of the mesh, where
+    an agent's constant primvar is not, so the colour would be black)."""
     layer = new_layer(fmt, fps, 0, 0, default_prim=root_name,
                       comment=f"crowd character {skeleton.name!r}")
     joints = Vt.TokenArray(joint_paths(skeleton.bone_names, skeleton.parents))
@@ -85,7 +89,8 @@ def character_layer(skeleton, mesh, fmt: str, fps: float, root_name: str, textur
         attribute(skel, "restTransforms", _T.Matrix4dArray,
                   convert.matrices(sqt.pose_to_matrices(skeleton.bind_pose)), uniform=True)
         whole = merge_meshes(mesh.name, [mesh, *(p.mesh for p in props)])
-        materials = _materials(root, whole, textures or {}, tuple(palette_materials))
+        materials = _materials(root, whole, textures or {}, tuple(palette_materials),
+                               agent_colours)
         look_of = {k.name: i for i, k in enumerate(whole.looks)}
         # (mesh, purpose, rigid bone, the look of a part without looks: as merged)
         meshes = [(mesh, "render" if proxy is not None else None, None, mesh.name)]
@@ -138,8 +143,9 @@ def _mesh(root, mesh, name, skeleton_path, bone=None):
     return prim
 
 
-def _materials(root, mesh, textures, palette_materials=()) -> list:
-    """A Material per look of ``mesh`` under ``Looks``: ``[(name, material spec)]``."""
+def _materials(root, mesh, textures, palette_materials=(), agent_colours=True) -> list:
+    """A Material per look of ``mesh`` under ``Looks``: ``[(name, material spec)]``
+    (``agent_colours``: :func:`character_layer`'s)."""
     if not mesh.looks:
         return []
     scope = define(root, "Looks", "Scope")
@@ -147,7 +153,8 @@ def _materials(root, mesh, textures, palette_materials=()) -> list:
     return [(name, _material(scope, name, look, mesh.uvs is not None,
                              textures.get(look.texture, look.texture),
                              palette_materials.index(look.name)
-                             if look.name in palette_materials else None))
+                             if agent_colours and look.name in palette_materials else None,
+                             agent_colours))
             for name, look in zip(names, mesh.looks)]
 
 
@@ -201,13 +208,13 @@ def _bind_looks(prim, which, named_materials):
         _bind(subset, material)
 
 
-def _material(scope, name, look, has_uvs, texture, column=None):
+def _material(scope, name, look, has_uvs, texture, column=None, tints=True):
     """``Material "<name>"``: a UsdPreviewSurface of the look's base colour and
     opacity; its texture, when it has one and the mesh has texture coordinates, feeds
     the diffuse colour instead; with a palette ``column``, the agent's primvar
     :func:`palette_primvar` does, and for a look agents' colours tint (grey, white:
-    :func:`tinted_looks`), the agent's primvar :func:`tint_primvar` (the look's colour
-    the fallback of both)."""
+    :func:`tinted_looks`) when ``tints``, the agent's primvar :func:`tint_primvar` (the
+    look's colour the fallback of both)."""
     material = define(scope, name, "Material")
     shader = define(material, "PreviewSurface", "Shader")
     attribute(shader, "info:id", _T.Token, "UsdPreviewSurface", uniform=True)
@@ -216,7 +223,7 @@ def _material(scope, name, look, has_uvs, texture, column=None):
     attribute(shader, "inputs:roughness", _T.Float, 0.6)
     surface = attribute(shader, "outputs:surface", _T.Token)
     connect(attribute(material, "outputs:surface", _T.Token), surface)
-    tint = not look.texture and tint_weight(look.color[:3]) > 0
+    tint = tints and not look.texture and tint_weight(look.color[:3]) > 0
     if column is not None or tint:
         reader = define(material, "Palette" if column is not None else "Tint", "Shader")
         attribute(reader, "info:id", _T.Token, "UsdPrimvarReader_float3", uniform=True)

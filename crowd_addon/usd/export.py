@@ -204,7 +204,10 @@ def _steps(rec, ids, meshes, files, layout, measure):
     out = _Output(files)
     with files:
         shot = Shot(rec, ids)
-        joints_of, char_assets, tints = _write_characters(out, rec, meshes)
+        # Blender's importer reads a material's primvar reader from the mesh, where the
+        # agents' constant colour primvars are not: its layout keeps the looks' colours
+        joints_of, char_assets, tints = _write_characters(out, rec, meshes,
+                                                          agent_colours=layout != "blender")
         yield "characters", len(meshes), len(meshes)
         stream_names, stream_assets = yield from _write_streams(out, rec, shot, joints_of)
         clip_assets = yield from _write_clip_layers(out, rec, shot, joints_of, stream_names,
@@ -272,13 +275,14 @@ class _Output:
         self.write += time.perf_counter() - t
 
 
-def _write_characters(out, rec, bodies) -> tuple:
+def _write_characters(out, rec, bodies, agent_colours=True) -> tuple:
     """One layer per body in ``bodies`` (``{body index: Body}``: its mesh variant's full
     mesh, its lightest LOD as a proxy, and its props), named after the skeleton (plus
     the variant and props, for a body with them), and a copy of each texture their
     looks use (``textures/``, so the export stands on its own on another machine);
     returns ``(joints_of, asset_of, tints_of)``, keyed by skeleton index and by body
-    index (``tints_of[b]``: the looks agents' colours tint, :func:`tinted_looks`)."""
+    index (``tints_of[b]``: the looks agents' colours tint, :func:`tinted_looks`; none
+    without ``agent_colours``, which :func:`character_layer` takes)."""
     cfg = rec.config
     skeleton_names = list(cfg.skeletons)
     ids = sorted(bodies)
@@ -295,11 +299,13 @@ def _write_characters(out, rec, bodies) -> tuple:
         palette = cfg.palette_materials.get(skeleton_names[k], ())
         layer, joints_of[k] = character_layer(
             cfg.skeletons[skeleton_names[k]], levels[0], out.files.format, rec.fps, name,
-            textures, proxies[-1] if proxies else None, palette, props, bodies[b].variant)
+            textures, proxies[-1] if proxies else None, palette, props, bodies[b].variant,
+            agent_colours)
         out.save(layer, f"characters/{name}")
         asset_of[b] = out.files.asset_path(f"characters/{name}")
         tints_of[b] = tinted_looks([*levels[0].looks, *(look for p in props
-                                                         for look in p.mesh.looks)], palette)
+                                                         for look in p.mesh.looks)],
+                                   palette) if agent_colours else []
     return joints_of, asset_of, tints_of
 
 

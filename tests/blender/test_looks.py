@@ -127,3 +127,28 @@ def test_a_plain_material_looks_the_same_in_every_engine_and_in_the_crowd():
     np.testing.assert_allclose(_look(mat).color, pole, atol=1e-6)
     assert plain_material("pole", (1.0, 0.0, 0.0, 1.0)) == mat        # reused, recoloured
     np.testing.assert_allclose(_look(mat).color, (1.0, 0.0, 0.0, 1.0), atol=1e-6)
+
+
+def test_blenders_layout_keeps_the_looks_colours_for_blenders_importer(dressed, tmp_path):
+    """A grey shirt (agents' tints) and a palette on the skin: the ``blender`` layout
+    writes no primvar readers into the materials, since Blender's importer turns one
+    into an Attribute node of the mesh, where the agents' constant primvars are not,
+    and would draw those looks black. The importer shows the looks' own colours. Before,
+    the palette look came in as such an Attribute node."""
+    scene = dressed[0]
+    grey = (0.9, 0.9, 0.9, 1.0)
+    bpy.data.materials["Shirt"].node_tree.nodes["Principled BSDF"].inputs[
+        "Base Color"].default_value = grey
+    pal = scene.crowd.characters[0].palettes.add()
+    pal.material, pal.mode, pal.count = "Skin", "RANDOM", 2
+    out = tmp_path / "export" / "looks.usdc"
+    os.makedirs(out.parent)
+    assert bpy.ops.crowd.export_usd(filepath=str(out), usd_layout="blender") == {"FINISHED"}
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    bpy.ops.wm.usd_import(filepath=str(out))
+    looks = {m.name.split(".")[0]: m for m in bpy.data.materials if m.node_tree is not None}
+    assert {"Shirt", "Skin"} <= set(looks)
+    for mat in looks.values():
+        assert not [n for n in mat.node_tree.nodes if n.type == "ATTRIBUTE"], mat.name
+    shirt = looks["Shirt"].node_tree.nodes["Principled BSDF"]
+    assert tuple(shirt.inputs["Base Color"].default_value) == pytest.approx(grey, abs=1e-6)
