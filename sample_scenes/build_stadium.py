@@ -44,6 +44,7 @@ import mocap  # noqa: E402
 import stadium_layout as layout  # noqa: E402
 from crowd_addon.blender.looks import plain_material  # noqa: E402
 from crowd_addon.core.errors import CrowdError  # noqa: E402
+from crowd_addon.gpu.renderer import BACKGROUND  # noqa: E402
 
 __all__ = ["build_stadium", "BUILDER_VERSION", "DEFAULT_SEATS", "PAPER_SEATS"]
 
@@ -52,8 +53,9 @@ DEFAULT_SEATS = 2000
 PAPER_SEATS = 65000
 FPS = 30
 
-#: linear RGB of the GPU preview's background (``gpu.renderer.BACKGROUND``, display values)
-SKY = (0.342, 0.392, 0.479)
+#: linear RGB of the GPU preview's background (``gpu.renderer.BACKGROUND``, sRGB display
+#: values, all above the decoding's linear segment)
+SKY = tuple(((c + 0.055) / 1.055) ** 2.4 for c in BACKGROUND[:3])
 _COLOURS = {"concrete": (0.55, 0.55, 0.52, 1.0), "home": (0.30, 0.09, 0.09, 1.0),
             "away": (0.08, 0.13, 0.32, 1.0), "pitch": (0.12, 0.45, 0.12, 1.0),
             "apron": (0.09, 0.30, 0.10, 1.0)}

@@ -222,13 +222,12 @@ class _Existing:
 
     def __init__(self, coll):
         self.coll = coll
-        self._read()
-
-    def _read(self):
-        """(Re)read them: also after removing a mesh, which removes its objects."""
         self.meshes = {m.name: m for m in bpy.data.meshes if m.name.startswith(_MESH_PREFIX)}
         self.objects = {o.name: o for o in bpy.data.objects if o.name.startswith(_POSE_PREFIX)}
-        self.linked = set(self.coll.objects.keys())
+        self.linked = set(coll.objects.keys())
+        #: meshes replaced this frame, removed in one batch once every pose object in
+        #: use shows its new mesh (removing a mesh removes the objects still using it)
+        self.stale = []
 
     def meshes_for(self, proxy, part: int, lod: int, count: int, palette=()) -> list:
         """``count`` pose meshes of one (part, LOD) topology, reused frame to frame
@@ -238,9 +237,9 @@ class _Existing:
             name = f"{_MESH_PREFIX}{part}.{lod}.{i:06d}"
             mesh = self.meshes.get(name)
             if mesh is None or mesh.get(_MADE_FROM) != made:
-                if mesh is not None:              # its objects go with it
-                    bpy.data.meshes.remove(mesh)
-                    self._read()
+                if mesh is not None:
+                    mesh.name = f"{name}~"             # frees the name for its successor
+                    self.stale.append(mesh)
                 mesh = self.meshes[name] = _mesh_for(proxy, name, palette)
                 mesh[_MADE_FROM] = made
             out.append(mesh)
@@ -365,6 +364,8 @@ def sync(scene, crowd) -> RenderStats:
         rgba[has, :3], rgba[has, 3] = palette[has, c], 1.0
         me.attributes[f"crowd_palette{c}"].data.foreach_set("color", rgba.ravel())
     me.update()
+    if existing.stale:                  # after the unused objects were unlinked above
+        bpy.data.batch_remove(existing.stale)
     stats.poses = poses
     stats.ms = (time.perf_counter() - t0) * 1e3
     return stats
