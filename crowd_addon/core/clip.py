@@ -344,14 +344,15 @@ class ClipBank:
         base = self.start[clip_ids]
         if out is None:
             out = np.empty((clip_ids.size,) + self.keys.shape[1:], np.float32)
-        np.take(self.keys, base + i0, axis=0, out=out)
+        # mode="clip": the indices are valid, and numpy buffers ``out`` in "raise" mode
+        np.take(self.keys, base + i0, axis=0, out=out, mode="clip")
         # at integer times (the common case: speed 1 at whole frames) the key is the pose;
         # between keys, the step to the next key is stored on the shortest arc
         # (``key_deltas``), so the blend is blend2's arithmetic without its sign test and
         # its subtraction (the same floats)
         frac = np.flatnonzero(f)
         if frac.size == clip_ids.size:          # every one between keys: in place
-            b = np.take(self.key_deltas, base + i0, axis=0)
+            b = np.take(self.key_deltas, base + i0, axis=0, mode="clip")
             b *= f[:, None, None]
             out += b
             sqt.normalize_rotations(out)

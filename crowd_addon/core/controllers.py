@@ -347,7 +347,7 @@ class Layer(Controller):
         def evaluate(self, ctx):
             if isinstance(self.out, slice):        # the base straight into the output
                 out = ctx.poses[self.out]
-                np.take(ctx.poses, self.ib, axis=0, out=out)
+                np.take(ctx.poses, self.ib, axis=0, out=out, mode="clip")   # (unbuffered)
             else:
                 out = ctx.poses[self.ib]
             b = self.bones_used
