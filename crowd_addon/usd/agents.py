@@ -22,6 +22,9 @@
                 primvars:crowdTint_<look> (constant: each grey or white look's
                                            colour tinted by the agent's, read by
                                            that look's material)
+                (the blender layout: not instanceable, and the three kinds of
+                primvars are on an over of each of the character's meshes instead,
+                one-element arrays, which Blender's USD importer reads)
         def Scope "AgentAnimations"   (in the sublayer agents.<ext>: per agent that
                                        is not static, a SkelAnimation whose value
                                        clips read streams, uniques and blends)
@@ -80,7 +83,7 @@ def author_offset_animations(root: Sdf.PrimSpec, shot, stream_names, stream_asse
 
 
 def author_agents(root: Sdf.PrimSpec, shot, names, character_assets, sources,
-                  instanceable=True, tints=None):
+                  meshes_of=None, tints=None):
     """The agent prims: a generator yielding ``("layout", done, total)`` after each
     batch of agents.
 
@@ -91,7 +94,12 @@ def author_agents(root: Sdf.PrimSpec, shot, names, character_assets, sources,
     names : prim name per exported agent.
     character_assets : asset path per body index (``shot.agent_body``).
     sources : ``skel:animationSource`` target (Sdf.Path) per exported agent.
-    instanceable : whether the agent prims are instanceable.
+    meshes_of : None: the agent prims are instanceable and carry their colour
+        primvars, which the character's meshes inherit. Else, per body index, the
+        names of the character's Mesh prims: the agents are not instanceable and each
+        of their meshes carries the primvars as one-element arrays, the only constant
+        primvars Blender's USD importer reads (as point attributes, which the Attribute
+        nodes it makes of the materials' primvar readers then find).
     tints : per body index, the looks agents' colours tint
         (:func:`~.character.tinted_looks`: ``[(primvar, colour)]``): each agent gets
         the look's colour tinted by its own (:func:`~crowd_addon.core.mesh.tinted`).
@@ -109,7 +117,7 @@ def author_agents(root: Sdf.PrimSpec, shot, names, character_assets, sources,
             for name, body, source, position, heading, color, scale, has_c, pal, tint in \
                     agents[a:a + _LAYOUT_CHUNK]:
                 prim = define(parent, name, "SkelRoot")
-                prim.instanceable = instanceable
+                prim.instanceable = meshes_of is None
                 prim.referenceList.Prepend(refs[body])
                 apply_api(prim, "SkelBindingAPI")
                 relationship(prim, "skel:animationSource", source)
@@ -119,21 +127,35 @@ def author_agents(root: Sdf.PrimSpec, shot, names, character_assets, sources,
                     attribute(prim, "xformOp:scale", _T.Float3, Gf.Vec3f(scale, scale, scale))
                 attribute(prim, "xformOpOrder", _T.TokenArray,
                           _ORDER if scale == 1.0 else _SCALED, uniform=True)
-                # primvars whose interpolation is not authored are constant (UsdGeom's
-                # fallback): one metadata call fewer a primvar of 65k agents
-                attribute(prim, "primvars:displayColor", _T.Color3fArray,
-                          Vt.Vec3fArray([Gf.Vec3f(*color)]))
-                for c, on in enumerate(has_c):
-                    if on:
-                        attribute(prim, f"primvars:{palette_primvar(c)}", _T.Color3f,
-                                  Gf.Vec3f(*pal[c]))
-                for primvar, rgb in tint:
-                    attribute(prim, f"primvars:{primvar}", _T.Color3f, Gf.Vec3f(*rgb))
+                colours = [("displayColor", color)]
+                colours += [(palette_primvar(c), pal[c]) for c, on in enumerate(has_c) if on]
+                colours += tint
+                if meshes_of is None:
+                    _author_colours(prim, colours, _T.Color3f, Gf.Vec3f)
+                else:
+                    for mesh in meshes_of[body]:
+                        _author_colours(Sdf.PrimSpec(prim, mesh, Sdf.SpecifierOver),
+                                        colours, _T.Color3fArray, _one_colour)
         yield "layout", min(a + _LAYOUT_CHUNK, len(agents)), len(agents)
     moving = np.flatnonzero(shot.moving)
     if moving.size:
         with Sdf.ChangeBlock():
             _author_moves(parent, shot, names, moving)
+
+
+def _author_colours(prim, colours, value_type, value):
+    """The primvars ``colours`` (``[(name, (r, g, b))]``) on ``prim``, constant:
+    their interpolation is not authored (UsdGeom's fallback; one metadata call fewer
+    a primvar of 65k agents). displayColor is an array whatever ``value_type``."""
+    for name, rgb in colours:
+        if name == "displayColor":
+            attribute(prim, "primvars:displayColor", _T.Color3fArray, _one_colour(rgb))
+        else:
+            attribute(prim, f"primvars:{name}", value_type, value(*rgb))
+
+
+def _one_colour(*rgb):
+    return Vt.Vec3fArray([Gf.Vec3f(*rgb)])
 
 
 def _tinted(shot, tints) -> list:

@@ -24,9 +24,11 @@
                                                    with the base colour, or an
                                                    UsdUVTexture of the image read at st;
                                                    a palette material's colour is read
-                                                   from the primvar crowdPalette<column>
-                                                   (each agent's, docs/variety.md), its
-                                                   own colour the fallback
+                                                   from the primvar crowdPalette<column>,
+                                                   a grey or white look's from
+                                                   crowdTint_<look> (each agent's,
+                                                   docs/variety.md), its own colour the
+                                                   fallback
 
 ``bindTransforms`` are the joints' model-space (skeleton-space) bind matrices, the
 inverse of core's ``Skeleton.inverse_bind``, so UsdSkel's skinning transform
@@ -55,8 +57,7 @@ _T = Sdf.ValueTypeNames
 
 
 def character_layer(skeleton, mesh, fmt: str, fps: float, root_name: str, textures=None,
-                    proxy=None, palette_materials=(), props=(), variant=0,
-                    agent_colours=True):
+                    proxy=None, palette_materials=(), props=(), variant=0):
     """The character layer of ``skeleton`` (core Skeleton) drawn with ``mesh`` (core
     ProxyMesh), its SkelRoot named ``root_name``; returns ``(layer, joints)`` with the
     joint path tokens (shared by every animation of this skeleton). ``textures`` maps
@@ -67,10 +68,9 @@ def character_layer(skeleton, mesh, fmt: str, fps: float, root_name: str, textur
     the agents' palette columns colour, in column order. ``props``: the
     :class:`~crowd_addon.core.bodies.Prop` s the body carries, each a mesh of its own
     bound rigidly to its joint; ``variant``: the mesh variant ``mesh`` is (recorded in
-    the root's ``customData``). ``agent_colours``: whether the materials read each
-    agent's palette and tint primvars (False: the looks' own colours; for Blender's
-    importer, which turns a primvar reader into an Attribute node of the mesh, where
-    an agent's constant primvar is not, so the colour would be black)."""
+    the root's ``customData``). Palette and tinted looks' materials read each agent's
+    primvars (:func:`palette_primvar`, :func:`tint_primvar`), with the look's own
+    colour as the fallback."""
     layer = new_layer(fmt, fps, 0, 0, default_prim=root_name,
                       comment=f"crowd character {skeleton.name!r}")
     joints = Vt.TokenArray(joint_paths(skeleton.bone_names, skeleton.parents))
@@ -89,8 +89,7 @@ def character_layer(skeleton, mesh, fmt: str, fps: float, root_name: str, textur
         attribute(skel, "restTransforms", _T.Matrix4dArray,
                   convert.matrices(sqt.pose_to_matrices(skeleton.bind_pose)), uniform=True)
         whole = merge_meshes(mesh.name, [mesh, *(p.mesh for p in props)])
-        materials = _materials(root, whole, textures or {}, tuple(palette_materials),
-                               agent_colours)
+        materials = _materials(root, whole, textures or {}, tuple(palette_materials))
         look_of = {k.name: i for i, k in enumerate(whole.looks)}
         # (mesh, purpose, rigid bone, the look of a part without looks: as merged)
         meshes = [(mesh, "render" if proxy is not None else None, None, mesh.name)]
@@ -143,9 +142,8 @@ def _mesh(root, mesh, name, skeleton_path, bone=None):
     return prim
 
 
-def _materials(root, mesh, textures, palette_materials=(), agent_colours=True) -> list:
-    """A Material per look of ``mesh`` under ``Looks``: ``[(name, material spec)]``
-    (``agent_colours``: :func:`character_layer`'s)."""
+def _materials(root, mesh, textures, palette_materials=()) -> list:
+    """A Material per look of ``mesh`` under ``Looks``: ``[(name, material spec)]``."""
     if not mesh.looks:
         return []
     scope = define(root, "Looks", "Scope")
@@ -153,8 +151,8 @@ def _materials(root, mesh, textures, palette_materials=(), agent_colours=True) -
     return [(name, _material(scope, name, look, mesh.uvs is not None,
                              textures.get(look.texture, look.texture),
                              palette_materials.index(look.name)
-                             if agent_colours and look.name in palette_materials else None,
-                             agent_colours))
+                             if look.name in palette_materials else None,
+                             _is_tinted(look, palette_materials)))
             for name, look in zip(names, mesh.looks)]
 
 
@@ -174,16 +172,18 @@ def tint_primvar(look_name: str) -> str:
 
 
 def tinted_looks(looks, palette_materials=()) -> list:
-    """Of ``looks``, those that agents' colours tint in the export: with a tint weight
-    (:func:`~crowd_addon.core.mesh.tint_weight`) above 0, in no palette and without a
-    texture; ``[(primvar, (r, g, b))]``, one per name."""
-    out = {}
-    for look in looks:
-        if look.name in palette_materials or look.texture:
-            continue
-        if tint_weight(look.color[:3]) > 0:
-            out[tint_primvar(look.name)] = tuple(look.color[:3])
-    return list(out.items())
+    """Of ``looks``, those that agents' colours tint in the export
+    (:func:`_is_tinted`): ``[(primvar, (r, g, b))]``, one per name."""
+    return list({tint_primvar(look.name): tuple(look.color[:3]) for look in looks
+                 if _is_tinted(look, palette_materials)}.items())
+
+
+def _is_tinted(look, palette_materials) -> bool:
+    """Whether agents' colours tint ``look`` in the export, as the preview's shader
+    does: a tint weight (:func:`~crowd_addon.core.mesh.tint_weight`) above 0, in no
+    palette and without a texture."""
+    return (look.name not in palette_materials and not look.texture
+            and tint_weight(look.color[:3]) > 0)
 
 
 def _bind_looks(prim, which, named_materials):
@@ -208,13 +208,13 @@ def _bind_looks(prim, which, named_materials):
         _bind(subset, material)
 
 
-def _material(scope, name, look, has_uvs, texture, column=None, tints=True):
+def _material(scope, name, look, has_uvs, texture, column=None, tint=False):
     """``Material "<name>"``: a UsdPreviewSurface of the look's base colour and
     opacity; its texture, when it has one and the mesh has texture coordinates, feeds
     the diffuse colour instead; with a palette ``column``, the agent's primvar
-    :func:`palette_primvar` does, and for a look agents' colours tint (grey, white:
-    :func:`tinted_looks`) when ``tints``, the agent's primvar :func:`tint_primvar` (the
-    look's colour the fallback of both)."""
+    :func:`palette_primvar` does, and for a look agents' colours ``tint``
+    (:func:`_is_tinted`), the agent's primvar :func:`tint_primvar` (the look's colour
+    the fallback of both)."""
     material = define(scope, name, "Material")
     shader = define(material, "PreviewSurface", "Shader")
     attribute(shader, "info:id", _T.Token, "UsdPreviewSurface", uniform=True)
@@ -223,7 +223,6 @@ def _material(scope, name, look, has_uvs, texture, column=None, tints=True):
     attribute(shader, "inputs:roughness", _T.Float, 0.6)
     surface = attribute(shader, "outputs:surface", _T.Token)
     connect(attribute(material, "outputs:surface", _T.Token), surface)
-    tint = tints and not look.texture and tint_weight(look.color[:3]) > 0
     if column is not None or tint:
         reader = define(material, "Palette" if column is not None else "Tint", "Shader")
         attribute(reader, "info:id", _T.Token, "UsdPrimvarReader_float3", uniform=True)

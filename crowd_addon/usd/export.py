@@ -129,7 +129,9 @@ def export_crowd(recording, path, agents=None, progress=None, layout="instanced"
         ``uniques``, ``blends``, ``agent animations``, ``layout``.
     layout : ``"instanced"`` (default: agents are instanceable, so renderers share
         each character's prototype) or ``"blender"`` (agents are not instanceable:
-        Blender's USD importer animates them only then); :data:`LAYOUTS`.
+        Blender's USD importer animates them only then; and their colour primvars are
+        authored on each of their meshes, where that importer reads them);
+        :data:`LAYOUTS`.
     camera : the :class:`~crowd_addon.gpu.camera.Camera` the repetition metric is
         measured from (default: one framing the exported agents).
     repetition : :class:`~crowd_addon.core.repetition.RepetitionSettings` of the
@@ -204,10 +206,7 @@ def _steps(rec, ids, meshes, files, layout, measure):
     out = _Output(files)
     with files:
         shot = Shot(rec, ids)
-        # Blender's importer reads a material's primvar reader from the mesh, where the
-        # agents' constant colour primvars are not: its layout keeps the looks' colours
-        joints_of, char_assets, tints = _write_characters(out, rec, meshes,
-                                                          agent_colours=layout != "blender")
+        joints_of, char_assets, tints, meshes_of = _write_characters(out, rec, meshes)
         yield "characters", len(meshes), len(meshes)
         stream_names, stream_assets = yield from _write_streams(out, rec, shot, joints_of)
         clip_assets = yield from _write_clip_layers(out, rec, shot, joints_of, stream_names,
@@ -226,7 +225,8 @@ def _steps(rec, ids, meshes, files, layout, measure):
             offsets = author_offset_animations(root, shot, stream_names, stream_assets)
         yield from author_agents(root, shot, names, char_assets,
                                  _sources(shot, offsets, own_paths),
-                                 instanceable=layout == "instanced", tints=tints)
+                                 meshes_of=meshes_of if layout == "blender" else None,
+                                 tints=tints)
         out.save(layer)
         files.commit()
     author = time.perf_counter() - t0 - out.write
@@ -275,14 +275,14 @@ class _Output:
         self.write += time.perf_counter() - t
 
 
-def _write_characters(out, rec, bodies, agent_colours=True) -> tuple:
+def _write_characters(out, rec, bodies) -> tuple:
     """One layer per body in ``bodies`` (``{body index: Body}``: its mesh variant's full
     mesh, its lightest LOD as a proxy, and its props), named after the skeleton (plus
     the variant and props, for a body with them), and a copy of each texture their
     looks use (``textures/``, so the export stands on its own on another machine);
-    returns ``(joints_of, asset_of, tints_of)``, keyed by skeleton index and by body
-    index (``tints_of[b]``: the looks agents' colours tint, :func:`tinted_looks`; none
-    without ``agent_colours``, which :func:`character_layer` takes)."""
+    returns ``(joints_of, asset_of, tints_of, meshes_of)``, keyed by skeleton index and
+    by body index (``tints_of[b]``: the looks agents' colours tint, :func:`tinted_looks`;
+    ``meshes_of[b]``: the names of the character's Mesh prims)."""
     cfg = rec.config
     skeleton_names = list(cfg.skeletons)
     ids = sorted(bodies)
@@ -292,21 +292,22 @@ def _write_characters(out, rec, bodies, agent_colours=True) -> tuple:
              for b in ids]
     textures = _copy_textures(out.files, [m for levels, props in parts
                                           for m in (levels[0], *(p.mesh for p in props))])
-    joints_of, asset_of, tints_of = {}, {}, {}
+    joints_of, asset_of, tints_of, meshes_of = {}, {}, {}, {}
     for b, name, (levels, props) in zip(ids, file_names, parts):
         k = bodies[b].skeleton
         proxies = [m for m in levels[1:] if m.triangle_count >= PROXY_MIN_TRIANGLES]
         palette = cfg.palette_materials.get(skeleton_names[k], ())
         layer, joints_of[k] = character_layer(
             cfg.skeletons[skeleton_names[k]], levels[0], out.files.format, rec.fps, name,
-            textures, proxies[-1] if proxies else None, palette, props, bodies[b].variant,
-            agent_colours)
+            textures, proxies[-1] if proxies else None, palette, props, bodies[b].variant)
         out.save(layer, f"characters/{name}")
         asset_of[b] = out.files.asset_path(f"characters/{name}")
         tints_of[b] = tinted_looks([*levels[0].looks, *(look for p in props
                                                          for look in p.mesh.looks)],
-                                   palette) if agent_colours else []
-    return joints_of, asset_of, tints_of
+                                   palette)
+        meshes_of[b] = [c.name for c in layer.GetPrimAtPath(f"/{name}").nameChildren
+                        if c.typeName == "Mesh"]
+    return joints_of, asset_of, tints_of, meshes_of
 
 
 def _body_file(cfg, body) -> str:

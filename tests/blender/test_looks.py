@@ -129,26 +129,59 @@ def test_a_plain_material_looks_the_same_in_every_engine_and_in_the_crowd():
     np.testing.assert_allclose(_look(mat).color, (1.0, 0.0, 0.0, 1.0), atol=1e-6)
 
 
-def test_blenders_layout_keeps_the_looks_colours_for_blenders_importer(dressed, tmp_path):
-    """A grey shirt (agents' tints) and a palette on the skin: the ``blender`` layout
-    writes no primvar readers into the materials, since Blender's importer turns one
-    into an Attribute node of the mesh, where the agents' constant primvars are not,
-    and would draw those looks black. The importer shows the looks' own colours. Before,
-    the palette look came in as such an Attribute node."""
+@pytest.mark.parametrize("materials", ["MAKE_UNIQUE", "REFERENCE_EXISTING"])
+def test_blenders_importer_shows_each_agents_colours(dressed, tmp_path, materials):
+    """A grey shirt (agents' tints) and a palette on the skin, exported in the
+    ``blender`` layout and imported by Blender's own USD importer: each look's material
+    reads an attribute (the Attribute node the importer makes of the primvar reader)
+    that each imported agent mesh holds, with that agent's colour as the crowd has it
+    (the tint rule of ``core.mesh.tinted``, the palette colour). Before, the layout
+    wrote the looks' own colours: every agent the same grey shirt and the same skin.
+    The importer's default makes each agent its own copy of each material; with
+    *Reference Existing* all the agents share one per look, still in their colours."""
+    from crowd_addon.blender.scene_config import config_from_scene
+    from crowd_addon.core.mesh import tinted
+    from crowd_addon.usd.character import palette_primvar, tint_primvar
     scene = dressed[0]
     grey = (0.9, 0.9, 0.9, 1.0)
     bpy.data.materials["Shirt"].node_tree.nodes["Principled BSDF"].inputs[
         "Base Color"].default_value = grey
     pal = scene.crowd.characters[0].palettes.add()
-    pal.material, pal.mode, pal.count = "Skin", "RANDOM", 2
+    pal.material, pal.mode, pal.count = "Skin", "RANDOM", 3
+    cfg = config_from_scene(scene)
+    want = {"Shirt": (tint_primvar("Shirt"), tinted(grey[:3], cfg.agent_color)),
+            "Skin": (palette_primvar(0), cfg.agent_palette[:, 0])}
+    assert len({tuple(c) for c in want["Shirt"][1].round(4)}) > 1   # the agents differ
     out = tmp_path / "export" / "looks.usdc"
     os.makedirs(out.parent)
     assert bpy.ops.crowd.export_usd(filepath=str(out), usd_layout="blender") == {"FINISHED"}
     bpy.ops.wm.read_factory_settings(use_empty=True)
-    bpy.ops.wm.usd_import(filepath=str(out))
-    looks = {m.name.split(".")[0]: m for m in bpy.data.materials if m.node_tree is not None}
-    assert {"Shirt", "Skin"} <= set(looks)
-    for mat in looks.values():
-        assert not [n for n in mat.node_tree.nodes if n.type == "ATTRIBUTE"], mat.name
-    shirt = looks["Shirt"].node_tree.nodes["Principled BSDF"]
-    assert tuple(shirt.inputs["Base Color"].default_value) == pytest.approx(grey, abs=1e-6)
+    bpy.ops.wm.usd_import(filepath=str(out), mtl_name_collision_mode=materials)
+    if materials == "REFERENCE_EXISTING":
+        assert sorted(m.name for m in bpy.data.materials) == ["Shirt", "Skin"]
+    for mat in bpy.data.materials:              # every copy of each look
+        attribute = want[mat.name.split(".")[0]][0]
+        (link,) = mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"].links
+        assert link.from_node.type == "ATTRIBUTE", mat.name
+        assert link.from_node.attribute_name == attribute, mat.name
+    seen = 0
+    for obj in bpy.data.objects:
+        if obj.type != "MESH":
+            continue
+        agent = next(int(p.name.split("_")[1]) for p in _ancestors(obj)
+                     if p.name.startswith("agent_"))
+        for look, (attribute, colours) in want.items():
+            values = obj.data.attributes[attribute]
+            got = np.empty(len(values.data) * 4, np.float32)
+            values.data.foreach_get("color", got)
+            np.testing.assert_allclose(got.reshape(-1, 4)[:, :3],
+                                       np.broadcast_to(colours[agent], (len(values.data), 3)),
+                                       atol=1e-6, err_msg=f"{obj.name} {look}")
+        seen += 1
+    assert seen == 6
+
+
+def _ancestors(obj):
+    while obj is not None:
+        yield obj
+        obj = obj.parent
