@@ -136,3 +136,49 @@ def test_tint_weight_is_the_previews_rule():
                                             (1.0, 0.9, 0.9)]), [1, 1, 0, 0.6], atol=1e-12)
     assert tint_primvar("Fan Shirt.001") != tint_primvar("Fan_Shirt_001")
     assert tint_primvar("Fan Shirt.001").startswith("crowdTint_Fan_Shirt_001_")
+
+
+def test_the_blender_layout_puts_each_agents_colours_on_its_meshes(tmp_path):
+    """The ``blender`` layout (for Blender's importer, which reads only the primvars on
+    a mesh prim itself, and constant ones only as arrays) gives each agent mesh, the
+    proxy too, the colours the ``instanced`` layout gives the agent: a tinted shirt, a
+    palette skin and displayColor, as one-element arrays of the same values, and
+    nothing on the agent prim."""
+    cfg = make_config()
+    cfg.meshes["fan"] = [dressed(cfg.meshes["fan"][0], (SHIRT, SKIN))]
+    n = cfg.agent_count
+    cfg.agent_color = np.where((np.arange(n) % 2 == 0)[:, None], RED, BLUE).astype(np.float32)
+    cfg.agent_palette = np.full((n, 4, 3), -1.0, np.float32)
+    cfg.agent_palette[:FAN_AGENTS, 0] = np.linspace(0.2, 0.8, FAN_AGENTS)[:, None]
+    cfg.palette_materials = {"fan": ("skin",)}
+    rec = recording(cfg)
+    stages = {layout: Usd.Stage.Open(str(export_crowd(
+        rec, tmp_path / f"{layout}.usda", layout=layout).path))
+        for layout in ("instanced", "blender")}
+    names = ("displayColor", "crowdPalette0", "crowdTint_shirt")
+    want = {}
+    for agent, prim in agent_meshes(stages["instanced"]):
+        api = UsdGeom.PrimvarsAPI(prim)
+        found = {k: api.FindPrimvarWithInheritance(k) for k in names}
+        want[agent] = {k: p.Get() if p.IsDefined() else None for k, p in found.items()}
+    assert all(v["crowdTint_shirt"] is not None for a, v in want.items() if a < FAN_AGENTS)
+    seen = 0
+    for prim in stages["blender"].Traverse():
+        if prim.GetParent().GetName().startswith("agent_"):
+            agent = int(prim.GetParent().GetName().split("_")[1])
+            on_agent = UsdGeom.PrimvarsAPI(prim.GetParent())
+            assert not [k for k in names if on_agent.GetPrimvar(k).IsDefined()]
+        if not prim.IsA(UsdGeom.Mesh):
+            continue
+        api = UsdGeom.PrimvarsAPI(prim)
+        for name in names:
+            primvar = api.GetPrimvar(name)          # on the mesh itself
+            if want[agent][name] is None:
+                assert not primvar.IsDefined(), (prim.GetPath(), name)
+                continue
+            value = primvar.Get()
+            assert primvar.GetInterpolation() == "constant" and len(value) == 1
+            np.testing.assert_allclose(np.array(value[0]), np.ravel(want[agent][name])[:3],
+                                       atol=0)
+        seen += 1
+    assert seen >= n
