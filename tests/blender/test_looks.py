@@ -138,7 +138,10 @@ def test_blenders_importer_shows_each_agents_colours(dressed, tmp_path, material
     (the tint rule of ``core.mesh.tinted``, the palette colour). Before, the layout
     wrote the looks' own colours: every agent the same grey shirt and the same skin.
     The importer's default makes each agent its own copy of each material; with
-    *Reference Existing* all the agents share one per look, still in their colours."""
+    *Reference Existing* all the agents share one per look, still in their colours.
+    Blender 4.2's importer makes nothing of a primvar reader (the look comes in with
+    the default base colour): checked there as a control, the attributes still
+    arriving, so a change in that importer shows here."""
     from crowd_addon.blender.scene_config import config_from_scene
     from crowd_addon.core.mesh import tinted
     from crowd_addon.usd.character import palette_primvar, tint_primvar
@@ -159,11 +162,14 @@ def test_blenders_importer_shows_each_agents_colours(dressed, tmp_path, material
     bpy.ops.wm.usd_import(filepath=str(out), mtl_name_collision_mode=materials)
     if materials == "REFERENCE_EXISTING":
         assert sorted(m.name for m in bpy.data.materials) == ["Shirt", "Skin"]
+    reads = bpy.app.version >= (4, 5, 0)
     for mat in bpy.data.materials:              # every copy of each look
         attribute = want[mat.name.split(".")[0]][0]
-        (link,) = mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"].links
-        assert link.from_node.type == "ATTRIBUTE", mat.name
-        assert link.from_node.attribute_name == attribute, mat.name
+        links = mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"].links
+        assert len(links) == reads, mat.name
+        if reads:
+            assert links[0].from_node.type == "ATTRIBUTE", mat.name
+            assert links[0].from_node.attribute_name == attribute, mat.name
     seen = 0
     for obj in bpy.data.objects:
         if obj.type != "MESH":
