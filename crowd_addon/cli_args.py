@@ -118,7 +118,8 @@ def add_shot_arguments(parser) -> None:
     parser.add_argument("--layout", choices=USD_LAYOUTS, default=USD_LAYOUTS[0],
                         help="instanced (default): agents are instanceable, renderers "
                              "share each character; blender: agents are not instanceable, "
-                             "so Blender's own USD import plays their animation")
+                             "so Blender's own USD import plays their animation "
+                             "and (Blender 4.5 and later) shows their colours")
     parser.add_argument("--substeps", type=int_at_least(1, MAX_SUBSTEPS), default=1, metavar="N",
                         help="poses written per frame, 1-%d (default 1): more adds samples "
                              "between frames, the crowd evaluated there, for renderers' "

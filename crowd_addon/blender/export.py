@@ -280,7 +280,8 @@ class CROWD_OT_export_usd(bpy.types.Operator, ExportHelper):
         items=[("instanced", "Instanced", "Agents are instanceable: renderers share each "
                 "character (usdview, Houdini, Omniverse, render delegates)"),
                ("blender", "Blender", "Agents are not instanceable, so Blender's own USD "
-                "import plays their animation")],
+                "import plays their animation, and their colours are on their meshes, "
+                "where it reads them (Blender 4.5 and later)")],
         description="How the agents are laid out in the stage")
     substeps: IntProperty(
         name="Samples per Frame", default=1, min=1, max=MAX_SUBSTEPS,
