@@ -567,7 +567,10 @@ def _decode_level(lv, dl, skel, cfg):
 
 # ------------------------------------------------------------------------- show
 _ACTION = (("kind", "str", None), ("target", "str", None), ("duration", "number", 8.0),
-           ("hold", "int", 0), ("name", "str", ""), ("value", "number", 0.0))
+           ("hold", "int", 0), ("name", "str", ""), ("value", "number", 0.0),
+           ("trigger", "str", ""), ("release", "str", ""))
+#: action fields left out of a file while empty, so files without them hash the same
+_OPTIONAL_ACTION = ("trigger", "release")
 _SWEEP = (("mode", "str", "angle"), ("speed", "number", None),
           ("start_angle", "number", 0.0), ("laps", "int", 1))
 _CUE = (("frame", "int", None), ("spread", "int", 0), ("seed", "int", 0),
@@ -581,7 +584,8 @@ def _encode_show(show: Show, enc) -> dict:
     for i, c in enumerate(show.cues):
         a = c.action
         cues.append({"name": c.name, **{k: getattr(c, k) for k, _, _ in _CUE},
-                     "action": {**{k: getattr(a, k) for k, _, _ in _ACTION},
+                     "action": {**{k: getattr(a, k) for k, _, _ in _ACTION
+                                   if getattr(a, k) or k not in _OPTIONAL_ACTION},
                                 "offset": a.offset, "when_full": a.when_full},
                      "agents": None if c.agents is None else
                      enc.at("cues", i).array(c.agents, "agents"),

@@ -140,6 +140,11 @@ class TreeEvaluator:
             idx = np.flatnonzero(self.depth == d)
             self.levels.append((d, idx, self.parent[idx]))
         self.ctx = FrameContext(n, bones, len(roots))
+        taken = [set() for _ in roots]
+        for ctrl, r in zip(nodes, root_of):
+            taken[r].update(tr.trigger for tr in getattr(ctrl, "transitions", ())
+                            if tr.trigger is not None)
+        self._root_triggers = tuple(frozenset(t) for t in taken)
 
     def batches_for_roots(self, roots) -> list:
         """The batches whose nodes belong to any of the given roots."""
@@ -242,6 +247,11 @@ class TreeEvaluator:
         """Set trigger ``name`` on tree ``root``; the next prepare consumes it."""
         self.ctx.triggers[root].add(str(name))
         self.ctx.triggered.add(root)
+
+    def triggers(self, root: int) -> frozenset:
+        """The trigger names a state machine in tree ``root`` has a transition on (the
+        triggers that can change what the tree plays)."""
+        return self._root_triggers[root]
 
     def states(self, root: int) -> list:
         """Current state names of the state machines in tree ``root``."""

@@ -43,6 +43,8 @@ ACTION_KINDS = ("stream", "unique", "trigger", "parameter")
 _OPS = {"==": np.equal, "!=": np.not_equal, "<": np.less, "<=": np.less_equal,
         ">": np.greater, ">=": np.greater_equal}
 _NEVER = np.iinfo(np.int64).min // 4
+#: what ShowRunner.stats counts per cue
+STAT_KEYS = ("agents", "skipped", "queued", "cut", "switched", "streams")
 
 
 def _finite(value, what) -> float:
@@ -78,6 +80,14 @@ class Action:
     when_full : ``None`` (the crowd's setting), ``"queue"`` or ``"cut"``.
     hold : stream and unique actions: frames after which the agents go back home
         (0: they stay, and the target becomes their home).
+    trigger : stream and unique actions: the mass reaction (paper s.3.4, s.5). Agents
+        on a stream whose state machine has a transition on this trigger, and whose
+        every agent the cue selects, stay on it: the cue sets the trigger on those
+        streams, so each agent follows its stream into the reaction state at its own
+        offset (no slot, no per-agent work); only the other agents blend to
+        ``target`` through transition slots.
+    release : with ``trigger`` and ``hold``: the trigger set on the switched streams
+        when the hold ends (the state machine's way back).
     """
 
     kind: str
@@ -88,6 +98,8 @@ class Action:
     hold: int = 0
     name: str = ""
     value: float = 0.0
+    trigger: str = ""
+    release: str = ""
 
     def __post_init__(self):
         if self.kind not in ACTION_KINDS:
@@ -107,6 +119,25 @@ class Action:
         if self.kind in ("trigger", "parameter") and not str(self.name).strip():
             raise CrowdError(f"{self.kind} action: no {self.kind} name")
         object.__setattr__(self, "value", _finite(self.value, f"{self.kind} action: value"))
+        for key in ("trigger", "release"):
+            v = getattr(self, key)
+            if not isinstance(v, str):
+                raise CrowdError(f"{self.kind} action: {key} must be a trigger name (text), "
+                                 f"got {v!r}")
+            object.__setattr__(self, key, v.strip())
+        if (self.trigger or self.release) and not self.moves_agents:
+            raise CrowdError(f"{self.kind} action: a switch trigger or release belongs to "
+                             "stream and unique actions (a trigger action sets its own)")
+        if self.release and not self.trigger:
+            raise CrowdError(f"{self.kind} action: release {self.release!r} without a "
+                             "trigger (nothing was switched to release)")
+        if self.release and not self.hold:
+            raise CrowdError(f"{self.kind} action: release {self.release!r} needs a hold "
+                             "(it is set when the hold ends)")
+        if self.trigger and self.hold and not self.release:
+            raise CrowdError(f"{self.kind} action: trigger {self.trigger!r} with a hold of "
+                             f"{self.hold} needs a release trigger (what brings the "
+                             "switched streams back when the hold ends)")
 
     @property
     def moves_agents(self) -> bool:
@@ -191,6 +222,10 @@ class Cue:
             raise CrowdError(f"{what}: sweep must be a Sweep")
         if self.sweep is not None and self.spread:
             raise CrowdError(f"{what}: choose a spread or a sweep, not both")
+        if self.action.trigger and (self.sweep is not None or self.spread):
+            raise CrowdError(f"{what}: trigger {self.action.trigger!r} switches whole "
+                             "streams at once; it cannot be spread or swept (the agents' "
+                             "offsets already spread the switch over up to M frames)")
         if self.agents is not None:
             ids = np.asarray(self.agents)
             if ids.ndim != 1 or (ids.size and ids.dtype.kind not in "iu"):
@@ -399,8 +434,10 @@ class ShowRunner:
     """Runs a :class:`Show` on a crowd: ``before_step(frame)`` issues the requests due
     at ``frame`` (called by ``Crowd.step``); ``reset()`` rewinds it with the crowd.
 
-    ``stats`` counts per cue: ``agents`` requested, ``skipped`` (held by another cue),
-    ``queued`` and ``cut``; ``reactions`` counts the agents each reaction reached.
+    ``stats`` counts per cue: ``agents`` moved, ``skipped`` (held by another cue),
+    ``queued`` and ``cut`` (of those sent through slots), ``switched`` (agents that
+    followed their stream into the cue's trigger state) and ``streams`` (streams the
+    trigger switched); ``reactions`` counts the agents each reaction reached.
     """
 
     def __init__(self, show: Show, crowd):
@@ -409,6 +446,12 @@ class ShowRunner:
         self._n = n
         self._cue_index = {c.name: i for i, c in enumerate(show.cues)}
         self._targets = [self._check(c) for c in show.cues]
+        # per cue with a switch trigger: (S,) the streams that take it (and its release)
+        ev = crowd.evaluator
+        self._takes = [None if not c.action.trigger else np.array(
+            [c.action.trigger in ev.triggers(k) and
+             (not c.action.release or c.action.release in ev.triggers(k))
+             for k in range(crowd.streams.count)], bool) for c in show.cues]
         for t in show.tracks:
             self._root(t.target, f"{t.kind} track {t.name!r}")
         for r in show.reactions:
@@ -505,10 +548,10 @@ class ShowRunner:
         self.home_offset = np.asarray(cfg.agent_offset, np.int64).copy()
         self.held_until = np.full(self._n, _NEVER, np.int64)
         self._returns = defaultdict(list)        # frame -> [(ids, duration)]
+        self._releases = defaultdict(list)       # frame -> [(cue, stream, ids)]
         self._reacted = defaultdict(list)        # reaction index -> [ids] for next frame
         self._track_last = [None] * len(self.show.tracks)
-        self.stats = {c.name: dict.fromkeys(("agents", "skipped", "queued", "cut"), 0)
-                      for c in self.show.cues}
+        self.stats = {c.name: dict.fromkeys(STAT_KEYS, 0) for c in self.show.cues}
         self.reactions = {r.name: 0 for r in self.show.reactions}
 
     def state(self) -> dict:
@@ -516,6 +559,7 @@ class ShowRunner:
         due (in the order they will be issued), the tracks' last values and the counts."""
         returns = [(f, ids, d) for f, groups in self._returns.items() for ids, d in groups]
         reacted = [(r, ids) for r, groups in self._reacted.items() for ids in groups]
+        releases = [(f, *entry) for f, groups in self._releases.items() for entry in groups]
         return {"home_kind": self.home_kind, "home_ref": self.home_ref,
                 "home_offset": self.home_offset, "held_until": self.held_until,
                 "returns": {"frame": np.array([f for f, _, _ in returns], np.int64),
@@ -523,6 +567,10 @@ class ShowRunner:
                             **_grouped([ids for _, ids, _ in returns])},
                 "reacted": {"reaction": np.array([r for r, _ in reacted], np.int64),
                             **_grouped([ids for _, ids in reacted])},
+                "releases": {"frame": np.array([e[0] for e in releases], np.int64),
+                             "cue": np.array([e[1] for e in releases], np.int64),
+                             "stream": np.array([e[2] for e in releases], np.int64),
+                             **_grouped([e[3] for e in releases])},
                 "track_last": list(self._track_last), "stats": self.stats,
                 "reactions": self.reactions}
 
@@ -530,6 +578,19 @@ class ShowRunner:
         for k in ("home_kind", "home_ref", "home_offset", "held_until"):
             getattr(self, k)[...] = state[k]
         self._returns, self._reacted = defaultdict(list), defaultdict(list)
+        self._releases = defaultdict(list)
+        rel = state["releases"]
+        if not (rel["frame"].size == rel["cue"].size == rel["stream"].size
+                == rel["counts"].size and int(rel["counts"].sum()) == rel["ids"].size
+                and (rel["counts"] >= 0).all()
+                and ((rel["ids"] >= 0) & (rel["ids"] < self._n)).all()
+                and ((rel["stream"] >= 0) & (rel["stream"] < self.crowd.streams.count)).all()
+                and all(0 <= k < len(self.show.cues) and self.show.cues[k].action.release
+                        for k in rel["cue"].tolist())):
+            raise ValueError("the show's pending releases name what does not exist")
+        for f, k, st, ids in zip(rel["frame"].tolist(), rel["cue"].tolist(),
+                                 rel["stream"].tolist(), _ungrouped(rel)):
+            self._releases[f].append((k, st, ids))
         r = state["returns"]
         for f, d, ids in zip(r["frame"].tolist(), r["duration"].tolist(), _ungrouped(r)):
             self._returns[f].append((ids, d))
@@ -540,7 +601,8 @@ class ShowRunner:
         if len(last) != len(self.show.tracks):
             raise ValueError("the show's track values do not fit its tracks")
         self._track_last = last
-        self.stats = {str(c): {str(k): int(v) for k, v in d.items()}
+        self.stats = {str(c): {**dict.fromkeys(STAT_KEYS, 0),
+                               **{str(k): int(v) for k, v in d.items()}}
                       for c, d in state["stats"].items()}
         self.reactions = {str(k): int(v) for k, v in state["reactions"].items()}
         c = self.crowd
@@ -570,6 +632,9 @@ class ShowRunner:
         self.apply_tracks(frame)
         for ids, duration in self._returns.pop(frame, ()):
             self._send_home(ids[self.held_until[ids] == frame], duration)
+        for cue_i, stream, ids in self._releases.pop(frame, ()):
+            self.crowd.set_trigger(int(stream), self.show.cues[cue_i].action.release)
+            self.held_until[ids[self.held_until[ids] == frame]] = _NEVER
         if self._reacted:
             reacted, self._reacted = self._reacted, defaultdict(list)
             for r, groups in reacted.items():
@@ -621,6 +686,11 @@ class ShowRunner:
             ids = ids[free]
         if ids.size == 0:
             return
+        st["agents"] += int(ids.size)
+        if a.trigger:
+            ids = self._switch(i, ids, frame)
+            if ids.size == 0:
+                return
         if a.kind == "stream":
             offset = None if a.offset == "keep" else a.offset if isinstance(a.offset, int) \
                 else (_mix(cue.seed, cue.name, ids) % np.uint64(c.streams.max_offset)).astype(
@@ -629,7 +699,6 @@ class ShowRunner:
                                          when_full=a.when_full)
         else:
             r = c.transition_to_unique(ids, a.target, a.duration, when_full=a.when_full)
-        st["agents"] += int(ids.size)
         st["queued"] += int(r.queued.size)
         st["cut"] += int(r.cut.size)
         if a.hold:
@@ -641,6 +710,44 @@ class ShowRunner:
             self.home_ref[ids] = ref
             if a.kind == "stream" and offset is not None:
                 self.home_offset[ids] = offset
+
+    def _switchable(self, i, ids, kind, ref, kind_all, ref_all) -> tuple:
+        """Which of ``ids`` (playing ``kind``/``ref``) cue ``i`` switches with their
+        streams, given what every agent plays (``kind_all``/``ref_all``): those on a
+        stream that takes its trigger and that no agent outside ``ids`` plays (a
+        stream is shared: switching it moves everyone on it). Returns (mask, streams)."""
+        count = self.crowd.streams.count
+        on = kind == STREAM
+        on[on] = self._takes[i][ref[on]]
+        mine = np.bincount(ref[on], minlength=count)
+        everyone = np.bincount(ref_all[kind_all == STREAM], minlength=count)
+        whole = (mine > 0) & (mine == everyone)
+        on[on] = whole[ref[on]]
+        return on, np.flatnonzero(whole)
+
+    def _switch(self, i, ids, frame) -> np.ndarray:
+        """Set cue ``i``'s trigger on the streams its agents ``ids`` can follow into
+        the reaction (see :meth:`_switchable`); returns the agents left for the slots."""
+        cue, c = self.show.cues[i], self.crowd
+        a = cue.action
+        kind, ref, _ = c.playing(ids)
+        kind_all, ref_all, _ = c.playing(np.arange(self._n))
+        on, streams = self._switchable(i, ids, kind, ref, kind_all, ref_all)
+        if not streams.size:
+            return ids
+        for k in streams.tolist():
+            c.set_trigger(k, a.trigger)
+        sw, sw_ref = ids[on], ref[on]
+        st = self.stats[cue.name]
+        st["switched"] += int(sw.size)
+        st["streams"] += int(streams.size)
+        if a.hold:
+            self.held_until[sw] = frame + a.hold
+            for k in streams.tolist():
+                self._releases[frame + a.hold].append((i, k, sw[sw_ref == k]))
+        else:
+            self.held_until[sw] = _NEVER
+        return ids[~on]
 
     def _send_home(self, ids, duration):
         if ids.size == 0:
@@ -696,8 +803,16 @@ class ShowRunner:
     def _describe(self) -> list:
         out = []
         for i, cue in enumerate(self.show.cues):
-            n = 0 if not cue.action.moves_agents else self._agents(cue, self._targets[i]).size
-            out.append({"name": cue.name, "frame": cue.frame, "agents": int(n),
-                        "action": cue.action.kind, "target": cue.action.target})
+            ids = self._agents(cue, self._targets[i]) if cue.action.moves_agents else None
+            d = {"name": cue.name, "frame": cue.frame, "agents": 0 if ids is None else
+                 int(ids.size), "action": cue.action.kind, "target": cue.action.target,
+                 "switched": 0, "streams": 0}
+            if cue.action.trigger:          # as configured: each agent on its stream
+                st = np.asarray(self.crowd.config.agent_stream, np.int64)
+                kind = np.where(st >= 0, STREAM, UNIQUE)
+                on, streams = self._switchable(i, ids, kind[ids], st[ids], kind, st)
+                d["switched"], d["streams"] = int(on.sum()), int(streams.size)
+            d["slots"] = d["agents"] - d["switched"]
+            out.append(d)
         return out
 

@@ -276,7 +276,8 @@ _NAN_ALLOWED = (".prev", ".entered")
 
 def _varies(name) -> bool:
     return name.endswith(("queue.line", ".ids", ".counts", ".frame", ".duration",
-                          ".reaction", "log_stream", "log_name", "log_frame"))
+                          ".reaction", "log_stream", "log_name", "log_frame",
+                          "releases.cue", "releases.stream"))
 
 
 class SnapshotCache:

@@ -153,7 +153,8 @@ def test_cues_leave_held_agents_alone_unless_they_interrupt():
                      interrupt=True)))
     crowd = Crowd(make_config(Show(show.cues)))
     crowd.advance_to(12)
-    assert crowd.show.stats["wave"] == {"agents": 4, "skipped": 6, "queued": 0, "cut": 0}
+    assert crowd.show.stats["wave"] == {"agents": 4, "skipped": 6, "queued": 0, "cut": 0,
+                                        "switched": 0, "streams": 0}
     assert crowd.playing([2])[0][0] == UNIQUE
     crowd.advance_to(19)                      # the hit's return (frame 18) takes agent 2
     kind, ref, _ = crowd.playing([2, 3])      # home; agent 3 still cheers
