@@ -160,10 +160,11 @@ def repetition_settings(args, **size):
 
 
 def add_trust_argument(parser) -> None:
-    """``--trust-scripts``: run a .blend's crowd script (docs/show.md)."""
+    """``--trust-scripts``: run a .blend's crowd script in this command (docs/show.md)."""
     parser.add_argument("--trust-scripts", action="store_true",
-                        help="run the .blend's crowd script (scene.crowd.show.script) even "
-                             "where Blender does not trust scripts in .blend files")
+                        help="run the .blend's crowd script (scene.crowd.show.script) in "
+                             "this command even where Blender does not trust scripts in "
+                             ".blend files; nothing stays trusted after it")
 
 
 def parse_command(parser, argv):

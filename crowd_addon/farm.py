@@ -47,7 +47,8 @@ class ShotSource:
     """Where a shot's crowd comes from and how it is exported: a configuration file
     (``config``) or a .blend (``blend``, its ``scene``, ``trust_scripts``; neither: the
     .blend open in Blender), with the export's ``agents``, ``layout`` and ``substeps``
-    (as ``crowd export``)."""
+    (as ``crowd export``). ``trust_scripts`` is passed to each of the shot's tasks and
+    holds for that task only: a worker that ran a trusted shot trusts nothing after it."""
 
     config: str | None = None
     blend: str | None = None

@@ -105,12 +105,6 @@ def _flush_c_stdio():
         pass
 
 
-def _trust(trusted: bool):
-    if trusted:
-        from .show_data import trust_scripts
-        trust_scripts(True)
-
-
 def scene_frames(scene, frames=None) -> tuple:
     """``frames`` (first, last), or the scene's frame range when None."""
     return (scene.frame_start, scene.frame_end) if frames is None else tuple(frames)
@@ -129,20 +123,20 @@ def export_blend(out: str, frames: tuple | None = None, *, blend: str | None = N
     missing, and removed again when the export fails. Blender's own output goes to
     stderr (:func:`blender_output_to_stderr`). Returns ``(config, result)``: the baked
     ``CrowdConfig`` and the ``ExportResult``. ``trust_scripts``: run the scene's crowd
-    script even where scripts in .blend files are not trusted.
+    script in this call even where scripts in .blend files are not trusted; it trusts
+    nothing after the call (a later call, or another file, is not trusted by it).
     """
     with blender_output_to_stderr():        # from the import of bpy on (5.2 logs then)
         from ..core.files import folders_made
         from ..gpu.preview_render import writable_dir
         from .export import export_scene
-        _trust(trust_scripts)
         found = open_scene(blend, scene)
         folder = writable_dir(os.path.dirname(os.path.abspath(out)))
         with folders_made(folder):
             return export_scene(found, out, scene_frames(found, frames), agents=agents,
                                 progress=progress, on_bake=on_bake, layout=layout,
                                 substeps=substeps, snapshots=snapshots,
-                                repetition=repetition)
+                                repetition=repetition, trust_script=trust_scripts)
 
 
 def preview_blend(out: str, frames: int | None = None, *, blend: str | None = None,
@@ -170,7 +164,6 @@ def preview_blend(out: str, frames: int | None = None, *, blend: str | None = No
         from .cameras import camera_from_object, find_camera, scene_size
         from .scene_config import build_crowd, config_from_scene
         from .scene_geometry import scene_geometry, scene_light
-        _trust(trust_scripts)
         found = open_scene(blend, scene)
         first = found.frame_start if start is None else int(start)
         if frames is None:
@@ -186,7 +179,8 @@ def preview_blend(out: str, frames: int | None = None, *, blend: str | None = No
             from .headless_gpu import init_headless_gpu
             init_headless_gpu()
         config = config_from_scene(found, on_bake)
-        crowd, note = build_crowd(found, config)       # with the scene's crowd script
+        crowd, note = build_crowd(found, config,       # with the scene's crowd script
+                                  trust_script=trust_scripts)
         if note and on_bake is not None:
             on_bake(1, 1, note)
         result = render_preview(crowd, out, frames, start=first, size=size, mp4=mp4,
@@ -201,11 +195,12 @@ def plan_blend(*, blend: str | None = None, scene: str | None = None, settings=_
     """What ``crowd plan --blend`` plans from: the scene's Crowd settings baked
     (:func:`open_scene`, as the exports bake them) and the camera and settings of its
     repetition metric (:func:`.cameras.metric_view`: the scene camera at the render
-    size; None: the caller frames the agents). Returns ``(config, camera, settings)``."""
+    size; None: the caller frames the agents). Returns ``(config, camera, settings)``.
+    ``trust_scripts`` is accepted as the other commands take it; no crowd is built
+    here, so no crowd script runs."""
     with blender_output_to_stderr():
         from .cameras import metric_view
         from .scene_config import config_from_scene
-        _trust(trust_scripts)
         found = open_scene(blend, scene)
         config = config_from_scene(found, on_bake)
         camera, settings = metric_view(found, settings)
@@ -222,12 +217,12 @@ def snapshot_blend(out: str, frames: tuple | None = None, *, every: int,
     with blender_output_to_stderr():
         from ..core.snapshot import SnapshotFolder, write_snapshots
         from .scene_config import build_crowd, config_from_scene
-        _trust(trust_scripts)
         found = open_scene(blend, scene)
         first, last = scene_frames(found, frames)
         folder = SnapshotFolder(out, create=True)
         config = config_from_scene(found, on_bake)
-        crowd, note = build_crowd(found, config, substeps=substeps)
+        crowd, note = build_crowd(found, config, substeps=substeps,
+                                  trust_script=trust_scripts)
         if note and on_bake is not None:
             on_bake(1, 1, note)
         return config, write_snapshots(crowd, folder, first, last, every, progress)

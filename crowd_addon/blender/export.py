@@ -63,7 +63,7 @@ def check_export(scene, path, frames) -> tuple:
 
 def export_scene(scene, path, frames, agents=None, progress=None, on_bake=None,
                  depsgraph=None, layout="instanced", substeps=1, snapshots=None,
-                 repetition=RepetitionSettings()):
+                 repetition=RepetitionSettings(), trust_script=False):
     """Bake ``scene``'s Crowd settings and export the shot to ``path`` in one call
     (:func:`export_steps` run to the end).
 
@@ -85,6 +85,8 @@ def export_scene(scene, path, frames, agents=None, progress=None, on_bake=None,
     repetition : the repetition metric's settings (None: not measured), measured
         through the scene camera at the scene's render size when it has one
         (:func:`.cameras.metric_view`).
+    trust_script : run the scene's crowd script in this export even where it is not
+        trusted (``crowd export --trust-scripts``); it trusts nothing after the call.
 
     Returns
     -------
@@ -94,7 +96,7 @@ def export_scene(scene, path, frames, agents=None, progress=None, on_bake=None,
     the export the same way.
     """
     steps = export_steps(scene, path, frames, agents, depsgraph, layout, substeps, snapshots,
-                         repetition)
+                         repetition, trust_script)
     try:
         while True:
             try:
@@ -111,7 +113,8 @@ def export_scene(scene, path, frames, agents=None, progress=None, on_bake=None,
 
 
 def export_steps(scene, path, frames, agents=None, depsgraph=None, layout="instanced",
-                 substeps=1, snapshots=None, repetition=RepetitionSettings()):
+                 substeps=1, snapshots=None, repetition=RepetitionSettings(),
+                 trust_script=False):
     """The export of :func:`export_scene` as a generator, one unit of work per
     ``next()``: returns ``(config, result)`` (``StopIteration.value``).
 
@@ -131,11 +134,11 @@ def export_steps(scene, path, frames, agents=None, depsgraph=None, layout="insta
     frames = check_export(scene, path, frames)
     check_layout(layout)
     return _export_steps(scene, path, frames, agents, depsgraph, layout,
-                         check_substeps(substeps), snapshots, repetition)
+                         check_substeps(substeps), snapshots, repetition, trust_script)
 
 
 def _export_steps(scene, path, frames, agents, depsgraph, layout, substeps, snapshots,
-                  repetition):
+                  repetition, trust_script):
     import dataclasses
 
     from ..core.snapshot import ShotSnapshots
@@ -157,7 +160,8 @@ def _export_steps(scene, path, frames, agents, depsgraph, layout, substeps, snap
     finally:
         bake.close()
     check_output(config, path, agents, layout)
-    crowd, note = scene_config.build_crowd(scene, config, substeps=substeps)
+    crowd, note = scene_config.build_crowd(scene, config, substeps=substeps,
+                                           trust_script=trust_script)
     if note:
         yield "bake", 1, 1, note
     snaps = ShotSnapshots(snapshots, crowd, frames[0]) if snapshots else None

@@ -310,8 +310,10 @@ def on_undo(*_):
 
 @bpy.app.handlers.persistent
 def on_load_pre(*_):
+    from .show_data import forget_trusted_scripts
     stop_all()
     _ERRORS.clear()
+    forget_trusted_scripts(unsaved_only=True)     # an unsaved file's trust ends with it
 
 
 @bpy.app.handlers.persistent

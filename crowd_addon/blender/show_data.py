@@ -11,6 +11,9 @@ the cue, reaction or parameter and changes nothing in the scene.
 
 from __future__ import annotations
 
+import hashlib
+import os
+
 import numpy as np
 
 from ..core.errors import CrowdError
@@ -21,11 +24,16 @@ from .agents import _attribute, _group_members
 from .compat import action_slots, assigned_slot
 
 __all__ = ["show_from_scene", "selected_agents", "parameter_values", "show_fingerprint",
-           "run_script", "scripts_trusted", "trust_scripts"]
+           "run_script", "script_key", "script_trusted", "trust_script",
+           "forget_trusted_scripts"]
 
-#: scripts trusted for this session by ``crowd ... --trust-scripts`` or the panel's
-#: button (never saved: trust is the person's, not the file's)
-_SESSION = {"trust": False}
+#: crowd scripts trusted in this Blender process by the panel's *Trust Script*
+#: (:func:`trust_script`): keys ``(the .blend's absolute path, the text's name, the
+#: sha256 of its content)``. Never saved (trust is the person's, not the file's), never
+#: a switch for every file: another file, or the same text changed, is not in it. The
+#: command line's ``--trust-scripts`` and a shot's ``trust_scripts`` add nothing here:
+#: they are an argument of the one call they are given to (``run_script(trusted=)``).
+_TRUSTED: set = set()
 
 _SELECT_KINDS = ("FLOAT", "INT", "INT8")
 
@@ -192,29 +200,65 @@ def show_fingerprint(scene) -> tuple:
 
 
 # ----------------------------------------------------------------------- script
-def trust_scripts(trusted: bool = True):
-    """Trust (or stop trusting) the crowd scripts of .blend files for this session."""
-    _SESSION["trust"] = bool(trusted)
-
-
-def scripts_trusted() -> bool:
-    """Whether a .blend's crowd script may run: Blender's *Auto Run Python Scripts*
-    preference (and the file was not blocked by it), or trust given for the session."""
+def _key(text, source: str) -> tuple:
     import bpy
-    if _SESSION["trust"]:
-        return True
+    path = bpy.data.filepath
+    return (os.path.abspath(path) if path else "", text.name_full,
+            hashlib.sha256(source.encode("utf-8")).hexdigest())
+
+
+def script_key(text) -> tuple:
+    """What trusting the crowd script ``text`` trusts: ``(the open .blend's absolute
+    path ("" while unsaved), the text's name, the sha256 hex digest of its content)``."""
+    return _key(text, text.as_string())
+
+
+def trust_script(text) -> tuple:
+    """Trust the crowd script ``text`` of the open .blend for this Blender process (the
+    panel's *Trust Script*): exactly this file's text with this content, nothing else.
+    Returns its :func:`script_key`."""
+    key = script_key(text)
+    _TRUSTED.add(key)
+    return key
+
+
+def forget_trusted_scripts(unsaved_only: bool = False):
+    """Forget the scripts :func:`trust_script` trusted (``unsaved_only``: those of an
+    unsaved file, whose key has no path: done whenever a file is loaded)."""
+    if unsaved_only:
+        _TRUSTED.difference_update([k for k in _TRUSTED if not k[0]])
+    else:
+        _TRUSTED.clear()
+
+
+def _auto_run() -> bool:
+    import bpy
     return bool(bpy.context.preferences.filepaths.use_scripts_auto_execute
                 and not bpy.app.autoexec_fail)
 
 
-def run_script(scene, crowd) -> str:
+def script_trusted(text, trusted: bool = False) -> bool:
+    """Whether the crowd script ``text`` of the open .blend may run: ``trusted`` (given
+    for this one call: ``--trust-scripts``, a shot's ``trust_scripts``), Blender's *Auto
+    Run Python Scripts* preference (and the file was not blocked by it), or this very
+    text of this file trusted in this process (:func:`trust_script`)."""
+    return _trusted(text, text.as_string(), trusted)
+
+
+def _trusted(text, source: str, trusted: bool) -> bool:
+    return bool(trusted) or _auto_run() or _key(text, source) in _TRUSTED
+
+
+def run_script(scene, crowd, trusted: bool = False) -> str:
     """Run the scene's crowd script on ``crowd`` (its ``register(crowd)``); returns ""
-    when it ran or there is none, else why it did not run (scripts not trusted). A
-    script that fails raises a CrowdError naming the text and the line."""
+    when it ran or there is none, else why it did not run (not trusted:
+    :func:`script_trusted`; ``trusted`` holds for this call only). A script that fails
+    raises a CrowdError naming the text and the line."""
     text = scene.crowd.show.script
     if text is None:
         return ""
-    if not scripts_trusted():
+    source = text.as_string()              # what is checked is what runs
+    if not _trusted(text, source, trusted):
         return (f"crowd script {text.name!r} did not run: scripts in .blend files are not "
                 "trusted here (enable Auto Run Python Scripts, press Trust Script in the "
                 "Show panel, or pass --trust-scripts)")
@@ -223,7 +267,7 @@ def run_script(scene, crowd) -> str:
     module = types.ModuleType(f"crowd_script_{text.name}")
     module.__file__ = text.name
     try:
-        exec(compile(text.as_string(), text.name, "exec"), module.__dict__)
+        exec(compile(source, text.name, "exec"), module.__dict__)
         register = getattr(module, "register", None)
         if not callable(register):
             raise CrowdError(f"crowd script {text.name!r} defines no register(crowd)")

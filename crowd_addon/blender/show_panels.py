@@ -50,14 +50,19 @@ class CROWD_UL_parameters(bpy.types.UIList):
 
 
 class CROWD_OT_trust_script(bpy.types.Operator):
-    """Let crowd scripts in .blend files run for this session (not saved), and rebuild
-    the preview so the scene's script runs"""
+    """Let this scene's crowd script run in this file until Blender quits (not saved):
+    only this text of this file as it reads now; another file, or the text edited, asks
+    again. Rebuilds the preview so the script runs"""
 
     bl_idname = "crowd.trust_script"
     bl_label = "Trust Script"
 
     def execute(self, context):
-        show_data.trust_scripts(True)
+        text = context.scene.crowd.show.script
+        if text is None:
+            self.report({"ERROR"}, "the scene has no crowd script (Crowd > Show > Script)")
+            return {"CANCELLED"}
+        show_data.trust_script(text)
         if preview.get(context.scene) is not None:
             try:
                 preview.start(context.scene)

@@ -274,3 +274,34 @@ class FakeBakeOperator:
 
     def report(self, kind, message):
         self.reports.append((set(kind), message))
+
+
+#: a crowd script that leaves a mark of each part that runs: its module body writes
+#: ``BODY``, its ``register(crowd)`` writes ``REGISTER``
+MARKING_SCRIPT = '''\
+from pathlib import Path
+Path({body!r}).write_text("module body ran")
+
+
+def register(crowd):
+    Path({register!r}).write_text("register ran")
+'''
+
+
+def script_markers(folder, tag) -> tuple:
+    """The marker files of :func:`scripted_blend`'s script ``tag``: (body, register)."""
+    from pathlib import Path
+    return Path(folder) / f"{tag}.body", Path(folder) / f"{tag}.register"
+
+
+def scripted_blend(path, markers, tag, text="show.py"):
+    """The :func:`walking_crowd` with a crowd script (the text ``text``) that writes
+    :func:`script_markers` ``(markers, tag)`` when it runs, saved as ``path`` and left
+    open; returns the two marker paths (neither written yet)."""
+    scene = walking_crowd()[0]
+    body, register = script_markers(markers, tag)
+    script = bpy.data.texts.new(text)
+    script.from_string(MARKING_SCRIPT.format(body=str(body), register=str(register)))
+    scene.crowd.show.script = script
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    return body, register

@@ -200,10 +200,12 @@ def test_a_bad_show_is_named_and_changes_nothing(scene, edit, message):
     assert settings_fingerprint(scene.crowd) == before
 
 
-def run_here(scene, last):
+def run_here(scene, last, trusted=False):
     """The crowd as the preview builds it in this process: local poses per frame and
-    the events, from the scene's first frame to ``last``."""
-    crowd, _note = scene_config.build_crowd(scene, scene_config.config_from_scene(scene))
+    the events, from the scene's first frame to ``last`` (``trusted``: its crowd script
+    trusted for this build, as ``--trust-scripts`` does)."""
+    crowd, _note = scene_config.build_crowd(scene, scene_config.config_from_scene(scene),
+                                            trust_script=trusted)
     events = []
     crowd.on_event("*", lambda name, frame, ids: events.append((name, int(frame), ids.size)))
     poses = {crowd.frame: crowd.agent_poses().copy()}
@@ -216,16 +218,10 @@ def run_here(scene, last):
 def test_a_fresh_process_exports_what_the_authoring_session_plays(scene, tmp_path):
     from pxr import Usd, UsdSkel
 
-    from crowd_addon.blender import show_data
     last = 40
     _script(scene, SCRIPT)                 # a crowd script's callback, trusted both sides
-    show_data.trust_scripts(True)
-    try:
-        crowd, poses, events = run_here(scene, last)
-        show_data.trust_scripts(False)
-        untrusted = run_here(scene, last)[1]
-    finally:
-        show_data.trust_scripts(False)
+    crowd, poses, events = run_here(scene, last, trusted=True)
+    untrusted = run_here(scene, last)[1]
     assert not np.array_equal(untrusted[last], poses[last])     # the script mattered
     stats = crowd.show.stats
     assert stats["goal"]["agents"] and stats["wave"]["agents"] and stats["fall"]["agents"]
@@ -336,18 +332,17 @@ def test_the_crowd_script_runs_only_where_scripts_are_trusted(scene):
     _, plain, _ = run_here(scene, 30)
     _script(scene, SCRIPT)
     cfg = scene_config.config_from_scene(scene)
-    show_data.trust_scripts(False)
     crowd, note = scene_config.build_crowd(scene, cfg)
     assert "crowd script 'show.py' did not run: scripts in .blend files are not trusted" \
         in note
     try:
-        show_data.trust_scripts(True)
+        show_data.trust_script(scene.crowd.show.script)     # the panel's Trust Script
         crowd, note = scene_config.build_crowd(scene, cfg)
         assert note == ""
         crowd.advance_to(30)
         _, scripted, _ = run_here(scene, 30)
     finally:
-        show_data.trust_scripts(False)
+        show_data.forget_trusted_scripts()
     assert not np.array_equal(crowd.agent_poses(), plain[30])   # the callback moved them
     assert np.array_equal(crowd.agent_poses(), scripted[30])
 
@@ -359,14 +354,10 @@ def test_the_crowd_script_runs_only_where_scripts_are_trusted(scene):
     ("def register(crowd)\n", r"crowd script 'show.py' failed.*SyntaxError"),
 ])
 def test_a_failing_crowd_script_is_named(scene, body, message):
-    from crowd_addon.blender import show_data
     _script(scene, body)
-    show_data.trust_scripts(True)
-    try:
-        with pytest.raises(CrowdError, match=message):
-            scene_config.build_crowd(scene, scene_config.config_from_scene(scene))
-    finally:
-        show_data.trust_scripts(False)
+    with pytest.raises(CrowdError, match=message):
+        scene_config.build_crowd(scene, scene_config.config_from_scene(scene),
+                                 trust_script=True)
 
 
 def test_an_untrusted_export_says_its_script_did_not_run(scene, tmp_path):

@@ -1,0 +1,122 @@
+"""Trusting a .blend's crowd script trusts that file's text and nothing else (issue 31).
+
+Each scene's crowd script leaves a marker file from its module body and another from
+its ``register(crowd)`` (``crowd_scene.scripted_blend``); the oracle is the file system:
+a script that must not run has written neither. Every test runs with Blender's *Auto
+Run Python Scripts* preference off (the bpy module's default), except the one that
+checks the preference still works as documented (docs/show.md, "A crowd script").
+"""
+
+import os
+import sys
+
+import pytest
+
+bpy = pytest.importorskip("bpy")
+sys.path.insert(0, os.path.dirname(__file__))
+import crowd_scene as cs  # noqa: E402
+
+from crowd_addon.blender import preview, scene_config, show_data  # noqa: E402
+from crowd_addon.blender.cli_commands import export_blend  # noqa: E402
+
+UNTRUSTED = "did not run: scripts in .blend files are not trusted"
+
+extension = cs.extension_fixture()
+
+
+@pytest.fixture(autouse=True)
+def auto_run_off():
+    """Blender's Auto Run preference off, nothing trusted before or after the test."""
+    prefs = bpy.context.preferences.filepaths
+    keep = prefs.use_scripts_auto_execute
+    prefs.use_scripts_auto_execute = False
+    show_data.forget_trusted_scripts()
+    yield
+    preview.stop_all()
+    show_data.forget_trusted_scripts()
+    prefs.use_scripts_auto_execute = keep
+
+
+def ran(markers) -> list:
+    """Which of a script's markers exist (and remove them for the next check)."""
+    found = [m.name for m in markers if m.exists()]
+    for m in markers:
+        m.unlink(missing_ok=True)
+    return found
+
+
+def build(scene):
+    """The scene's crowd built as the preview and the exports build it: its note."""
+    return scene_config.build_crowd(scene, scene_config.config_from_scene(scene))[1]
+
+
+def test_trust_script_in_the_panel_then_opening_another_file_leaves_it_untrusted(tmp_path):
+    other = tmp_path / "other.blend"
+    b = cs.scripted_blend(other, tmp_path, "other")
+    preview.start(bpy.context.scene)            # saved with its preview on: File > Open
+    bpy.ops.wm.save_mainfile()                  # rebuilds it from on_load_post
+    assert ran(b) == [] and UNTRUSTED in preview.get(bpy.context.scene).script_note
+    a = cs.scripted_blend(tmp_path / "mine.blend", tmp_path, "mine")
+    preview.start(bpy.context.scene)
+    assert ran(a) == [] and UNTRUSTED in preview.get(bpy.context.scene).script_note
+    assert bpy.ops.crowd.trust_script() == {"FINISHED"}        # the panel's button
+    assert ran(a) == ["mine.body", "mine.register"]            # the preview rebuilt with it
+    assert preview.get(bpy.context.scene).script_note == ""
+
+    bpy.ops.wm.open_mainfile(filepath=str(other))              # File > Open
+    scene = bpy.context.scene
+    pv = preview.get(scene)
+    assert pv is not None and UNTRUSTED in pv.script_note
+    assert ran(b) == []
+    preview.start(scene)
+    assert UNTRUSTED in build(scene) and ran(b) == []
+
+    bpy.ops.wm.open_mainfile(filepath=str(tmp_path / "mine.blend"))   # back: still trusted
+    assert build(bpy.context.scene) == "" and ran(a) == ["mine.body", "mine.register"]
+
+
+def test_a_changed_text_or_a_copy_of_the_file_is_untrusted_again(tmp_path):
+    a = cs.scripted_blend(tmp_path / "mine.blend", tmp_path, "mine")
+    scene = bpy.context.scene
+    bpy.ops.crowd.trust_script()
+    assert build(scene) == "" and ran(a) == ["mine.body", "mine.register"]
+    text = scene.crowd.show.script
+    text.write("\n# edited after it was trusted\n")
+    assert UNTRUSTED in build(scene) and ran(a) == []
+    bpy.ops.crowd.trust_script()                               # trusting the new text
+    assert build(scene) == "" and ran(a) == ["mine.body", "mine.register"]
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "copy.blend"))
+    assert UNTRUSTED in build(bpy.context.scene) and ran(a) == []     # another file
+
+
+def test_export_blend_trusts_the_script_for_that_call_only(tmp_path):
+    a = cs.scripted_blend(tmp_path / "mine.blend", tmp_path, "mine")
+    b = cs.scripted_blend(tmp_path / "other.blend", tmp_path, "other")
+    export_blend(str(tmp_path / "1" / "s.usdc"), (1, 4), blend=str(tmp_path / "mine.blend"),
+                 trust_scripts=True)
+    assert ran(a) == ["mine.body", "mine.register"]
+    notes = []
+    export_blend(str(tmp_path / "2" / "s.usdc"), (1, 4), blend=str(tmp_path / "other.blend"),
+                 on_bake=lambda done, total, message: notes.append(message))
+    assert ran(b) == [] and any(UNTRUSTED in n for n in notes)
+    export_blend(str(tmp_path / "3" / "s.usdc"), (1, 4), blend=str(tmp_path / "mine.blend"))
+    assert ran(a) == []                                        # nor the file trusted before
+    assert UNTRUSTED in build(bpy.context.scene) and ran(a) == []
+
+
+def test_a_failing_trusted_call_leaves_nothing_trusted(tmp_path):
+    a = cs.scripted_blend(tmp_path / "mine.blend", tmp_path, "mine")
+    b = cs.scripted_blend(tmp_path / "other.blend", tmp_path, "other")
+    with pytest.raises(Exception):
+        export_blend(str(tmp_path / "1" / "s.usdc"), (1, 4), blend=str(tmp_path / "mine.blend"),
+                     scene="no such scene", trust_scripts=True)
+    export_blend(str(tmp_path / "2" / "s.usdc"), (1, 4), blend=str(tmp_path / "other.blend"))
+    assert ran(a) == [] and ran(b) == []
+
+
+def test_auto_run_python_scripts_still_runs_every_file_s_script(tmp_path):
+    b = cs.scripted_blend(tmp_path / "other.blend", tmp_path, "other")
+    bpy.context.preferences.filepaths.use_scripts_auto_execute = True
+    bpy.ops.wm.open_mainfile(filepath=str(tmp_path / "other.blend"))
+    assert not bpy.app.autoexec_fail
+    assert build(bpy.context.scene) == "" and ran(b) == ["other.body", "other.register"]
