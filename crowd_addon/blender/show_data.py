@@ -65,7 +65,9 @@ def _cue(c, scene, depsgraph, cfg, placed, first, last) -> Cue:
             c.action.lower(), c.target, duration=c.duration,
             offset={"KEEP": "keep", "RANDOM": "random"}.get(c.offset_mode, c.offset),
             when_full=None if c.when_full == "DEFAULT" else c.when_full.lower(),
-            hold=c.hold, name=c.parameter, value=c.set_value)
+            hold=c.hold, name=c.parameter, value=c.set_value,
+            **({"trigger": c.switch_trigger, "release": c.release_trigger}
+               if c.action in ("STREAM", "UNIQUE") else {}))
         agents = selected_agents(c, depsgraph, cfg, placed) if action.moves_agents else None
         sweep = None
         if c.timing == "SWEEP":

@@ -16,7 +16,14 @@ __all__ = ["CLASSES"]
 def _counts(context) -> dict:
     pv = preview.get(context.scene)
     runner = getattr(pv.crowd, "show", None) if pv is not None else None
-    return {} if runner is None else {d["name"]: d["agents"] for d in runner.describe()}
+    return {} if runner is None else {d["name"]: d for d in runner.describe()}
+
+
+def _cost(d) -> str:
+    """What a cue costs: its agents, and how many of them need a transition slot."""
+    if not d["switched"]:
+        return f" ({d['agents']:,})"
+    return f" ({d['agents']:,}: {d['slots']:,} by slot)"
 
 
 class CROWD_UL_cues(bpy.types.UIList):
@@ -26,10 +33,10 @@ class CROWD_UL_cues(bpy.types.UIList):
                  icon="HIDE_ON" if item.mute else "HIDE_OFF")
         row.prop(item, "name", text="", emboss=False)
         row.label(text=str(item.frame) if item.timeline else "reaction")
-        n = _counts(context).get(item.name)
+        d = _counts(context).get(item.name)
         row.label(text=f"{item.action.title()} {item.target}"
-                  + ("" if n is None or item.action in ("TRIGGER", "PARAMETER")
-                     else f" ({n:,})"))
+                  + ("" if d is None or item.action in ("TRIGGER", "PARAMETER")
+                     else _cost(d)))
 
 
 class CROWD_UL_reactions(bpy.types.UIList):
@@ -135,6 +142,13 @@ def _draw_cue(layout, scene, c):
     col.prop(c, "when_full")
     col.prop(c, "hold")
     col.prop(c, "interrupt")
+    col.prop(c, "switch_trigger")
+    if c.switch_trigger:
+        col.prop(c, "release_trigger")
+        d = _counts(bpy.context).get(c.name)
+        if d is not None:
+            col.label(text=f"{d['switched']:,} agents follow {d['streams']} streams, "
+                           f"{d['slots']:,} by slot", icon="INFO")
     box = layout.box().column()
     box.use_property_split = True
     box.prop_search(c, "source", scene.crowd, "agent_sources")

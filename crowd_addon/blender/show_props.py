@@ -53,6 +53,17 @@ class CROWD_PG_cue(PropertyGroup):
                                   "played before (0: they stay)")
     interrupt: BoolProperty(name="Interrupt",
                             description="Also move agents another cue is holding")
+    switch_trigger: StringProperty(
+        name="Switch Trigger",
+        description="A mass reaction at no per-agent cost: agents on streams whose state "
+                    "machine takes this trigger (and whose every agent the cue selects) stay "
+                    "on their stream and follow it into the new state, each at its own "
+                    "offset; only the others blend to the target through transition slots "
+                    "(empty: every agent blends through slots)")
+    release_trigger: StringProperty(
+        name="Release Trigger",
+        description="With a switch trigger and a hold: the trigger set on the switched "
+                    "streams when the hold ends (the state machine's way back)")
     parameter: StringProperty(name="Name", description="Trigger or parameter name")
     set_value: FloatProperty(name="Value", description="Parameter value")
     # -- selection

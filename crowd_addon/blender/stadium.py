@@ -20,11 +20,15 @@ same crowd:
   the right hand for about one fan in seven, a cap for three in ten (:data:`FAN_PROPS`,
   objects parented to the fan rig's bones), both in the fan's team colour.
 - :func:`setup_show` authors the show (``scene.crowd.show``, docs/show.md) and sets the
-  scene's frame range to the run: the **goal** (home fans blend to ``cheer``, away
-  fans to ``groan``, both at offset 0 and held for the cheer), the **Mexican wave**
-  (a sweep round the pitch centre, the world origin, over the fans: it starts just
-  before the home stand the camera looks at and takes the whole run for one lap;
-  each fan stands ``WAVE_HOLD`` frames), the **hits** (one cue per hit fan, selected
+  scene's frame range to the run: the **goal**, a mass reaction (the seat streams are
+  state machines that take it, :data:`REACTION_STATES`: the goal cues set
+  ``celebrate`` on the home fans' streams and ``despair`` on the away fans', and
+  ``calm`` when the cheer's hold ends, so every fan follows its stream at its own
+  offset; only fans on other streams blend to ``cheer`` / ``groan`` through slots),
+  the **Mexican wave** (a sweep round the pitch centre, the world origin, over the
+  fans: it starts just before the home stand the camera looks at and takes the whole
+  run for one lap, or longer where the transition slots could not carry a faster
+  front round a full bowl; each fan stands ``WAVE_HOLD`` frames), the **hits** (one cue per hit fan, selected
   by its ``hit`` attribute, to its own unique animation; they interrupt the cheer) and
   nothing for the claps: they are the ``clap`` action's event tags, counted by the
   crowd (``crowd.events``). The beats are fractions of the run (:data:`BEATS`), so a
@@ -57,6 +61,16 @@ __all__ = ["STREAMS", "HOME_MIX", "AWAY_MIX", "FAN", "MOCAP", "BEATS", "CUES", "
 #: stream name -> action of FanRig
 STREAMS = {"idle_a": "idle_seated_a", "idle_b": "idle_seated_b", "idle_c": "idle_seated_c",
            "clap": "clap", "cheer": "cheer", "wave": "wave_arms", "groan": "disappointment"}
+#: The seat streams are templates that take the goal (paper s.5): each is a state
+#: machine whose seated state (the stream's own action) turns into a celebration or a
+#: disappointment on a trigger from the show and back on ``calm``, so a goal switches
+#: whole streams and every fan follows at its own offset, with no transition slot.
+#: the triggers; state -> (action, the trigger that enters it); the cross-fade (frames)
+CELEBRATE, DESPAIR, CALM = "celebrate", "despair", "calm"
+REACTION_STATES = {"celebrating": ("cheer", CELEBRATE),
+                   "despairing": ("disappointment", DESPAIR)}
+REACTION_FADE = 6
+SEAT_STREAMS = ("idle_a", "idle_b", "idle_c", "clap")
 HOME_MIX = {"idle_a": 0.3, "idle_c": 0.3, "clap": 0.4}
 AWAY_MIX = {"idle_b": 1.0}
 HIT = "hit_by_ball"
@@ -74,6 +88,7 @@ BEATS = {"wave": 20 / 240, "goal": 45 / 240, "hit": 70 / 240}
 CHEER_SHARE = 90 / 240                  # how long the goal's cheer and groan are held
 WAVE_LAP_SHARE = 1.0                    # one lap of the wave takes the whole run
 WAVE_HOLD = 16                          # frames a fan stays up in the wave
+WAVE_SLOTS = 0.75                       # the share of the slots the wave may take
 BLEND = 6                               # blend length of every cue, frames
 #: the wave starts just before the home stand the camera looks at (angle -pi/2)
 WAVE_START_ANGLE = -math.pi / 2 - 0.4
@@ -121,6 +136,26 @@ def _animation(pool, name, action):
     anim.name = name
     node = anim.nodes.add()
     node.name, node.kind, node.action = "clip", "CLIP", _action(action)
+    return anim
+
+
+def _reacting(anim):
+    """Make a one-clip stream a template that takes the goal: a state machine over its
+    clip ("seated") and the :data:`REACTION_STATES`, entered on their triggers from any
+    state and left on ``calm``."""
+    for state, (action, _) in REACTION_STATES.items():
+        node = anim.nodes.add()
+        node.name, node.kind, node.action = state, "CLIP", _action(action)
+    sm = anim.nodes.add()
+    sm.name, sm.kind, sm.initial_state = "react", "STATE_MACHINE", "seated"
+    for state, node in (("seated", "clip"), *((s, s) for s in REACTION_STATES)):
+        i = sm.inputs.add()
+        i.name, i.node = state, node
+    edges = [(s, trigger) for s, (_, trigger) in REACTION_STATES.items()] + [("seated", CALM)]
+    for target, trigger in edges:
+        tr = sm.transitions.add()
+        tr.source, tr.target, tr.trigger, tr.duration = "*", target, trigger, REACTION_FADE
+    anim.root = "react"
     return anim
 
 
@@ -224,7 +259,9 @@ def _add_characters(s, hits):
         c.name, c.armature, c.body = name, _obj(rig), _obj(body)
     fan, mocap = s.characters[FAN], s.characters[MOCAP]
     for name, action in STREAMS.items():
-        _animation(fan.streams, name, action)
+        anim = _animation(fan.streams, name, action)
+        if name in SEAT_STREAMS:
+            _reacting(anim)
     for k in range(hits):
         _animation(fan.uniques, f"hit{k}", HIT)
     _action(MOCAP_ACTION).use_cyclic = True     # the jumps loop (its manual frame range)
@@ -348,13 +385,32 @@ def _select(attribute, value):
     return {"select": "ATTRIBUTE", "attribute": attribute, "op": "==", "compare": value}
 
 
+def _wave_speed(scene, frames):
+    """The wave's speed (radians a second): one lap in the run, or slower where the
+    bowl is so full that a faster front would need more than :data:`WAVE_SLOTS` of the
+    crowd's transition slots (a 65,000-seat bowl: the paper's 800 slots carry a wave
+    that goes round in about 40 seconds, as a real one does)."""
+    from ..core.show import Sweep, slot_speed
+    from .scene_config import scene_fps
+
+    fps = scene_fps(scene)
+    me = _obj("Seats").data
+    n = len(me.vertices)
+    pos = np.zeros(n * 3, np.float32)
+    me.vertices.foreach_get("co", pos)
+    character = np.zeros(n, np.int32)
+    me.attributes["character"].data.foreach_get("value", character)
+    lap = max(1, round(WAVE_LAP_SHARE * frames))
+    sweep = Sweep(mode="angle", speed=2 * math.pi * fps / lap, start_angle=WAVE_START_ANGLE)
+    slots = int(WAVE_SLOTS * scene.crowd.transition_slots)
+    return slot_speed(sweep, pos.reshape(n, 3)[character == 0], fps, slots, BLEND)
+
+
 def setup_show(scene, frames: int):
     """Author the stadium's show in ``scene.crowd.show`` (replacing any there) for a run
     of ``frames`` frames from the scene's start frame, and set the scene's frame range
     to that run; one hit cue per seat :func:`setup_crowd` marked. Returns the names of
     the cues muted because they start after the run."""
-    from .scene_config import scene_fps
-
     seats = _obj("Seats").data
     hit = np.zeros(len(seats.vertices), np.int32)
     if "hit" in seats.attributes:
@@ -370,14 +426,14 @@ def setup_show(scene, frames: int):
     show.reactions.clear()
     show.parameters.clear()
     cheer = max(1, round(CHEER_SHARE * frames))
-    for name, section, target in ((CUES["goal_home"], HOME, "cheer"),
-                                  (CUES["goal_away"], AWAY, "groan")):
+    for name, section, target, trigger in ((CUES["goal_home"], HOME, "cheer", CELEBRATE),
+                                           (CUES["goal_away"], AWAY, "groan", DESPAIR)):
         _cue(show, name, at["goal"], last, target, hold=cheer, offset_mode="GIVEN",
-             offset=0, **_select("section", section))
-    lap = max(1, round(WAVE_LAP_SHARE * frames))
+             offset=0, switch_trigger=trigger, release_trigger=CALM,
+             **_select("section", section))
     _cue(show, CUES["wave"], at["wave"], last, "wave", hold=WAVE_HOLD, offset_mode="GIVEN",
          offset=0, timing="SWEEP", sweep_mode="ANGLE", sweep_centre=None,
-         sweep_speed=2 * math.pi * scene_fps(scene) / lap, sweep_start=WAVE_START_ANGLE,
+         sweep_speed=_wave_speed(scene, frames), sweep_start=WAVE_START_ANGLE,
          sweep_laps=1, **_select("character", 0))
     start, end = _action(HIT).frame_range
     hit_frames = int(math.ceil(end - start - 1e-6)) + 1     # the whole clip, keys included

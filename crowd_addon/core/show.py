@@ -37,7 +37,8 @@ from .agents import STREAM, UNIQUE
 from .errors import CrowdError
 
 __all__ = ["Action", "Sweep", "Cue", "Reaction", "Track", "Show", "ShowRunner",
-           "ACTION_KINDS", "select_inside", "select_value", "select_fraction", "neighbours"]
+           "ACTION_KINDS", "select_inside", "select_value", "select_fraction", "neighbours",
+           "slot_speed"]
 
 ACTION_KINDS = ("stream", "unique", "trigger", "parameter")
 _OPS = {"==": np.equal, "!=": np.not_equal, "<": np.less, "<=": np.less_equal,
@@ -184,6 +185,46 @@ class Sweep:
         turn = np.mod(angle if self.speed > 0 else -angle, 2 * np.pi)
         lap = 2 * np.pi / abs(self.speed) * fps
         return turn[:, None] / abs(self.speed) * fps + lap * np.arange(self.laps)
+
+
+def slot_speed(sweep: Sweep, positions, fps: float, slots: int, blend: float) -> float:
+    """The fastest speed (``sweep``'s units, its sign kept) at which ``sweep`` over
+    ``positions`` never needs more than ``slots`` transition slots, when each agent it
+    reaches blends in over ``blend`` frames and later home over ``blend`` frames (a cue
+    with a hold): at most ``slots / 2`` agents may be reached within any ``blend + 1``
+    frames (reach frames are whole). The Mexican wave of a full bowl is bound by this, not by the crowd's size."""
+    pos = np.asarray(positions, np.float64).reshape(-1, 3)
+    slots, blend = int(slots), _finite(blend, "slot_speed: blend")
+    if slots < 2 or blend <= 0 or not pos.size:
+        raise CrowdError(f"slot_speed: needs agents, at least 2 slots and a blend > 0 "
+                         f"(got {pos.shape[0]} agents, {slots} slots, blend {blend:g})")
+    d = pos - np.asarray(sweep.centre)
+    if sweep.mode == "distance":
+        where = np.sort(np.hypot(np.hypot(d[:, 0], d[:, 1]), d[:, 2]))
+        period = None
+    else:                                   # turns round the centre, wrapped once
+        turn = np.sort(np.mod(np.arctan2(d[:, 1], d[:, 0]), 2 * np.pi))
+        where, period = np.r_[turn, turn + 2 * np.pi], 2 * np.pi
+    n, allowed = pos.shape[0], slots // 2
+
+    def fits(speed):                        # most agents within blend frames <= allowed
+        width = speed * (blend + 1) / fps          # reach frames are whole
+        if period is not None and width >= period:
+            return n <= allowed
+        heads = where[:n]
+        return int((np.searchsorted(where, heads + width, "right") - np.arange(n)).max()) \
+            <= allowed
+
+    if fits(abs(sweep.speed)):
+        return sweep.speed
+    lo, hi = 0.0, abs(sweep.speed)
+    for _ in range(50):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if fits(mid) else (lo, mid)
+    if lo <= 0:
+        raise CrowdError(f"slot_speed: {allowed * 2} slots cannot serve {n} agents at "
+                         "the same place (more agents share one spot than slots)")
+    return float(np.copysign(lo, sweep.speed))
 
 
 @dataclass(frozen=True, eq=False)

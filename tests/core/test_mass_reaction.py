@@ -13,7 +13,7 @@ import pytest
 from crowd_addon.core import (ClipPlayer, Crowd, CrowdConfig, CrowdError, StateMachine,
                               StateTransition, synthetic)
 from crowd_addon.core.agents import STREAM, TRANSITION
-from crowd_addon.core.show import Action, Cue, Show, Sweep
+from crowd_addon.core.show import Action, Cue, Show, Sweep, slot_speed
 
 M, CUE, HOLD = 12, 20, 30
 
@@ -26,7 +26,7 @@ def reacting_tree():
                          StateTransition("*", "idle", 6, trigger="calm")])
 
 
-def make_config(show=None, slots=16):
+def make_config(show=None, slots=16, positions=None):
     """Streams: ``home_a`` and ``home_b`` take the reaction, ``plain`` does not (one
     clip), ``cheer`` is the slot target. Agents 0..23 on home_a (offsets 0..M-1 twice),
     24..35 on home_b, 36..41 on plain."""
@@ -42,8 +42,9 @@ def make_config(show=None, slots=16):
     cfg.add_stream("cheer", "fan", ClipPlayer("cheer"))
     streams = np.r_[np.zeros(24), np.ones(12), np.full(6, 2)].astype(np.int64)
     offsets = np.r_[np.arange(24) % M, np.arange(12), np.arange(6) * 2]
-    cfg.add_agents(streams.size, streams=streams, offsets=offsets,
-                   positions=np.c_[np.arange(streams.size), np.zeros((streams.size, 2))])
+    if positions is None:
+        positions = np.c_[np.arange(streams.size), np.zeros((streams.size, 2))]
+    cfg.add_agents(streams.size, streams=streams, offsets=offsets, positions=positions)
     cfg.show = show if show is not None else Show()
     return cfg
 
@@ -202,3 +203,36 @@ def test_the_switch_settings_survive_the_config_file(tmp_path):
     actions = [c["action"] for c in json.loads((tmp_path / "c.json").read_text())["show"]["cues"]]
     assert "trigger" in actions[0] and "release" in actions[0]
     assert "trigger" not in actions[1] and "release" not in actions[1]    # same hash as before
+
+
+def _most_slots(speed, slots, blend=3, hold=5):
+    """Run a wave (a sweep round the origin over 42 agents on a circle) at ``speed``:
+    the most slots busy at once and the most agents waiting in the queue."""
+    angle = np.linspace(0, 2 * np.pi, 42, endpoint=False)
+    pos = np.c_[10 * np.cos(angle), 10 * np.sin(angle), np.zeros(42)]
+    cue = Cue("wave", 5, Action("stream", "cheer", blend, offset=0, hold=hold),
+              sweep=Sweep(mode="angle", speed=speed))
+    crowd = Crowd(make_config(Show((cue,)), slots=slots, positions=pos))
+    busy = waiting = 0
+    while crowd.frame < 5 + 24.0 * 2 * np.pi / speed + hold + 2 * blend:
+        crowd.step()
+        busy = max(busy, int(crowd.slots.active.sum()))
+        waiting = max(waiting, crowd.slots.queued_agents().size)
+    return busy, waiting
+
+
+def test_slot_speed_keeps_a_wave_within_its_slots():
+    fast = Sweep(mode="angle", speed=40.0)
+    angle = np.linspace(0, 2 * np.pi, 42, endpoint=False)
+    pos = np.c_[10 * np.cos(angle), 10 * np.sin(angle), np.zeros(42)]
+    speed = slot_speed(fast, pos, 24.0, slots=8, blend=3)
+    assert 0 < speed < 40.0
+    busy, waiting = _most_slots(speed, 8)
+    assert waiting == 0 and busy <= 8
+    busy, waiting = _most_slots(1.6 * speed, 8)              # faster: the queue fills
+    assert waiting > 0
+    assert slot_speed(Sweep(speed=-40.0), pos, 24.0, 8, 3) == -speed   # clockwise too
+    slow = Sweep(speed=0.1)
+    assert slot_speed(slow, pos, 24.0, 8, 3) == 0.1           # already fits: unchanged
+    with pytest.raises(CrowdError, match="at least 2 slots"):
+        slot_speed(fast, pos, 24.0, 1, 3)
