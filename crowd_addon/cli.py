@@ -521,6 +521,10 @@ def _add_preview(subparsers) -> None:
                    help="multisample anti-aliasing, samples a pixel, moderngl backend "
                         "(Blender's gpu module has no multisampled offscreen image); 0: "
                         "none (default: %(default)s)")
+    p.add_argument("--lod", choices=("on", "off"), default="on",
+                   help="levels of detail: on (each agent's level by its height in "
+                        "pixels) or off (every agent drawn with its full mesh: the judge "
+                        "of what the levels lose, far slower) (default: %(default)s)")
     add_repetition_arguments(p)
     p.add_argument("--json", action="store_true",
                    help="print the summary as one JSON object")
@@ -547,7 +551,7 @@ def _run_preview(args) -> int:
             args.out, args.frames, blend=args.blend, scene=args.scene, start=args.start,
             camera=args.camera, size=size, mp4=args.mp4, backend=args.backend,
             samples=args.samples, shadows=args.shadows, trust_scripts=args.trust_scripts,
-            progress=progress, repetition=repetition_settings(args),
+            progress=progress, repetition=repetition_settings(args), lod=args.lod == "on",
             on_bake=lambda done, total, message: print(
                 f"crowd preview: {message}", file=sys.stderr, flush=True))
     else:
@@ -566,7 +570,8 @@ def _run_preview(args) -> int:
             init_headless_gpu()
         r = render_preview(config, args.out, args.frames, start=args.start, size=size,
                            mp4=args.mp4, backend=args.backend, progress=progress,
-                           samples=args.samples, repetition=repetition_settings(args))
+                           samples=args.samples, repetition=repetition_settings(args),
+                           lod=args.lod == "on")
     s = r.seconds
     if args.json:
         print(json.dumps({

@@ -144,7 +144,7 @@ def preview_blend(out: str, frames: int | None = None, *, blend: str | None = No
                   camera: str | None = None, size=(None, None), mp4: bool = False,
                   backend: str = "moderngl", progress=None, on_bake=None,
                   trust_scripts: bool = False, samples: int = 4, shadows: bool = True,
-                  repetition=_DEFAULT):
+                  repetition=_DEFAULT, lod: bool = True):
     """Render the Crowd settings of a .blend's scene (:func:`open_scene`) headless to
     PNG frames (:func:`crowd_addon.gpu.preview_render.render_preview`), drawn in the
     scene's own geometry and lit by its sun (:mod:`.scene_geometry`).
@@ -156,8 +156,8 @@ def preview_blend(out: str, frames: int | None = None, *, blend: str | None = No
     The camera, the frames and the output folder are checked before the bake.
     Blender's own output goes to stderr. ``trust_scripts`` as :func:`export_blend`;
     ``samples``: anti-aliasing of the moderngl backend; ``shadows``: the sun's
-    shadows; ``repetition``: the repetition metric's settings (None: not measured).
-    Returns ``(config, result, camera object name or None)``.
+    shadows; ``repetition``: the repetition metric's settings (None: not measured);
+    ``lod``: False draws every agent with its full mesh. Returns ``(config, result, camera object name or None)``.
     """
     with blender_output_to_stderr():        # from the import of bpy on (5.2 logs then)
         from ..gpu.preview_render import render_preview, writable_dir
@@ -186,7 +186,8 @@ def preview_blend(out: str, frames: int | None = None, *, blend: str | None = No
         result = render_preview(crowd, out, frames, start=first, size=size, mp4=mp4,
                                 backend=backend, progress=progress, camera=view,
                                 scene=scene_geometry(found), light=scene_light(found),
-                                samples=samples, shadows=shadows, repetition=repetition)
+                                samples=samples, shadows=shadows, repetition=repetition,
+                                lod=lod)
     return config, result, None if obj is None else obj.name
 
 

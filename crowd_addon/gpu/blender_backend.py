@@ -93,7 +93,7 @@ class BlenderGPURenderer(CrowdRenderer):
     """
 
     def __init__(self, view, size=None, light=(0.4, -0.6, 0.8, 0.35), culling=True,
-                 shadows=False):
+                 shadows=False, lod=True):
         import gpu
         self.gpu = gpu
         try:
@@ -111,7 +111,7 @@ class BlenderGPURenderer(CrowdRenderer):
             self.framebuffer = gpu.types.GPUFrameBuffer(depth_slot=self.depth_tex,
                                                         color_slots=(self.color_tex,))
         super().__init__(view, self.limit, light, culling, max_int=_EXACT_INT,
-                         shadows=shadows)
+                         shadows=shadows, lod=lod)
 
     # ---------------------------------------------------------------- primitives
     def _create_texture(self, spec):

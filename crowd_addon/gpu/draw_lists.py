@@ -94,6 +94,7 @@ class DrawLists:
     bounds : (K, 2) float ``(centre height, radius)`` per body (:func:`proxy_bounds`).
     lod_distances : increasing thresholds in metres.
     max_width : texture width limit in texels.
+    lod : False draws every agent at level 0, its full mesh.
 
     Attributes
     ----------
@@ -101,7 +102,8 @@ class DrawLists:
     lod : (N,) int LOD of each agent, ``-1`` where it is not drawn.
     """
 
-    def __init__(self, agent_body, lod_counts, bounds, lod_distances, max_width=4096):
+    def __init__(self, agent_body, lod_counts, bounds, lod_distances, max_width=4096,
+                 lod=True):
         self.agent_body = np.asarray(agent_body, np.int64)
         self.lod_counts = np.asarray(lod_counts, np.int64)
         self.bounds = np.asarray(bounds, np.float64).reshape(-1, 2)
@@ -116,6 +118,7 @@ class DrawLists:
         self.height = max(1, -(-n // self.width))
         self.image = np.zeros((self.height, self.width, 1), np.int32)
         self.agent_levels = self.lod_counts[self.agent_body]
+        self.use_lod = bool(lod)
         self.groups = []
         self.lod = np.full(n, -1, np.int64)
 
@@ -134,7 +137,9 @@ class DrawLists:
             dist = centre @ planes[:, :3].T + planes[:, 3]
             drawn &= (dist >= -self.bounds[self.agent_body, 1][:, None]).all(1)
         dist = view_distances(centre, view_projection, pixels_high)
-        self.lod = np.where(drawn, lod_levels(dist, self.lod_distances, self.agent_levels), -1)
+        level = lod_levels(dist, self.lod_distances, self.agent_levels) if self.use_lod \
+            else np.zeros(drawn.size, np.int64)
+        self.lod = np.where(drawn, level, -1)
         key = (self.agent_body * self.levels + self.lod)[drawn]
         key = key.astype(np.int16 if key.size and key.max() < 2 ** 15 else np.int64)
         order = np.flatnonzero(drawn)[np.argsort(key, kind="stable")]

@@ -125,9 +125,12 @@ class FramePlan:
     max_texture_size : the GPU's largest texture side in texels.
     max_int : integers an int texture write keeps exact (None: any int32); the
         agent count must stay below it.
+    lod : False draws every agent with its full mesh (``crowd preview --lod off``: the
+        judge of what the levels lose).
     """
 
-    def __init__(self, view, max_texture_size: int, max_int: int | None = None):
+    def __init__(self, view, max_texture_size: int, max_int: int | None = None,
+                 lod: bool = True):
         lay = view.layout
         limit = int(max_texture_size)
         if max(lay.width, lay.height) > limit:
@@ -150,7 +153,7 @@ class FramePlan:
         self.lists = DrawLists(view.agent_body, [len(p) for p in self.proxies],
                                [tuple(self.max_scale * np.asarray(proxy_bounds(p[0].extent)))
                                 if p else (0.0, 0.0) for p in self.proxies],
-                               view.config.lod_distances, min(4096, limit))
+                               view.config.lod_distances, min(4096, limit), lod=lod)
         self.batch_image = batch_image(lay.row_count) if self.on_gpu else None
         self._list_key = None
 

@@ -82,7 +82,7 @@ class ModernGLRenderer(CrowdRenderer):
     MAX_ROW_WRITES = 1024       # a few hundred small writes cost less than whole blocks
 
     def __init__(self, view, ctx, size=(640, 360), light=(0.4, -0.6, 0.8, 0.35),
-                 culling=True, owns_context=False, samples=0, shadows=False):
+                 culling=True, owns_context=False, samples=0, shadows=False, lod=True):
         import moderngl
         self._mgl = moderngl
         if ctx.version_code < GL_VERSION:
@@ -102,7 +102,7 @@ class ModernGLRenderer(CrowdRenderer):
             self._attachments += (ctx.renderbuffer(self.size, 4),)
             self._resolved = ctx.framebuffer(color_attachments=[self._attachments[2]])
         super().__init__(view, ctx.info["GL_MAX_TEXTURE_SIZE"], light, culling,
-                         shadows=shadows)
+                         shadows=shadows, lod=lod)
 
     # ------------------------------------------------------------------ contexts
     @classmethod

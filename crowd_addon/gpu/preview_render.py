@@ -134,7 +134,7 @@ def render_preview(config, out_dir, frames: int, start: int | None = None,
                    progress=None, before_step=None, camera=None, scene=None,
                    light=None, samples: int = 4, on_image=None,
                    shadows: bool | None = None,
-                   repetition=RepetitionSettings()) -> PreviewResult:
+                   repetition=RepetitionSettings(), lod: bool = True) -> PreviewResult:
     """Render ``frames`` frames of ``config`` (a ``CrowdConfig``) from ``start``
     (default: its start frame) into ``out_dir``; ``progress(done, total)`` is called
     after each frame. Raises ``CrowdError`` on bad input before writing anything.
@@ -149,7 +149,8 @@ def render_preview(config, out_dir, frames: int, start: int | None = None,
     given each frame's ``(H, W, 3)`` uint8 image (e.g. a contact sheet); ``shadows``:
     the sun's shadows (None: with a scene); ``repetition``: the repetition metric's
     settings (their ``frames`` spread over the run, measured as they are shown; the
-    size is the frames'), None not to measure it."""
+    size is the frames'), None not to measure it; ``lod``: False draws every agent
+    with its full mesh (``--lod off``, the judge of the levels)."""
     w, h = (int(v) for v in size)
     crowd = config if isinstance(config, Crowd) else None
     config = crowd.config if crowd is not None else config
@@ -162,6 +163,7 @@ def render_preview(config, out_dir, frames: int, start: int | None = None,
     seconds["simulate"] += time.perf_counter() - t0
     options = {} if light is None else {"light": light}
     options["shadows"] = scene is not None if shadows is None else bool(shadows)
+    options["lod"] = bool(lod)
     if backend == "moderngl":
         options["samples"] = int(samples)
     renderer = make_renderer(crowd.view, backend, (w, h), **options)

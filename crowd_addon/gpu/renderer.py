@@ -74,7 +74,7 @@ class CrowdRenderer:
     MAX_ROW_WRITES = None
 
     def __init__(self, view, max_texture_size, light=(0.4, -0.6, 0.8, 0.35), culling=True,
-                 max_int=None, shadows=False):
+                 max_int=None, shadows=False, lod=True):
         self.view = view
         self.culling = bool(culling)
         self.light = tuple(float(v) for v in light)
@@ -82,7 +82,7 @@ class CrowdRenderer:
         self.stats = FrameStats()
         self.scene, self._scene, self._shadow_map = None, None, None
         self._scene_bounds = None
-        self.plan = FramePlan(view, max_texture_size, max_int)
+        self.plan = FramePlan(view, max_texture_size, max_int, lod=lod)
         #: the highest bind-pose point of any proxy (metres): the shadow casters' reach
         self._tallest = self.plan.max_scale * max(
             (float(buf.extent[1, 2]) for levels in self.plan.proxies for buf in levels),

@@ -118,3 +118,15 @@ def test_lists_are_rebuilt_only_when_the_camera_or_agents_move(h, renderer):
     crowd.step()
     r.sync()
     assert r.render(camera).list_bytes > 0
+
+
+def test_lod_off_draws_every_agent_with_its_full_mesh(h, renderer):
+    """``--lod off`` (``lod=False``): the same agents, every one at level 0."""
+    crowd, r, camera = _row_scene(h, renderer, (160, 120))
+    off = renderer(crowd, (160, 120), lod=False)
+    stats = off.render(camera)
+    r.render(camera)
+    assert (r.plan.lists.lod > 0).any()
+    np.testing.assert_array_equal(off.plan.lists.lod, np.zeros(crowd.agents.count))
+    full = crowd.config.meshes["fan"][0].vertex_count
+    assert stats.vertices == crowd.agents.count * full and stats.draws == 1
