@@ -225,6 +225,12 @@ class FramePlan:
                             {"u_pose_layout": self.pose_layout, "u_batch_count": n},
                             -(-n // SKIN_GROUP))
 
+    def set_lod(self, on: bool):
+        """Levels of detail on, or off (every agent its full mesh) from the next
+        render."""
+        self.lists.use_lod = bool(on)
+        self._list_key = None
+
     def regroup(self, view_projection, pixels_high: int, cull: bool) -> list:
         """Draw list regions to write before drawing through ``view_projection`` (4, 4)
         into a viewport ``pixels_high`` pixels high; empty when neither the view, the

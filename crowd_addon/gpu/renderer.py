@@ -140,6 +140,11 @@ class CrowdRenderer:
             self._scene_bounds = geometry.bounds()     # once: the shadows' depth range
         self.scene = geometry
 
+    def set_lod(self, on: bool):
+        """Levels of detail on (the default), or off: every agent drawn with its full
+        mesh (``crowd preview --lod off``), from the next :meth:`render`."""
+        self.plan.set_lod(on)
+
     def render(self, camera, target=None, clear=BACKGROUND) -> FrameStats:
         """Draw the crowd as seen by ``camera`` (anything with ``view_projection``
         (4, 4), OpenGL clip space) into ``target`` (the backend's framebuffer type;
