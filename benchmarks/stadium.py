@@ -15,11 +15,15 @@ without the show (the *quiet run*: the same agents, streams and offsets) into an
 - ``wave_queue_frames_<size>``: the longest a wave agent waits in the slot queue
   while the goal plays (from the goal's frame to the end of its hold plus M).
 - ``goal_slots_<size>``: agents the goal cues sent through slots.
+- with ``--compare``, ``goal_reacted_share_2s_<size>_by_slots``: the same share when
+  the goal cues have no switch trigger and send every fan through the slots (the
+  show as it was before mass reactions).
 - ``demo_65k_seconds`` and ``demo_65k_split``: the whole ``crowd demo --agents
   65000`` (240 frames), its seconds per stage from its ``summary.json`` (with
   ``--demo``; it takes minutes).
 
-    .venv/bin/python benchmarks/stadium.py [--agents 2000,65000] [--frames 240] [--demo]
+    .venv/bin/python benchmarks/stadium.py [--agents 2000,65000] [--frames 240] [--compare]
+                                           [--demo]
 
 Prints a table and ends with one JSON line.
 """
@@ -79,19 +83,34 @@ def _angles(a, b):
     return 2.0 * np.arccos(np.clip(dot, 0.0, 1.0))
 
 
-def measure(agents: int, frames: int, work: Path) -> dict:
+def _by_slots(cfg):
+    """``cfg`` with the goal cues' switch triggers taken out: every fan by slot."""
+    from crowd_addon.blender.stadium import CUES
+    from crowd_addon.core.show import Show
+
+    goals = (CUES["goal_home"], CUES["goal_away"])
+    cues = tuple(replace(c, action=replace(c.action, trigger="", release=""))
+                 if c.name in goals else c for c in cfg.show.cues)
+    return replace(cfg, show=Show(cues, cfg.show.reactions, cfg.show.tracks))
+
+
+def stadium_config(agents: int, frames: int, work: Path):
     import bpy
 
-    from crowd_addon.blender.stadium import CUES, FAN, author_stadium
-    from crowd_addon.core.show import Show
+    from crowd_addon.blender.stadium import author_stadium
 
     blend = work / f"stadium_{agents}.blend"
     t = time.perf_counter()
     _build(blend, agents)
     stadium = author_stadium(blend, frames, progress=None)
     bpy.ops.wm.read_factory_settings(use_empty=True)
-    cfg = stadium.config
-    build_s = time.perf_counter() - t
+    return stadium.config, time.perf_counter() - t
+
+
+def measure(cfg, frames: int, build_s: float = 0.0) -> dict:
+    from crowd_addon.blender.stadium import CUES
+    from crowd_addon.core.show import Show
+
     show = cfg.show
     goals = [show.cue(CUES["goal_home"]), show.cue(CUES["goal_away"])]
     at = goals[0].frame
@@ -165,6 +184,8 @@ def main(argv=None):
     ap.add_argument("--agents", default="2000,65000",
                     help="comma-separated stadium sizes (default 2000,65000)")
     ap.add_argument("--frames", type=int, default=240, help="the show's run (default 240)")
+    ap.add_argument("--compare", action="store_true",
+                    help="also measure the goal sent through the slots (no switch trigger)")
     ap.add_argument("--demo", action="store_true",
                     help="also time the whole `crowd demo --agents 65000`")
     args = ap.parse_args(argv)
@@ -175,15 +196,22 @@ def main(argv=None):
         print(f"{'agents':>8} {'selected':>9} {'reacted':>8} {'share':>7} {'switched':>9} "
               f"{'by slot':>8} {'wave wait':>9} {'build s':>8} {'run s':>7}")
         for n in sizes:
-            r = measure(n, args.frames, work)
-            print(f"{r['agents']:>8,} {r['goal_selected']:>9,} {r['goal_reacted']:>8,} "
-                  f"{r['goal_reacted_share']:>7.3f} {r['goal_switched']:>9,} "
-                  f"{r['goal_slots']:>8,} {r['wave_queue_frames']:>9} "
-                  f"{r['build_seconds']:>8} {r['run_seconds']:>7}", flush=True)
-            k = _label(n)
-            out[f"goal_reacted_share_2s_{k}"] = round(r["goal_reacted_share"], 4)
-            out[f"wave_queue_frames_{k}"] = r["wave_queue_frames"]
-            out[f"goal_slots_{k}"] = r["goal_slots"]
+            cfg, build_s = stadium_config(n, args.frames, work)
+            runs = [("", cfg)] + ([("_by_slots", _by_slots(cfg))] if args.compare else [])
+            for suffix, c in runs:
+                r = measure(c, args.frames, build_s)
+                print(f"{r['agents']:>8,} {r['goal_selected']:>9,} {r['goal_reacted']:>8,} "
+                      f"{r['goal_reacted_share']:>7.3f} {r['goal_switched']:>9,} "
+                      f"{r['goal_slots']:>8,} {r['wave_queue_frames']:>9} "
+                      f"{r['build_seconds']:>8} {r['run_seconds']:>7}"
+                      + ("  (goal by slots)" if suffix else ""), flush=True)
+                k = _label(n)
+                out[f"goal_reacted_share_2s_{k}{suffix}"] = round(r["goal_reacted_share"], 4)
+                if not suffix:
+                    out[f"wave_queue_frames_{k}"] = r["wave_queue_frames"]
+                    out[f"goal_slots_{k}"] = r["goal_slots"]
+                else:
+                    out[f"wave_queue_frames_{k}{suffix}"] = r["wave_queue_frames"]
         if args.demo:
             d = run_demo(65000, args.frames, work)
             print(f"crowd demo --agents 65000 --frames {args.frames}: {d['seconds']} s "

@@ -635,11 +635,15 @@ def _run_demo(args) -> int:
                  mp4=args.mp4, usd=args.usd)
     t = s["seconds"]
     print("\n".join([
-        f"stadium demo in {args.out} ({t['total']:.1f} s)",
+        f"stadium demo in {args.out} ({t['total']:.1f} s: "
+        + ", ".join(f"{k} {t[k]:.1f}" for k in ("build_scene", "bake", "simulate", "upload",
+                                                 "draw", "encode", "usd") if k in t) + ")",
         f"  {s['agents']:,} agents, {s['streams']} streams, {s['uniques']} uniques, "
         f"{s['characters']} character types, {s['frames']} frames",
         f"  core step {s['ms_per_step']:.2f} ms/frame, {s['upload_bytes_per_frame']:,} B "
         f"uploaded/frame, rendered on {s['renderer']}",
+        f"  mass reactions: {s['switched_with_streams']:,} agents followed "
+        f"{s['streams_switched']} switched streams (no slot)",
         f"  transitions: {s['transitions_requested']:,} requested, "
         f"{s['transitions_served']:,} served, {s['queued']:,} queued, {s['cut']} cut",
         f"  events fired {s['events_fired']:,} (clap: {s['clap_agent_events']:,} agent "

@@ -84,9 +84,11 @@ def show_summary(crowd) -> dict:
     def total(key, prefix=""):
         return int(sum(s[key] for name, s in stats.items() if name.startswith(prefix)))
 
-    requested, queued, cut = total("agents"), total("queued"), total("cut")
+    switched = total("switched")
+    requested, queued, cut = total("agents") - switched, total("queued"), total("cut")
     fired, calls = crowd.events.fired, crowd.events.calls
-    return {"transitions_requested": requested, "started_at_once": requested - queued - cut,
+    return {"switched_with_streams": switched, "streams_switched": total("streams"),
+            "transitions_requested": requested, "started_at_once": requested - queued - cut,
             "queued": queued, "cut": cut, "skipped": total("skipped"),
             "transitions_served": int(crowd.stats["transitions_served"]),
             "cheering": total("agents", CUES["goal_home"]),
@@ -100,14 +102,22 @@ def show_summary(crowd) -> dict:
 
 
 def _beat_frames(crowd, first: int, last: int) -> list:
-    """The contact sheet's frames: the first, the wave twice as it passes the camera's
-    stand, the goal's cheer, the hits and the last (beats after the run left out),
-    topped up with frames spread over the run to :data:`SHEET_FRAMES`."""
+    """The contact sheet's frames: the first, the wave in two places (as it starts at
+    the camera's stand, and just before the goal), the goal's cheer once every fan has
+    followed its stream (M frames after the cue, within its hold), the hits and the
+    last (beats after the run left out), topped up with frames spread over the run to
+    :data:`SHEET_FRAMES`."""
     from ..blender.stadium import CUES
     from ..gpu.contact_sheet import sheet_frames
 
     at = {c["name"]: c["frame"] for c in crowd.show.describe()} if crowd.show else {}
-    beats = [(CUES["wave"], 6), (CUES["wave"], 10), (CUES["goal_home"], 12),
+    goal = CUES["goal_home"]
+    rippled = crowd.config.max_offset
+    if goal in at:
+        rippled = min(rippled, max(12, crowd.config.show.cue(goal).action.hold - 6))
+    before_goal = at[goal] - at[CUES["wave"]] - 1 if goal in at and CUES["wave"] in at \
+        else 24
+    beats = [(CUES["wave"], 8), (CUES["wave"], max(before_goal, 16)), (goal, rippled),
              (f"{CUES['hit']} 1", 12)]
     picked = {first, last} | {at[name] + k for name, k in beats
                               if name in at and first <= at[name] + k <= last}
@@ -166,6 +176,9 @@ def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
                              on_image=sheet.offer)
     write_png(out / "contact_sheet.png", sheet.image())
     seconds["simulate_render"] = time.perf_counter() - t
+    for stage, key in (("simulate", "simulate"), ("sync", "upload"), ("render", "draw"),
+                       ("write", "encode")):
+        seconds[key] = preview.seconds.get(stage, 0.0)
     step_ms = crowd.stats["ms_total"] / max(crowd.stats["steps"], 1)
     summary = {"agents": cfg.agent_count, "streams": len(cfg.streams),
                "uniques": len(cfg.uniques), "characters": len(cfg.skeletons),

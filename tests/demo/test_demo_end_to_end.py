@@ -52,6 +52,11 @@ def test_summary_reports_the_show(demo):
     assert frames["goal home"] == frames["goal away"] == 2 + FRAMES * 45 // 240
     assert {frames[f"hit {k}"] for k in range(1, 7)} == {2 + FRAMES * 70 // 240}
     assert "transitions:" in run.stdout and "events fired" in run.stdout
+    # the goal is a mass reaction: the fans follow their streams, none by slot
+    goal = [c for c in s["cues"] if c["name"].startswith("goal")]
+    assert s["switched_with_streams"] == sum(c["switched"] for c in goal) > 0
+    assert all(c["switched"] == c["agents"] for c in goal) and s["streams_switched"] >= 4
+    assert "agents followed" in run.stdout
     rep = s["repetition"]                       # docs/variety.md
     assert 0 <= rep["value"] < 0.1 and rep["k"] == 6 and rep["screen"] == [320, 180]
     assert len(rep["frames"]) == 8 and min(rep["visible"]) >= 30    # a stand in view
@@ -106,11 +111,16 @@ clip = cfg.clips["clap"]
 taus = [f for n, f in clip.events if n == "clap"]
 period = clip.keys.shape[0] - 1
 root = cfg.streams[[s.name for s in cfg.streams].index("clap")].root
+# the clap stream takes the goal: a state machine whose seated state is the clip; it
+# entered that state on the first frame the crowd evaluated (start - M + 1), and a
+# state's clock starts when it is entered
+entered = cfg.start_frame - cfg.max_offset + 1
+root = root.states[root.state_names.index(root.initial)]
 on = np.flatnonzero(cfg.agent_stream == [s.name for s in cfg.streams].index("clap"))
 expected = {}
 for f in range(crowd.frame - 14, crowd.frame + 1):
-    t1 = root.start + root.speed * (f - cfg.agent_offset[on])
-    t0 = root.start + root.speed * (f - 1 - cfg.agent_offset[on])
+    t1 = root.start + root.speed * (f - entered - cfg.agent_offset[on])
+    t0 = root.start + root.speed * (f - 1 - entered - cfg.agent_offset[on])
     hit = np.zeros(on.size, bool)
     for tau in taus:
         hit |= np.floor((t1 - tau) / period) - np.floor((t0 - tau) / period) > 0
@@ -191,9 +201,12 @@ def test_contact_sheet_holds_six_frames_of_the_run_and_its_beats(demo):
     frames = s["contact_sheet_frames"]
     cue = {c["name"]: c["frame"] for c in s["cues"]}
     assert len(frames) == 6 and frames[0] == shot[0] and frames[-1] == shot[-1]
-    # the wave passing the camera's stand, the goal's cheer and the hits are on it
-    assert {cue["wave"] + 6, cue["wave"] + 10, cue["goal home"] + 12,
-            cue["hit 1"] + 12} <= set(frames)
+    # the wave in two places (as it starts at the camera's stand, just before the
+    # goal), the goal's cheer once the fans have followed their streams (M = 60 frames,
+    # within the cheer's hold) and the hits are on it
+    hold = round(FRAMES * 90 / 240)
+    assert {cue["wave"] + 8, cue["wave"] + max(cue["goal home"] - cue["wave"] - 1, 16),
+            cue["goal home"] + min(60, max(12, hold - 6)), cue["hit 1"] + 12} <= set(frames)
     expected = ContactSheet(frames)
     for f in frames:
         expected.offer(f, read_png(out / "frames" / f"frame_{f:04d}.png"))
