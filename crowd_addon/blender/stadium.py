@@ -389,7 +389,7 @@ def _wave_speed(scene, frames):
     """The wave's speed (radians a second): one lap in the run, or slower where the
     bowl is so full that a faster front would need more than :data:`WAVE_SLOTS` of the
     crowd's transition slots (a 65,000-seat bowl: the paper's 800 slots carry a wave
-    that goes round in about 40 seconds, as a real one does)."""
+    that goes round in about a minute, as a real one does)."""
     from ..core.show import Sweep, slot_speed
     from .scene_config import scene_fps
 
