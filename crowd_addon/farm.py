@@ -18,7 +18,10 @@ runs many shots' tasks on one cluster at once. Each snapshot pass and chunk is a
 retried once, the chunks wait for their shot's snapshots and the stitch for its chunks;
 progress from every worker shows as one ``chunks done/total`` count; a chunk that fails
 twice is reported by name with its error, and then nothing is stitched, so a stage
-already at the output is left as it was. Every attempt is logged in
+already at the output is left as it was: the chunks exported again write new layer
+versions and keep the ones that stage reads (usd/references.py). The report says
+whether it is so: it compares the files the stage read before the run with what is
+there after it. Every attempt is logged in
 ``<stem>.chunks/attempts.log`` (time, chunk, worker, outcome). Dask is the optional ``farm`` extra
 (``pip install .[farm]``); it is imported only here, only when a cluster is used.
 """
@@ -280,6 +283,7 @@ def _submit(client, shot, workers, k) -> dict:
     snaps_dir = os.path.join(folder, "snapshots")
     log = os.path.join(folder, "attempts.log")
     os.makedirs(folder, exist_ok=True)
+    before = _stage_state(shot.out)          # before any task can touch a file of it
     tag = f"{os.getpid()}-{time.time_ns()}-{k}"
     snaps = client.submit(_run_snapshots, shot.source, snaps_dir, (first, last), size, log,
                           key=f"crowd-snapshots-{tag}", retries=1, pure=False)
@@ -291,7 +295,7 @@ def _submit(client, shot, workers, k) -> dict:
     stitched = client.submit(_run_stitch, shot.out, chunks, log, key=f"crowd-stitch-{tag}",
                              pure=False)
     return {"shot": shot, "names": names, "snapshots": snaps, "chunks": chunks,
-            "stitch": stitched}
+            "stitch": stitched, "before": before}
 
 
 def _collect(plan, t0):
@@ -303,19 +307,74 @@ def _collect(plan, t0):
                                   f"{_error(plan['snapshots'])}; nothing was exported")
     failed = [f"{name} failed twice: {_error(f)}"
               for name, f in zip(plan["names"], plan["chunks"]) if f.status == "error"]
+    attempts = f"every attempt is in {os.path.join(chunk_folder(out), 'attempts.log')}"
     if failed:
-        return CrowdError(where + "; ".join(failed) + f"; nothing was stitched ({out} is as "
-                          f"it was; every attempt is in "
-                          f"{os.path.join(chunk_folder(out), 'attempts.log')})")
+        whole, state = _as_it_was(out, plan["before"])
+        return CrowdError(where + "; ".join(failed) + (
+            f"; nothing was stitched ({state}; {attempts})" if whole else
+            f"; nothing was stitched, but {state} ({attempts})"))
     try:
         stitched, stitch_s = plan["stitch"].result()
     except Exception as e:  # noqa: BLE001 - reported with its shot
-        return CrowdError(where + f"the stitch failed: {type(e).__name__}: {e}")
+        whole, state = _as_it_was(out, plan["before"])
+        return CrowdError(where + f"the stitch failed: {type(e).__name__}: {e}; "
+                          + (state if whole else f"and {state}"))
     files, snap_s = plan["snapshots"].result()
     chunks = [f.result() for f in plan["chunks"]]
     return FarmResult(stitched, chunks, files, {
         "snapshots": snap_s, "chunks": max(c["seconds"]["total"] for c in chunks),
         "stitch": stitch_s, "total": time.perf_counter() - t0})
+
+
+def _stage_state(out):
+    """The files the stage at ``out`` reads (itself, and every layer, clip and texture
+    it names, transitively), each with its size and modification time (None: missing);
+    None when there is no stage at ``out``. A failed run compares this with what is
+    there after it (:func:`_as_it_was`)."""
+    if not os.path.isfile(out):
+        return None
+    from .usd.references import referenced_files
+    files = {os.path.normpath(os.path.abspath(out))} | referenced_files([out])
+    return {f: _stat(f) for f in sorted(files)}
+
+
+def _stat(path):
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    return st.st_size, st.st_mtime_ns
+
+
+def _as_it_was(out, before) -> tuple:
+    """``(whole, words)``: whether the stage at ``out`` is as it was before a run that
+    stitched nothing (every file it read still there, unchanged), and the words that
+    say so, or what is gone or changed."""
+    if before is None:
+        if os.path.lexists(out):
+            return False, f"a stage appeared at {out} during the run (none was there)"
+        return True, f"there was no stage at {out}, and there is none"
+    now = {f: _stat(f) for f in before}
+    present = [f for f, st in before.items() if st is not None]
+    gone = [f for f in present if now[f] is None]
+    changed = [f for f in present if now[f] is not None and now[f] != before[f]]
+    base = os.path.dirname(os.path.abspath(out))
+
+    def names(files):
+        shown = ", ".join(os.path.relpath(f, base) for f in files[:3])
+        return shown + (f" and {len(files) - 3} more" if len(files) > 3 else "")
+    if gone or changed:
+        what = "; ".join(x for x in (
+            f"{len(gone)} gone ({names(gone)})" if gone else "",
+            f"{len(changed)} changed ({names(changed)})" if changed else "") if x)
+        return False, (f"{out} is not as it was: of the {len(present)} files it read, "
+                       f"{what}")
+    words = f"{out} is as it was, with all {len(present)} files it reads in place"
+    missing = [f for f, st in before.items() if st is None]
+    if missing:
+        words = (f"{out} is as it was, with {len(present)} files it reads in place and "
+                 f"{len(missing)} already missing before this run ({names(missing)})")
+    return True, words
 
 
 def _run_snapshots(source, folder, frames, every, log):

@@ -9,12 +9,17 @@ directory (``.shot.usdc.XXXX.tmp``, with an ``owner`` file naming the process).
 1. renames the finished layers to the new version folder, ``shot.layers/vN`` (the
    previous export, whose main layer names ``vN-1``, is untouched);
 2. renames the main layer into place: this one rename is the commit;
-3. removes the older versions.
+3. removes the older versions that no stage reads.
 
 A crash (or kill) before step 2 leaves the previous export whole; after it, the new
-one. What a killed export leaves behind (its temporary folder, an orphan version) is
-removed by the next export to the same place: temporaries of our naming whose owner
-process is gone, and every version but the one committed.
+one. A version is never changed once written, and is deleted only when no stage reads
+it (usd/references.py): not the stages beside the export, nor the stages registered
+in ``shot.layers/readers/`` (a stitched stage registers itself with each chunk it
+reads), each followed through every layer it names. So re-exporting a chunk in place
+leaves the version that a stitched stage reads. What a killed export leaves behind
+(its temporary folder, an orphan version) is removed by the next export to the same
+place: temporaries of our naming whose owner process is gone, and every older version
+no stage reads.
 """
 
 from __future__ import annotations
@@ -28,6 +33,7 @@ import tempfile
 from pxr import Tf
 
 from ..core.errors import CrowdError
+from .references import READERS, versions_in_use
 
 __all__ = ["ExportFiles", "FORMATS"]
 
@@ -152,13 +158,40 @@ class ExportFiles:
             raise CrowdError(f"{self.path}: cannot move the export into place: "
                              f"{e.strerror or e}") from None
         _step("main")
-        for name in os.listdir(self.layers_root):           # older versions, old layouts
-            if name != self.version:
-                old = os.path.join(self.layers_root, name)
-                if os.path.isdir(old) and not os.path.islink(old):
-                    shutil.rmtree(old, ignore_errors=True)
-                else:
-                    _unlink(old)
+        self._remove_unread()
+
+    def _remove_unread(self) -> None:
+        """Step 3: delete the older versions (and entries of an old layout) that no
+        stage reads (:func:`~crowd_addon.usd.references.versions_in_use`: the stages
+        beside the export and the readers registered in ``<stem>.layers/readers/``,
+        such as a stitched stage reading this chunk). A version above ours is another
+        export's, still committing, and left alone. When what is in use cannot be
+        told, nothing is deleted: a later export tries again."""
+        ours = int(self.version[1:])
+        try:
+            names = os.listdir(self.layers_root)
+        except OSError:
+            return
+        old = []
+        for name in names:
+            m = re.fullmatch(r"v(\d+)", name)
+            if name in (self.version, READERS) or (m and int(m.group(1)) > ours):
+                continue
+            old.append(name)
+        if not old:
+            return
+        try:
+            used = versions_in_use(self.layers_root)
+        except Exception:  # noqa: BLE001 - the export is committed; keep everything
+            return
+        for name in old:
+            if name in used:
+                continue
+            path = os.path.join(self.layers_root, name)
+            if os.path.isdir(path) and not os.path.islink(path):
+                shutil.rmtree(path, ignore_errors=True)
+            else:
+                _unlink(path)
 
 
 def _step(name: str) -> None:

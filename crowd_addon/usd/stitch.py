@@ -23,9 +23,12 @@ switch layers at given times, which is what the export already does for agents.
 
 The stitched stage reads the chunks' character layers and blend banks: keep the chunk
 files where they are (relative paths, so the stitched shot and its chunks can move
-together). Checked before anything is written, each problem named: every chunk is a
-crowd export of the same configuration (``configDigest``), agents, layout and
-samples per frame; their frame ranges follow each other with no gap or overlap.
+together). It registers itself with each chunk (``<chunk>.layers/readers/``,
+usd/references.py), so re-exporting a chunk in place keeps the layer version the
+stitched stage reads until no stage reads it. Checked before anything is written,
+each problem named: every chunk is a crowd export of the same configuration
+(``configDigest``), agents, layout and samples per frame; their frame ranges follow
+each other with no gap or overlap.
 """
 
 from __future__ import annotations
@@ -41,6 +44,7 @@ from .agents import ROOT
 from .clips import PRIM, manifest_layer
 from .files import ExportFiles
 from .layers import attribute, define, new_layer
+from .references import register_reader
 
 __all__ = ["stitch", "StitchResult"]
 
@@ -93,6 +97,7 @@ class _Chunk:
                              "older version? export the chunk again)")
         self.settings = crowd
         self.first, self.last = int(crowd["firstFrame"]), int(crowd["lastFrame"])
+        self.layers_root = f"{os.path.splitext(self.path)[0]}.layers"
         self.own = None
         for sub in self.layer.subLayerPaths:
             self.own = _open(self.resolve(sub), path)
@@ -241,6 +246,9 @@ def stitch(chunks, path, progress=None) -> StitchResult:
         files.save(main)
         if progress is not None:
             progress("layout", len(first.names), len(first.names))
+        for c in parts:                      # before the commit: no moment unprotected
+            if os.path.isdir(c.layers_root):
+                register_reader(c.layers_root, files.path)
         files.commit()
     return StitchResult(
         path=files.path, layers_dir=files.layers_dir, files=dict(files.written),

@@ -214,3 +214,74 @@ def test_a_blend_shot_on_workers_equals_its_single_process_export(tmp_path):
                     float(np.abs(got[n][1] - want[n][1]).max())) for n in want)
     assert worst < 1e-6, worst
     assert stream_events(got_stage) == stream_events(want_stage)
+
+
+def stage_layers(path):
+    """Every layer file the stage at ``path`` reads (pxr's walk over its sublayers,
+    references and value clips), with its bytes, and what does not resolve."""
+    from pxr import UsdUtils
+    layers, _, unresolved = UsdUtils.ComputeAllDependencies(str(path))
+    return {layer.realPath: Path(layer.realPath).read_bytes() for layer in layers}, \
+        list(unresolved)
+
+
+def test_a_re_run_whose_chunk_fails_twice_leaves_the_earlier_stage_whole(shot, cluster,
+                                                                         capsys):
+    """Issue 31 item 2: the other chunks of the re-run are exported again in place (new
+    layer versions) while chunk 2 fails twice; the stage from the earlier run must keep
+    every layer it reads (its chunks' blend banks and characters among them) and read
+    the same samples, and the message must say so truthfully."""
+    tmp, config, whole = shot
+    out = tmp / "rerun" / "shot.usdc"
+    args = ["export", "--config", str(config), "--out", str(out), "--frames",
+            f"{FRAMES[0]}-{FRAMES[1]}", "--scheduler", cluster.scheduler_address,
+            "--chunk-frames", "10"]
+    assert main(args) == 0
+    capsys.readouterr()
+    times = list(range(FRAMES[0], FRAMES[1] + 1))
+    layers, unresolved = stage_layers(out)
+    assert unresolved == [] and len(layers) > 10
+    _, samples = read(out, times)
+    # chunk 2 fails: a folder stands where its main layer goes (its layers, which the
+    # earlier stage reads, are left alone)
+    chunk2 = next((tmp / "rerun" / "shot.chunks").glob("c0002_*")) / "shot.usdc"
+    chunk2.unlink()
+    chunk2.mkdir()
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert "chunk 2 (frames 21-30) failed twice" in err
+    assert f"nothing was stitched ({out} is as it was" in err
+    again, unresolved = stage_layers(out)
+    assert unresolved == []
+    assert again == layers                               # every layer, byte for byte
+    _, now = read(out, times)
+    for name, (joints, world) in samples.items():        # the same samples
+        np.testing.assert_array_equal(now[name][0], joints)
+        np.testing.assert_array_equal(now[name][1], world)
+    chunk2.rmdir()
+    assert main(args) == 0                               # and it recovers
+    same_shot(out, whole)
+
+
+def test_a_failed_run_says_truthfully_whether_the_earlier_stage_is_as_it_was(shot,
+                                                                             tmp_path):
+    """The words after "nothing was stitched" come from the files the stage read before
+    the run, compared with what is there after it: "is as it was" only when every one
+    is in place and unchanged."""
+    import shutil
+
+    from crowd_addon.farm import _as_it_was, _stage_state
+    tmp, _, whole = shot
+    shutil.copytree(whole.parent, tmp_path / "w")
+    out = tmp_path / "w" / "shot.usdc"
+    before = _stage_state(str(out))
+    assert len(before) > 5 and all(before.values())
+    whole_now, words = _as_it_was(str(out), before)
+    assert whole_now and f"{out} is as it was, with all {len(before)} files" in words
+    blend = next(f for f in before if "/blends/" in f)
+    Path(blend).unlink()
+    whole_now, words = _as_it_was(str(out), before)
+    assert not whole_now and "is not as it was" in words and "1 gone" in words
+    assert "is as it was" not in words and "blends" in words
+    assert _as_it_was(str(tmp_path / "none.usdc"), None) == (
+        True, f"there was no stage at {tmp_path / 'none.usdc'}, and there is none")
