@@ -77,8 +77,9 @@ def rigid_mesh(name, skeleton, bone, positions, triangles, bone_count=None,
 
 
 def is_card(mesh: ProxyMesh) -> bool:
-    """Whether ``mesh`` is a card level (:func:`~.mesh.card_lod`)."""
-    return mesh.vertex_count == 8 and mesh.name.endswith("." + CARD)
+    """Whether ``mesh`` is a card level (:func:`~.mesh.card_lod`, or the card per body
+    part of :func:`~.mesh.parts_lod`, both named ``<mesh>.card``)."""
+    return mesh.name.endswith("." + CARD)
 
 
 def merge_meshes(name: str, parts) -> ProxyMesh:

@@ -208,7 +208,7 @@ class CrowdConfig:
         return len(have) - 1
 
     def _levels(self, mesh, lods) -> list:
-        from .mesh import CARD, ProxyMesh, build_lods, card_lod
+        from .mesh import CARD, ProxyMesh, build_lods, parts_lod
         self._check_mesh(mesh)
         ready = [m for m in lods if isinstance(m, ProxyMesh)]
         if not ready:
@@ -227,7 +227,7 @@ class CrowdConfig:
                     raise CrowdError(f"mesh {mesh.name!r}: LOD {k} {level.name!r} is for "
                                      f"skeleton {level.skeleton!r}, not {mesh.skeleton!r}")
                 self._check_mesh(level, f"mesh {mesh.name!r}: LOD {k}: ")
-            levels = [mesh, *ready] + ([card_lod(mesh)] if rest else [])
+            levels = [mesh, *ready] + ([parts_lod(mesh)] if rest else [])
         return levels
 
     def _check_mesh(self, mesh, what=""):

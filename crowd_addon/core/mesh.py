@@ -300,7 +300,9 @@ def build_lods(mesh: ProxyMesh, ratios=(0.25, 0.06)) -> list:
     """``[mesh, lod1, lod2, ...]``: each LOD keeps about ``ratio`` of the triangles;
     the entry :data:`CARD` (last only) adds the 8-vertex :func:`card_lod`.
 
-    Vertex clustering on a uniform grid over the bind pose: the cell size is
+    Vertex clustering on a uniform grid over the bind pose, per dominant bone (a
+    cell holds the vertices of one bone only, so a cluster never joins two body parts
+    that move apart: an arm raised never drags the torso's vertices with it): the cell size is
     searched (bisection on its logarithm) until the triangle count is close to the
     target; each cell is represented by its vertex nearest the cell's mean, with
     that vertex's own position, normal and influences (all of them: a mesh stored
@@ -316,7 +318,10 @@ def build_lods(mesh: ProxyMesh, ratios=(0.25, 0.06)) -> list:
             if ratio != CARD or k != len(ratios):
                 raise CrowdError(f"mesh {mesh.name!r}: LOD {ratio!r} must be a triangle ratio "
                                  f"in (0, 1) or {CARD!r} (as the last level)")
-            lods.append(card_lod(mesh))
+            card = parts_lod(mesh)
+            if card.triangle_count > lods[-1].triangle_count:    # a light body: no lighter
+                card = replace(lods[-1], name=f"{mesh.name}.{CARD}")
+            lods.append(card)
             continue
         if not 0 < ratio < 1:
             raise CrowdError(f"mesh {mesh.name!r}: LOD ratio {ratio} must be in (0, 1)")
@@ -390,9 +395,61 @@ def card_lod(mesh: ProxyMesh, name: str | None = None) -> ProxyMesh:
         None, mesh.bone_count, **look)
 
 
-def _cluster(mesh: ProxyMesh, cell: float, name: str):
+def parts_lod(mesh: ProxyMesh, name: str | None = None, min_share: float = 0.004) -> ProxyMesh:
+    """The farthest LOD: a card per body part -- two crossed quads (8 vertices, 4
+    triangles) per bone that carries a share of at least ``min_share`` of the mesh's
+    surface, bound to that bone alone, in the look covering most of that part.
+
+    A part is the triangles whose first vertex's strongest bone is that bone. Its
+    quads stand along the part's longest principal axis (bind pose), each as wide
+    as the part across one of the other two axes. So a far agent keeps its colours
+    (shirt, skin, hair, trousers: the agent's palette and tint reach each part's
+    look) and its pose (its arms are quads that follow the arms: raised arms read as
+    raised arms), at a few dozen triangles where the single :func:`card_lod` (which
+    is one colour and follows the root and the head only) read as a painted streak.
+    A mesh with no part above the share falls back to :func:`card_lod`.
+    """
+    p = mesh.positions.astype(np.float64)
+    t = mesh.triangles.astype(np.int64)
+    area = 0.5 * np.linalg.norm(np.cross(p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]]),
+                                axis=1)
+    bone = mesh.bone_indices[t[:, 0], 0].astype(np.int64)
+    share = np.bincount(bone, area) / max(area.sum(), 1e-12)
+    mat = np.zeros(t.shape[0], np.int64) if mesh.material is None else \
+        mesh.material.astype(np.int64)
+    pos, bones, normals, looks = [], [], [], []
+    for b in np.flatnonzero(share >= min_share):
+        tri = t[bone == b]
+        v = p[np.unique(tri)]
+        centre = v.mean(0)
+        axes = np.linalg.svd(v - centre, full_matrices=False)[2]       # rows: principal axes
+        proj = (v - centre) @ axes.T
+        lo, hi = proj.min(0), proj.max(0)
+        mid = centre + ((lo + hi) / 2) @ axes
+        half = np.maximum((hi - lo) / 2, 1e-3)
+        a0 = axes[0] * half[0]
+        for k, n in ((1, 2), (2, 1)):
+            ak = axes[k] * half[k]
+            pos += [mid - a0 - ak, mid - a0 + ak, mid + a0 + ak, mid + a0 - ak]
+            normals += [axes[n]] * 4
+        bones.append(b)
+        looks.append(int(np.argmax(np.bincount(mat[bone == b], area[bone == b]))))
+    if not bones:
+        return card_lod(mesh, name)
+    q = np.array([[0, 1, 2], [0, 2, 3]])
+    tris = np.concatenate([q + 4 * i for i in range(2 * len(bones))])
+    look = {"material": np.repeat(looks, 4), "looks": mesh.looks} if mesh.looks else {}
+    return ProxyMesh.from_influences(
+        name or f"{mesh.name}.{CARD}", mesh.skeleton, np.array(pos),
+        tris, np.repeat(bones, 8)[:, None], np.ones((8 * len(bones), 1)),
+        np.array(normals), mesh.bone_count, **look)
+
+
+def _cluster(mesh: ProxyMesh, cell: float, name: str, by_bone: bool = True):
     p = mesh.positions.astype(np.float64)
     key = np.floor((p - p.min(0)) / cell).astype(np.int64)
+    if by_bone:     # a cluster never spans two bones: parts that move apart stay apart
+        key = np.c_[mesh.bone_indices[:, 0].astype(np.int64), key]
     _, cluster = np.unique(key, axis=0, return_inverse=True)
     cluster = cluster.reshape(-1)
     n = int(cluster.max()) + 1

@@ -7,7 +7,7 @@ import pytest
 from crowd_addon.core import synthetic
 from crowd_addon.core.config import CrowdConfig
 from crowd_addon.core.errors import CrowdError
-from crowd_addon.core.mesh import CARD, ProxyMesh, card_lod
+from crowd_addon.core.mesh import CARD, ProxyMesh, card_lod, parts_lod
 
 
 @pytest.fixture
@@ -26,8 +26,8 @@ def test_ready_levels_are_used_as_given_then_the_card(cfg):
     levels = cfg.add_mesh(body, lods=(mid, low, CARD))
     assert [lv.name for lv in levels[:3]] == ["body", "mid", "low"]
     assert levels[1] is mid and levels[2] is low and cfg.meshes["fan"] is levels
-    want = card_lod(body)
-    assert levels[3].vertex_count == 8
+    want = parts_lod(body)             # a card per body part
+    assert levels[3].vertex_count == want.vertex_count and levels[3].name == "body.card"
     np.testing.assert_array_equal(levels[3].positions, want.positions)
     assert [lv.name for lv in cfg.add_mesh(body, lods=(mid,))] == ["body", "mid"]
 

@@ -154,8 +154,9 @@ def test_card_stands_on_the_root_bone_and_follows_the_head():
 
 def test_card_is_the_last_lod_and_the_default_far_level():
     m = _box(0.4, 0.2, 1.8)
-    levels = build_lods(m, (0.5, CARD))
-    assert levels[-1].vertex_count == 8 and len(levels) == 3
+    levels = build_lods(m, (0.5, CARD))   # a card per body part: two bones, two parts
+    assert levels[-1].vertex_count == 16 and len(levels) == 3
+    assert sorted(set(levels[-1].bone_indices[:, 0].tolist())) == [1, 2]
     for bad in (("card", 0.5), ("cards",)):
         with pytest.raises(CrowdError, match="'card' \\(as the last level\\)"):
             build_lods(m, bad)
@@ -181,4 +182,76 @@ def test_automatic_lods_never_decimate_below_a_body(bones, sides, rings):
     assert min(tris[:3]) >= min(MIN_LOD_TRIANGLES, m.triangle_count), tris
     if m.triangle_count <= MIN_LOD_TRIANGLES:
         assert tris[:3] == [m.triangle_count] * 3
-    assert tris[3] == 4
+    assert tris[3] <= tris[2]          # a card per body part, never heavier than lod2
+
+
+def _two_part_body():
+    """A 'torso' box on bone 1 with an 'arm' box on bone 2 touching it at z = 1.0..1.4,
+    each face split 3 x 3, and the skeleton: bone 2 pivots at (0.25, 0, 1.4)."""
+    from crowd_addon.core.skeleton import Skeleton
+    bind = np.zeros((3, 10))
+    bind[:, :4] = 1.0
+    bind[1, 7:] = (0, 0, 0.0)
+    bind[2, 7:] = (0.25, 0, 1.4)
+    sk = Skeleton("sk", ("root", "torso", "arm"), np.array([-1, 0, 1]), bind)
+    pos, tri, bone = [], [], []
+    g = np.linspace(0, 1, 4)
+    for b, lo, hi in ((1, (-0.2, -0.1, 0.0), (0.2, 0.1, 1.5)), (2, (0.2, -0.05, 1.0),
+                                                              (0.3, 0.05, 1.4))):
+        lo, hi = np.array(lo), np.array(hi)
+        for axis in range(3):
+            u, v = [a for a in range(3) if a != axis]
+            for side in (lo, hi):
+                uu, vv = np.meshgrid(g, g, indexing="ij")
+                q = np.zeros((4, 4, 3))
+                q[..., axis] = side[axis]
+                q[..., u] = lo[u] + uu * (hi[u] - lo[u])
+                q[..., v] = lo[v] + vv * (hi[v] - lo[v])
+                base = sum(len(p) for p in pos)
+                pos.append(q.reshape(-1, 3))
+                i = (np.arange(3)[:, None] * 4 + np.arange(3)[None]).ravel()
+                tri += [np.c_[i, i + 4, i + 5] + base, np.c_[i, i + 5, i + 1] + base]
+                bone.append(np.full(16, b))
+    pos = np.concatenate(pos)
+    mesh = ProxyMesh.from_influences("body", "sk", pos, np.concatenate(tri),
+                                     np.concatenate(bone)[:, None], np.ones((len(pos), 1)),
+                                     bone_count=3)
+    raised = np.broadcast_to(bind, (1, 3, 10)).copy()
+    raised[0, 2, 3:7] = (np.cos(1.4), 0.0, np.sin(1.4), 0.0)     # the arm up (about Y)
+    return sk, mesh, np.concatenate([bind[None], raised])
+
+
+@pytest.mark.xfail(reason="the torn level built here does not depart by a pixel yet: "
+                          "the test's tear needs a stronger merge (issue 36, unfinished)")
+def test_the_lod_check_refuses_a_level_that_tears_and_keeps_one_that_does_not():
+    from crowd_addon.core.lod_check import check_levels, departure
+    from crowd_addon.core.mesh import _cluster
+
+    sk, mesh, poses = _two_part_body()
+    kept = _cluster(mesh, 0.12, "body.kept", by_bone=True)     # a cluster per bone
+    # a clustering across parts: the arm's upper vertices merged into torso clusters
+    # (a torso vertex represents them), so they stay while the rest of the arm rises
+    idx = kept.bone_indices.copy()
+    idx[(idx[:, 0] == 2) & (kept.positions[:, 2] < 1.2), 0] = 1
+    torn = ProxyMesh("body.torn", "sk", kept.positions, kept.triangles, idx,
+                     kept.bone_weights, kept.normals, 3)
+    assert torn.triangle_count < mesh.triangle_count and kept.triangle_count < mesh.triangle_count
+    assert departure(mesh, mesh, sk, poses, 40) == 0.0
+    assert departure(torn, mesh, sk, poses, 40) > 1.0 > departure(kept, mesh, sk, poses, 40)
+    levels, notes = check_levels([mesh, kept, torn], sk, poses, (40, 40))
+    assert levels[1] is kept and levels[2].name == "body.torn"
+    assert levels[2].triangle_count == kept.triangle_count       # the level before, renamed
+    assert len(notes) == 1 and "LOD 2 'body.torn' refused" in notes[0]
+
+
+def test_the_card_per_body_part_follows_each_part():
+    from crowd_addon.core.mesh import parts_lod
+    from crowd_addon.core.skinning import skin_vertices, skinning_matrices
+
+    sk, mesh, poses = _two_part_body()
+    card = parts_lod(mesh)
+    assert card.name == "body.card" and card.vertex_count == 16
+    rows = skinning_matrices(poses, sk)
+    up = skin_vertices(card.positions, card.bone_indices, card.bone_weights, rows)[1]
+    arm = card.bone_indices[:, 0] == 2
+    assert up[arm, 2].max() > 1.6 and np.allclose(up[~arm], card.positions[~arm], atol=1e-6)
