@@ -109,8 +109,9 @@ class CrowdHandle:
         """Step the crowd to ``frame``. Going backwards re-simulates from the start
         (deterministic) or from the nearest snapshot the crowd keeps; the frames
         replayed before ``frame`` report no events."""
+        from .core.bounds import whole_frame
         crowd = self._need()
-        frame = int(frame)
+        frame = whole_frame(frame, "advance_to")      # CrowdError, as Crowd.advance_to
         if frame < crowd.frame or crowd.jump_snapshot(frame) is not None:
             self._mute_before = frame
         try:

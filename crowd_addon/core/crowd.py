@@ -385,10 +385,24 @@ class Crowd:
         with :meth:`keep_snapshots` a jump either way starts instead from the nearest
         kept snapshot before ``frame`` when that is nearer than where the crowd is, so
         it steps at most ``snapshots.every`` frames (at least one: the frame reached is
-        stepped, so its events fire as on any frame change)."""
-        frame = int(frame)
+        stepped, so its events fire as on any frame change).
+
+        ``frame`` is a whole number of magnitude at most :data:`~.bounds.MAX_FRAME`, and
+        one call steps at most :data:`~.bounds.MAX_RUN_FRAMES` frames (from where the
+        run starts: this frame, the snapshot it jumps from, or the start frame when it
+        goes back). Both are checked before anything changes (CrowdError naming the
+        bound and how to split the run)."""
+        from .bounds import MAX_RUN_FRAMES, check_run, whole_frame
+        frame = whole_frame(frame, "advance_to")
         start = self.config.start_frame
         snap = self.jump_snapshot(frame)
+        # where the run starts: the snapshot, or here, or the frame reset to (going
+        # back); a replay below only drops snapshots after the one jumped from
+        origin = snap.frame if snap is not None else \
+            self.frame if frame >= self.frame else min(start, frame)
+        check_run("advance_to", origin, frame,
+                  f"advance_to({origin + MAX_RUN_FRAMES}) first, then on from there, each "
+                  "call at most that many frames further")
         if frame < self.frame and self._outside:   # replayed from there: changes lost
             self._replay_from(snap.frame if snap is not None else start)
             snap = self.jump_snapshot(frame)
@@ -658,5 +672,8 @@ class Crowd:
         return self.evaluator.states(self._root(target))
 
     def on_event(self, name, fn) -> int:
-        """Register ``fn(name, frame, agent_ids)`` for event tag ``name`` (``"*"``: all)."""
+        """Register ``fn(name, frame, agent_ids)`` for event tag ``name`` (``"*"``: all);
+        returns a handle (``crowd.events.off(handle)``). A name that is not a non-empty
+        string or an ``fn`` that cannot be called is a CrowdError, and nothing is
+        registered."""
         return self.events.on(name, fn)

@@ -19,6 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .errors import CrowdError
+
 __all__ = ["EventDispatcher", "CallbackError", "deliver"]
 
 log = logging.getLogger("crowd_addon.events")
@@ -69,11 +71,17 @@ class EventDispatcher:
         self.fired, self.calls = counts
 
     def on(self, name: str, fn) -> int:
-        """Register ``fn(name, frame, agent_ids)`` for ``name`` (or ``"*"``); returns a handle."""
+        """Register ``fn(name, frame, agent_ids)`` for ``name`` (or ``"*"``); returns a
+        handle. A name that is not a non-empty string, or an ``fn`` that cannot be
+        called, is a CrowdError (nothing registered)."""
+        if not isinstance(name, str) or not name:
+            raise CrowdError(f"{self.label}: on_event: the event name must be a tag name "
+                             f"(a non-empty string) or '*' for every event, got {name!r}")
         if not callable(fn):
-            raise TypeError(f"event callback for {name!r} is not callable: {fn!r}")
+            raise CrowdError(f"{self.label}: on_event: the callback for {name!r} is not "
+                             f"callable: {fn!r}")
         self._next += 1
-        self._handlers[self._next] = (str(name), fn)
+        self._handlers[self._next] = (name, fn)
         return self._next
 
     def off(self, handle: int) -> None:

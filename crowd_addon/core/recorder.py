@@ -3,8 +3,9 @@
 :func:`record`, or a :class:`Recorder` stepped one frame at a time (a modal timer), runs
 a :class:`~.crowd.Crowd` over ``first .. last`` reading only ``crowd.view``: see
 :mod:`.recording` for what is kept. Before anything runs, shots are refused that would
-simulate more than :data:`MAX_PREROLL` frames before their first frame or whose poses
-would take more than :data:`MAX_BYTES`.
+simulate more than :data:`MAX_PREROLL` frames before their first frame, step more than
+:data:`~.bounds.MAX_RUN_FRAMES` frames in all, or whose poses would take more than
+:data:`MAX_BYTES`.
 """
 
 from __future__ import annotations
@@ -277,6 +278,10 @@ def _check_cost(view, first, last):
                          f"{lay.streams} streams and {lay.uniques} uniques{samples}) need "
                          f"{need / 2**30:,.1f} GiB of poses, more than "
                          f"{MAX_BYTES / 2**30:.0f} GiB; record a shorter range")
+    from .bounds import check_run
+    check_run("record", view.config.start_frame if view.frame > first else view.frame, last,
+              "record the shot in chunks, each going on from the snapshot the last one "
+              "left (crowd export --frames A-B --snapshots DIR, then crowd stitch)")
 
 
 def _check_frames(first, last, start) -> tuple:

@@ -18,14 +18,18 @@ poses, so a snapshot taken with either mode restores into either.
 The file (``.npz``, see docs/snapshots.md) is a NumPy zip archive: one array per
 state array, and ``snapshot.json``, a UTF-8 JSON header (as uint8 bytes) with the
 format name and version, the frame, the configuration's digest, the samples per
-frame, the small values (counts, parameters, triggers) and the name, dtype and shape
-of every array, all checked on load. Files are written through a temporary name and
-renamed, so a failed write leaves no partial file.
+frame, the small values (counts, parameters, triggers) and the name, dtype, shape and
+SHA-256 digest of every array, all checked on load: every header field and count
+against its bounds, every array against its digest, so a damaged file is refused with
+its name. Files are written through a temporary name and renamed, so a failed write
+leaves no partial file.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
+import math
 import os
 import tempfile
 import zipfile
@@ -34,6 +38,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .bounds import MAX_RUN_FRAMES, check_run, whole_frame
 from .errors import CrowdError
 from .files import file_mode
 
@@ -41,8 +46,12 @@ __all__ = ["Snapshot", "SnapshotCache", "SnapshotFolder", "FORMAT", "VERSION", "
            "load_snapshot", "write_snapshots", "ShotSnapshots"]
 
 FORMAT = "crowd-snapshot"
-VERSION = 1
+#: 2: each array's SHA-256 in the header (version 1 files, without it, are refused)
+VERSION = 2
 HEADER = "snapshot.json"
+#: The largest count a snapshot may hold (events fired, slots served, tickets issued,
+#: steps...): whole numbers up to 2**53 are exact in every JSON reader.
+MAX_COUNT = 2**53
 
 
 def copy_state(state):
@@ -127,10 +136,12 @@ class Snapshot:
         return _nested(self.arrays, self.values)
 
     def header(self) -> dict:
+        """The file's header (docs/snapshots.md): the digests of the arrays included."""
         return {"format": FORMAT, "version": VERSION, "frame": self.frame,
                 "config_digest": self.config_digest, "substeps": self.substeps,
                 "values": self.values,
-                "arrays": {k: {"dtype": a.dtype.str, "shape": list(a.shape)}
+                "arrays": {k: {"dtype": a.dtype.str, "shape": list(a.shape),
+                               "sha256": array_digest(a)}
                            for k, a in self.arrays.items()}}
 
     def save(self, path) -> None:
@@ -164,10 +175,17 @@ class Snapshot:
                     pass
 
 
+def array_digest(a: np.ndarray) -> str:
+    """SHA-256 hex of an array's bytes in C order (its dtype and shape are listed
+    beside it in the header)."""
+    return hashlib.sha256(np.ascontiguousarray(a).reshape(-1).view(np.uint8)).hexdigest()
+
+
 def load_snapshot(path) -> Snapshot:
     """Read a snapshot written by :meth:`Snapshot.save`. Anything wrong (not a
-    snapshot, another format version, a missing, extra or mis-shaped array, a damaged
-    archive) raises CrowdError naming the file and what is wrong."""
+    snapshot, another format version, a header field or count out of its bounds, a
+    missing, extra, mis-shaped or damaged array, a damaged archive) raises CrowdError
+    naming the file and what is wrong."""
     path = os.fspath(path)
     try:
         z = np.load(path, allow_pickle=False)
@@ -177,9 +195,12 @@ def load_snapshot(path) -> Snapshot:
             names = set(z.files)
             if HEADER not in names:
                 raise CrowdError(f"{path}: not a crowd snapshot (no {HEADER})")
+            raw = z[HEADER]
+            if not isinstance(raw, np.ndarray) or raw.dtype != np.uint8 or raw.ndim != 1:
+                raise CrowdError(f"{path}: {HEADER} is damaged (not the header's bytes)")
             try:
-                head = json.loads(z[HEADER].tobytes().decode("utf-8"))
-            except (UnicodeDecodeError, ValueError) as e:
+                head = json.loads(raw.tobytes().decode("utf-8"))
+            except (UnicodeDecodeError, ValueError, RecursionError) as e:
                 raise CrowdError(f"{path}: {HEADER} is not valid JSON: {e}") from None
             _check_header(path, head)
             listed = head["arrays"]
@@ -191,10 +212,16 @@ def load_snapshot(path) -> Snapshot:
             arrays = {}
             for name, spec in listed.items():
                 a = z[name]
+                if not isinstance(a, np.ndarray):
+                    raise CrowdError(f"{path}: array {name!r} is damaged (not a NumPy "
+                                     "array)")
                 if a.dtype.str != spec["dtype"] or list(a.shape) != list(spec["shape"]):
                     raise CrowdError(f"{path}: array {name!r} is {a.dtype.str} "
                                      f"{list(a.shape)}, the header says {spec['dtype']} "
                                      f"{spec['shape']}")
+                if array_digest(a) != spec["sha256"]:
+                    raise CrowdError(f"{path}: array {name!r} does not match its digest in "
+                                     f"the header: the file is damaged")
                 arrays[name] = a
     except CrowdError:
         raise
@@ -208,9 +235,17 @@ def load_snapshot(path) -> Snapshot:
 
 
 def _check_header(path, head):
+    """Every field of the header against its type and bounds (CrowdError naming the
+    file and the field)."""
+    from .bounds import MAX_FRAME
+    from .config import MAX_SUBSTEPS
     if not isinstance(head, dict) or head.get("format") != FORMAT:
         raise CrowdError(f"{path}: not a crowd snapshot (format "
                          f"{head.get('format') if isinstance(head, dict) else head!r})")
+    if head.get("version") == 1:
+        raise CrowdError(f"{path}: snapshot format version 1 (its arrays carry no "
+                         f"digest), this crowd reads version {VERSION}: write it again "
+                         "(crowd snapshot, or crowd export --snapshots)")
     if head.get("version") != VERSION:
         raise CrowdError(f"{path}: snapshot format version {head.get('version')!r}, this "
                          f"crowd reads version {VERSION}")
@@ -219,10 +254,109 @@ def _check_header(path, head):
                             ("arrays", dict, "an object")):
         if not isinstance(head.get(key), kind) or isinstance(head.get(key), bool):
             raise CrowdError(f"{path}: {HEADER}: {key!r} must be {what}")
+    if abs(head["frame"]) > MAX_FRAME:
+        raise CrowdError(f"{path}: {HEADER}: 'frame' {head['frame']} is past the largest "
+                         f"frame number (magnitude at most {MAX_FRAME})")
+    if not _is_hex(head["config_digest"]):
+        raise CrowdError(f"{path}: {HEADER}: 'config_digest' must be a SHA-256 (64 hex "
+                         "digits)")
+    if not 1 <= head["substeps"] <= MAX_SUBSTEPS:
+        raise CrowdError(f"{path}: {HEADER}: 'substeps' must be 1..{MAX_SUBSTEPS}, got "
+                         f"{head['substeps']}")
     for name, spec in head["arrays"].items():
         if not (isinstance(spec, dict) and isinstance(spec.get("dtype"), str)
-                and isinstance(spec.get("shape"), list)):
-            raise CrowdError(f"{path}: {HEADER}: array {name!r} needs a dtype and a shape")
+                and isinstance(spec.get("shape"), list) and _is_hex(spec.get("sha256"))):
+            raise CrowdError(f"{path}: {HEADER}: array {name!r} needs a dtype, a shape and "
+                             "a sha256")
+        if not all(isinstance(n, int) and not isinstance(n, bool) and 0 <= n <= MAX_COUNT
+                   for n in spec["shape"]):
+            raise CrowdError(f"{path}: {HEADER}: array {name!r}: its shape must be sizes "
+                             f">= 0, got {spec['shape']}")
+    check_values(head["values"], head["frame"], f"{path}: {HEADER}")
+
+
+def _is_hex(text) -> bool:
+    return isinstance(text, str) and len(text) == 64 and \
+        all(c in "0123456789abcdef" for c in text)
+
+
+#: the values that are counts (whole numbers 0..MAX_COUNT), and those that hold counts
+#: by name (``{name: count}``) or by name and name (``{name: {name: count}}``)
+_COUNTS = ("crowd.steps", "slots.served", "slots.cuts", "slots.queue.count",
+           "slots.queue.issued")
+_COUNTS_BY_NAME = ("events.fired", "events.calls", "show.reactions")
+_COUNTS_BY_NAMES = ("show.stats",)
+#: the values that are frame numbers
+_FRAMES = ("crowd.frame", "crowd.origin")
+#: how deep a value may nest (lists and objects)
+_DEPTH = 8
+
+
+def check_values(values: dict, frame: int, what: str) -> None:
+    """Each small value of a snapshot against its bounds: counts are whole numbers
+    0..:data:`MAX_COUNT`, frames whole numbers within ``MAX_FRAME`` (``crowd.frame``
+    the snapshot's ``frame``), the step time a finite number >= 0, parameters finite
+    numbers, triggers names; any other number finite and no larger than a count.
+    CrowdError naming ``what`` and the value otherwise."""
+    from .bounds import MAX_FRAME
+
+    def bad(name, must):
+        value = repr(values[name])
+        raise CrowdError(f"{what}: value {name!r} must be {must}, got "
+                         f"{value if len(value) <= 80 else value[:77] + '...'}")
+
+    def count(v):
+        return isinstance(v, int) and not isinstance(v, bool) and 0 <= v <= MAX_COUNT
+
+    def number(v):
+        return isinstance(v, (int, float)) and not isinstance(v, bool) and \
+            math.isfinite(v) and abs(v) <= MAX_COUNT
+
+    def plain(v, depth=0):
+        if v is None or isinstance(v, (bool, str)):
+            return True
+        if isinstance(v, (int, float)):
+            return number(v)
+        if depth >= _DEPTH:
+            return False
+        if isinstance(v, list):
+            return all(plain(x, depth + 1) for x in v)
+        return isinstance(v, dict) and all(isinstance(k, str) and plain(x, depth + 1)
+                                           for k, x in v.items())
+
+    def by_name(v, inner):
+        return isinstance(v, dict) and all(isinstance(k, str) and inner(x)
+                                           for k, x in v.items())
+
+    for name, v in values.items():
+        if not isinstance(name, str):
+            raise CrowdError(f"{what}: value names must be strings, got {name!r}")
+        if name in _COUNTS and not count(v):
+            bad(name, f"a count (a whole number 0..{MAX_COUNT})")
+        elif name in _COUNTS_BY_NAME and not by_name(v, count):
+            bad(name, f"counts by name (whole numbers 0..{MAX_COUNT})")
+        elif name in _COUNTS_BY_NAMES and not by_name(v, lambda d: by_name(d, count)):
+            bad(name, f"counts by name and name (whole numbers 0..{MAX_COUNT})")
+        elif name in _FRAMES and not (isinstance(v, int) and not isinstance(v, bool)
+                                      and abs(v) <= MAX_FRAME):
+            bad(name, f"a frame (a whole number of magnitude at most {MAX_FRAME})")
+        elif name == "crowd.ms_total" and not (number(v) and v >= 0):
+            bad(name, "a finite number of milliseconds >= 0")
+        elif name == "evaluator.params" and not (
+                isinstance(v, list) and all(by_name(p, number) for p in v)):
+            bad(name, "finite numbers by parameter name, one object per animation")
+        elif name == "evaluator.triggers" and not (
+                isinstance(v, list) and all(isinstance(t, list) and
+                                            all(isinstance(n, str) for n in t) for t in v)):
+            bad(name, "trigger names, one list per animation")
+        elif not plain(v):
+            bad(name, f"plain JSON: finite numbers of magnitude at most {MAX_COUNT}, "
+                      f"at most {_DEPTH} levels deep")
+    if "crowd.frame" in values and values["crowd.frame"] != frame:
+        bad("crowd.frame", f"the snapshot's frame {frame}")
+    if "crowd.origin" in values and "crowd.frame" in values and \
+            values["crowd.origin"] > values["crowd.frame"]:
+        bad("crowd.origin", f"a frame at or before the crowd's frame {frame}")
 
 
 def take(crowd) -> Snapshot:
@@ -244,6 +378,12 @@ def check(crowd, snap: Snapshot, what: str = "snapshot") -> None:
     if snap.substeps != crowd.substeps:
         raise CrowdError(f"{what} of frame {snap.frame} keeps {snap.substeps} samples a "
                          f"frame, this crowd {crowd.substeps}")
+    from .bounds import MAX_FRAME
+    if isinstance(snap.frame, bool) or not isinstance(snap.frame, int) or \
+            abs(snap.frame) > MAX_FRAME:
+        raise CrowdError(f"{what}: its frame {snap.frame!r} is not a frame number (a whole "
+                         f"number of magnitude at most {MAX_FRAME})")
+    check_values(snap.values, snap.frame, what)
     arrays, values = _flatten(crowd._state())
     for name in sorted(set(arrays) | set(snap.arrays)):
         a, b = arrays.get(name), snap.arrays.get(name)
@@ -405,13 +545,21 @@ def write_snapshots(crowd, folder: SnapshotFolder, first: int, last: int, every:
     ``every`` frames after it (the frame before each ``every``-frame chunk of
     ``first .. last``; none before the start frame, where a chunk needs none) and at
     ``last``. Returns the files written.
-    ``progress(done, total)`` after each step."""
+    ``progress(done, total)`` after each step. A pass that would step more than
+    :data:`~.bounds.MAX_RUN_FRAMES` frames is refused before its first step."""
     if isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 1:
         raise CrowdError(f"snapshots: every must be a whole number of frames >= 1, "
                          f"got {every!r}")
+    first, last = whole_frame(first, "snapshots"), whole_frame(last, "snapshots")
     if first > last:
         raise CrowdError(f"snapshots: frames {first}-{last}: the first is after the last")
     folder.start(crowd, first)
+    end = crowd.frame + MAX_RUN_FRAMES
+    check_run("snapshots", crowd.frame, last,              # before the first step
+              f"write them in passes of at most {MAX_RUN_FRAMES:,} frames into the same "
+              f"folder, each going on from the last snapshot there (crowd snapshot "
+              f"--frames {min(first, end)}-{end}, then --frames {end + 1}-{end + MAX_RUN_FRAMES}, "
+              "and so on)")
     start = crowd.config.start_frame              # a new crowd is there already
     wanted = {f for f in range(first - 1, last + 1, every) if f > start} | {last}
     written, total = [], last - crowd.frame

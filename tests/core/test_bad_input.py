@@ -275,3 +275,90 @@ def test_a_singular_inverse_bind_is_named():
     with pytest.raises(CrowdError, match=r"skeleton 'fan': inverse_bind of bone "
                                          r"'.+' is singular"):
         Skeleton("fan", sk.bone_names, sk.parents, sk.bind_pose, inv)
+
+
+# ------------------------------------------------- advance_to, on_event (issue 31)
+
+def refused(crowd, fn, *words):
+    """``fn(crowd)`` raises CrowdError with ``words``, changes nothing, and never steps:
+    a refused run is refused before its first frame (before the fix
+    ``advance_to(10**30)`` stepped for 13 minutes until it was killed)."""
+    def step():
+        pytest.fail("the crowd stepped: the run was not refused before it began")
+    crowd.step = step
+    try:
+        before = state(crowd)
+        with pytest.raises(CrowdError) as e:
+            fn(crowd)
+        assert_unchanged(before, state(crowd))
+    finally:
+        del crowd.step
+    msg = str(e.value)
+    for w in words:
+        assert w in msg, f"{w!r} not in {msg!r}"
+    crowd.step()                                      # still works afterwards
+    return msg
+
+
+@pytest.mark.parametrize("frame, words", [
+    ("abc", ["advance_to", "'abc'", "whole number"]),
+    (2.5, ["advance_to", "2.5"]),
+    (None, ["advance_to", "None"]),
+    (True, ["advance_to", "True"]),
+])
+def test_advance_to_a_frame_that_is_not_a_whole_number_is_named(busy, frame, words):
+    # regression: advance_to("abc") raised int()'s bare ValueError
+    refused(busy, lambda c: c.advance_to(frame), *words)
+
+
+def test_advance_to_a_frame_past_the_largest_is_refused_before_stepping(busy):
+    from crowd_addon.core.bounds import MAX_FRAME
+    refused(busy, lambda c: c.advance_to(10**30), "advance_to", str(10**30),
+            str(MAX_FRAME))
+
+
+def test_a_run_longer_than_the_bound_is_refused_before_stepping(busy):
+    """One call steps at most MAX_RUN_FRAMES frames; the error says the bound, where
+    the run would start and how to split it, and changes nothing."""
+    from crowd_addon.core.bounds import MAX_RUN_FRAMES
+    now = busy.frame
+    far = now + MAX_RUN_FRAMES + 1
+    msg = refused(busy, lambda c: c.advance_to(far), "advance_to", f"frame {far}",
+                  f"{MAX_RUN_FRAMES:,}", f"from frame {now}", "split")
+    assert f"advance_to({now + MAX_RUN_FRAMES})" in msg          # the first part
+
+
+def test_a_run_of_exactly_the_bound_is_not_refused(busy, monkeypatch):
+    from crowd_addon.core.bounds import MAX_RUN_FRAMES
+    steps = []
+
+    def step():                                       # one fake step to the end
+        steps.append(busy.frame)
+        busy.frame += MAX_RUN_FRAMES
+    monkeypatch.setattr(busy, "step", step)
+    busy.advance_to(busy.frame + MAX_RUN_FRAMES)
+    assert len(steps) == 1
+
+
+@pytest.mark.parametrize("name, fn, words", [
+    ("x", 5, ["on_event", "'x'", "5", "not callable"]),
+    (5, print, ["on_event", "event name", "5"]),
+    ("", print, ["on_event", "event name", "''"]),
+])
+def test_on_event_with_a_bad_name_or_callback_is_named(busy, name, fn, words):
+    # regression: on_event("x", 5) raised a bare TypeError
+    before = dict(busy.events._handlers)
+    check_request(busy, lambda c: c.on_event(name, fn), *words)
+    assert busy.events._handlers == before
+
+
+def test_a_recording_longer_than_the_bound_is_refused_before_running():
+    """A range whose poses fit in memory but that steps more than MAX_RUN_FRAMES."""
+    from crowd_addon.core.bounds import MAX_RUN_FRAMES
+    from crowd_addon.core.recorder import Recorder
+    crowd = Crowd(make_config())
+    start = crowd.frame
+    with pytest.raises(CrowdError, match=f"at most {MAX_RUN_FRAMES:,} frames.*split it"):
+        Recorder(crowd, start + 1, start + MAX_RUN_FRAMES + 1)
+    assert crowd.frame == start
+    Recorder(crowd, start + 1, start + 10).close()                  # a short one: fine

@@ -3,6 +3,8 @@ fresh crowd (or the same one, or through a file) and continue. The oracle is the
 uninterrupted run: every later frame's local poses (and, on the CPU, skinning rows)
 equal it bit for bit, and so do the events and the show's counts."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -245,7 +247,8 @@ def broken_files(tmp_path, good):
         return {**arrays, HEADER: np.frombuffer(json.dumps(h).encode(), np.uint8)}
 
     out = [(write("plain.npz", {"x": np.zeros(3)}), "not a crowd snapshot"),
-           (write("v2.npz", with_head(version=2)), "format version 2"),
+           (write("v3.npz", with_head(version=3)), "format version 3"),
+           (write("v1.npz", with_head(version=1)), "format version 1 .*write it again"),
            (write("fmt.npz", with_head(format="other")), "not a crowd snapshot"),
            (write("frame.npz", with_head(frame="7")), "'frame' must be a whole number"),
            (write("missing.npz", {k: v for k, v in arrays.items()
@@ -422,11 +425,164 @@ def test_values_a_shape_check_cannot_see_are_refused_and_rolled_back(tmp_path):
             crowd.restore(bad)
         for a, b in zip(before, poses_now(crowd)):
             np.testing.assert_array_equal(a, b)
+    # a parameter that is not a number: refused by the values' bounds, before anything
     values = dict(good.values, **{"evaluator.params": [{"w": "high"}] * len(
         good.values["evaluator.params"])})
+    bad = type(good)(good.frame, good.config_digest, good.substeps, good.arrays, values)
+    with pytest.raises(CrowdError, match="value 'evaluator.params' must be finite numbers"):
+        crowd.restore(bad)
+    for a, b in zip(before, poses_now(crowd)):
+        np.testing.assert_array_equal(a, b)
+    # one track value too few: found only while the show is put back, then undone
+    values = dict(good.values, **{"show.track_last": good.values["show.track_last"][:-1]})
     bad = type(good)(good.frame, good.config_digest, good.substeps, good.arrays, values)
     with pytest.raises(CrowdError, match="cannot be restored.*the crowd is as it was"):
         crowd.restore(bad)
     for a, b in zip(before, poses_now(crowd)):
         np.testing.assert_array_equal(a, b)
     play(crowd, 20)                                       # and it runs on
+
+
+# ------------------------------------------- damaged and impossible files (issue 31)
+
+def rewritten(tmp_path, good, name, header=None, members=None, **arrays):
+    """``good`` written again as ``name`` with its header changed by ``header(head)``,
+    arrays replaced, or raw zip members replaced (``members``: {name: bytes})."""
+    import json
+    import zipfile
+    with np.load(good) as z:
+        have = {k: z[k] for k in z.files}
+    head = json.loads(have[HEADER].tobytes())
+    if header is not None:
+        header(head)
+    have.update(arrays)
+    have[HEADER] = np.frombuffer(json.dumps(head).encode(), np.uint8)
+    path = tmp_path / name
+    np.savez(path, **have)
+    if members:
+        with zipfile.ZipFile(path) as z:
+            raw = {n: z.read(n) for n in z.namelist()}
+        raw.update(members)
+        with zipfile.ZipFile(path, "w") as z:
+            for n, b in raw.items():
+                z.writestr(n, b)
+    return path
+
+
+def refused_file(crowd, path, *patterns):
+    """Loading and restoring ``path`` is a CrowdError naming the file (and
+    ``patterns``), and the crowd is as it was."""
+    before = poses_now(crowd)
+    with pytest.raises(CrowdError) as err:
+        crowd.restore(load_snapshot(path))
+    msg = str(err.value)
+    assert str(path) in msg, msg
+    for p in patterns:
+        assert re.search(p, msg), (p, msg)
+    for a, b in zip(before, poses_now(crowd)):
+        np.testing.assert_array_equal(a, b)
+    return msg
+
+
+@pytest.fixture
+def saved(tmp_path):
+    """A crowd at frame 14 and a good file of its frame 10."""
+    crowd = show_crowd()
+    play(crowd, 10)
+    crowd.snapshot().save(tmp_path / "good.npz")
+    play(crowd, 14)
+    return crowd, tmp_path / "good.npz"
+
+
+def test_a_junk_member_is_named_not_an_attribute_error(saved, tmp_path):
+    # regression: a junk snapshot.json.npy member raised AttributeError in load_snapshot
+    crowd, good = saved
+    junk = rewritten(tmp_path, good, "junk_header.npz",
+                     members={f"{HEADER}.npy": b"junk junk junk"})
+    refused_file(crowd, junk, re.escape(HEADER), "damaged")
+    junk = rewritten(tmp_path, good, "junk_array.npz",
+                     members={"agents.kind.npy": b"not an array"})
+    refused_file(crowd, junk, "'agents.kind'", "damaged")
+
+
+@pytest.mark.parametrize("change, patterns", [
+    (lambda h: h.update(frame=10**30), ["'frame'", str(2**31 - 1)]),
+    (lambda h: h.update(frame=1e30), ["'frame'"]),
+    (lambda h: h["values"].update({"slots.cuts": 1e308}), ["'slots.cuts'", "count"]),
+    (lambda h: h["values"].update({"slots.queue.issued": 2**63}),
+     ["'slots.queue.issued'", "count", str(2**53)]),
+    (lambda h: h["values"].update({"slots.served": -1}), ["'slots.served'"]),
+    (lambda h: h["values"].update({"crowd.frame": 11}), ["'crowd.frame'", "10"]),
+    (lambda h: h["values"].update({"crowd.origin": 10**12}), ["'crowd.origin'"]),
+    (lambda h: h["values"].update({"crowd.ms_total": float("inf")}), ["'crowd.ms_total'"]),
+    (lambda h: h["values"]["events.fired"].update(clap=0.5), ["'events.fired'"]),
+    (lambda h: h["values"]["show.stats"]["wave"].update(agents=2**60),
+     ["'show.stats'"]),
+    (lambda h: h["values"].update({"evaluator.params": [{"w": float("nan")}] * len(
+        h["values"]["evaluator.params"])}), ["'evaluator.params'"]),
+    (lambda h: h.update(substeps=10**9), ["'substeps'"]),
+    (lambda h: h.update(config_digest="abc"), ["'config_digest'"]),
+    (lambda h: h["arrays"]["agents.kind"].update(shape=[-1]), ["'agents.kind'"]),
+], ids=["frame 10**30", "frame 1e30", "cuts 1e308", "issued 2**63", "served -1",
+        "frame disagrees", "origin", "ms_total inf", "fired 0.5", "stats 2**60", "param nan",
+        "substeps", "digest", "shape -1"])
+def test_impossible_header_values_are_refused_with_the_file_name(saved, tmp_path, change,
+                                                                 patterns):
+    """Every header field and count is checked against its bounds (before the fix a
+    header frame of 10**30, slots.cuts = 1e308 and queue.issued = 2**63 were accepted)."""
+    crowd, good = saved
+    refused_file(crowd, rewritten(tmp_path, good, "bad.npz", header=change), *patterns)
+
+
+def test_a_corrupted_array_of_the_right_shape_is_refused_by_its_digest(saved, tmp_path):
+    """Before the fix a damaged array was caught only when its shape broke."""
+    crowd, good = saved
+    with np.load(good) as z:
+        history = z["streams.history"].copy()
+        kind = z["agents.kind"].copy()
+    history[0, 0, 0, 4] += 0.25
+    refused_file(crowd, rewritten(tmp_path, good, "pose.npz",
+                                  **{"streams.history": history}),
+                 "'streams.history'", "digest", "damaged")
+    kind[3] = 1 - kind[3]
+    refused_file(crowd, rewritten(tmp_path, good, "kind.npz", **{"agents.kind": kind}),
+                 "'agents.kind'", "digest")
+    # the bytes of the file itself, in the middle of the pose history's data
+    raw = bytearray(good.read_bytes())
+    at = raw.find(history[1].tobytes()[:64])
+    assert at > 0
+    raw[at + 5] ^= 0x40
+    flipped = tmp_path / "flipped.npz"
+    flipped.write_bytes(bytes(raw))
+    refused_file(crowd, flipped)
+
+
+def test_the_header_lists_a_digest_of_every_array(saved):
+    import json
+    _, good = saved
+    with np.load(good) as z:
+        head = json.loads(z[HEADER].tobytes())
+    assert head["version"] == 2
+    assert all(len(spec["sha256"]) == 64 for spec in head["arrays"].values())
+
+
+def test_crowd_snapshot_over_too_many_frames_is_refused_before_it_steps(tmp_path, capsys,
+                                                                       monkeypatch):
+    """crowd snapshot --frames 1-2000000000 --every 1000000000 ran on (issue 31): it is
+    refused before the first step, naming the bound and how to split the pass."""
+    from crowd_addon.cli import main
+
+    def step(self):
+        pytest.fail("the crowd stepped: the pass was not refused before it began")
+    monkeypatch.setattr(Crowd, "step", step)
+    config = tmp_path / "crowd.json"
+    save_config(make_config(show(), slots=6), config)
+    out = tmp_path / "snaps"
+    assert main(["snapshot", "--config", str(config), "--frames", "1-2000000000",
+                 "--every", "1000000000", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    from crowd_addon.core.bounds import MAX_RUN_FRAMES
+    assert err[-1].startswith("crowd snapshot: error: snapshots: ")
+    assert f"{MAX_RUN_FRAMES:,}" in err[-1] and "2000000000" in err[-1]
+    assert f"--frames 1-{1 + MAX_RUN_FRAMES}" in err[-1]              # how to split
+    assert not list(out.glob("*.npz"))
