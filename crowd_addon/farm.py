@@ -22,19 +22,26 @@ already at the output is left as it was: the chunks exported again write new lay
 versions and keep the ones that stage reads (usd/references.py). The report says
 whether it is so: it compares the files the stage read before the run with what is
 there after it. Every attempt is logged in
-``<stem>.chunks/attempts.log`` (time, chunk, worker, outcome). Dask is the optional ``farm`` extra
-(``pip install .[farm]``); it is imported only here, only when a cluster is used.
+``<stem>.chunks/attempts.log`` (time, chunk, worker, outcome; a failure with its
+traceback). A cluster that does not start (workers killed as they start: "Nanny failed
+to start") or fails while the shots run is a CrowdError naming it, its traceback in
+every shot's attempts log; Dask's own log lines go there too, never to the terminal.
+Dask is the optional ``farm`` extra (``pip install .[farm]``); it is imported only
+here, only when a cluster is used.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
+import logging
 import math
 import os
 import re
 import socket
 import sys
 import time
+import traceback
 from dataclasses import dataclass, field
 
 from .core.errors import CrowdError
@@ -167,7 +174,7 @@ def _run_chunk(source, frames, out, snapshots, name, log, _after=None):
         _, result = export_chunk(source, frames, out, snapshots)
     except BaseException as e:
         _log(log, f"{name}: failed on {where} after {time.perf_counter() - t:.1f} s: "
-                  f"{type(e).__name__}: {e}")
+                  f"{type(e).__name__}: {e}", e)
         raise
     _log(log, f"{name}: done on {where} in {time.perf_counter() - t:.1f} s")
     return {"path": result.path, "frames": list(result.frames),
@@ -187,9 +194,68 @@ def _without_blender_scripts():
         sys.path[:] = [p for p in sys.path if not _BLENDER_SCRIPTS.search(p)]
 
 
-def _log(path, line):
+def _log(path, line, error=None):
+    """Append ``line`` to the attempts log ``path``, with ``error``'s traceback below it
+    (indented): the log, not the terminal, is where a failure's traceback goes."""
+    if error is not None:
+        trace = "".join(traceback.format_exception(error)).rstrip("\n")
+        line += "\n" + "\n".join("    " + t for t in trace.splitlines())
     with open(path, "a", encoding="utf-8") as f:
         f.write(f"{time.strftime('%Y-%m-%d %H:%M:%S')} {line}\n")
+
+
+#: the level of Dask's own log lines on the terminal (its workers' included): none, as
+#: a failure's traceback goes to the attempts log and its error to the command's line
+_QUIET = logging.CRITICAL + 1
+
+
+class _AttemptsLog(logging.Handler):
+    """Dask's log records in this process (warnings and errors: a worker lost, a
+    connection dropped) written to every shot's attempts log instead of the terminal."""
+
+    def __init__(self, logs):
+        super().__init__(logging.WARNING)
+        self.logs = logs
+
+    def emit(self, record):
+        try:
+            line = f"dask: {record.name}: {record.levelname}: {record.getMessage()}"
+            for log in self.logs:
+                _log(log, line, record.exc_info[1] if record.exc_info else None)
+        except Exception:  # noqa: BLE001 - logging never raises
+            self.handleError(record)
+
+
+@contextlib.contextmanager
+def _dask_logs_to(logs):
+    """While the cluster runs: Dask's log records go to the shots' attempts ``logs``
+    (folders made), none to the terminal."""
+    for log in logs:
+        os.makedirs(os.path.dirname(log), exist_ok=True)
+    dask_log = logging.getLogger("distributed")
+    streams = [h for h in dask_log.handlers if isinstance(h, logging.StreamHandler)
+               and not isinstance(h, logging.FileHandler)]
+    levels = [h.level for h in streams]
+    handler = _AttemptsLog(logs)
+    for h in streams:
+        h.setLevel(_QUIET)
+    dask_log.addHandler(handler)
+    try:
+        yield
+    finally:
+        dask_log.removeHandler(handler)
+        for h, level in zip(streams, levels):
+            h.setLevel(level)
+
+
+def _cluster_failed(logs, what, error) -> CrowdError:
+    """``error`` of the cluster itself (not of one shot's task), logged with its
+    traceback in every shot's attempts log; the CrowdError that names it."""
+    for log in logs:
+        _log(log, f"cluster: {what}: {type(error).__name__}: {error}", error)
+    more = " (and every shot's)" if len(logs) > 1 else ""
+    return CrowdError(f"{what}: {type(error).__name__}: {error}; nothing was exported "
+                      f"(Dask's traceback is in {logs[0]}{more})")
 
 
 @dataclass(frozen=True)
@@ -242,21 +308,38 @@ def farm_export_shots(shots, workers: int = 2, scheduler=None, progress=None) ->
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise CrowdError(f"--workers must be at least 1, got {workers!r}")
     try:
-        from dask.distributed import Client, LocalCluster, as_completed
+        from dask.distributed import Client, LocalCluster
     except ImportError:
         raise CrowdError("--workers needs Dask: pip install 'crowd_addon[farm]' (dask "
                          "and distributed)") from None
     t0 = time.perf_counter()
-    cluster = None
-    if scheduler:
-        try:
-            client = Client(scheduler, timeout=30)
-        except OSError as e:
-            raise CrowdError(f"--scheduler {scheduler}: cannot connect: {e}") from None
-    else:
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                               dashboard_address=":0")        # any free port
-        client = Client(cluster)
+    logs = [os.path.join(chunk_folder(shot.out), "attempts.log") for shot in shots]
+    with _dask_logs_to(logs):
+        cluster = None
+        if scheduler:
+            try:
+                client = Client(scheduler, timeout=30)
+            except Exception as e:  # noqa: BLE001 - OSError, a timeout, a bad address
+                raise CrowdError(f"--scheduler {scheduler}: cannot connect: "
+                                 f"{type(e).__name__}: {e}") from None
+        else:
+            try:
+                cluster = LocalCluster(n_workers=workers, threads_per_worker=1,
+                                       processes=True, dashboard_address=":0",  # any port
+                                       silence_logs=_QUIET)
+                client = Client(cluster)
+            except Exception as e:  # noqa: BLE001 - e.g. "Nanny failed to start"
+                if cluster is not None:
+                    cluster.close()
+                raise _cluster_failed(logs, f"the local Dask cluster of {workers} worker"
+                                      f"{'s' if workers > 1 else ''} did not start", e) \
+                    from None
+        return _run_shots(client, cluster, shots, workers, progress, logs, t0)
+
+
+def _run_shots(client, cluster, shots, workers, progress, logs, t0) -> list:
+    """:func:`farm_export_shots` once the cluster is up (closed at the end)."""
+    from dask.distributed import as_completed
     try:
         plans = [_submit(client, shot, workers, k) for k, shot in enumerate(shots)]
         chunk_futures = [f for p in plans for f in p["chunks"]]
@@ -266,6 +349,11 @@ def farm_export_shots(shots, workers: int = 2, scheduler=None, progress=None) ->
             if progress is not None:
                 progress("chunks", done, len(chunk_futures))
         results = [_collect(p, t0) for p in plans]
+    except CrowdError:
+        raise
+    except Exception as e:  # noqa: BLE001 - the cluster failed (a shot's task is named)
+        raise _cluster_failed(logs, "the Dask cluster failed while the shots ran", e) \
+            from None
     finally:
         client.close()
         if cluster is not None:
@@ -384,7 +472,7 @@ def _run_snapshots(source, folder, frames, every, log):
     try:
         files = write_shot_snapshots(source, folder, frames, every)
     except BaseException as e:
-        _log(log, f"snapshots: failed on {_where()}: {type(e).__name__}: {e}")
+        _log(log, f"snapshots: failed on {_where()}: {type(e).__name__}: {e}", e)
         raise
     _log(log, f"snapshots: done on {_where()} in {time.perf_counter() - t:.1f} s")
     return files, time.perf_counter() - t
@@ -395,7 +483,11 @@ def _run_stitch(out, chunks, log):
     seconds)."""
     from .usd.stitch import stitch
     t = time.perf_counter()
-    result = stitch([c["path"] for c in chunks], out)
+    try:
+        result = stitch([c["path"] for c in chunks], out)
+    except BaseException as e:
+        _log(log, f"stitch: failed on {_where()}: {type(e).__name__}: {e}", e)
+        raise
     _log(log, f"stitch: done on {_where()} in {time.perf_counter() - t:.1f} s")
     return result, time.perf_counter() - t
 
