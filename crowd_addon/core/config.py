@@ -144,7 +144,9 @@ class CrowdConfig:
     props: dict = field(default_factory=dict)
     agent_variant: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int16))
     agent_props: np.ndarray = field(default_factory=lambda: np.zeros(0, np.uint8))
-    lod_distances: tuple = (30.0, 90.0, 150.0)
+    lod_pixels: tuple = (90.0, 30.0, 18.0)
+    lod_distances: tuple | None = None
+    lod_budget_px: float = 1.0
     show: Show = field(default_factory=Show)
 
     # authoring helpers ---------------------------------------------------------
@@ -164,8 +166,14 @@ class CrowdConfig:
         """Set ``mesh`` as its skeleton's proxy, with LODs built at ``lods`` triangle
         ratios and, last, ``"card"`` for :func:`~.mesh.card_lod` (``()`` for none), or
         ready :class:`~.mesh.ProxyMesh` levels (of the same skeleton), optionally
-        followed by ``"card"`` (the card of ``mesh``). LOD ``k`` is drawn from
-        ``lod_distances[k - 1]`` metres."""
+        followed by ``"card"`` (the card of ``mesh``). LOD ``k`` is drawn once the
+        agent is shorter than ``lod_pixels[k - 1]`` pixels (:mod:`.lod`).
+
+        Every level after the first is checked over the poses of the skeleton's clips
+        added so far (:func:`.lod_check.check_levels`) at the size it is switched in
+        at: one whose silhouette strays from the full mesh's by more than
+        ``lod_budget_px`` (1 pixel; ``inf``: no check) is replaced by the level before it, and a note
+        saying so is added to :attr:`lod_notes` (the bake and the CLI print them)."""
         levels = self._levels(mesh, lods)
         self.meshes[mesh.skeleton] = levels
         return levels
@@ -228,6 +236,24 @@ class CrowdConfig:
                                      f"skeleton {level.skeleton!r}, not {mesh.skeleton!r}")
                 self._check_mesh(level, f"mesh {mesh.name!r}: LOD {k}: ")
             levels = [mesh, *ready] + ([parts_lod(mesh)] if rest else [])
+        return self._checked(levels)
+
+    @property
+    def lod_notes(self) -> list:
+        """What the silhouette check of :meth:`add_mesh` and :meth:`add_variant` refused
+        (one line per level; not saved: loading checks nothing again)."""
+        return self.__dict__.setdefault("_lod_notes", [])
+
+    def _checked(self, levels) -> list:
+        """``levels`` with the torn ones refused (:func:`.lod_check.check_levels`)."""
+        from .lod import switch_pixels
+        from .lod_check import check_levels, clip_poses
+        if len(levels) < 2 or not np.isfinite(self.lod_budget_px):
+            return levels
+        sk = self.skeletons[levels[0].skeleton]
+        levels, notes = check_levels(levels, sk, clip_poses(sk, self.clips.values()),
+                                     switch_pixels(self), float(self.lod_budget_px))
+        self.lod_notes.extend(f"mesh {levels[0].name!r}: {n}" for n in notes)
         return levels
 
     def _check_mesh(self, mesh, what=""):

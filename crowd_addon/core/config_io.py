@@ -488,7 +488,9 @@ def _encode_config(cfg: CrowdConfig) -> tuple:
         m[pool] = [{"name": a.name, "skeleton": a.skeleton,
                     **_timing(a), "root": enc.controller(a.root, pool, i, "root")}
                    for i, a in enumerate(getattr(cfg, pool))]
-    m["lod_distances"] = [float(x) for x in cfg.lod_distances]
+    m["lod_pixels"] = [float(x) for x in cfg.lod_pixels]
+    if cfg.lod_distances is not None:
+        m["lod_distances"] = [float(x) for x in cfg.lod_distances]
     m["meshes"] = []
     for i, (skel, levels) in enumerate(cfg.meshes.items()):
         e = enc.at("meshes", i)
@@ -746,10 +748,13 @@ def _decode_config(m: dict, dec: Decoder) -> CrowdConfig:
                                         template))
             except CrowdError as e:
                 raise d.error(str(e)) from None
-    lods = dec.items(m, "lod_distances", "number", list(CrowdConfig.lod_distances))
-    if any(b <= a for a, b in zip(lods, lods[1:])) or any(d < 0 for d in lods):
-        raise dec.at("lod_distances").error(f"must be increasing distances >= 0, got {lods}")
-    cfg.lod_distances = tuple(lods)
+    from .lod import check_lod_distances, check_lod_pixels
+    for key, check in (("lod_pixels", check_lod_pixels), ("lod_distances", check_lod_distances)):
+        if key in m:
+            try:
+                setattr(cfg, key, check(dec.items(m, key, "number", [])))
+            except CrowdError as e:
+                raise dec.at(key).error(str(e).split(": ", 1)[1]) from None
     mesh_of = {}
     for i, mesh in enumerate(dec.items(m, "meshes", "object", [])):
         d = dec.at("meshes", i)

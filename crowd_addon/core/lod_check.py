@@ -19,34 +19,56 @@ import numpy as np
 
 from .skinning import skin_vertices, skinning_matrices
 
-__all__ = ["silhouette", "departure", "check_levels", "BUDGET_PX"]
+__all__ = ["silhouette", "departure", "check_levels", "clip_poses", "BUDGET_PX"]
 
 #: the largest departure (pixels of outline) a level may have at its switch size
 BUDGET_PX = 1.0
+#: the share of the full silhouette's outline (in pixels) that may stray further
+SLACK = 0.02
 VIEWS = (0.0, 60.0, 120.0)       # degrees about +Z
+_WIN = 6                         # the window of a small triangle, pixels
 
 
 def silhouette(points, triangles, frame, pixels: int) -> np.ndarray:
-    """``(pixels, W)`` bool coverage of ``triangles`` over ``points`` (V, 2) (u, z),
-    in ``frame`` = (u0, z0, scale): pixel centres at ``u0 + (i + 0.5) / scale``."""
+    """``(pixels + 2, W)`` bool coverage of ``triangles`` over ``points`` (V, 2) (u, z),
+    in ``frame`` = (u0, z0, scale): pixel centres at ``u0 + (i + 0.5) / scale``.
+
+    Each triangle is tested against the pixel centres of its own bounding box: small
+    ones (most of a body at the sizes levels switch at) all at once in a fixed
+    :data:`_WIN` x :data:`_WIN` window, the few larger ones one by one."""
     u0, z0, s = frame
     q = (np.asarray(points, np.float64) - (u0, z0)) * s
     h = int(pixels) + 2
     w = int(np.ceil(q[:, 0].max(initial=1.0))) + 2
-    ys, xs = np.mgrid[0:h, 0:w] + 0.5
-    c = np.c_[xs.ravel(), ys.ravel()]
+    out = np.zeros((h, w), bool)
     a, b, d = (q[np.asarray(triangles, np.int64)[:, k]] for k in range(3))
-    out = np.zeros(c.shape[0], bool)
-    for lo in range(0, a.shape[0], 256):
-        A, B, D = a[lo:lo + 256, None], b[lo:lo + 256, None], d[lo:lo + 256, None]
+    lo = np.floor(np.minimum(np.minimum(a, b), d) - 0.5).astype(np.int64) + 1
+    hi = np.floor(np.maximum(np.maximum(a, b), d) - 0.5).astype(np.int64)
+    lo = np.maximum(lo, 0)
+    hi = np.minimum(hi, (w - 1, h - 1))
+    span = hi - lo
+    keep = (span >= 0).all(1)
+    small = keep & (span < _WIN).all(1)
 
+    def cover(A, B, D, x, y):
         def edge(p, r):
-            return (r[..., 0] - p[..., 0]) * (c[None, :, 1] - p[..., 1]) - \
-                (r[..., 1] - p[..., 1]) * (c[None, :, 0] - p[..., 0])
+            return (r[..., 0] - p[..., 0]) * (y - p[..., 1]) - \
+                (r[..., 1] - p[..., 1]) * (x - p[..., 0])
         e0, e1, e2 = edge(A, B), edge(B, D), edge(D, A)
-        inside = ((e0 >= 0) & (e1 >= 0) & (e2 >= 0)) | ((e0 <= 0) & (e1 <= 0) & (e2 <= 0))
-        out |= inside.any(0)
-    return out.reshape(h, w)
+        return ((e0 >= 0) & (e1 >= 0) & (e2 >= 0)) | ((e0 <= 0) & (e1 <= 0) & (e2 <= 0))
+
+    if small.any():
+        off = np.arange(_WIN)
+        x = lo[small, 0][:, None, None] + off[None, None, :]
+        y = lo[small, 1][:, None, None] + off[None, :, None]
+        inside = cover(a[small][:, None, None], b[small][:, None, None],
+                       d[small][:, None, None], x + 0.5, y + 0.5)
+        inside &= (x <= hi[small, 0][:, None, None]) & (y <= hi[small, 1][:, None, None])
+        out[np.broadcast_to(y, inside.shape)[inside], np.broadcast_to(x, inside.shape)[inside]] = True
+    for t in np.flatnonzero(keep & ~small):
+        ys, xs = np.mgrid[lo[t, 1]:hi[t, 1] + 1, lo[t, 0]:hi[t, 0] + 1]
+        out[ys, xs] |= cover(a[t], b[t], d[t], xs + 0.5, ys + 0.5)
+    return out
 
 
 def _outline(mask) -> int:
@@ -55,10 +77,34 @@ def _outline(mask) -> int:
     return int((mask & ~inner).sum())
 
 
+def _dilate(mask):
+    m = np.pad(mask, 1)
+    out = m[1:-1, 1:-1] | m[:-2, 1:-1] | m[2:, 1:-1] | m[1:-1, :-2] | m[1:-1, 2:]
+    out |= m[:-2, :-2] | m[:-2, 2:] | m[2:, :-2] | m[2:, 2:]
+    return out
+
+
+def _stray(fa, fb, slack: int, most: int = 32) -> int:
+    """How far, in pixels (chessboard), ``fb``'s pixels stray outside ``fa``: the
+    smallest ``d`` such that at most ``slack`` pixels of ``fb`` lie more than ``d``
+    from ``fa`` (``most`` at most)."""
+    out = fb & ~fa
+    grown = fa
+    d = 0
+    while int(out.sum()) > slack and d < most:
+        grown = _dilate(grown)
+        out &= ~grown
+        d += 1
+    return d
+
+
 def departure(level, full, skeleton, poses, pixels: float) -> float:
-    """The largest departure in pixels (differing pixels over the full silhouette's
-    outline) of ``level`` from ``full`` over ``poses`` (n, B, 10) local SQT and
-    :data:`VIEWS`, the full mesh ``pixels`` tall."""
+    """How far, in pixels, ``level``'s silhouette strays from ``full``'s (either way)
+    at worst over ``poses`` (n, B, 10) local SQT and :data:`VIEWS`, the full mesh
+    ``pixels`` tall in each pose: the distance beyond which no more than
+    :data:`SLACK` of the full silhouette's outline (and at least one pixel) lies --
+    a few stray pixels of rasterisation are forgiven, an arm left hanging or a wedge
+    of torso dragged up is not (it strays by its length)."""
     rows = skinning_matrices(np.asarray(poses, np.float64), skeleton)
     a = skin_vertices(full.positions, full.bone_indices, full.bone_weights, rows)
     b = skin_vertices(level.positions, level.bone_indices, level.bone_weights, rows)
@@ -71,13 +117,38 @@ def departure(level, full, skeleton, poses, pixels: float) -> float:
             lo = np.minimum(flat[0].min(0), flat[1].min(0))
             s = float(pixels) / max(float(np.ptp(flat[0][:, 1])), 1e-6)
             frame = (lo[0] - 1.0 / s, lo[1] - 1.0 / s, s)
-            fa = silhouette(flat[0], full.triangles, frame, pixels)
-            fb = silhouette(flat[1], level.triangles, frame, pixels)
+            top = int(np.ceil((max(flat[0][:, 1].max(), flat[1][:, 1].max()) - frame[1]) * s))
+            fa = silhouette(flat[0], full.triangles, frame, top)
+            fb = silhouette(flat[1], level.triangles, frame, top)
             w = max(fa.shape[1], fb.shape[1])
             fa = np.pad(fa, ((0, 0), (0, w - fa.shape[1])))
             fb = np.pad(fb, ((0, 0), (0, w - fb.shape[1])))
-            worst = max(worst, float((fa ^ fb).sum()) / max(_outline(fa), 1))
-    return worst
+            slack = max(1, int(SLACK * _outline(fa)))
+            worst = max(worst, _stray(fa, fb, slack), _stray(fb, fa, slack))
+    return float(worst)
+
+
+def clip_poses(skeleton, clips, per_clip: int = 4, most: int = 16) -> np.ndarray:
+    """``(n, B, 10)`` poses of ``skeleton`` to check levels over: its bind pose and
+    ``per_clip`` evenly spaced keys of each clip that matches it (by bone names, or
+    by bone count without them), at most ``most`` in all."""
+    from .errors import CrowdError
+    bind = np.asarray(skeleton.bind_pose, np.float64)
+    poses = [bind[None]]
+    for clip in clips:
+        try:
+            order = clip.bone_order(skeleton)
+        except CrowdError:
+            continue
+        keys = np.asarray(clip.keys, np.float64)
+        if order is not None:
+            keys = keys[:, order]
+        pick = np.unique(np.linspace(0, keys.shape[0] - 1, per_clip).round().astype(int))
+        poses.append(keys[pick])
+    out = np.concatenate(poses)
+    if out.shape[0] > most:
+        out = out[np.unique(np.linspace(0, out.shape[0] - 1, most).round().astype(int))]
+    return out
 
 
 def check_levels(levels, skeleton, poses, switch_px, budget_px: float = BUDGET_PX):

@@ -296,6 +296,11 @@ CARD = "card"
 """A ``build_lods`` / ``CrowdConfig.add_mesh`` level: the :func:`card_lod` of the mesh."""
 
 
+#: a level's cells are at most this share of a body part's thinnest extent: a part
+#: keeps its volume (a thin forearm collapsed to nothing, a level departs by its length)
+THIN_CELL = 0.99
+
+
 def build_lods(mesh: ProxyMesh, ratios=(0.25, 0.06)) -> list:
     """``[mesh, lod1, lod2, ...]``: each LOD keeps about ``ratio`` of the triangles;
     the entry :data:`CARD` (last only) adds the 8-vertex :func:`card_lod`.
@@ -331,10 +336,11 @@ def build_lods(mesh: ProxyMesh, ratios=(0.25, 0.06)) -> list:
             lods.append(replace(prev, name=f"{mesh.name}.lod{k}"))
             continue
         lo, hi = np.log(1e-4), np.log(float(np.ptp(mesh.positions, 0).max()) + 1e-6)
+        thin = THIN_CELL
         best = None
         for _ in range(24):
             mid = 0.5 * (lo + hi)
-            cand = _cluster(prev, np.exp(mid), f"{mesh.name}.lod{k}")
+            cand = _cluster(prev, np.exp(mid), f"{mesh.name}.lod{k}", thin=thin)
             if cand is None:                  # everything collapsed: cells too coarse
                 hi = mid
                 continue
@@ -346,7 +352,7 @@ def build_lods(mesh: ProxyMesh, ratios=(0.25, 0.06)) -> list:
             else:
                 lo = mid
         if best is None:
-            best = _cluster(prev, np.exp(hi), f"{mesh.name}.lod{k}")
+            best = _cluster(prev, np.exp(hi), f"{mesh.name}.lod{k}", thin=thin)
         if best is None or best.triangle_count < MIN_LOD_TRIANGLES:
             best = replace(prev, name=f"{mesh.name}.lod{k}")
         lods.append(best)
@@ -445,18 +451,38 @@ def parts_lod(mesh: ProxyMesh, name: str | None = None, min_share: float = 0.004
         np.array(normals), mesh.bone_count, **look)
 
 
-def _cluster(mesh: ProxyMesh, cell: float, name: str, by_bone: bool = True):
+def _cluster(mesh: ProxyMesh, cell: float, name: str, by_bone: bool = True,
+             by_normal: bool = True, outer: bool = True, thin: float = 0.99):
     p = mesh.positions.astype(np.float64)
-    key = np.floor((p - p.min(0)) / cell).astype(np.int64)
+    bone = mesh.bone_indices[:, 0].astype(np.int64)
+    size = np.full(p.shape[0], float(cell))
+    if by_bone:     # a cell never spans a part across: a thin forearm keeps its box
+        nb = int(bone.max()) + 1
+        lo = np.full((nb, 3), np.inf)
+        hi = np.full((nb, 3), -np.inf)
+        np.minimum.at(lo, bone, p)
+        np.maximum.at(hi, bone, p)
+        size = np.minimum(size, np.maximum(thin * (hi - lo).min(1)[bone], 1e-4))
+    key = np.floor((p - p.min(0)) / size[:, None]).astype(np.int64)
     if by_bone:     # a cluster never spans two bones: parts that move apart stay apart
-        key = np.c_[mesh.bone_indices[:, 0].astype(np.int64), key]
+        key = np.c_[bone, key]
+    if by_normal:   # nor two faces of a corner: a box keeps its edges and its shading
+        nrm = mesh.normals.astype(np.float64)
+        side = np.argmax(np.abs(nrm), 1) * 2 + (nrm[np.arange(nrm.shape[0]),
+                                                     np.argmax(np.abs(nrm), 1)] < 0)
+        key = np.c_[side, key]
     _, cluster = np.unique(key, axis=0, return_inverse=True)
     cluster = cluster.reshape(-1)
     n = int(cluster.max()) + 1
     count = np.bincount(cluster, minlength=n).astype(np.float64)
     mean = np.stack([np.bincount(cluster, p[:, k], n) for k in range(3)], 1) / count[:, None]
     dist = np.linalg.norm(p - mean[cluster], axis=1)
-    order = np.lexsort((dist, cluster))                 # by cluster, nearest first
+    if outer:       # the vertex furthest out from its part's centre: outlines stay out
+        nb = int(bone.max()) + 1
+        cnt = np.maximum(np.bincount(bone, minlength=nb), 1).astype(np.float64)
+        centre = np.stack([np.bincount(bone, p[:, k], nb) for k in range(3)], 1) / cnt[:, None]
+        dist = -np.linalg.norm(p - centre[bone], axis=1)
+    order = np.lexsort((dist, cluster))                 # by cluster, best first
     first = np.ones(order.size, bool)
     first[1:] = cluster[order[1:]] != cluster[order[:-1]]
     rep = order[first]                                  # representative vertex per cluster

@@ -115,8 +115,9 @@ def assert_same(a, b, where="config"):
         assert list(a) == list(b), f"{where}: keys {list(a)} != {list(b)}"
         for k in a:
             assert_same(a[k], b[k], f"{where}.{k}")
-    elif hasattr(a, "__dict__"):
-        assert_same(vars(a), vars(b), where)
+    elif hasattr(a, "__dict__"):       # "_" attributes are transient (lod_notes)
+        assert_same({k: v for k, v in vars(a).items() if not k.startswith("_")},
+                    {k: v for k, v in vars(b).items() if not k.startswith("_")}, where)
     else:
         assert a == b, f"{where}: {a!r} != {b!r}"
 
@@ -361,8 +362,11 @@ MANIFEST_ERRORS = [
     # accepted before: a folder outside the manifest's, LOD distances that do not grow
     (("arrays", "uri"), "../crowd.npz", r"arrays\.uri: must name a file beside the "
                                         r"manifest, got '\.\./crowd\.npz'"),
-    (("lod_distances",), [30.0, 20.0, 150.0], r"lod_distances: must be increasing "
-                                              r"distances >= 0"),
+    (("lod_distances",), [30.0, 20.0, 150.0], r"lod_distances: must be strictly "
+                                              r"increasing metres > 0"),
+    (("lod_distances",), [], r"lod_distances: must name 1 to 8 thresholds"),
+    (("lod_distances",), [0.0] * 100, r"lod_distances: must name 1 to 8 thresholds"),
+    (("lod_pixels",), [0.0, 0.0], r"lod_pixels: must be strictly decreasing pixels > 0"),
     # accepted before: empty names (an unnamed stream, state or mesh level could not be
     # addressed), and a second mesh for a skeleton silently replaced the first
     (("streams", 0, "name"), "", r"streams\[0\]\.name: must be a non-empty name"),

@@ -23,6 +23,7 @@ def test_ready_levels_are_used_as_given_then_the_card(cfg):
     body = synthetic.humanoid_mesh(sk, sides=8, rings=4, name="body")
     mid = synthetic.humanoid_mesh(sk, sides=5, rings=2, name="mid")
     low = synthetic.humanoid_mesh(sk, sides=3, rings=1, name="low")
+    cfg.lod_budget_px = float("inf")     # as given: no silhouette check
     levels = cfg.add_mesh(body, lods=(mid, low, CARD))
     assert [lv.name for lv in levels[:3]] == ["body", "mid", "low"]
     assert levels[1] is mid and levels[2] is low and cfg.meshes["fan"] is levels
