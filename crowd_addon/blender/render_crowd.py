@@ -50,7 +50,8 @@ import bpy
 
 from ..core.errors import CrowdError
 from ..core.skinning import skin_vertices
-from ..gpu.draw_lists import lod_levels, view_distances
+from ..core.lod import agent_heights, levels_from_pixels, projected_heights, switch_pixels
+from ..gpu.draw_lists import view_depths
 from .crowd_materials import crowd_material, refresh_all, remove_all as crowd_materials
 
 __all__ = ["POINTS", "POSES", "NODE_GROUP", "RenderStats", "sync", "remove", "agent_lods"]
@@ -75,7 +76,8 @@ class RenderStats:
 
 def agent_lods(crowd, scene, levels) -> np.ndarray:
     """``(N,)`` level of detail of each agent seen through ``scene``'s camera at its
-    render resolution (every agent's finest level when the scene has no camera);
+    render resolution, by its projected height in pixels (as the GPU draws it:
+    :mod:`crowd_addon.core.lod`) (every agent's finest level when the scene has no camera);
     ``levels`` (N,): the levels each agent's mesh has."""
     from .cameras import camera_from_object
     from .cameras import scene_size
@@ -84,8 +86,14 @@ def agent_lods(crowd, scene, levels) -> np.ndarray:
         return np.zeros(crowd.agents.count, np.int64)
     w, h = scene_size(scene)
     camera = camera_from_object(scene.camera, w / h)
-    d = view_distances(crowd.agents.position, camera.view_projection, h)
-    return lod_levels(d, crowd.config.lod_distances, levels).astype(np.int64)
+    cfg = crowd.config
+    names = list(cfg.skeletons)
+    bodies = [cfg.meshes.get(n) or () for n in names]
+    heights = agent_heights(bodies, np.asarray(crowd.view.agent_skeleton, np.int64),
+                            crowd.agents.scale)
+    depth, focal = view_depths(crowd.agents.position, camera.view_projection, h)
+    return levels_from_pixels(projected_heights(heights, depth, focal), switch_pixels(cfg),
+                              levels).astype(np.int64)
 
 
 def _node_group():

@@ -22,7 +22,7 @@ from .errors import CrowdError
 
 __all__ = ["DEFAULT_LOD_PIXELS", "REFERENCE_FOCAL_PX", "REFERENCE_HEIGHT_M", "MAX_LOD_LEVELS",
            "check_lod_pixels", "check_lod_distances", "pixels_from_distances",
-           "switch_pixels", "projected_heights", "levels_from_pixels"]
+           "switch_pixels", "projected_heights", "levels_from_pixels", "agent_heights"]
 
 REFERENCE_FOCAL_PX = 540.0 / np.tan(np.radians(20.0))
 """Focal length in pixels of the reference view of ``lod_distances``: 1080 pixels high,
@@ -94,3 +94,22 @@ def levels_from_pixels(pixels, lod_pixels, levels) -> np.ndarray:
     t = -np.asarray(lod_pixels, np.float64)
     lod = np.searchsorted(t, -np.asarray(pixels, np.float64), side="left")
     return np.minimum(lod, np.asarray(levels) - 1)
+
+
+def agent_heights(bodies, agent_body, scales=None) -> np.ndarray:
+    """``(N,)`` each agent's height in metres: its body's full mesh's bind-pose bounding
+    height (``bodies[k][0]``, a mesh or its buffers with an ``extent``; a body with no levels: :data:`REFERENCE_HEIGHT_M`) times
+    its scale (``scales`` (N,); None or empty: 1)."""
+    def height(m):
+        e = getattr(m, "extent", None)        # (2, 3) bind-pose box, where kept
+        if e is not None:
+            return float(np.asarray(e)[1, 2] - np.asarray(e)[0, 2])
+        p = np.asarray(m.positions)
+        return float(np.ptp(p[:, 2])) if len(p) else REFERENCE_HEIGHT_M
+
+    h = np.array([height(b[0]) if len(b) else REFERENCE_HEIGHT_M for b in bodies] or
+                 [REFERENCE_HEIGHT_M])
+    h = np.where(h > 0, h, REFERENCE_HEIGHT_M)
+    out = h[np.asarray(agent_body, np.int64)]
+    s = None if scales is None else np.asarray(scales, np.float64).reshape(-1)
+    return out * s if s is not None and s.size == out.size else out

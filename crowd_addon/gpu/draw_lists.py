@@ -2,14 +2,14 @@
 
 A body is what an agent is drawn with: its character's mesh variant with the props
 it carries (:mod:`crowd_addon.core.bodies`). Agents outside the camera's view (a
-bounding sphere per body) are left out. An agent's LOD follows how big it looks: LOD
-``k`` is used from ``lod_distances[k - 1]`` metres on (``CrowdConfig.lod_distances``),
-clamped to the levels its body has, where the distance is the one at which the agent
-would look as big in the *reference view* -- 1080 pixels high with a 40 degree
-vertical field of view (:data:`REFERENCE_FOCAL_PX`). In that view it is the agent's
-depth in front of the camera; zooming in (a longer lens) or a taller viewport
-shrinks it, so close-ups keep their detail, and a small or wide view (or an
-orthographic one, zoomed out) gets the coarse levels sooner. The visible agents are
+bounding sphere per body) are left out. An agent's LOD follows its projected height
+in pixels (:func:`~crowd_addon.core.lod.projected_heights`: its body's height times
+its scale over its depth times the view's focal length in pixels): LOD ``k`` once it
+is shorter than ``lod_pixels[k - 1]`` (:func:`~crowd_addon.core.lod.switch_pixels`),
+clamped to the levels its body has. Zooming in (a longer lens) or a taller viewport
+makes agents taller, so close-ups keep their detail; a small or wide view (or an
+orthographic one, zoomed out) gets the coarse levels sooner; a tall agent keeps its
+detail further than a short one. The visible agents are
 grouped by (body, LOD) in one flat list (an R32I texture,
 ``gpu_shaders/agents.glsl``); draw ``g`` reads its instances from ``base[g]``. The list
 is rebuilt only when the camera, the viewport's height or the agents move.
@@ -22,14 +22,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.errors import CrowdError
+from ..core.lod import REFERENCE_FOCAL_PX, check_lod_pixels, levels_from_pixels, \
+    projected_heights
 from ..core.pose_storage import TextureRegion
 
 __all__ = ["DrawGroup", "DrawLists", "lod_levels", "frustum_planes",
-           "proxy_bounds", "view_distances", "REFERENCE_FOCAL_PX"]
+           "proxy_bounds", "view_distances", "view_depths", "REFERENCE_FOCAL_PX"]
 
-REFERENCE_FOCAL_PX = 540.0 / np.tan(np.radians(20.0))
-"""Focal length in pixels of the reference view of ``lod_distances``: 1080 pixels high,
-40 degrees vertical field of view (~1484 px)."""
 
 
 def lod_levels(distances: np.ndarray, lod_distances, levels: np.ndarray) -> np.ndarray:
@@ -38,6 +37,18 @@ def lod_levels(distances: np.ndarray, lod_distances, levels: np.ndarray) -> np.n
     agent's proxy has."""
     lod = np.searchsorted(np.asarray(lod_distances, np.float64), distances, side="right")
     return np.minimum(lod, np.asarray(levels) - 1)
+
+
+def view_depths(points: np.ndarray, view_projection, pixels_high) -> tuple:
+    """``(depths (N,), focal)``: clip ``w`` of ``points`` (N, 3) (the depth in front of
+    the camera, 1 for an orthographic view) and the view's focal length in pixels (half
+    the height times the projection's vertical scale)."""
+    m = np.asarray(view_projection, np.float64)
+    focal = 0.5 * float(pixels_high) * float(np.linalg.norm(m[1, :3]))
+    if not focal > 0:
+        raise CrowdError(f"LOD: the view has no vertical scale ({pixels_high} pixels high, "
+                         f"view-projection row 1 = {m[1].tolist()})")
+    return np.asarray(points, np.float64) @ m[3, :3] + m[3, 3], focal
 
 
 def view_distances(points: np.ndarray, view_projection, pixels_high) -> np.ndarray:
@@ -92,9 +103,11 @@ class DrawLists:
     agent_body : (N,) int body index per agent.
     lod_counts : (K,) int LOD levels of each body (0: not drawn).
     bounds : (K, 2) float ``(centre height, radius)`` per body (:func:`proxy_bounds`).
-    lod_distances : increasing thresholds in metres.
+    lod_pixels : decreasing thresholds in pixels (projected heights).
     max_width : texture width limit in texels.
     lod : False draws every agent at level 0, its full mesh.
+    heights : (N,) each agent's height in metres (its body's bind-pose height times
+        its scale); None: 1.8 m each.
 
     Attributes
     ----------
@@ -102,16 +115,14 @@ class DrawLists:
     lod : (N,) int LOD of each agent, ``-1`` where it is not drawn.
     """
 
-    def __init__(self, agent_body, lod_counts, bounds, lod_distances, max_width=4096,
-                 lod=True):
+    def __init__(self, agent_body, lod_counts, bounds, lod_pixels, max_width=4096,
+                 lod=True, heights=None):
         self.agent_body = np.asarray(agent_body, np.int64)
         self.lod_counts = np.asarray(lod_counts, np.int64)
         self.bounds = np.asarray(bounds, np.float64).reshape(-1, 2)
-        d = np.asarray(lod_distances, np.float64).reshape(-1)
-        if not (np.isfinite(d).all() and (d > 0).all() and (np.diff(d) > 0).all()):
-            raise CrowdError(f"lod_distances must be increasing positive metres, got "
-                             f"{list(lod_distances)}")
-        self.lod_distances = d
+        self.lod_pixels = np.asarray(check_lod_pixels(lod_pixels), np.float64)
+        self.heights = np.full(self.agent_body.size, 1.8) if heights is None else \
+            np.broadcast_to(np.asarray(heights, np.float64), self.agent_body.shape)
         self.levels = max(1, int(self.lod_counts.max(initial=1)))
         n = self.agent_body.size
         self.width = max(1, min(max_width, n))
@@ -125,7 +136,7 @@ class DrawLists:
     def rebuild(self, positions: np.ndarray, view_projection, pixels_high,
                 cull: bool = True) -> list:
         """Regroup the agents at ``positions`` (N, 3) seen through ``view_projection``
-        (4, 4) in a viewport ``pixels_high`` pixels high (LOD by :func:`view_distances`),
+        (4, 4) in a viewport ``pixels_high`` pixels high (LOD by projected height),
         leaving out those outside the view when ``cull``; returns the texture regions to
         upload. Agents whose body has no levels are never drawn."""
         pos = np.asarray(positions, np.float64)
@@ -136,9 +147,10 @@ class DrawLists:
             planes = frustum_planes(view_projection)
             dist = centre @ planes[:, :3].T + planes[:, 3]
             drawn &= (dist >= -self.bounds[self.agent_body, 1][:, None]).all(1)
-        dist = view_distances(centre, view_projection, pixels_high)
-        level = lod_levels(dist, self.lod_distances, self.agent_levels) if self.use_lod \
-            else np.zeros(drawn.size, np.int64)
+        depth, focal = view_depths(centre, view_projection, pixels_high)
+        self.pixels = projected_heights(self.heights, depth, focal)
+        level = levels_from_pixels(self.pixels, self.lod_pixels, self.agent_levels) \
+            if self.use_lod else np.zeros(drawn.size, np.int64)
         self.lod = np.where(drawn, level, -1)
         key = (self.agent_body * self.levels + self.lod)[drawn]
         key = key.astype(np.int16 if key.size and key.max() < 2 ** 15 else np.int64)

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.errors import CrowdError
+from ..core.lod import agent_heights, switch_pixels
 from ..core.pose_storage import TextureRegion
 from .draw_lists import DrawLists, proxy_bounds
 from .instances import InstanceData
@@ -153,7 +154,9 @@ class FramePlan:
         self.lists = DrawLists(view.agent_body, [len(p) for p in self.proxies],
                                [tuple(self.max_scale * np.asarray(proxy_bounds(p[0].extent)))
                                 if p else (0.0, 0.0) for p in self.proxies],
-                               view.config.lod_distances, min(4096, limit), lod=lod)
+                               switch_pixels(view.config), min(4096, limit), lod=lod,
+                               heights=agent_heights(self.proxies, view.agent_body,
+                                                     view.agents.scale))
         self.batch_image = batch_image(lay.row_count) if self.on_gpu else None
         self._list_key = None
 

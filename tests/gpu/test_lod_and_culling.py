@@ -1,4 +1,5 @@
-"""LOD by how big agents look (CrowdConfig.lod_distances in the reference view),
+"""LOD by the agents' projected height in pixels (CrowdConfig.lod_pixels, or
+lod_distances said in the reference view),
 culling, and the draw calls."""
 
 import numpy as np
@@ -27,13 +28,16 @@ def _row_scene(h, renderer, size, lod_distances=(60.0, 150.0)):
 
 
 def _expected_lod(crowd, camera, pixels_high, lod_distances):
-    """LOD from the camera's definition: the agent looks as big as in the reference
-    view (1080 px, 40 degrees) at its depth times the ratio of the focal lengths in
-    pixels."""
+    """LOD from the camera's definition: the agent's projected height in pixels (its
+    body's height times its scale over its depth times the focal length in pixels) against the pixel
+    thresholds ``lod_distances`` say (a 1.8 m agent in the reference view, 1080 px and
+    40 degrees, at those distances)."""
     depth = crowd.agents.position[:, 0] + 1.0
     focal = 0.5 * pixels_high / np.tan(camera.fov_y / 2)
-    seen = depth * (540.0 / np.tan(np.radians(20.0))) / focal
-    return np.searchsorted(lod_distances, seen, side="right").clip(max=2)
+    body = crowd.config.meshes["fan"][0].positions[:, 2]
+    seen = float(np.ptp(body)) * crowd.agents.scale * focal / depth
+    ref = 1.8 * (540.0 / np.tan(np.radians(20.0))) / np.asarray(lod_distances)
+    return np.searchsorted(-ref, -seen, side="left").clip(max=2)
 
 
 def test_far_agents_are_drawn_with_the_coarse_mesh(h, renderer):
