@@ -500,8 +500,9 @@ def _add_preview(subparsers) -> None:
                    help="number of frames to render (default, from a .blend: up to the "
                         "scene's last frame; with --config it must be given)")
     p.add_argument("--start", type=frame_number, default=None, metavar="F",
-                   help="first frame (default: the configuration's start frame, the "
-                        "scene's for a .blend)")
+                   help="first frame drawn: frame F of the shot, the crowd run from its "
+                        "start through every cue before F (default: the configuration's "
+                        "start frame, the scene's for a .blend)")
     p.add_argument("--width", type=int_at_least(1), default=None,
                    help="image width in pixels (default: the scene's render resolution "
                         "with --blend, else 960)")

@@ -136,7 +136,9 @@ def render_preview(config, out_dir, frames: int, start: int | None = None,
                    shadows: bool | None = None,
                    repetition=RepetitionSettings(), lod: bool = True) -> PreviewResult:
     """Render ``frames`` frames of ``config`` (a ``CrowdConfig``) from ``start``
-    (default: its start frame) into ``out_dir``; ``progress(done, total)`` is called
+    (default: its start frame; frame ``start`` of the shot, the crowd run from its
+    start frame, or from its nearest kept snapshot, through everything the show did
+    before it) into ``out_dir``; ``progress(done, total)`` is called
     after each frame. Raises ``CrowdError`` on bad input before writing anything.
 
     ``config`` may also be a built ``Crowd`` (rendered from where it is, e.g. with GPU
@@ -157,9 +159,12 @@ def render_preview(config, out_dir, frames: int, start: int | None = None,
     out = _check(config, out_dir, int(frames), (w, h), mp4, backend)
     t0 = time.perf_counter()
     seconds = dict.fromkeys(("simulate", "sync", "render", "write"), 0.0)
+    if start is not None and int(start) < config.start_frame:
+        raise CrowdError(f"start frame {int(start)} is before the shot's first frame "
+                         f"{config.start_frame}")
     crowd = crowd or Crowd(config, skinning="gpu")
-    if start is not None:
-        crowd.reset(int(start))
+    if start is not None:           # frame F of the shot: run through the cues before it
+        crowd.advance_to(int(start))
     seconds["simulate"] += time.perf_counter() - t0
     options = {} if light is None else {"light": light}
     options["shadows"] = scene is not None if shadows is None else bool(shadows)

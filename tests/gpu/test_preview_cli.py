@@ -200,3 +200,37 @@ def test_blender_backend_renders_the_same_frames(config_path, tmp_path, capsys):
     for name in ("frame_0000.png", "frame_0001.png"):
         a, b = decode(tmp_path / "mgl" / name), decode(tmp_path / "bl" / name)
         assert (np.abs(a.astype(int) - b.astype(int)).max(-1) <= 2).mean() >= 0.995
+
+
+def test_start_shows_that_frame_of_the_shot(h, tmp_path, capsys):
+    """``--start F`` draws frame F as a run from the start shows it: a cue before F
+    (agents sent to another stream, some still blending at F) has happened."""
+    from crowd_addon.core.show import Action, Cue, Show
+    cfg = h.make_config(M=8, agents=16, spacing=0.9, NT=16)
+    first = cfg.start_frame
+    cfg.show = Show((Cue("go", first + 2, Action("stream", "s1", duration=6, offset=0),
+                         agents=np.arange(0, 16, 2)),))
+    path = tmp_path / "crowd.json"
+    save_config(cfg, path)
+    size = ("--width", 96, "--height", 64)
+    code, _, err = run(capsys, "--config", path, "--out", tmp_path / "full", "--frames", 9,
+                       *size)
+    assert code == 0, err
+    code, _, err = run(capsys, "--config", path, "--out", tmp_path / "late", "--frames", 4,
+                       "--start", first + 5, *size)
+    assert code == 0, err
+    late = sorted((tmp_path / "late").glob("frame_*.png"))
+    assert [p.name for p in late] == [f"frame_{f:04d}.png" for f in range(first + 5,
+                                                                            first + 9)]
+    for p in late:
+        assert np.array_equal(decode(p), decode(tmp_path / "full" / p.name)), p.name
+    # without the cue the frame differs: the test sees the cue
+    cfg.show = Show()
+    save_config(cfg, path)
+    code, _, err = run(capsys, "--config", path, "--out", tmp_path / "quiet", "--frames", 1,
+                       "--start", first + 5, *size)
+    assert code == 0, err
+    assert not np.array_equal(decode(tmp_path / "quiet" / late[0].name), decode(late[0]))
+    code, _, err = run(capsys, "--config", path, "--out", tmp_path / "early", "--frames", 1,
+                       "--start", first - 1, *size)
+    assert code == 2 and "before the shot's first frame" in err
