@@ -331,6 +331,7 @@ def farm_export_shots(shots, workers: int = 2, scheduler=None, progress=None) ->
             except Exception as e:  # noqa: BLE001 - e.g. "Nanny failed to start"
                 if cluster is not None:
                     cluster.close()
+                _forget_closed_servers()
                 raise _cluster_failed(logs, f"the local Dask cluster of {workers} worker"
                                       f"{'s' if workers > 1 else ''} did not start", e) \
                     from None
@@ -358,7 +359,26 @@ def _run_shots(client, cluster, shots, workers, progress, logs, t0) -> list:
         client.close()
         if cluster is not None:
             cluster.close()
+        _forget_closed_servers()
     return results
+
+
+def _forget_closed_servers():
+    """Let the schedulers this process started and closed go. Dask memoises, per
+    bound method, whether a handler takes a comm (``distributed.core._expects_comm``,
+    a cache without a bound), which keeps every scheduler ever started alive with its
+    tasks: farm exports one after another in one process (a Blender session) grew
+    without end. Clearing the memo costs Dask one signature check per handler. Each
+    scheduler's scratch folder, gone once it closed, also leaves an import cache entry
+    behind."""
+    try:
+        from distributed import core
+        core._expects_comm.cache_clear()
+    except (ImportError, AttributeError):    # another Dask: nothing of it to clear
+        pass
+    for path in [p for p in sys.path_importer_cache if "dask-scratch-space" in p]:
+        if not os.path.isdir(path):
+            sys.path_importer_cache.pop(path, None)
 
 
 def _submit(client, shot, workers, k) -> dict:

@@ -88,3 +88,24 @@ def test_workers_killed_while_the_cluster_starts_are_named(config, tmp_path, cap
     assert "cluster: the local Dask cluster of 1 worker did not start" in log
     assert "Traceback" in log and "Nanny failed to start" in log
     assert not out.exists()
+
+
+def test_a_closed_cluster_is_not_kept_alive(config, tmp_path):
+    """Farm exports one after another in one process (a Blender session) kept every
+    scheduler they started alive, with its tasks, through Dask's unbounded memo of
+    handler signatures (distributed.core._expects_comm): memory grew about 0.15 MB an
+    export (issue 31, item 6; ``benchmarks/export_memory.py --workers 1``)."""
+    import gc
+
+    from distributed import Scheduler
+    from distributed.core import Status
+
+    def closed_schedulers():
+        gc.collect()
+        return [o for o in gc.get_objects()
+                if isinstance(o, Scheduler) and o.status == Status.closed]
+    before = len(closed_schedulers())
+    for k in range(2):
+        assert main(["export", "--config", str(config), "--frames", "1-10", "--out",
+                     str(tmp_path / f"s{k}" / "shot.usdc"), "--workers", "1"]) == 0
+    assert len(closed_schedulers()) <= before
