@@ -376,6 +376,7 @@ class CROWD_PT_agents(_Panel, bpy.types.Panel):
         layout = self.layout
         _list(layout, "CROWD_UL_sources", s, "agent_sources", "active_source_index")
         layout.operator("crowd.generate_agents", icon="COMMUNITY")
+        layout.operator("crowd.generate_seats", icon="MESH_GRID")
         if not 0 <= s.active_source_index < len(s.agent_sources):
             return
         src = s.agent_sources[s.active_source_index]

@@ -108,13 +108,14 @@ def _operator_table(classes) -> list:
 
 def reference() -> str:
     """The generated part of docs/scripting.md (the extension must be registered)."""
-    from . import export, operators, props
+    from . import export, operators, props, seats_operator
     lines = [BEGIN, "", "## Properties (`scene.crowd`)", "",
              "`scene.crowd` is a `CROWD_PG_settings`; the others are reached through it "
              "(`scene.crowd.characters[i]`, `scene.crowd.show.cues[i]`, ...).", ""]
     for cls in reversed(props.CLASSES):
         lines += _group_table(cls)
-    lines += ["## Operators", ""] + _operator_table(operators.CLASSES + export.CLASSES)
+    ops = operators.CLASSES + seats_operator.CLASSES + export.CLASSES
+    lines += ["## Operators", ""] + _operator_table(ops)
     return "\n".join(lines + [END]) + "\n"
 
 

@@ -15,12 +15,13 @@ from __future__ import annotations
 import bpy
 
 from .. import api
-from . import cli_commands, export, operators, panels, prefs, preview, props, show_panels
+from . import (cli_commands, export, operators, panels, prefs, preview, props, seats_operator,
+               show_panels)
 
 __all__ = ["CLASSES", "HANDLERS", "MENUS", "register", "unregister", "leftovers"]
 
-CLASSES = (props.CLASSES + operators.CLASSES + export.CLASSES + panels.CLASSES
-           + show_panels.CLASSES + prefs.CLASSES)
+CLASSES = (props.CLASSES + operators.CLASSES + seats_operator.CLASSES + export.CLASSES
+           + panels.CLASSES + show_panels.CLASSES + prefs.CLASSES)
 MENUS = export.MENUS           # (menu type name, draw function)
 HANDLERS = (("load_pre", preview.on_load_pre), ("load_post", preview.on_load_post),
             ("frame_change_post", preview.on_frame_change),
