@@ -4,15 +4,17 @@
 
 The scene holds (see sample_scenes/README.md for the details):
 
-- "Stands" (terraces and benches round a rounded-rectangle bowl), "Pitch";
+- "Stands" (a two-tier bowl of terraces and benches, made by the extension's seat
+  generator: ``stadium_layout.SPEC``), "Pitch", "Apron";
 - "Seats": a vertex per seat (agent point) with point attributes ``heading``
   (FLOAT, radians about +Z, facing the pitch centre for a character facing -Y),
-  ``section`` (INT, 0 home / 1 away), ``seat_row``, ``seat_index`` (INT) and
+  ``section``, ``tier``, ``row``, ``seat`` and ``team`` (INT, 0 home / 1 away) and
   vertex groups "home" and "away";
 - the fan character "FanRig" (23 bones) with its skinned "FanBody" and ten
   authored actions with event markers (``fan_actions.ACTIONS``);
 - "MocapRig"/"MocapBody" with the action "mocap_01_01" from CMU motion capture;
-- a camera framing the bowl, a sun, a sky-coloured world (Standard view transform), 30 fps, and scene custom properties
+- the broadcast camera high on the north stand looking across the pitch at the far
+  stand, a sun, a sky-coloured world (Standard view transform), 30 fps, and scene custom properties
   ``crowd_seat_count``, ``crowd_builder_version`` and friends.
 
 Everything is deterministic: the same arguments give the same scene. Import
@@ -43,12 +45,14 @@ import fan_rig  # noqa: E402
 import mocap  # noqa: E402
 import stadium_layout as layout  # noqa: E402
 from crowd_addon.blender.looks import plain_material  # noqa: E402
+from crowd_addon.blender.seats_operator import seat_objects  # noqa: E402
+from crowd_addon.core.seats import HOME, AWAY, plan_ring  # noqa: E402
 from crowd_addon.core.errors import CrowdError  # noqa: E402
 from crowd_addon.gpu.renderer import BACKGROUND  # noqa: E402
 
 __all__ = ["build_stadium", "BUILDER_VERSION", "DEFAULT_SEATS", "PAPER_SEATS"]
 
-BUILDER_VERSION = "1.1.0"
+BUILDER_VERSION = "1.2.0"
 DEFAULT_SEATS = 2000
 PAPER_SEATS = 65000
 FPS = 30
@@ -56,9 +60,9 @@ FPS = 30
 #: linear RGB of the GPU preview's background (``gpu.renderer.BACKGROUND``, sRGB display
 #: values, all above the decoding's linear segment)
 SKY = tuple(((c + 0.055) / 1.055) ** 2.4 for c in BACKGROUND[:3])
-_COLOURS = {"concrete": (0.55, 0.55, 0.52, 1.0), "home": (0.30, 0.09, 0.09, 1.0),
-            "away": (0.08, 0.13, 0.32, 1.0), "pitch": (0.12, 0.45, 0.12, 1.0),
-            "apron": (0.09, 0.30, 0.10, 1.0)}
+_COLOURS = {"pitch": (0.12, 0.45, 0.12, 1.0), "apron": (0.09, 0.30, 0.10, 1.0)}
+#: the broadcast camera: its field of view keeps this much room round the far stand
+FRAME_MARGIN = 1.08
 
 
 
@@ -73,68 +77,59 @@ def _mesh_object(name, collection, verts, faces, materials=()):
     return obj
 
 
-def _build_stands(bowl, rows, collection):
-    """Terraces plus one bench per row (away-end benches in the away colour)."""
-    ring, normal = layout.bowl_ring(bowl)
-    verts, faces = layout.sweep(ring, normal, layout.stand_profile(bowl, rows))
-    parts_v, parts_f, kinds = [verts], [faces], [np.zeros(len(faces), np.int32)]
-    offset = len(verts)
-    for r in range(rows):
-        v, f = layout.sweep(ring, normal, layout.bench_profile(bowl, r), closed_profile=True)
-        away = layout.in_away_end(bowl, v[f].mean(axis=1)[:, :2])
-        parts_v.append(v)
-        parts_f.append(f + offset)
-        kinds.append(np.where(away, 2, 1).astype(np.int32))
-        offset += len(v)
-    obj = _mesh_object("Stands", collection, np.vstack(parts_v), np.vstack(parts_f),
-                       ("concrete", "home", "away"))
-    obj.data.polygons.foreach_set("material_index", np.concatenate(kinds))
-    return obj
-
-
-def _build_pitch(bowl, collection):
-    ring, _ = layout.bowl_ring(bowl)
+def _build_pitch(spec, collection):
+    ring, _ = plan_ring(spec)
     _mesh_object("Apron", collection, np.column_stack([ring, np.zeros(len(ring))]),
                  [list(range(len(ring)))], ("apron",))
-    px, py = bowl.pitch_half
+    px, py = 0.5 * spec.pitch[0], 0.5 * spec.pitch[1]
     _mesh_object("Pitch", collection,
                  [(-px, -py, 0.05), (px, -py, 0.05), (px, py, 0.05), (-px, py, 0.05)],
                  [[0, 1, 2, 3]], ("pitch",))
 
 
-def _build_seats(seats, collection):
-    mesh = bpy.data.meshes.new("Seats")
-    mesh.vertices.add(len(seats.position))
-    mesh.vertices.foreach_set("co", seats.position.ravel())
-    for name, kind, values in (("heading", "FLOAT", seats.heading),
-                               ("section", "INT", seats.section),
-                               ("seat_row", "INT", seats.row),
-                               ("seat_index", "INT", seats.index)):
-        mesh.attributes.new(name, kind, "POINT").data.foreach_set("value", values)
-    mesh.update()
-    obj = bpy.data.objects.new("Seats", mesh)
-    collection.objects.link(obj)
-    for name, section in (("home", layout.HOME), ("away", layout.AWAY)):
-        obj.vertex_groups.new(name=name).add(
-            np.nonzero(seats.section == section)[0].tolist(), 1.0, "REPLACE")
-    return obj
+def far_stand(seats, spec):
+    """(N,) bool: the seats of the far (south) stand, the straight along the south
+    touchline, which the broadcast camera frames."""
+    straight = 0.5 * spec.pitch[0] + spec.margin[0] - spec.corner_radius
+    return (seats.position[:, 1] < 0) & (np.abs(seats.position[:, 0]) <= straight)
 
 
-def _camera_and_sun(scene, bowl, rows, collection):
-    """The camera framing the bowl, the sun over the home stand, a world of the
-    preview's sky colour and the Standard view transform."""
-    a, b = bowl.half_straight
-    reach = bowl.corner_radius + rows * bowl.tread + 0.4
-    radius = math.hypot(a + reach, b + reach)
+def _broadcast_camera(scene, seats, collection):
+    """The "Camera": the main broadcast camera on the halfway line of the north stand,
+    hung under the top tier's front (or 12 m up if that is lower), looking across the
+    pitch at the far stand, which it frames whole in the render's aspect."""
+    spec = seats.spec
+    edge = 0.5 * spec.pitch[1] + spec.margin[1]       # the north stand's front edge
+    eye = np.array([0.0, edge + seats.fronts[-1] - 1.0, max(seats.heights[-1] - 1.0, 12.0)])
+    far = seats.position[far_stand(seats, spec)].astype(np.float64)
+    aspect = scene.render.resolution_x / scene.render.resolution_y
+    forward = far.mean(0) - eye
+    for _ in range(3):                  # aim at the middle of the far stand's extent
+        f = forward / np.linalg.norm(forward)
+        right = np.cross(f, (0.0, 0.0, 1.0))
+        right /= np.linalg.norm(right)
+        up = np.cross(right, f)
+        rel = far - eye
+        depth = rel @ f
+        x, yy = (rel @ right) / depth, (rel @ up) / depth
+        mid_x, mid_y = 0.5 * (x.max() + x.min()), 0.5 * (yy.max() + yy.min())
+        forward = f + mid_x * right + mid_y * up
+    tan_half = FRAME_MARGIN * max(0.5 * np.ptp(x), 0.5 * np.ptp(yy) * aspect)
     cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
-    cam.data.lens = 35.0
-    cam.data.clip_start, cam.data.clip_end = 1.0, 20 * radius
-    half_fov = math.atan(0.5 * cam.data.sensor_width / cam.data.lens)
-    direction = Vector((0.55, -0.75, 0.45)).normalized()
-    cam.location = direction * (1.05 * radius / math.sin(half_fov))
-    cam.rotation_euler = (-direction).to_track_quat("-Z", "Y").to_euler()
+    cam.data.sensor_fit = "HORIZONTAL"
+    cam.data.lens = 0.5 * cam.data.sensor_width / tan_half
+    cam.data.clip_start, cam.data.clip_end = 1.0, 20.0 * float(np.abs(far).max())
+    cam.location = Vector(eye)
+    cam.rotation_euler = Vector(forward).to_track_quat("-Z", "Y").to_euler()
     collection.objects.link(cam)
     scene.camera = cam
+    return cam
+
+
+def _camera_and_sun(scene, seats, collection):
+    """The broadcast camera, the sun over the home stand, a world of the preview's sky
+    colour and the Standard view transform."""
+    cam = _broadcast_camera(scene, seats, collection)
     sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN"))
     sun.data.energy = 3.0
     sun.rotation_euler = (math.radians(40), 0.0, math.radians(210))   # lights the home stand
@@ -203,7 +198,8 @@ def build_stadium(path, seats=DEFAULT_SEATS, bvh=mocap.BVH_PATH, log=print):
 
     seats : number of agent points (>= 1). bvh : CMU BVH file for the mocap
     character. log : callable taking one progress string (None: silent).
-    Summary keys: path, seats, rows, home, away, actions ({name: {frame_start,
+    Summary keys: path, seats, rows (all tiers), tiers (rows per tier), sections,
+    home, away, actions ({name: {frame_start,
     frame_end, loop, markers: [(name, frame)], rig}}), vertices ({object: count}),
     bytes, seconds.
     """
@@ -218,15 +214,12 @@ def build_stadium(path, seats=DEFAULT_SEATS, bvh=mocap.BVH_PATH, log=print):
     scene.frame_start, scene.frame_end = 1, 120
     scene.render.resolution_x, scene.render.resolution_y = 1280, 720
 
-    bowl = layout.Bowl()
     say(f"laying out {seats} seats")
-    seat_layout = layout.layout_seats(bowl, int(seats))
+    seat_layout = layout.layout_seats(int(seats))
     stadium = _collection(scene, "Stadium")
-    stand_rows = seat_layout.rows + 1       # a full stand: its seated rows and one behind
-    say(f"building stands: {seat_layout.rows} seated rows of {stand_rows}")
-    stands = _build_stands(bowl, stand_rows, stadium)
-    _build_pitch(bowl, stadium)
-    seat_obj = _build_seats(seat_layout, stadium)
+    say(f"building the seats and stands: {' + '.join(map(str, seat_layout.rows))} rows")
+    seat_obj, stands = seat_objects(seat_layout, stadium)
+    _build_pitch(seat_layout.spec, stadium)
 
     say("building the fan rig, body and actions")
     fan_col = _collection(scene, "Fan")
@@ -239,11 +232,12 @@ def build_stadium(path, seats=DEFAULT_SEATS, bvh=mocap.BVH_PATH, log=print):
     with _stdout_silenced(log is None):
         mocap_rig, mocap_body, mocap_action = mocap.build_mocap(mocap_col, bvh)
 
-    _camera_and_sun(scene, bowl, stand_rows, stadium)
+    _camera_and_sun(scene, seat_layout, stadium)
     scene.frame_set(1)
     scene["crowd_builder_version"] = BUILDER_VERSION
     scene["crowd_seat_count"] = int(seats)
-    scene["crowd_seat_rows"] = int(seat_layout.rows)
+    scene["crowd_seat_rows"] = int(sum(seat_layout.rows))
+    scene["crowd_seat_sections"] = int(seat_layout.sections)
     scene["crowd_character_forward"] = "-Y"
     scene["crowd_fan_rig"] = rig.name
     scene["crowd_mocap_rig"] = mocap_rig.name
@@ -252,9 +246,10 @@ def build_stadium(path, seats=DEFAULT_SEATS, bvh=mocap.BVH_PATH, log=print):
     with _stdout_silenced(log is None):
         _save(path)
     summary = {
-        "path": str(path), "seats": int(seats), "rows": int(seat_layout.rows),
-        "home": int((seat_layout.section == layout.HOME).sum()),
-        "away": int((seat_layout.section == layout.AWAY).sum()),
+        "path": str(path), "seats": int(seats), "rows": int(sum(seat_layout.rows)),
+        "tiers": [int(r) for r in seat_layout.rows], "sections": int(seat_layout.sections),
+        "home": int((seat_layout.team == HOME).sum()),
+        "away": int((seat_layout.team == AWAY).sum()),
         "actions": {a.name: {"rig": owner.name, "frame_start": int(a.frame_start),
                              "frame_end": int(a.frame_end), "loop": bool(a.use_cyclic),
                              "markers": sorted((m.name, m.frame) for m in a.pose_markers)}
@@ -271,7 +266,8 @@ def format_summary(summary):
     """Human-readable lines for a :func:`build_stadium` summary."""
     lines = [f"wrote {summary['path']} ({summary['bytes'] / 1e6:.2f} MB, "
              f"{summary['seconds']:.1f} s)",
-             f"seats: {summary['seats']} in {summary['rows']} rows "
+             f"seats: {summary['seats']} in {summary['rows']} rows (tiers "
+             f"{' + '.join(map(str, summary['tiers']))}), {summary['sections']} sections "
              f"(home {summary['home']}, away {summary['away']})",
              "vertices: " + ", ".join(f"{k} {v}" for k, v in summary["vertices"].items()),
              "actions:"]

@@ -78,7 +78,7 @@ MOCAP_ACTION, MOCAP_SHARE = "mocap_01_01", 0.02
 #: the characters: name -> (armature, body)
 FAN, MOCAP = "Fan", "Mocap"
 CHARACTERS = {FAN: ("FanRig", "FanBody"), MOCAP: ("MocapRig", "MocapBody")}
-HOME, AWAY = 0, 1                       # the seats' ``section`` attribute
+HOME, AWAY = 0, 1                       # the seats' ``team`` attribute
 
 #: When the beats start, as fractions of the run: a beat at share ``s`` of a run of
 #: ``N`` frames from frame ``F`` starts at frame ``F + 1 + floor(s * N)`` (the first
@@ -290,47 +290,47 @@ def _seat_attribute(me, name, values, kind="INT"):
 
 
 def _seats():
-    """The seats object, its positions (n, 3) and sections (n,)."""
+    """The seats object, its positions (n, 3) and teams (n,: HOME or AWAY)."""
     seats = _obj("Seats")
     me = seats.data
     n = len(me.vertices)
     pos = np.zeros(n * 3, np.float32)
     me.vertices.foreach_get("co", pos)
-    section = np.zeros(n, np.int32)
-    me.attributes["section"].data.foreach_get("value", section)
-    return seats, pos.reshape(n, 3), section
+    teams = np.zeros(n, np.int32)
+    me.attributes["team"].data.foreach_get("value", teams)
+    return seats, pos.reshape(n, 3), teams
 
 
-def _camera_stand(pos, section):
+def _camera_stand(pos, teams):
     """(n,) bool: the home seats of the near long side (about angle -pi/2 round the
     pitch centre), where the camera looks and the wave passes first."""
     angle = np.arctan2(pos[:, 1], pos[:, 0])
     near = np.abs(np.angle(np.exp(1j * (angle + np.pi / 2)))) < 0.35
-    return near & (section == HOME)
+    return near & (teams == HOME)
 
 
-def _seat_casting(seats, section, pos, seed, hits):
+def _seat_casting(seats, teams, pos, seed, hits):
     """Per seat: character (0 fan, 1 mocap), stream index among its character's
     streams, which hit it takes (1..hits, 0 none) and a team colour, written as the
     ``character``, ``stream``, ``hit`` and ``team_colour`` point attributes."""
     me = seats.data
-    n = section.size
+    n = teams.size
     rng = np.random.default_rng(seed)
     names = list(STREAMS)
     stream = np.empty(n, np.int32)
     for side, mix in ((HOME, HOME_MIX), (AWAY, AWAY_MIX)):
-        m = section == side
+        m = teams == side
         ids = [names.index(k) for k in mix]
         stream[m] = rng.choice(ids, size=int(m.sum()), p=np.array(list(mix.values())))
     character = np.zeros(n, np.int32)
-    home = np.flatnonzero(section == HOME)
+    home = np.flatnonzero(teams == HOME)
     jumpers = np.random.default_rng(seed + 1).choice(
         home, size=max(1, int(MOCAP_SHARE * home.size)), replace=False)
     character[jumpers] = 1
     stream[jumpers] = 0                     # the mocap character's only stream
     # the ball lands in the stand the camera looks at (any fan's seat if it has too few)
     fans = character == 0
-    pool = np.flatnonzero(fans & _camera_stand(pos, section))
+    pool = np.flatnonzero(fans & _camera_stand(pos, teams))
     if pool.size < hits:
         pool = np.flatnonzero(fans)
     hit = np.zeros(n, np.int32)
@@ -338,7 +338,7 @@ def _seat_casting(seats, section, pos, seed, hits):
                                                     replace=False)
     hit[chosen] = np.arange(1, chosen.size + 1)
     # team colours, varied per seat
-    team = np.where((section == HOME)[:, None], (0.85, 0.18, 0.15), (0.2, 0.35, 0.85))
+    team = np.where((teams == HOME)[:, None], (0.85, 0.18, 0.15), (0.2, 0.35, 0.85))
     vary = 0.8 + 0.5 * (np.random.default_rng(seed + 3).random((n, 3)) - 0.8)
     colour = np.ones((n, 4), np.float32)
     colour[:, :3] = 0.6 * team + 0.4 * vary
@@ -358,8 +358,8 @@ def setup_crowd(scene, hits=6, slots=800, max_offset=60, seed=5):
     s.forward_axis = "NEG_Y"
     _add_characters(s, hits)
     s.agent_sources.clear()
-    seats, pos, section = _seats()
-    _seat_casting(seats, section, pos, seed, hits)
+    seats, pos, teams = _seats()
+    _seat_casting(seats, teams, pos, seed, hits)
     src = s.agent_sources.add()
     src.name, src.object, src.mode = "seats", seats, "VERTICES"
     src.heading_mode, src.heading_attribute = "ATTRIBUTE", "heading"
@@ -430,7 +430,7 @@ def setup_show(scene, frames: int):
                                            (CUES["goal_away"], AWAY, "groan", DESPAIR)):
         _cue(show, name, at["goal"], last, target, hold=cheer, offset_mode="GIVEN",
              offset=0, switch_trigger=trigger, release_trigger=CALM,
-             **_select("section", section))
+             **_select("team", section))
     _cue(show, CUES["wave"], at["wave"], last, "wave", hold=WAVE_HOLD, offset_mode="GIVEN",
          offset=0, timing="SWEEP", sweep_mode="ANGLE", sweep_centre=None,
          sweep_speed=_wave_speed(scene, frames), sweep_start=WAVE_START_ANGLE,
@@ -451,9 +451,9 @@ def add_stand_camera(scene, size=(960, 540)):
     size ``size``."""
     from mathutils import Vector
 
-    _, pos, section = _seats()
+    _, pos, teams = _seats()
     pos = pos.astype(np.float64)
-    stand = _camera_stand(pos, section)
+    stand = _camera_stand(pos, teams)
     pick = pos[stand] if stand.any() else pos
     centre = pick.mean(0)
     reach = max(float(np.linalg.norm(centre[:2])), 1.0)        # stand to pitch centre

@@ -103,12 +103,25 @@ def test_every_engine_sees_the_same_colours(built):
     np.testing.assert_allclose(display, BACKGROUND[:3], atol=2e-3)
 
 
-def test_camera_frames_every_seat(built):
+def test_broadcast_camera_looks_across_the_pitch_at_the_far_stand(built):
+    """The camera is high on the north stand, on the halfway line, looking across the
+    pitch; the far (south) stand's seats are all in its frame."""
     scene = bpy.context.scene
+    cam = scene.camera
+    spec = _load_builder().layout.SPEC
+    touchline = 0.5 * spec.pitch[1]
+    assert abs(cam.location.x) < 1e-6 and cam.location.y > touchline
+    assert cam.location.z >= 12.0
+    forward = cam.matrix_world.to_3x3() @ Vector((0, 0, -1))
+    assert forward.y < -0.8 and forward.z < 0
     seats = bpy.data.objects["Seats"]
-    ndc = np.array([world_to_camera_view(scene, scene.camera, seats.matrix_world @ v.co)
-                    for v in seats.data.vertices])
-    assert np.all((ndc[:, :2] > 0.02) & (ndc[:, :2] < 0.98)) and np.all(ndc[:, 2] > 0)
+    pos = np.array([seats.matrix_world @ v.co for v in seats.data.vertices])
+    straight = 0.5 * spec.pitch[0] + spec.margin[0] - spec.corner_radius
+    far = (pos[:, 1] < 0) & (np.abs(pos[:, 0]) <= straight)
+    assert far.sum() > 0.15 * SEATS
+    ndc = np.array([world_to_camera_view(scene, cam, Vector(p)) for p in pos[far]])
+    assert np.all((ndc[:, :2] > 0.0) & (ndc[:, :2] < 1.0)) and np.all(ndc[:, 2] > 0)
+    assert ndc[:, 0].min() < 0.1 and ndc[:, 0].max() > 0.9     # framed, not lost in it
 
 
 def test_seats_have_attributes_and_groups(built):
@@ -116,10 +129,11 @@ def test_seats_have_attributes_and_groups(built):
     mesh = seats.data
     assert len(mesh.vertices) == SEATS
     kinds = {a.name: (a.data_type, a.domain) for a in mesh.attributes}
-    assert kinds["heading"] == ("FLOAT", "POINT") and kinds["section"] == ("INT", "POINT")
-    assert kinds["seat_row"] == ("INT", "POINT") and kinds["seat_index"] == ("INT", "POINT")
+    assert kinds["heading"] == ("FLOAT", "POINT")
+    for name in ("section", "tier", "row", "seat", "team"):
+        assert kinds[name] == ("INT", "POINT"), name
     heading = np.array([d.value for d in mesh.attributes["heading"].data])
-    section = np.array([d.value for d in mesh.attributes["section"].data])
+    team = np.array([d.value for d in mesh.attributes["team"].data])
     pos = np.array([seats.matrix_world @ v.co for v in mesh.vertices])
     # the fan faces -Y at rest; rotating it by heading about +Z must face the pitch centre
     forward = np.array([(Matrix.Rotation(h, 3, "Z") @ Vector((0, -1, 0)))[:2] for h in heading])
@@ -128,8 +142,10 @@ def test_seats_have_attributes_and_groups(built):
     groups = {g.index: g.name for g in seats.vertex_groups}
     member = [[groups[g.group] for g in v.groups if g.weight > 0] for v in mesh.vertices]
     assert all(len(m) == 1 for m in member)
-    np.testing.assert_array_equal([m == ["away"] for m in member], section == 1)
-    assert 0 < (section == 1).sum() < SEATS
+    np.testing.assert_array_equal([m == ["away"] for m in member], team == 1)
+    assert 0 < (team == 1).sum() < SEATS
+    # the away fans sit behind the east goal
+    assert np.all(pos[team == 1, 0] > 0.5 * _load_builder().layout.SPEC.pitch[0])
 
 
 def test_seats_sit_on_the_terraces_with_a_bench_behind(built):
