@@ -14,7 +14,7 @@ The scene holds (see sample_scenes/README.md for the details):
   authored actions with event markers (``fan_actions.ACTIONS``);
 - "MocapRig"/"MocapBody" with the action "mocap_01_01" from CMU motion capture;
 - the broadcast camera high on the north stand looking across the pitch at the far
-  stand, a sun, a sky-coloured world (Standard view transform), 30 fps, and scene custom properties
+  stand, an aerial camera that sees the whole bowl ("AerialCamera"), a sun, a sky-coloured world (Standard view transform), 30 fps, and scene custom properties
   ``crowd_seat_count``, ``crowd_builder_version`` and friends.
 
 Everything is deterministic: the same arguments give the same scene. Import
@@ -126,10 +126,39 @@ def _broadcast_camera(scene, seats, collection):
     return cam
 
 
+def _aerial_camera(seats, collection, aspect):
+    """"AerialCamera": high over the south-west corner, looking down at the middle of
+    the bowl, which it frames whole (every seat in view) in ``aspect``: the full stadium
+    at a glance (``crowd preview --camera AerialCamera``)."""
+    pos = seats.position.astype(np.float64)
+    reach = float(np.abs(pos[:, :2]).max())
+    eye = np.array([-0.9 * reach, -1.25 * reach, 0.75 * reach])
+    forward = -eye
+    for _ in range(3):                  # aim at the middle of the bowl's extent in view
+        f = forward / np.linalg.norm(forward)
+        right = np.cross(f, (0.0, 0.0, 1.0))
+        right /= np.linalg.norm(right)
+        up = np.cross(right, f)
+        rel = pos - eye
+        depth = rel @ f
+        x, y = (rel @ right) / depth, (rel @ up) / depth
+        forward = f + 0.5 * (x.max() + x.min()) * right + 0.5 * (y.max() + y.min()) * up
+    tan_half = FRAME_MARGIN * max(0.5 * np.ptp(x), 0.5 * np.ptp(y) * aspect)
+    cam = bpy.data.objects.new("AerialCamera", bpy.data.cameras.new("AerialCamera"))
+    cam.data.sensor_fit = "HORIZONTAL"
+    cam.data.lens = 0.5 * cam.data.sensor_width / tan_half
+    cam.data.clip_start, cam.data.clip_end = 1.0, 10.0 * reach
+    cam.location = Vector(eye)
+    cam.rotation_euler = Vector(forward).to_track_quat("-Z", "Y").to_euler()
+    collection.objects.link(cam)
+    return cam
+
+
 def _camera_and_sun(scene, seats, collection):
-    """The broadcast camera, the sun over the home stand, a world of the preview's sky
-    colour and the Standard view transform."""
+    """The broadcast camera (the scene camera), the aerial camera, the sun over the home
+    stand, a world of the preview's sky colour and the Standard view transform."""
     cam = _broadcast_camera(scene, seats, collection)
+    _aerial_camera(seats, collection, scene.render.resolution_x / scene.render.resolution_y)
     sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN"))
     sun.data.energy = 3.0
     sun.rotation_euler = (math.radians(40), 0.0, math.radians(210))   # lights the home stand

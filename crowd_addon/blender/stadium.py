@@ -426,11 +426,10 @@ def setup_show(scene, frames: int):
     show.reactions.clear()
     show.parameters.clear()
     cheer = max(1, round(CHEER_SHARE * frames))
-    for name, section, target, trigger in ((CUES["goal_home"], HOME, "cheer", CELEBRATE),
-                                           (CUES["goal_away"], AWAY, "groan", DESPAIR)):
+    for name, team, target, trigger in ((CUES["goal_home"], HOME, "cheer", CELEBRATE),
+                                        (CUES["goal_away"], AWAY, "groan", DESPAIR)):
         _cue(show, name, at["goal"], last, target, hold=cheer, offset_mode="GIVEN",
-             offset=0, switch_trigger=trigger, release_trigger=CALM,
-             **_select("team", section))
+             offset=0, switch_trigger=trigger, release_trigger=CALM, **_select("team", team))
     _cue(show, CUES["wave"], at["wave"], last, "wave", hold=WAVE_HOLD, offset_mode="GIVEN",
          offset=0, timing="SWEEP", sweep_mode="ANGLE", sweep_centre=None,
          sweep_speed=_wave_speed(scene, frames), sweep_start=WAVE_START_ANGLE,

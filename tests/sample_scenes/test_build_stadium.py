@@ -124,6 +124,21 @@ def test_broadcast_camera_looks_across_the_pitch_at_the_far_stand(built):
     assert ndc[:, 0].min() < 0.1 and ndc[:, 0].max() > 0.9     # framed, not lost in it
 
 
+def test_aerial_camera_sees_the_whole_bowl(built):
+    """"AerialCamera" looks down at the bowl from over a corner, every seat in frame
+    and the bowl filling it (the full stadium at a glance)."""
+    scene = bpy.context.scene
+    cam = bpy.data.objects["AerialCamera"]
+    assert cam.type == "CAMERA" and scene.camera.name == "Camera"    # not the main one
+    forward = cam.matrix_world.to_3x3() @ Vector((0, 0, -1))
+    assert forward.z < -0.3
+    seats = bpy.data.objects["Seats"]
+    pos = np.array([seats.matrix_world @ v.co for v in seats.data.vertices])
+    ndc = np.array([world_to_camera_view(scene, cam, Vector(p)) for p in pos])
+    assert np.all((ndc[:, :2] > 0.0) & (ndc[:, :2] < 1.0)) and np.all(ndc[:, 2] > 0)
+    assert np.ptp(ndc[:, 0]) > 0.8                              # fills the frame
+
+
 def test_seats_have_attributes_and_groups(built):
     seats = bpy.data.objects["Seats"]
     mesh = seats.data
