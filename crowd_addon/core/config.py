@@ -235,7 +235,9 @@ class CrowdConfig:
                     raise CrowdError(f"mesh {mesh.name!r}: LOD {k} {level.name!r} is for "
                                      f"skeleton {level.skeleton!r}, not {mesh.skeleton!r}")
                 self._check_mesh(level, f"mesh {mesh.name!r}: LOD {k}: ")
-            levels = [mesh, *ready] + ([parts_lod(mesh)] if rest else [])
+            # levels an artist made are kept as made: the silhouette check judges the
+            # automatic ones
+            return [mesh, *ready] + ([parts_lod(mesh)] if rest else [])
         return self._checked(levels)
 
     @property
