@@ -17,7 +17,9 @@ camera) is :mod:`crowd_addon.blender.cli_commands`, imported only for them; that
 package never imports this module (inside Blender, ``blender -c crowd export`` is its
 own command). Exit codes: 0 success, 2 bad input (usage
 errors and :class:`~crowd_addon.core.errors.CrowdError`, reported on stderr as
-``crowd <command>: error: <message>``).
+``crowd <command>: error: <message>``), 3 a .blend's crowd script that is not trusted
+here (:class:`~crowd_addon.core.errors.ScriptNotTrusted`, reported the same way;
+``--ignore-scripts`` goes on without it).
 
 Units: sizes in bytes; ``--budget-mb`` is in MB of 10**6 bytes, or MiB (2**20 bytes)
 with ``--mib``.
@@ -199,7 +201,7 @@ def _run_plan(args) -> int:
         from .blender.cli_commands import plan_blend
         config, camera, settings = plan_blend(
             blend=args.blend, scene=args.scene, settings=settings,
-            trust_scripts=args.trust_scripts,
+            trust_scripts=args.trust_scripts, ignore_scripts=args.ignore_scripts,
             on_bake=lambda done, total, message: print(f"crowd plan: {message}",
                                                        file=sys.stderr, flush=True))
     else:
@@ -267,7 +269,8 @@ def _run_export(args) -> int:
     from .farm import ShotSource, export_chunk
     source = ShotSource(config=args.config, blend=args.blend, scene=args.scene,
                         trust_scripts=args.trust_scripts, agents=args.agents,
-                        layout=args.layout, substeps=args.substeps)
+                        layout=args.layout, substeps=args.substeps,
+                        ignore_scripts=args.ignore_scripts)
     progress = progress_printer("crowd export")
     if args.workers is not None or args.scheduler is not None:
         return _run_farm_export(args, source, progress)
@@ -305,12 +308,20 @@ def _run_farm_export(args, source, progress) -> int:
     import json
 
     from .farm import chunk_folder, farm_export, summary
-    if args.frames is None:
-        raise CrowdError("--workers and --scheduler need --frames FIRST-LAST")
     if args.snapshots is not None:
         raise CrowdError("--workers keeps its snapshots beside its chunks "
                          "(<out stem>.chunks/snapshots); leave out --snapshots")
-    result = farm_export(source, args.out, args.frames, workers=args.workers or 2,
+    frames = args.frames
+    if source.config is not None:
+        if frames is None:
+            raise CrowdError("--workers and --scheduler need --frames FIRST-LAST with "
+                             "--config (a .blend gives its scene's frame range)")
+    else:       # opened here once: the scene's frames, its script checked before any task
+        from .blender.cli_commands import blend_shot
+        frames = blend_shot(frames, blend=source.blend, scene=source.scene,
+                            trust_scripts=source.trust_scripts,
+                            ignore_scripts=source.ignore_scripts)
+    result = farm_export(source, args.out, frames, workers=args.workers or 2,
                          scheduler=args.scheduler, chunk_frames=args.chunk_frames,
                          progress=progress)
     if args.json:
@@ -332,11 +343,13 @@ def _add_farm(subparsers) -> None:
         help="export many shots in chunks on one Dask cluster",
         description="Export every shot of a shot list (JSON: {\"shots\": [{\"config\" or "
                     "\"blend\": ..., \"frames\": \"FIRST-LAST\", \"out\": ..., optional "
-                    "\"scene\", \"trust_scripts\", \"agents\", \"layout\", \"substeps\", "
-                    "\"chunk_frames\"}]}, paths relative to the file) as crowd export "
-                    "--workers does: every shot's snapshot pass, chunks and stitch as tasks "
-                    "of one Dask cluster. A shot that fails is named and writes no stage; "
-                    "the others are written (docs/snapshots.md).",
+                    "\"scene\", \"trust_scripts\", \"ignore_scripts\", \"agents\", \"layout\", "
+                    "\"substeps\", \"chunk_frames\"}]}, paths relative to the file) as crowd "
+                    "export --workers does: every shot's snapshot pass, chunks and stitch as "
+                    "tasks of one Dask cluster. A shot that fails is named and writes no "
+                    "stage; the others are written (docs/snapshots.md). Exit code 3 when a "
+                    "shot's crowd script is not trusted (give it trust_scripts or "
+                    "ignore_scripts), else 2 when a shot failed.",
         epilog="example: crowd farm shots.json --workers 8")
     p.add_argument("shots", type=path_arg, metavar="SHOTS_JSON", help="the shot list")
     p.add_argument("--workers", type=int_at_least(1), default=2, metavar="N",
@@ -367,6 +380,8 @@ def _run_farm(args) -> int:
                       f"agents, {len(r.chunks)} chunks")
     for r in failed:
         print(f"crowd farm: error: {r}", file=sys.stderr)
+    if any(getattr(r, "exit_code", 2) == 3 for r in failed):
+        return 3                # a shot's crowd script not trusted (and no ignore_scripts)
     return 2 if failed else 0
 
 
@@ -451,7 +466,8 @@ def _run_snapshot(args) -> int:
     t = time.perf_counter()
     progress = progress_printer("crowd snapshot")
     source = ShotSource(config=args.config, blend=args.blend, scene=args.scene,
-                        trust_scripts=args.trust_scripts, substeps=args.substeps)
+                        trust_scripts=args.trust_scripts, substeps=args.substeps,
+                        ignore_scripts=args.ignore_scripts)
     files = write_shot_snapshots(
         source, args.out, args.frames, args.every,
         progress=lambda d, n: progress("simulate", d, n),
@@ -552,6 +568,7 @@ def _run_preview(args) -> int:
             args.out, args.frames, blend=args.blend, scene=args.scene, start=args.start,
             camera=args.camera, size=size, mp4=args.mp4, backend=args.backend,
             samples=args.samples, shadows=args.shadows, trust_scripts=args.trust_scripts,
+            ignore_scripts=args.ignore_scripts,
             progress=progress, repetition=repetition_settings(args), lod=args.lod == "on",
             on_bake=lambda done, total, message: print(
                 f"crowd preview: {message}", file=sys.stderr, flush=True))
@@ -720,7 +737,7 @@ def main(argv=None) -> int:
         return args.handler(args)
     except CrowdError as exc:
         print(f"{parser.prog} {args.command}: error: {exc}", file=sys.stderr)
-        return 2
+        return getattr(exc, "exit_code", 2)        # 3: ScriptNotTrusted
 
 
 def console(argv=None) -> int:

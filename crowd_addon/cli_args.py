@@ -160,11 +160,18 @@ def repetition_settings(args, **size):
 
 
 def add_trust_argument(parser) -> None:
-    """``--trust-scripts``: run a .blend's crowd script in this command (docs/show.md)."""
-    parser.add_argument("--trust-scripts", action="store_true",
-                        help="run the .blend's crowd script (scene.crowd.show.script) in "
-                             "this command even where Blender does not trust scripts in "
-                             ".blend files; nothing stays trusted after it")
+    """``--trust-scripts``: run a .blend's crowd script in this command;
+    ``--ignore-scripts``: go on without it (docs/show.md). Without either, a crowd
+    script that is not trusted here stops the command with exit code 3."""
+    scripts = parser.add_mutually_exclusive_group()
+    scripts.add_argument("--trust-scripts", action="store_true",
+                         help="run the .blend's crowd script (scene.crowd.show.script) in "
+                              "this command even where Blender does not trust scripts in "
+                              ".blend files; nothing stays trusted after it")
+    scripts.add_argument("--ignore-scripts", action="store_true",
+                         help="go on without the .blend's crowd script: it does not run in "
+                              "this command, trusted or not (without this, a script that "
+                              "is not trusted here stops the command with exit code 3)")
 
 
 def parse_command(parser, argv):

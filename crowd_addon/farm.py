@@ -44,7 +44,7 @@ import time
 import traceback
 from dataclasses import dataclass, field
 
-from .core.errors import CrowdError
+from .core.errors import CrowdError, ScriptNotTrusted
 from .core.repetition import RepetitionSettings
 
 __all__ = ["ShotSource", "FarmShot", "chunk_ranges", "chunk_folder", "write_shot_snapshots",
@@ -58,7 +58,9 @@ class ShotSource:
     (``config``) or a .blend (``blend``, its ``scene``, ``trust_scripts``; neither: the
     .blend open in Blender), with the export's ``agents``, ``layout`` and ``substeps``
     (as ``crowd export``). ``trust_scripts`` is passed to each of the shot's tasks and
-    holds for that task only: a worker that ran a trusted shot trusts nothing after it."""
+    holds for that task only: a worker that ran a trusted shot trusts nothing after it.
+    A .blend whose crowd script would not run stops the shot (ScriptNotTrusted) unless
+    ``ignore_scripts``: then every task leaves the script out."""
 
     config: str | None = None
     blend: str | None = None
@@ -67,10 +69,13 @@ class ShotSource:
     agents: int | None = None
     layout: str = "instanced"
     substeps: int = 1
+    ignore_scripts: bool = False
 
     def __post_init__(self):
         if self.config is not None and self.blend is not None:
             raise CrowdError("a shot comes from one --config or one --blend, not both")
+        if self.trust_scripts and self.ignore_scripts:
+            raise CrowdError("a shot trusts its crowd script or ignores it, not both")
 
 
 def chunk_ranges(first: int, last: int, size: int) -> list:
@@ -112,7 +117,8 @@ def write_shot_snapshots(source: ShotSource, folder, frames, every, progress=Non
     from .blender.cli_commands import snapshot_blend
     return snapshot_blend(folder, frames, every=every, blend=source.blend,
                           scene=source.scene, substeps=source.substeps,
-                          trust_scripts=source.trust_scripts, progress=progress,
+                          trust_scripts=source.trust_scripts,
+                          ignore_scripts=source.ignore_scripts, progress=progress,
                           on_bake=on_bake)[1]
 
 
@@ -159,7 +165,8 @@ def export_chunk(source: ShotSource, frames, out, snapshots=None, progress=None,
     return export_blend(out, frames, blend=source.blend, scene=source.scene,
                         agents=source.agents, layout=source.layout,
                         substeps=source.substeps, snapshots=snapshots,
-                        trust_scripts=source.trust_scripts, progress=progress,
+                        trust_scripts=source.trust_scripts,
+                        ignore_scripts=source.ignore_scripts, progress=progress,
                         on_bake=on_bake, repetition=repetition)
 
 
@@ -411,6 +418,8 @@ def _collect(plan, t0):
     out = plan["shot"].out
     where = f"{out}: "
     if plan["snapshots"].status == "error":
+        if isinstance(plan["snapshots"].exception(), ScriptNotTrusted):
+            return ScriptNotTrusted(where + str(plan["snapshots"].exception()))
         return CrowdError(where + f"the snapshot pass failed twice: "
                                   f"{_error(plan['snapshots'])}; nothing was exported")
     failed = [f"{name} failed twice: {_error(f)}"
@@ -522,7 +531,8 @@ def _error(future) -> str:
 
 
 #: what a shot of a shot list may say, with its JSON type
-_SHOT_KEYS = {"config": str, "blend": str, "scene": str, "trust_scripts": bool, "out": str,
+_SHOT_KEYS = {"config": str, "blend": str, "scene": str, "trust_scripts": bool,
+              "ignore_scripts": bool, "out": str,
               "frames": str, "agents": int, "layout": str, "substeps": int,
               "chunk_frames": int}
 
@@ -566,6 +576,9 @@ def load_shot_list(path) -> list:
             frames = frame_range(shot["frames"])
         except Exception as e:  # noqa: BLE001 - argparse's type error, named here
             raise CrowdError(f"{where}: 'frames': {e}") from None
+        if shot.get("trust_scripts") and shot.get("ignore_scripts"):
+            raise CrowdError(f"{where}: 'trust_scripts' and 'ignore_scripts' exclude each "
+                             "other")
         if shot.get("layout", "instanced") not in USD_LAYOUTS:
             raise CrowdError(f"{where}: 'layout' must be one of {list(USD_LAYOUTS)}")
         if not 1 <= shot.get("substeps", 1) <= MAX_SUBSTEPS:
@@ -582,6 +595,7 @@ def load_shot_list(path) -> list:
             return os.path.normpath(os.path.join(base, shot[key])) if key in shot else None
         source = ShotSource(config=at("config"), blend=at("blend"), scene=shot.get("scene"),
                             trust_scripts=shot.get("trust_scripts", False),
+                            ignore_scripts=shot.get("ignore_scripts", False),
                             agents=shot.get("agents"), layout=shot.get("layout", "instanced"),
                             substeps=shot.get("substeps", 1))
         out.append(FarmShot(source, target, frames, shot.get("chunk_frames")))

@@ -19,7 +19,8 @@
 This module never imports the headless command line; its ``export`` options are the
 scene-facing subset of ``crowd export`` (``--scene``, ``--out``, ``--frames``,
 ``--agents``, ``--json``). Exit codes: 0 success, 2 bad input (reported on stderr as
-``crowd export: error: <message>``, nothing written).
+``crowd export: error: <message>``, nothing written), 3 a crowd script that is not
+trusted here (the same way; ``--ignore-scripts`` goes on without it).
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ from ..core.repetition import RepetitionSettings, describe
 _DEFAULT = RepetitionSettings()
 
 __all__ = ["open_scene", "export_blend", "preview_blend", "snapshot_blend", "scene_frames",
+           "blend_shot",
            "blender_output_to_stderr", "build_parser", "crowd_command", "register_command",
            "unregister_command", "command_registered"]
 
@@ -110,10 +112,31 @@ def scene_frames(scene, frames=None) -> tuple:
     return (scene.frame_start, scene.frame_end) if frames is None else tuple(frames)
 
 
+def _check_script(scene, trust_scripts: bool, ignore_scripts: bool) -> None:
+    """A scene whose crowd script would not run here stops the command
+    (:func:`.show_data.check_script`: ScriptNotTrusted, exit code 3)."""
+    from .show_data import check_script
+    check_script(scene, trust_scripts, ignore_scripts)
+
+
+def blend_shot(frames: tuple | None = None, *, blend: str | None = None,
+               scene: str | None = None, trust_scripts: bool = False,
+               ignore_scripts: bool = False) -> tuple:
+    """What a chunked export of a .blend (``crowd export --workers N --blend``) checks
+    before its cluster starts: the scene opened (:func:`open_scene`), its crowd script
+    trusted (or ``ignore_scripts``) as every task will need it, and the shot's frames,
+    ``frames`` or the scene's frame range. Returns ``(first, last)``."""
+    with blender_output_to_stderr():
+        found = open_scene(blend, scene)
+        _check_script(found, trust_scripts, ignore_scripts)
+        return tuple(int(f) for f in scene_frames(found, frames))
+
+
 def export_blend(out: str, frames: tuple | None = None, *, blend: str | None = None,
                  scene: str | None = None, agents: int | None = None, progress=None,
                  on_bake=None, trust_scripts: bool = False, layout: str = "instanced",
-                 substeps: int = 1, snapshots: str | None = None, repetition=_DEFAULT):
+                 substeps: int = 1, snapshots: str | None = None, repetition=_DEFAULT,
+                 ignore_scripts: bool = False):
     """Export the Crowd settings of a .blend's scene (:func:`open_scene`) as UsdSkel.
 
     ``out``, ``agents``, ``layout``, ``substeps``, ``snapshots``, ``repetition``,
@@ -124,19 +147,24 @@ def export_blend(out: str, frames: tuple | None = None, *, blend: str | None = N
     stderr (:func:`blender_output_to_stderr`). Returns ``(config, result)``: the baked
     ``CrowdConfig`` and the ``ExportResult``. ``trust_scripts``: run the scene's crowd
     script in this call even where scripts in .blend files are not trusted; it trusts
-    nothing after the call (a later call, or another file, is not trusted by it).
+    nothing after the call (a later call, or another file, is not trusted by it). A
+    script that would not run stops the export before anything is written
+    (:class:`~crowd_addon.core.errors.ScriptNotTrusted`), unless ``ignore_scripts``:
+    then the shot is exported without it.
     """
     with blender_output_to_stderr():        # from the import of bpy on (5.2 logs then)
         from ..core.files import folders_made
         from ..gpu.preview_render import writable_dir
         from .export import export_scene
         found = open_scene(blend, scene)
+        _check_script(found, trust_scripts, ignore_scripts)
         folder = writable_dir(os.path.dirname(os.path.abspath(out)))
         with folders_made(folder):
             return export_scene(found, out, scene_frames(found, frames), agents=agents,
                                 progress=progress, on_bake=on_bake, layout=layout,
                                 substeps=substeps, snapshots=snapshots,
-                                repetition=repetition, trust_script=trust_scripts)
+                                repetition=repetition, trust_script=trust_scripts,
+                                ignore_script=ignore_scripts)
 
 
 def preview_blend(out: str, frames: int | None = None, *, blend: str | None = None,
@@ -144,7 +172,7 @@ def preview_blend(out: str, frames: int | None = None, *, blend: str | None = No
                   camera: str | None = None, size=(None, None), mp4: bool = False,
                   backend: str = "moderngl", progress=None, on_bake=None,
                   trust_scripts: bool = False, samples: int = 4, shadows: bool = True,
-                  repetition=_DEFAULT, lod: bool = True):
+                  repetition=_DEFAULT, lod: bool = True, ignore_scripts: bool = False):
     """Render the Crowd settings of a .blend's scene (:func:`open_scene`) headless to
     PNG frames (:func:`crowd_addon.gpu.preview_render.render_preview`), drawn in the
     scene's own geometry and lit by its sun (:mod:`.scene_geometry`).
@@ -154,7 +182,8 @@ def preview_blend(out: str, frames: int | None = None, *, blend: str | None = No
     the scene camera; with none, a camera framing the crowd); ``size`` (width, height)
     in pixels, either None for the scene's render resolution (its percentage applied).
     The camera, the frames and the output folder are checked before the bake.
-    Blender's own output goes to stderr. ``trust_scripts`` as :func:`export_blend`;
+    Blender's own output goes to stderr. ``trust_scripts`` and ``ignore_scripts`` as
+    :func:`export_blend`;
     ``samples``: anti-aliasing of the moderngl backend; ``shadows``: the sun's
     shadows; ``repetition``: the repetition metric's settings (None: not measured);
     ``lod``: False draws every agent with its full mesh. Returns ``(config, result, camera object name or None)``.
@@ -165,6 +194,7 @@ def preview_blend(out: str, frames: int | None = None, *, blend: str | None = No
         from .scene_config import build_crowd, config_from_scene
         from .scene_geometry import scene_geometry, scene_light
         found = open_scene(blend, scene)
+        _check_script(found, trust_scripts, ignore_scripts)
         first = found.frame_start if start is None else int(start)
         if frames is None:
             frames = found.frame_end - first + 1
@@ -180,7 +210,8 @@ def preview_blend(out: str, frames: int | None = None, *, blend: str | None = No
             init_headless_gpu()
         config = config_from_scene(found, on_bake)
         crowd, note = build_crowd(found, config,       # with the scene's crowd script
-                                  trust_script=trust_scripts)
+                                  trust_script=trust_scripts,
+                                  ignore_script=ignore_scripts)
         if note and on_bake is not None:
             on_bake(1, 1, note)
         result = render_preview(crowd, out, frames, start=first, size=size, mp4=mp4,
@@ -192,13 +223,13 @@ def preview_blend(out: str, frames: int | None = None, *, blend: str | None = No
 
 
 def plan_blend(*, blend: str | None = None, scene: str | None = None, settings=_DEFAULT,
-               trust_scripts: bool = False, on_bake=None):
+               trust_scripts: bool = False, on_bake=None, ignore_scripts: bool = False):
     """What ``crowd plan --blend`` plans from: the scene's Crowd settings baked
     (:func:`open_scene`, as the exports bake them) and the camera and settings of its
     repetition metric (:func:`.cameras.metric_view`: the scene camera at the render
     size; None: the caller frames the agents). Returns ``(config, camera, settings)``.
-    ``trust_scripts`` is accepted as the other commands take it; no crowd is built
-    here, so no crowd script runs."""
+    ``trust_scripts`` and ``ignore_scripts`` are accepted as the other commands take
+    them; no crowd is built here, so no crowd script runs."""
     with blender_output_to_stderr():
         from .cameras import metric_view
         from .scene_config import config_from_scene
@@ -210,20 +241,24 @@ def plan_blend(*, blend: str | None = None, scene: str | None = None, settings=_
 
 def snapshot_blend(out: str, frames: tuple | None = None, *, every: int,
                    blend: str | None = None, scene: str | None = None, substeps: int = 1,
-                   trust_scripts: bool = False, progress=None, on_bake=None):
+                   trust_scripts: bool = False, progress=None, on_bake=None,
+                   ignore_scripts: bool = False):
     """Write snapshots of a .blend's scene crowd (:func:`open_scene`, baked as the
     exports bake it, with its crowd script) into the folder ``out``:
     :func:`crowd_addon.core.snapshot.write_snapshots` over ``frames`` (default: the
-    scene's frame range) every ``every`` frames. Returns ``(config, files written)``."""
+    scene's frame range) every ``every`` frames; ``trust_scripts`` and
+    ``ignore_scripts`` as :func:`export_blend`. Returns ``(config, files written)``."""
     with blender_output_to_stderr():
         from ..core.snapshot import SnapshotFolder, write_snapshots
         from .scene_config import build_crowd, config_from_scene
         found = open_scene(blend, scene)
+        _check_script(found, trust_scripts, ignore_scripts)
         first, last = scene_frames(found, frames)
         folder = SnapshotFolder(out, create=True)
         config = config_from_scene(found, on_bake)
         crowd, note = build_crowd(found, config, substeps=substeps,
-                                  trust_script=trust_scripts)
+                                  trust_script=trust_scripts,
+                                  ignore_script=ignore_scripts)
         if note and on_bake is not None:
             on_bake(1, 1, note)
         return config, write_snapshots(crowd, folder, first, last, every, progress)
@@ -262,12 +297,13 @@ def crowd_command(argv) -> int:
             args.out, args.frames, scene=args.scene, agents=args.agents,
             layout=args.layout, substeps=args.substeps, snapshots=args.snapshots,
             repetition=repetition_settings(args),
-            trust_scripts=args.trust_scripts, progress=progress_printer("crowd export"),
+            trust_scripts=args.trust_scripts, ignore_scripts=args.ignore_scripts,
+            progress=progress_printer("crowd export"),
             on_bake=lambda done, total, message: print(
                 f"crowd export: {message}", file=sys.stderr, flush=True))
     except CrowdError as exc:
         print(f"crowd {args.command}: error: {exc}", file=sys.stderr)
-        return 2
+        return getattr(exc, "exit_code", 2)        # 3: a crowd script not trusted
     if args.json:
         print(json.dumps({**dataclasses.asdict(result), "bytes": result.bytes}))
     else:

@@ -63,7 +63,8 @@ def check_export(scene, path, frames) -> tuple:
 
 def export_scene(scene, path, frames, agents=None, progress=None, on_bake=None,
                  depsgraph=None, layout="instanced", substeps=1, snapshots=None,
-                 repetition=RepetitionSettings(), trust_script=False):
+                 repetition=RepetitionSettings(), trust_script=False,
+                 ignore_script=False):
     """Bake ``scene``'s Crowd settings and export the shot to ``path`` in one call
     (:func:`export_steps` run to the end).
 
@@ -87,6 +88,8 @@ def export_scene(scene, path, frames, agents=None, progress=None, on_bake=None,
         (:func:`.cameras.metric_view`).
     trust_script : run the scene's crowd script in this export even where it is not
         trusted (``crowd export --trust-scripts``); it trusts nothing after the call.
+    ignore_script : leave the scene's crowd script out of this export, trusted or not
+        (``crowd export --ignore-scripts``).
 
     Returns
     -------
@@ -96,7 +99,7 @@ def export_scene(scene, path, frames, agents=None, progress=None, on_bake=None,
     the export the same way.
     """
     steps = export_steps(scene, path, frames, agents, depsgraph, layout, substeps, snapshots,
-                         repetition, trust_script)
+                         repetition, trust_script, ignore_script)
     try:
         while True:
             try:
@@ -114,7 +117,7 @@ def export_scene(scene, path, frames, agents=None, progress=None, on_bake=None,
 
 def export_steps(scene, path, frames, agents=None, depsgraph=None, layout="instanced",
                  substeps=1, snapshots=None, repetition=RepetitionSettings(),
-                 trust_script=False):
+                 trust_script=False, ignore_script=False):
     """The export of :func:`export_scene` as a generator, one unit of work per
     ``next()``: returns ``(config, result)`` (``StopIteration.value``).
 
@@ -134,11 +137,12 @@ def export_steps(scene, path, frames, agents=None, depsgraph=None, layout="insta
     frames = check_export(scene, path, frames)
     check_layout(layout)
     return _export_steps(scene, path, frames, agents, depsgraph, layout,
-                         check_substeps(substeps), snapshots, repetition, trust_script)
+                         check_substeps(substeps), snapshots, repetition, trust_script,
+                         ignore_script)
 
 
 def _export_steps(scene, path, frames, agents, depsgraph, layout, substeps, snapshots,
-                  repetition, trust_script):
+                  repetition, trust_script, ignore_script=False):
     import dataclasses
 
     from ..core.snapshot import ShotSnapshots
@@ -161,7 +165,8 @@ def _export_steps(scene, path, frames, agents, depsgraph, layout, substeps, snap
         bake.close()
     check_output(config, path, agents, layout)
     crowd, note = scene_config.build_crowd(scene, config, substeps=substeps,
-                                           trust_script=trust_script)
+                                           trust_script=trust_script,
+                                           ignore_script=ignore_script)
     if note:
         yield "bake", 1, 1, note
     snaps = ShotSnapshots(snapshots, crowd, frames[0]) if snapshots else None

@@ -354,17 +354,19 @@ def _depsgraph(scene):
     return dg
 
 
-def build_crowd(scene, config, skinning="gpu", substeps=1, trust_script=False):
+def build_crowd(scene, config, skinning="gpu", substeps=1, trust_script=False,
+                ignore_script=False):
     """The :class:`~crowd_addon.core.crowd.Crowd` of ``config`` (built from ``scene``)
     with the scene's crowd script run on it: ``(crowd, note)``, ``note`` saying why the
     script did not run ("" when it ran or there is none). The preview and the exports
     build their crowds here, so both run the same script. ``substeps``: samples kept per
     frame (an export's sub-frame samples); ``trust_script``: run the script for this
-    call even where it is not trusted (:func:`.show_data.run_script`)."""
+    call even where it is not trusted; ``ignore_script``: leave it out, trusted or not
+    (:func:`.show_data.run_script`)."""
     from ..core.crowd import Crowd
     from .show_data import run_script
     crowd = Crowd(config, skinning=skinning, substeps=substeps)
-    return crowd, run_script(scene, crowd, trusted=trust_script)
+    return crowd, run_script(scene, crowd, trusted=trust_script, ignore=ignore_script)
 
 
 def config_from_scene(scene, progress=None, depsgraph=None, notes=None) -> CrowdConfig:

@@ -16,7 +16,7 @@ import os
 
 import numpy as np
 
-from ..core.errors import CrowdError
+from ..core.errors import CrowdError, ScriptNotTrusted
 from ..core.show import (Action, Cue, Reaction, Show, Sweep, Track, select_fraction,
                          select_inside, select_value)
 from .action_data import action_fcurves
@@ -25,7 +25,7 @@ from .compat import action_slots, assigned_slot
 
 __all__ = ["show_from_scene", "selected_agents", "parameter_values", "show_fingerprint",
            "run_script", "script_key", "script_trusted", "trust_script",
-           "forget_trusted_scripts"]
+           "forget_trusted_scripts", "script_refusal", "check_script"]
 
 #: crowd scripts trusted in this Blender process by the panel's *Trust Script*
 #: (:func:`trust_script`): keys ``(the .blend's absolute path, the text's name, the
@@ -251,19 +251,46 @@ def _trusted(text, source: str, trusted: bool) -> bool:
     return bool(trusted) or _auto_run() or _key(text, source) in _TRUSTED
 
 
-def run_script(scene, crowd, trusted: bool = False) -> str:
+def _untrusted(text) -> str:
+    return (f"crowd script {text.name!r} did not run: scripts in .blend files are not "
+            "trusted here (enable Auto Run Python Scripts, press Trust Script in the "
+            "Show panel, or pass --trust-scripts)")
+
+
+def script_refusal(scene, trusted: bool = False) -> str:
+    """Why the scene's crowd script would not run here (:func:`script_trusted`;
+    ``trusted`` as :func:`run_script`), or "" when it would run or there is none."""
+    text = scene.crowd.show.script
+    if text is None or _trusted(text, text.as_string(), trusted):
+        return ""
+    return _untrusted(text)
+
+
+def check_script(scene, trusted: bool = False, ignore: bool = False) -> None:
+    """What a command does before it builds a crowd: a scene whose crowd script would
+    not run here is refused with :class:`~crowd_addon.core.errors.ScriptNotTrusted`
+    (the command's exit code 3), since the command would otherwise play a show other
+    than the file's; ``ignore`` (``--ignore-scripts``) goes on without the script."""
+    reason = "" if ignore else script_refusal(scene, trusted)
+    if reason:
+        raise ScriptNotTrusted(f"{reason}; nothing was done (pass --ignore-scripts to go "
+                               "on without the script)")
+
+
+def run_script(scene, crowd, trusted: bool = False, ignore: bool = False) -> str:
     """Run the scene's crowd script on ``crowd`` (its ``register(crowd)``); returns ""
     when it ran or there is none, else why it did not run (not trusted:
-    :func:`script_trusted`; ``trusted`` holds for this call only). A script that fails
-    raises a CrowdError naming the text and the line."""
+    :func:`script_trusted`; ``trusted`` holds for this call only; ``ignore``: left out
+    whether trusted or not, ``--ignore-scripts``). A script that fails raises a
+    CrowdError naming the text and the line."""
     text = scene.crowd.show.script
     if text is None:
         return ""
+    if ignore:
+        return f"crowd script {text.name!r} left out (--ignore-scripts)"
     source = text.as_string()              # what is checked is what runs
     if not _trusted(text, source, trusted):
-        return (f"crowd script {text.name!r} did not run: scripts in .blend files are not "
-                "trusted here (enable Auto Run Python Scripts, press Trust Script in the "
-                "Show panel, or pass --trust-scripts)")
+        return _untrusted(text)
     import traceback
     import types
     module = types.ModuleType(f"crowd_script_{text.name}")

@@ -18,6 +18,7 @@ import crowd_scene as cs  # noqa: E402
 
 from crowd_addon.blender import preview, scene_config, show_data  # noqa: E402
 from crowd_addon.blender.cli_commands import export_blend  # noqa: E402
+from crowd_addon.core.errors import ScriptNotTrusted  # noqa: E402
 
 UNTRUSTED = "did not run: scripts in .blend files are not trusted"
 
@@ -95,11 +96,18 @@ def test_export_blend_trusts_the_script_for_that_call_only(tmp_path):
     export_blend(str(tmp_path / "1" / "s.usdc"), (1, 4), blend=str(tmp_path / "mine.blend"),
                  trust_scripts=True)
     assert ran(a) == ["mine.body", "mine.register"]
+    with pytest.raises(ScriptNotTrusted, match=UNTRUSTED):      # not another show
+        export_blend(str(tmp_path / "2" / "s.usdc"), (1, 4),
+                     blend=str(tmp_path / "other.blend"))
+    assert ran(b) == [] and not (tmp_path / "2").exists()
     notes = []
     export_blend(str(tmp_path / "2" / "s.usdc"), (1, 4), blend=str(tmp_path / "other.blend"),
-                 on_bake=lambda done, total, message: notes.append(message))
-    assert ran(b) == [] and any(UNTRUSTED in n for n in notes)
-    export_blend(str(tmp_path / "3" / "s.usdc"), (1, 4), blend=str(tmp_path / "mine.blend"))
+                 on_bake=lambda done, total, message: notes.append(message),
+                 ignore_scripts=True)
+    assert ran(b) == [] and "crowd script 'show.py' left out (--ignore-scripts)" in notes
+    with pytest.raises(ScriptNotTrusted, match=UNTRUSTED):
+        export_blend(str(tmp_path / "3" / "s.usdc"), (1, 4),
+                     blend=str(tmp_path / "mine.blend"))
     assert ran(a) == []                                        # nor the file trusted before
     assert UNTRUSTED in build(bpy.context.scene) and ran(a) == []
 
@@ -110,7 +118,9 @@ def test_a_failing_trusted_call_leaves_nothing_trusted(tmp_path):
     with pytest.raises(Exception):
         export_blend(str(tmp_path / "1" / "s.usdc"), (1, 4), blend=str(tmp_path / "mine.blend"),
                      scene="no such scene", trust_scripts=True)
-    export_blend(str(tmp_path / "2" / "s.usdc"), (1, 4), blend=str(tmp_path / "other.blend"))
+    with pytest.raises(ScriptNotTrusted):
+        export_blend(str(tmp_path / "2" / "s.usdc"), (1, 4),
+                     blend=str(tmp_path / "other.blend"))
     assert ran(a) == [] and ran(b) == []
 
 
@@ -120,3 +130,7 @@ def test_auto_run_python_scripts_still_runs_every_file_s_script(tmp_path):
     bpy.ops.wm.open_mainfile(filepath=str(tmp_path / "other.blend"))
     assert not bpy.app.autoexec_fail
     assert build(bpy.context.scene) == "" and ran(b) == ["other.body", "other.register"]
+    # --ignore-scripts leaves it out even where it is trusted: every machine, one show
+    export_blend(str(tmp_path / "1" / "s.usdc"), (1, 4), blend=str(tmp_path / "other.blend"),
+                 ignore_scripts=True)
+    assert ran(b) == []

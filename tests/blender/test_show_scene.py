@@ -360,17 +360,34 @@ def test_a_failing_crowd_script_is_named(scene, body, message):
                                  trust_script=True)
 
 
-def test_an_untrusted_export_says_its_script_did_not_run(scene, tmp_path):
+def test_an_untrusted_export_stops_with_exit_code_3_unless_told_to_ignore_it(scene,
+                                                                              tmp_path):
+    """Issue 35, item 6: an untrusted crowd script was a warning and exit 0, so a farm
+    silently exported another show. Now the command stops with exit code 3 and the
+    reason, writing nothing (not even the output's folder); ``--ignore-scripts`` goes
+    on without the script, and says so."""
     _script(scene, SCRIPT)
     blend = tmp_path / "show.blend"
     bpy.ops.wm.save_as_mainfile(filepath=str(blend))
-    run = subprocess.run([sys.executable, "-m", "crowd_addon", "export", "--blend", str(blend),
-                          "--out", str(tmp_path / "s.usdc"), "--frames", "1-4", "--json"],
-                         cwd=ROOT, capture_output=True, text=True, timeout=300)
+
+    def export(*extra):
+        return subprocess.run([sys.executable, "-m", "crowd_addon", "export", "--blend",
+                               str(blend), "--out", str(tmp_path / "out" / "s.usdc"),
+                               "--frames", "1-4", "--json", *extra],
+                              cwd=ROOT, capture_output=True, text=True, timeout=300)
+    run = export()
+    assert run.returncode == 3, run.stderr[-2000:]
+    last = run.stderr.strip().splitlines()[-1]
+    assert last.startswith("crowd export: error: crowd script 'show.py' did not run: "
+                           "scripts in .blend files are not trusted"), last
+    assert "--ignore-scripts" in last and "Traceback" not in run.stderr
+    assert run.stdout == "" and not (tmp_path / "out").exists()
+    run = export("--ignore-scripts")
     assert run.returncode == 0, run.stderr[-2000:]
-    assert "crowd script 'show.py' did not run: scripts in .blend files are not trusted" \
-        in run.stderr
-    json.loads(run.stdout)
+    assert "crowd script 'show.py' left out (--ignore-scripts)" in run.stderr
+    assert json.loads(run.stdout)["frames"] == [1, 4]
+    run = export("--ignore-scripts", "--trust-scripts")          # one or the other
+    assert run.returncode == 2 and "not allowed with argument" in run.stderr
 
 
 def test_undoing_a_cue_edit_gives_the_same_crowd(scene):
