@@ -179,8 +179,9 @@ def _add_plan(subparsers) -> None:
     p.add_argument("--no-plot", dest="plot", action="store_const", const=None,
                    help="write no plot")
     p.add_argument("--json", action="store_true",
-                   help="end with one JSON line: repetition_default, repetition_planned, "
-                        "the default, the plan and every candidate")
+                   help="print one JSON object on stdout (repetition_default, "
+                        "repetition_planned, the default, the plan and every "
+                        "candidate); the table goes to stderr")
     add_trust_argument(p)
     p.set_defaults(handler=_run_plan)
 
@@ -217,10 +218,11 @@ def _run_plan(args) -> int:
                           settings, args.max_streams,
                           progress=lambda done, total: printer("candidates", done, total))
     written = plot(result, args.plot) if args.plot else None
-    print(table(result))
-    print("\n".join(summary_lines(result)))
+    text = sys.stderr if args.json else sys.stdout     # --json: stdout is the JSON alone
+    print(table(result), file=text)
+    print("\n".join(summary_lines(result)), file=text)
     if written:
-        print(f"  plot: {written}")
+        print(f"  plot: {written}", file=text)
     if args.json:
         print(json.dumps({**result.as_dict(), "plot": written}))
     return 0
@@ -401,7 +403,8 @@ def _add_stitch(subparsers) -> None:
     p.add_argument("chunks", nargs="+", type=path_arg, metavar="CHUNK_USD",
                    help="the chunks' main layers, any order")
     p.add_argument("--out", required=True, type=path_arg, metavar="SHOT_USD",
-                   help="main layer to write (.usdc, .usd or .usda)")
+                   help="main layer to write (.usdc, .usd or .usda); its folder is "
+                        "created if missing")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.set_defaults(handler=_run_stitch)
 
@@ -410,8 +413,12 @@ def _run_stitch(args) -> int:
     import dataclasses
     import json
 
+    from .core.files import folders_made
+    from .gpu.preview_render import writable_dir
     from .usd.stitch import stitch
-    result = stitch(args.chunks, args.out, progress=progress_printer("crowd stitch"))
+    folder = writable_dir(os.path.dirname(os.path.abspath(args.out)))
+    with folders_made(folder):                  # as crowd export: gone again on failure
+        result = stitch(args.chunks, args.out, progress=progress_printer("crowd stitch"))
     if args.json:
         print(json.dumps({**dataclasses.asdict(result), "bytes": result.bytes}))
         return 0

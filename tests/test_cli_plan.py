@@ -29,15 +29,15 @@ def test_plan_prints_the_candidates_the_proposal_and_plots_them(crowd_json, tmp_
     assert main(["plan", "--config", str(crowd_json), "--budget-mb", "4",
                  "--max-streams", "12", "--plot", str(png), "--json"]) == 0
     out, err = capsys.readouterr()
-    lines = out.strip().splitlines()
-    result = json.loads(lines[-1])
+    result = json.loads(out)         # stdout is the JSON object alone (issue 35, item 6)
+    lines = [line for line in err.splitlines() if not line.startswith("crowd plan:")]
     assert result["repetition_planned"] < result["repetition_default"]
     assert result["planned"]["bytes"] <= 4e6 and result["planned"]["streams"] <= 12
     assert result["plot"] == str(png) and result["k"] == 6
     assert lines[0].split() == ["M", "copies", "offsets", "streams", "memory", "MB",
                                 "repetition"]
     assert sum(line.endswith(" *") for line in lines) == 1
-    assert "(over budget)" in out and "less repetition" in out
+    assert "(over budget)" in err and "less repetition" in err
     assert "crowd plan: candidates" in err
     from matplotlib.image import imread               # a PNG decoder of its own
     img = (imread(png)[..., :3] * 255).astype(np.uint8)
@@ -51,7 +51,7 @@ def test_no_plot_and_options(crowd_json, tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
     assert main(["plan", "--config", str(crowd_json), "--no-plot", "--neighbours", "3",
                  "--width", "640", "--height", "640", "--json"]) == 0
-    result = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    result = json.loads(capsys.readouterr().out)
     assert result["plot"] is None and result["k"] == 3
     assert not (tmp_path / "plan.png").exists()
 
@@ -65,14 +65,14 @@ def test_motion_only_leaves_looks_out(crowd_json, tmp_path, capsys):
     save_config(cfg, tmp_path / "colours.json")
     args = ["plan", "--config", str(tmp_path / "colours.json"), "--no-plot", "--json"]
     assert main(args) == 0
-    full = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    full = json.loads(capsys.readouterr().out)
     assert main(args + ["--motion-only"]) == 0
-    out = capsys.readouterr().out
-    motion = json.loads(out.strip().splitlines()[-1])
+    out, err = capsys.readouterr()
+    motion = json.loads(out)
     assert full["appearance"] is True and motion["appearance"] is False
     assert motion["repetition_default"] > full["repetition_default"]
     assert motion["repetition_planned"] < motion["repetition_default"]
-    assert "; motion only" in out
+    assert "; motion only" in err
 
 
 def test_bad_input_is_named(crowd_json, tmp_path, capsys):

@@ -145,3 +145,18 @@ def test_crowd_stitch_command(tmp_path, capsys):
     assert summary["frames"] == [FIRST, LAST] and summary["path"] == str(out)
     assert main(["stitch", "--out", str(out), str(chunks[0]), str(chunks[2])]) == 2
     assert "crowd stitch: error:" in capsys.readouterr().err
+
+
+def test_crowd_stitch_creates_its_folder_and_removes_it_when_it_fails(tmp_path, capsys):
+    """Issue 35, item 6: ``crowd stitch --out new/shot.usdc`` failed on the missing
+    folder that ``crowd export`` creates. Now it is created, and gone again (with every
+    folder it made) when the stitch fails."""
+    _, chunks = export_chunks(tmp_path)
+    out = tmp_path / "stitched" / "final" / "shot.usdc"
+    assert main(["stitch", "--out", str(out), str(chunks[0]), str(chunks[2])]) == 2
+    assert "crowd stitch: error:" in capsys.readouterr().err
+    assert not (tmp_path / "stitched").exists()
+    assert main(["stitch", "--out", str(out), *map(str, chunks), "--json"]) == 0, \
+        capsys.readouterr().err
+    assert json.loads(capsys.readouterr().out)["frames"] == [FIRST, LAST]
+    assert len(read(out, [FIRST, LAST])[1]) == len(read(chunks[0], [FIRST])[1])
