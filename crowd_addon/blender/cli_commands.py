@@ -132,6 +132,15 @@ def blend_shot(frames: tuple | None = None, *, blend: str | None = None,
         return tuple(int(f) for f in scene_frames(found, frames))
 
 
+def report_lod_notes(config, on_bake) -> None:
+    """Pass each LOD level the silhouette check refused (``CrowdConfig.lod_notes``) to
+    ``on_bake(done, total, message)``, as the bake's remarks are: the commands print
+    them on stderr."""
+    if on_bake is not None:
+        for note in config.lod_notes:
+            on_bake(1, 1, note)
+
+
 def export_blend(out: str, frames: tuple | None = None, *, blend: str | None = None,
                  scene: str | None = None, agents: int | None = None, progress=None,
                  on_bake=None, trust_scripts: bool = False, layout: str = "instanced",
@@ -209,6 +218,7 @@ def preview_blend(out: str, frames: int | None = None, *, blend: str | None = No
             from .headless_gpu import init_headless_gpu
             init_headless_gpu()
         config = config_from_scene(found, on_bake)
+        report_lod_notes(config, on_bake)
         crowd, note = build_crowd(found, config,       # with the scene's crowd script
                                   trust_script=trust_scripts,
                                   ignore_script=ignore_scripts)
@@ -235,6 +245,7 @@ def plan_blend(*, blend: str | None = None, scene: str | None = None, settings=_
         from .scene_config import config_from_scene
         found = open_scene(blend, scene)
         config = config_from_scene(found, on_bake)
+        report_lod_notes(config, on_bake)
         camera, settings = metric_view(found, settings)
         return config, camera, settings
 
@@ -256,6 +267,7 @@ def snapshot_blend(out: str, frames: tuple | None = None, *, every: int,
         first, last = scene_frames(found, frames)
         folder = SnapshotFolder(out, create=True)
         config = config_from_scene(found, on_bake)
+        report_lod_notes(config, on_bake)
         crowd, note = build_crowd(found, config, substeps=substeps,
                                   trust_script=trust_scripts,
                                   ignore_script=ignore_scripts)

@@ -163,6 +163,8 @@ def _export_steps(scene, path, frames, agents, depsgraph, layout, substeps, snap
             yield "bake", done, total, message
     finally:
         bake.close()
+    for note in config.lod_notes:       # LOD levels the silhouette check refused
+        yield "bake", 1, 1, note
     check_output(config, path, agents, layout)
     crowd, note = scene_config.build_crowd(scene, config, substeps=substeps,
                                            trust_script=trust_script,

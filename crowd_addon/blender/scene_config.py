@@ -319,6 +319,8 @@ def config_steps(scene, depsgraph=None, notes=None):
     if agents.count:
         agents.add_to(cfg)
     cfg.show = show_from_scene(scene, dg, cfg, placed)
+    if notes is not None:           # LOD levels the silhouette check refused
+        notes.extend(n for n in cfg.lod_notes if n not in notes)
     return cfg
 
 
