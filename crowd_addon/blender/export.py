@@ -308,6 +308,7 @@ class CROWD_OT_export_usd(bpy.types.Operator, ExportHelper):
     step_seconds = 0.05
     _timer = None
     _job = None
+    _made = ()                          # folders made for this export, deepest first
 
     def check(self, _context):
         """.usdc, .usd and .usda stay as typed; any other name gets .usdc."""
@@ -348,6 +349,10 @@ class CROWD_OT_export_usd(bpy.types.Operator, ExportHelper):
                   else (self.frame_start, self.frame_end))
         path = bpy.path.abspath(self.filepath)
         wm = context.window_manager
+        try:            # a missing folder is made, as crowd export makes it
+            self._made = _make_folder(os.path.dirname(os.path.abspath(path)))
+        except CrowdError as e:
+            return self._fail(e)
         if self.interactive and _event_loop(context):
             try:
                 # the depsgraph is looked up when the agents are placed, as the bake does
@@ -374,6 +379,9 @@ class CROWD_OT_export_usd(bpy.types.Operator, ExportHelper):
                 substeps=self.substeps)
         except CrowdError as e:
             return self._fail(e)
+        except BaseException:
+            self._unmake()
+            raise
         finally:
             wm.progress_end()
         return self._finish(result)
@@ -383,6 +391,7 @@ class CROWD_OT_export_usd(bpy.types.Operator, ExportHelper):
         if event.type in {"ESC", "RIGHTMOUSE"} and event.value == "PRESS":
             job.cancel()                # returns once the temporary files are gone
             self._end(context)
+            self._unmake()
             self.report({"WARNING"}, "Export cancelled: nothing was written")
             return {"CANCELLED"}
         if event.type != "TIMER":
@@ -395,6 +404,7 @@ class CROWD_OT_export_usd(bpy.types.Operator, ExportHelper):
         except BaseException:
             job.cancel()
             self._end(context)
+            self._unmake()
             raise
         if not more:
             self._end(context)
@@ -411,6 +421,7 @@ class CROWD_OT_export_usd(bpy.types.Operator, ExportHelper):
         if self._job is not None:
             self._job.cancel()
             self._end(context)
+            self._unmake()
 
     def _end(self, context):
         wm = context.window_manager
@@ -423,15 +434,50 @@ class CROWD_OT_export_usd(bpy.types.Operator, ExportHelper):
             context.workspace.status_text_set(None)
 
     def _fail(self, error):
+        self._unmake()
         self.report({"ERROR"}, f"Crowd export: {str(error).removeprefix('export: ')}")
         return {"CANCELLED"}
 
+    def _unmake(self):
+        """The folders this export made, removed again (it failed or was cancelled)."""
+        _remove_folders(self._made)
+        self._made = ()
+
     def _finish(self, result):
+        self._made = ()
         first, last = result.frames
         self.report({"INFO"}, f"Crowd: wrote {result.agents:,} agents, frames {first}-"
                               f"{last} to {result.path} and {len(result.files) - 1} "
                               f"layers ({_size(result.bytes)})")
         return {"FINISHED"}
+
+
+def _make_folder(folder) -> tuple:
+    """Create ``folder`` and its missing parents (checked first to be creatable and
+    writable: CrowdError naming it); returns the folders made, deepest first."""
+    from ..gpu.preview_render import writable_dir
+    writable_dir(folder)
+    made, probe = [], folder
+    while not os.path.exists(probe) and os.path.dirname(probe) != probe:
+        made.append(probe)
+        probe = os.path.dirname(probe)
+    try:
+        os.makedirs(folder, exist_ok=True)
+    except OSError as e:
+        _remove_folders(made)
+        raise CrowdError(f"output folder {folder}: cannot create it "
+                         f"({e.strerror or e})") from None
+    return tuple(made)
+
+
+def _remove_folders(made):
+    """Remove the folders :func:`_make_folder` made, deepest first, each only while
+    empty."""
+    for folder in made:
+        try:
+            os.rmdir(folder)
+        except OSError:
+            break
 
 
 def menu_export(self, _context):

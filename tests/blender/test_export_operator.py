@@ -165,8 +165,9 @@ def _break(scene, what, tmp_path):
         kw.update(use_scene_range=False, frame_start=0, frame_end=4)
     elif what == "bad extension":
         kw["filepath"] = str(tmp_path / "bad.abc")
-    elif what == "missing folder":
-        kw["filepath"] = str(tmp_path / "nowhere" / "bad.usdc")
+    elif what == "folder is a file":
+        (tmp_path / "taken").write_text("mine")
+        kw["filepath"] = str(tmp_path / "taken" / "deeper" / "bad.usdc")
     elif what == "too many agents":                # fails after the bake, in the export
         kw["agents"] = 31
     return kw
@@ -179,14 +180,38 @@ def _break(scene, what, tmp_path):
     ("empty range", "frame range 9-4 is empty"),
     ("before start", "frame range 0-4 starts before scene 'Scene''s start frame 1"),
     ("bad extension", "needs a name ending in .usdc, .usd, .usda"),
-    ("missing folder", "does not exist"),
+    ("folder is a file", "cannot create it"),
     ("too many agents", "31 agents requested but the crowd has 30"),
 ])
 def test_bad_input_is_reported_and_writes_nothing(scene, tmp_path, what, message):
     kw = _break(scene, what, tmp_path)
     with pytest.raises(RuntimeError, match="Crowd export: .*" + message.replace("(", r"\(")):
         bpy.ops.crowd.export_usd(**kw)
+    assert listing(tmp_path) == (["taken"] if what == "folder is a file" else [])
+
+
+def test_a_missing_folder_is_made_and_gone_again_when_the_export_fails(scene, tmp_path):
+    """Issue 35, item 6: *Export Crowd USD* refused a folder that does not exist yet,
+    which ``crowd export`` creates. Now it is created (its missing parents too), and
+    removed again when the export fails, so a failure still leaves nothing behind."""
+    path = tmp_path / "new" / "shots" / "shot.usdc"
+    with pytest.raises(RuntimeError, match="31 agents requested"):
+        bpy.ops.crowd.export_usd(filepath=str(path), agents=31)
     assert listing(tmp_path) == []
+    assert bpy.ops.crowd.export_usd(filepath=str(path)) == {"FINISHED"}
+    assert listing(path.parent) == ["shot.layers", "shot.usdc"]
+    assert len(agents_of(path)[1]) == 30
+
+
+def test_a_cancelled_modal_export_removes_the_folder_it_made(scene, tmp_path, event_loop,
+                                                            new_threads):
+    path = tmp_path / "new" / "shot.usdc"
+    op, ctx = _ModalExport(path), _Context()
+    assert op.execute(ctx) == {"RUNNING_MODAL"}
+    assert listing(tmp_path) == ["new"]                # made when the export starts
+    _run_until(op, ctx, "simulate", 2)
+    assert op.modal(ctx, ESC) == {"CANCELLED"}
+    assert listing(tmp_path) == [] and new_threads() == []
 
 
 def test_failed_export_keeps_the_previous_one(scene, tmp_path):
@@ -376,9 +401,10 @@ class _ModalExport:
     (``invoke`` set ``interactive``); the operator's methods run against it."""
 
     _op = crowd_export.CROWD_OT_export_usd
-    execute, modal, cancel, _end, _fail, _finish = (
-        _op.execute, _op.modal, _op.cancel, _op._end, _op._fail, _op._finish)
+    execute, modal, cancel, _end, _fail, _finish, _unmake = (
+        _op.execute, _op.modal, _op.cancel, _op._end, _op._fail, _op._finish, _op._unmake)
     _timer = _job = None
+    _made = ()
     step_seconds = 0.0                   # one unit of work per timer event
 
     def __init__(self, path, **props):
