@@ -1,9 +1,20 @@
 """Blender's ``gpu`` module in background mode (``bpy`` as a Python module, or
 ``blender -b``): it refuses to draw until the GPU has been initialised, which one tiny
 render does. Call :func:`init_headless_gpu` before making a ``gpu``-module renderer
-headless (``crowd preview --backend blender`` does)."""
+headless (``crowd preview --backend blender`` does).
+
+On a headless EGL display (Mesa) Blender tries EGL configurations until one fits and
+reports each refusal on stderr (``EGL Error (0x3009): EGL_BAD_MATCH: ...``), though it
+then draws. Those lines are kept off the console; any other output goes through.
+"""
 
 from __future__ import annotations
+
+import contextlib
+import os
+import re
+import sys
+import tempfile
 
 import bpy
 
@@ -27,7 +38,8 @@ def init_headless_gpu() -> None:
         scene.camera = cam
         scene.render.engine = "BLENDER_WORKBENCH"
         scene.render.resolution_x = scene.render.resolution_y = 8
-        bpy.ops.render.render(scene=scene.name)
+        with _without_egl_mismatches():
+            bpy.ops.render.render(scene=scene.name)
     except RuntimeError as e:
         raise CrowdError(f"Blender gpu backend: the initialising render failed ({e})") from None
     finally:
@@ -36,3 +48,43 @@ def init_headless_gpu() -> None:
         bpy.data.cameras.remove(data)
         bpy.data.scenes.remove(scene)
     _READY["gpu"] = True
+
+
+#: Blender's report of an EGL configuration it tried and let go (GHOST's EGL context)
+_EGL_MISMATCH = re.compile(r"^EGL Error \(0x3009\): EGL_BAD_MATCH\b")
+
+
+@contextlib.contextmanager
+def _without_egl_mismatches():
+    """For the ``with`` block, the process's stderr (file descriptor 2, where Blender's
+    C code writes) goes to a temporary file; afterwards every line of it but
+    :data:`_EGL_MISMATCH` goes on to the real stderr."""
+    sys.stderr.flush()
+    try:
+        saved = os.dup(2)
+    except OSError:                             # no standard error at all
+        yield
+        return
+    with tempfile.TemporaryFile() as caught:
+        os.dup2(caught.fileno(), 2)
+        try:
+            yield
+        finally:
+            sys.stderr.flush()
+            _flush_c_stdio()
+            os.dup2(saved, 2)
+            os.close(saved)
+            caught.seek(0)
+            kept = [line for line in caught.read().decode("utf-8", "replace")
+                    .splitlines(keepends=True) if not _EGL_MISMATCH.match(line)]
+            if kept:
+                sys.stderr.write("".join(kept))
+                sys.stderr.flush()
+
+
+def _flush_c_stdio():
+    try:
+        import ctypes
+        ctypes.CDLL(None).fflush(None)
+    except (OSError, AttributeError, TypeError):     # no C library to flush (Windows)
+        pass
