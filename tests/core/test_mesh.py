@@ -248,9 +248,9 @@ def test_the_lod_check_refuses_a_level_that_tears_and_keeps_one_that_does_not():
     assert len(notes) == 1 and "LOD 2 'body.torn' refused" in notes[0]
 
 
-def test_a_config_refuses_a_torn_level_it_is_given():
-    """``add_mesh`` checks every level over its skeleton's clips at the size it is
-    switched in at: a torn one is replaced by the level before, with a note."""
+def test_a_config_keeps_the_levels_it_is_given():
+    """``add_mesh`` keeps levels an artist made as made (commit 2797fbb: the silhouette
+    check judges the automatic levels only), even one the check would refuse."""
     from crowd_addon.core.clip import Clip
     from crowd_addon.core.mesh import _cluster
 
@@ -266,8 +266,7 @@ def test_a_config_refuses_a_torn_level_it_is_given():
     assert levels[2] is torn and not cfg.lod_notes
     cfg.add_clip(Clip("raise", np.concatenate([poses, poses[:1]])))
     levels = cfg.add_mesh(mesh, lods=(kept, torn))
-    assert levels[1] is kept and levels[2] is not torn and levels[2].name == "body.torn"
-    assert len(cfg.lod_notes) == 1 and "'body.torn' refused" in cfg.lod_notes[0]
+    assert levels[1] is kept and levels[2] is torn and not cfg.lod_notes
 
 
 def test_the_card_per_body_part_follows_each_part():
