@@ -127,7 +127,9 @@ class CROWD_PT_main(_Panel, bpy.types.Panel):
         row.operator("crowd.bake", icon="RENDER_ANIMATION")
         row.operator("crowd.preview_toggle", text="Preview", icon="HIDE_OFF",
                      depress=pv is not None)
-        layout.operator("crowd.export_usd", text="Export USD...", icon="EXPORT")
+        row = layout.row(align=True)
+        row.operator("crowd.export_usd", text="Export USD...", icon="EXPORT")
+        row.operator("crowd.import_usd", text="Import USD...", icon="IMPORT")
         layout.prop(s, "render_crowd", icon="RESTRICT_RENDER_OFF")
         if pv is None:
             err = preview.last_error(scene)

@@ -1,8 +1,8 @@
 """Register and unregister everything the extension adds to Blender.
 
 :func:`register` adds the property groups (``Scene.crowd``), operators, UI lists and
-panels, the File > Export menu entry, the ``crowd`` command of Blender's ``-c`` option
-(:mod:`.cli_commands`), and the app handlers the preview needs (file load, frame
+panels, the File > Export and File > Import menu entries, the ``crowd`` command of
+Blender's ``-c`` option (:mod:`.cli_commands`), and the app handlers the preview needs (file load, frame
 change, depsgraph update, undo/redo; all persistent so they survive file loads). The
 viewport draw handler exists only while a preview runs; the bake's modal timer only
 while it bakes. :func:`unregister` stops every preview (removing the draw handler) and takes
@@ -15,14 +15,14 @@ from __future__ import annotations
 import bpy
 
 from .. import api
-from . import (cli_commands, export, operators, panels, prefs, preview, props, seats_operator,
-               show_panels)
+from . import (cli_commands, export, import_usd, operators, panels, prefs, preview, props,
+               seats_operator, show_panels)
 
 __all__ = ["CLASSES", "HANDLERS", "MENUS", "register", "unregister", "leftovers"]
 
 CLASSES = (props.CLASSES + operators.CLASSES + seats_operator.CLASSES + export.CLASSES
-           + panels.CLASSES + show_panels.CLASSES + prefs.CLASSES)
-MENUS = export.MENUS           # (menu type name, draw function)
+           + import_usd.CLASSES + panels.CLASSES + show_panels.CLASSES + prefs.CLASSES)
+MENUS = export.MENUS + import_usd.MENUS    # (menu type name, draw function)
 HANDLERS = (("load_pre", preview.on_load_pre), ("load_post", preview.on_load_post),
             ("frame_change_post", preview.on_frame_change),
             ("depsgraph_update_post", preview.on_depsgraph_update),
