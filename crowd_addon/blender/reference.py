@@ -1,8 +1,8 @@
 """The scripting reference, generated from the registered RNA so it cannot drift.
 
 :func:`reference` returns markdown tables of every ``scene.crowd`` property group
-(name, type, default, what it does) and every crowd operator (``bpy.ops.crowd.*`` and
-the USD export), read from Blender's own description of what the extension registered.
+(name, type, default, what it does) and every operator the extension registers
+(``bpy.ops.crowd.*``: the USD export and import among them), read from Blender's own description of what the extension registered.
 ``docs/scripting.md`` holds it between two marker lines; a test regenerates it and
 compares, and ``python -m crowd_addon.blender.reference docs/scripting.md`` rewrites
 that part of the file.
@@ -108,13 +108,14 @@ def _operator_table(classes) -> list:
 
 def reference() -> str:
     """The generated part of docs/scripting.md (the extension must be registered)."""
-    from . import export, operators, props, seats_operator
+    from . import props, registration
     lines = [BEGIN, "", "## Properties (`scene.crowd`)", "",
              "`scene.crowd` is a `CROWD_PG_settings`; the others are reached through it "
              "(`scene.crowd.characters[i]`, `scene.crowd.show.cues[i]`, ...).", ""]
     for cls in reversed(props.CLASSES):
         lines += _group_table(cls)
-    ops = operators.CLASSES + seats_operator.CLASSES + export.CLASSES
+    # every operator the extension registers (the Show panel's Trust Script too)
+    ops = [c for c in registration.CLASSES if issubclass(c, bpy.types.Operator)]
     lines += ["## Operators", ""] + _operator_table(ops)
     return "\n".join(lines + [END]) + "\n"
 

@@ -29,6 +29,12 @@ def test_the_reference_is_what_is_registered():
     for name in ("CROWD_PG_settings", "CROWD_PG_character", "CROWD_PG_cue",
                  "CROWD_PG_reaction", "CROWD_PG_parameter", "bpy.ops.crowd.bake()"):
         assert name in generated
+    # every operator registered is in it (issue 35: crowd.trust_script was not)
+    from crowd_addon.blender.registration import CLASSES
+    ops = [c.bl_idname for c in CLASSES if issubclass(c, bpy.types.Operator)]
+    assert "crowd.trust_script" in ops and "crowd.import_usd" in ops
+    for op in ops:
+        assert f"`bpy.ops.{op}()`" in generated, op
 
 
 def test_the_worked_script_builds_its_crowd_and_show(capsys):
