@@ -35,7 +35,7 @@ from .cli_args import (add_repetition_arguments, add_shot_arguments, add_trust_a
                        frame_number, frame_range,
                        int_at_least, parse_command, path_arg, positive_float,
                        progress_printer, repetition_settings)
-from .core.config import MAX_SUBSTEPS
+from .core.config import MAX_SUBSTEPS, USD_LAYOUTS
 from .core.errors import CrowdError
 
 __all__ = ["build_parser", "main"]
@@ -646,6 +646,10 @@ def _add_demo(subparsers) -> None:
     p.add_argument("--height", type=int_at_least(2), default=540)
     p.add_argument("--no-mp4", dest="mp4", action="store_false", help="PNG frames only")
     p.add_argument("--no-usd", dest="usd", action="store_false", help="skip the USD export")
+    p.add_argument("--layout", choices=USD_LAYOUTS, default=USD_LAYOUTS[0],
+                   help="stadium.usdc's layout, as crowd export's: instanced (default), or "
+                        "blender, the stage Blender's own USD importer plays (File > Import "
+                        "> Crowd (.usd) sets its frame rate; docs/usd_export.md)")
     p.set_defaults(handler=_run_demo)
 
 
@@ -657,7 +661,7 @@ def _run_demo(args) -> int:
     if importlib.util.find_spec("imageio_ffmpeg") is None:
         args.mp4 = False                    # PNG frames only; say so in the summary
     s = run_demo(args.out, args.agents, args.frames, (args.width, args.height),
-                 mp4=args.mp4, usd=args.usd)
+                 mp4=args.mp4, usd=args.usd, layout=args.layout)
     t = s["seconds"]
     print("\n".join([
         f"stadium demo in {args.out} ({t['total']:.1f} s: "
@@ -680,7 +684,8 @@ def _run_demo(args) -> int:
                                for c in s["cues"]),
         f"  {s['pngs']} PNG frames" + (f", {s['mp4']}" if s['mp4'] else "")
         + f", contact sheet {s['contact_sheet']}"
-        + (f", {s['usd']} ({s['usd_bytes']:,} B)" if "usd" in s else "")]))
+        + (f", {s['usd']} ({s['usd_layout']} layout, {s['usd_bytes']:,} B)" if "usd" in s
+           else "")]))
     return 0
 
 

@@ -129,13 +129,18 @@ def _beat_frames(crowd, first: int, last: int) -> list:
 
 
 def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
-             mp4: bool = True, usd: bool = True, log=None) -> dict:
-    """Run the stadium demo into ``out_dir``; returns the summary dict."""
+             mp4: bool = True, usd: bool = True, log=None, layout: str = "instanced") -> dict:
+    """Run the stadium demo into ``out_dir``; returns the summary dict. ``layout``: of
+    ``stadium.usdc`` (``"blender"``: the stage Blender's own USD importer plays,
+    docs/usd_export.md)."""
     log = log or (lambda msg: print(msg, file=sys.stderr, flush=True))
     if agents < 10:
         raise CrowdError(f"--agents must be at least 10, got {agents}")
     if frames < 1:
         raise CrowdError(f"--frames must be at least 1, got {frames}")
+    from ..core.config import USD_LAYOUTS
+    if layout not in USD_LAYOUTS:
+        raise CrowdError(f"--layout must be one of {', '.join(USD_LAYOUTS)}, got {layout!r}")
     from ..gpu.preview_render import output_dir
     out = output_dir(out_dir)
     t0 = time.perf_counter()
@@ -199,9 +204,11 @@ def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
         from ..usd.export import export_crowd
         log("exporting the show to USD")
         res = export_crowd(shot, out / "stadium.usdc", camera=stadium.camera,
-                           repetition=measure, progress=lambda stage, d, n: _bar(d, n, stage))
+                           repetition=measure, progress=lambda stage, d, n: _bar(d, n, stage),
+                           layout=layout)
         seconds["usd"] = time.perf_counter() - t
-        summary.update(usd=str(res.path), usd_bytes=int(sum(res.files.values())),
+        summary.update(usd=str(res.path), usd_layout=layout,
+                       usd_bytes=int(sum(res.files.values())),
                        usd_clip_agents=res.clip_agents,
                        usd_export={k: getattr(res, k) for k in USD_COUNTS})
         summary["repetition"] = res.repetition

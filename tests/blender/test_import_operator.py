@@ -19,7 +19,8 @@ import numpy as np
 import pytest
 
 bpy = pytest.importorskip("bpy")
-pxr = pytest.importorskip("pxr")
+pytest.importorskip("pxr")
+from pxr import Usd  # noqa: E402
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import crowd_scene as cs  # noqa: E402
@@ -85,7 +86,7 @@ def fresh_scene():
 
 def test_the_imported_crowd_plays_at_the_stages_rate_sharing_one_material_per_look(
         stages, truth):
-    stage = pxr.Usd.Stage.Open(str(stages["blender"]))
+    stage = Usd.Stage.Open(str(stages["blender"]))
     scene, template = fresh_scene()
     assert bpy.ops.crowd.import_usd(filepath=str(stages["blender"])) == {"FINISHED"}
     # the clock: the scene's frame rate is the stage's, its range the stage's
