@@ -699,7 +699,8 @@ def _add_build_extension(subparsers) -> None:
                     "Python Blender ships (cached in build/wheels) and build the "
                     "extension zip with Blender's own extension tool (from the bpy "
                     "module). Install it with Blender > Preferences > Get Extensions > "
-                    "Install from Disk.")
+                    "Install from Disk, or blender --command extension install-file --repo "
+                    "user_default --enable ZIP (docs/user_guide_blender.md, Install).")
     p.add_argument("--out", default="dist", type=path_arg, metavar="DIR",
                    help="folder for the zip (default: %(default)s)")
     p.add_argument("--split-platforms", action="store_true",

@@ -6,6 +6,9 @@ directories live in a temporary folder (as tests/packaging does). There the
 extension is disabled and enabled twice with a preview running each time; Blender's
 registries are the oracle for what is left: ``bpy.types``, ``bpy.app.handlers``,
 ``Scene.crowd``, and ``draw_handler_remove`` refusing the preview's draw handler.
+
+The user guide's install commands are run as written, and a new process with the same
+user folders finds the extension enabled (issue 35, item 3).
 """
 
 import json
@@ -130,3 +133,86 @@ def test_package_and_api_import_without_blender():
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          timeout=120)
     assert run.returncode == 0 and run.stdout.strip() == "ok", run.stderr[-2000:]
+
+
+GUIDE = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(
+    os.path.abspath(__file__)))), "docs", "user_guide_blender.md")
+
+LOOK = textwrap.dedent("""
+    import json, sys
+    import bpy
+    name = "bl_ext.user_default.crowd_animation"
+    module = sys.modules.get(name)
+    print(json.dumps({"scene_crowd": hasattr(bpy.types.Scene, "crowd"),
+                      "operator": hasattr(bpy.types, "CROWD_OT_bake"),
+                      "enabled": name in bpy.context.preferences.addons,
+                      "file": getattr(module, "__file__", None),
+                      "dirty": bpy.context.preferences.is_dirty,
+                      "auto_save": bpy.context.preferences.use_preferences_save}))
+""")
+
+
+def install_section() -> dict:
+    """The user guide's install commands: ``blender`` (the argument list of Blender's
+    own ``extension`` command line), ``script`` (the install script) and ``start``
+    (what a new ``bpy``-module process runs first)."""
+    import re
+    with open(GUIDE, encoding="utf-8") as f:
+        text = f.read()
+    section = text[text.index("## Install"):text.index("## 1. Characters")]
+    blocks = re.findall(r"```(\w+)\n(.*?)```", section, re.S)
+    (line,) = [b for kind, b in blocks if kind == "bash" and b.lstrip().startswith("blender")]
+    words = line.split()
+    assert words[:3] == ["blender", "--command", "extension"], line
+    script, start = [textwrap.dedent(b) for kind, b in blocks if kind == "python"]
+    return {"blender": words[3:], "script": script, "start": start, "text": section}
+
+
+def in_fresh_process(code, user, cwd, *args):
+    env = dict(os.environ, BLENDER_USER_RESOURCES=str(user))
+    run = subprocess.run([sys.executable, "-c", code, *map(str, args)], env=env, cwd=cwd,
+                         capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr[-3000:]
+    return run
+
+
+def test_the_guides_install_commands_enable_it_in_every_new_process(extension_zip,
+                                                                    tmp_path):
+    """Issue 35, item 3: installed as the user guide said, the extension was gone in the
+    next Blender process (only that process had it enabled: nothing saved the
+    preferences). Now each install command of the guide -- Blender's own
+    ``extension install-file`` command line (run here through the function Blender's
+    ``--command extension`` calls, the bpy module having no ``blender`` program) and
+    the install script -- is run as written, with user folders of its own; a new
+    process with the same folders then finds ``Scene.crowd`` registered, having run
+    nothing but the guide's start (Blender's ``read_userpref``, which the program does
+    when it starts). The control: the same script without its save leaves a new
+    process without the extension, as before."""
+    guide = install_section()
+    work = tmp_path / "work"
+    (work / "dist").mkdir(parents=True)
+    zip_name = os.path.basename(extension_zip)
+    assert f"dist/{zip_name}" in guide["text"]            # the guide names the built zip
+    import shutil
+    shutil.copy(extension_zip, work / "dist" / zip_name)
+    blender_cli = ("import sys, bpy, bl_pkg\n"
+                   "sys.exit(bl_pkg.cli_extension(sys.argv[1:]))")
+    unsaved = "\n".join(line for line in guide["script"].splitlines()
+                        if "save_userpref" not in line)
+    assert unsaved != guide["script"]
+    installs = {"blender": (blender_cli, guide["blender"]), "script": (guide["script"], ()),
+                "unsaved control": (unsaved, ())}
+    for way, (code, args) in installs.items():
+        user = tmp_path / way.replace(" ", "_") / "blender_user"
+        in_fresh_process(code, user, work, *args)
+        run = in_fresh_process(guide["start"] + "\n" + LOOK, user, work)
+        found = json.loads(run.stdout.strip().splitlines()[-1])
+        if "control" in way:
+            assert not found["scene_crowd"] and not found["enabled"], found
+            # as Blender's UI leaves it: unsaved, to be saved at quit by Auto-Save
+            run = in_fresh_process(unsaved + "\n" + LOOK, tmp_path / "ui" / "u", work)
+            now = json.loads(run.stdout.strip().splitlines()[-1])
+            assert now["scene_crowd"] and now["dirty"] and now["auto_save"], now
+            continue
+        assert found["scene_crowd"] and found["operator"] and found["enabled"], (way, found)
+        assert found["file"].startswith(str(user)), (way, found["file"])
