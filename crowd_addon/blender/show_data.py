@@ -68,7 +68,7 @@ def _cue(c, scene, depsgraph, cfg, placed, first, last) -> Cue:
             hold=c.hold, name=c.parameter, value=c.set_value,
             **({"trigger": c.switch_trigger, "release": c.release_trigger}
                if c.action in ("STREAM", "UNIQUE") else {}))
-        agents = selected_agents(c, depsgraph, cfg, placed) if action.moves_agents else None
+        agents = selected_agents(c, depsgraph, cfg, placed) if action.selects_agents else None
         sweep = None
         if c.timing == "SWEEP":
             centre = (0.0, 0.0, 0.0) if c.sweep_centre is None else \

@@ -116,6 +116,11 @@ class CrowdConfig:
         character (empty: none; :attr:`prop_masks`). See :mod:`.bodies`.
     show : :class:`~.show.Show`, the cues, reactions and animated parameters the crowd
         runs itself before each step (empty by default).
+    look_rigs : dict skeleton -> :class:`~.look_at.LookRig`, how its agents turn their
+        heads; look_targets : dict name -> :class:`~.look_at.LookTarget`, the points
+        they can look at (a ``look`` cue, ``Crowd.look_at``); look_lag : ``"offset"``
+        (each agent sees the target as late as its animation offset) or ``"seeded"``
+        (a seeded delay of up to ``look_max_lag`` frames). See :mod:`.look_at`.
     """
 
     skeletons: dict = field(default_factory=dict)
@@ -148,6 +153,10 @@ class CrowdConfig:
     lod_distances: tuple | None = None
     lod_budget_px: float = 1.0
     show: Show = field(default_factory=Show)
+    look_rigs: dict = field(default_factory=dict)
+    look_targets: dict = field(default_factory=dict)
+    look_lag: str = "offset"
+    look_max_lag: int = 12
 
     # authoring helpers ---------------------------------------------------------
     def add_skeleton(self, skeleton):
@@ -443,7 +452,25 @@ def validate_config(cfg: CrowdConfig) -> dict:
             raise CrowdError(f"crowd: clip stored as {name!r} is named {clip.name!r}")
     uses = _validate_animations(cfg)
     _validate_agents(cfg)
+    _check_looks(cfg)
     return uses
+
+
+def _check_looks(cfg):
+    """Look rigs bind to their skeletons' bones; look targets are named as keyed."""
+    from .look_at import LookChain, LookRig, LookTarget, agent_lags
+    for name, rig in cfg.look_rigs.items():
+        if name not in cfg.skeletons:
+            raise CrowdError(f"look rig: unknown skeleton {name!r} (known: "
+                             f"{sorted(cfg.skeletons)})")
+        if not isinstance(rig, LookRig):
+            raise CrowdError(f"look rig of skeleton {name!r}: must be a LookRig, got "
+                             f"{type(rig).__name__}")
+        LookChain(rig, cfg.skeletons[name])
+    for name, target in cfg.look_targets.items():
+        if not isinstance(target, LookTarget) or target.name != name:
+            raise CrowdError(f"look target {name!r}: must be a LookTarget of that name")
+    agent_lags(np.zeros(1), cfg.look_lag, cfg.look_max_lag)
 
 
 def _validate_animations(cfg):

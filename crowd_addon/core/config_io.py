@@ -519,6 +519,8 @@ def _encode_config(cfg: CrowdConfig) -> tuple:
     if (cfg.prop_masks != 0).any():
         m["agents"]["props"] = e.array(cfg.prop_masks, "props")
     m["show"] = _encode_show(cfg.show, enc.at("show"))
+    if cfg.look_rigs or cfg.look_targets:    # files without looks as before
+        m["look"] = _encode_look(cfg, enc.at("look"))
     return _plain(m, ""), arrays
 
 
@@ -653,6 +655,47 @@ def _decode_show(m: dict, dec) -> Show:
         values = d.array(t, "values", "f", (None,))
         tracks.append(_built(d, lambda: Track(values=values, **fields)))
     return _built(dec, lambda: Show(tuple(cues), tuple(reactions), tuple(tracks)))
+
+
+# ------------------------------------------------------------------------- look
+_LOOK_RIG = (("yaw_limit", "number", None), ("pitch_limit", "number", None))
+
+
+def _encode_look(cfg, enc) -> dict:
+    return {"lag": cfg.look_lag, "max_lag": int(cfg.look_max_lag),
+            "rigs": {sk: {"bones": list(r.bones), "shares": list(r.shares),
+                          "yaw_limit": r.yaw_limit, "pitch_limit": r.pitch_limit,
+                          "forward": list(r.forward)} for sk, r in cfg.look_rigs.items()},
+            "targets": [{"name": t.name, "first": t.first, "smoothing": t.smoothing,
+                         "positions": enc.at("targets", i).array(t.positions, "positions")}
+                        for i, t in enumerate(cfg.look_targets.values())]}
+
+
+def _decode_look(m: dict, dec, cfg):
+    from .look_at import LookRig, LookTarget
+    look = dec.get(m, "look", "object", None)
+    if look is None:                       # files without looks
+        return
+    dec = dec.at("look")
+    cfg.look_lag = dec.get(look, "lag", "str", "offset")
+    cfg.look_max_lag = dec.get(look, "max_lag", "int", 12)
+    rigs = dec.get(look, "rigs", "object", {})
+    for sk in rigs:
+        d, r = dec.at("rigs", sk), dec.at("rigs").get(rigs, sk, "object")
+        bones, shares = d.items(r, "bones", "name"), d.items(r, "shares", "number")
+        forward = d.items(r, "forward", "number")
+        cfg.look_rigs[sk] = _built(d, lambda: LookRig(tuple(bones), tuple(shares),
+                                                       forward=tuple(forward),
+                                                       **_fields(d, r, _LOOK_RIG)))
+    for i, t in enumerate(dec.items(look, "targets", "object", [])):
+        d = dec.at("targets", i)
+        fields = _fields(d, t, (("name", "name", None), ("first", "int", None),
+                                ("smoothing", "number", 4.0)))
+        positions = d.array(t, "positions", "f", (None, 3))
+        if fields["name"] in cfg.look_targets:
+            raise d.at("name").error(f"two look targets are named {fields['name']!r}")
+        cfg.look_targets[fields["name"]] = _built(
+            d, lambda: LookTarget(positions=positions, **fields))
 
 
 def _plain(obj, path):
@@ -805,6 +848,7 @@ def _decode_config(m: dict, dec: Decoder) -> CrowdConfig:
     if agents.get("props") is not None:
         cfg.agent_props = d.array(agents, "props", "iu", (n,)).astype(np.uint8)
     cfg.show = _decode_show(m, dec)
+    _decode_look(m, dec, cfg)
     return cfg
 
 

@@ -33,6 +33,7 @@ from .errors import CrowdError
 from .events import EventDispatcher, deliver
 from .frame_view import FrameView
 from .graph import DependencyGraph, TreeEvaluator
+from .look_at import AgentLooks, LookChain, agent_lags, apply_look, look_turns
 from .pools import StreamPool, UniquePool
 from .show import ShowRunner
 from .skinning import SkinningPlan
@@ -136,6 +137,14 @@ class Crowd:
         self.view = FrameView(self)
         self.skinning.bind(self)
         self._build_graph()
+        # look-at (core/look_at.py): a chain per skeleton with a look rig, the targets
+        self._look_chains = [LookChain(cfg.look_rigs[name], sk) if name in cfg.look_rigs
+                             else None for name, sk in zip(skel_names, self.skeletons)]
+        self.look_target_names = tuple(cfg.look_targets)
+        self._look_targets = tuple(cfg.look_targets.values())
+        self._look_lags = agent_lags(cfg.agent_offset, cfg.look_lag, cfg.look_max_lag,
+                                     cfg.seed)
+        self.looks = AgentLooks(self.agents.count)
         self.show = ShowRunner(cfg.show, self) if cfg.show else None
         self.snapshots = None          # a SnapshotCache once keep_snapshots() is called
         self._quiet = 0                # > 0 inside step/reset/restore: not a user's change
@@ -184,6 +193,7 @@ class Crowd:
 
     def _reset(self, f0):
         cfg = self.config
+        self.looks.reset()
         if self.show is not None:
             self.show.reset()
         self.evaluator.reset()
@@ -260,6 +270,7 @@ class Crowd:
                 "streams": self.streams.state(), "uniques": self.uniques.state(),
                 "agents": self.agents.state(), "slots": self.slots.state(),
                 "evaluator": self.evaluator.state(), "events": self.events.state(),
+                "looks": self.looks.state(),
                 **({"show": self.show.state()} if self.show is not None else {})}
 
     def _set_state(self, state: dict):
@@ -274,6 +285,7 @@ class Crowd:
         self.agents.set_state(state["agents"])        # after the slots: it regroups by target
         self.evaluator.set_state(state["evaluator"])
         self.events.set_state(state["events"])
+        self.looks.set_state(state["looks"], len(self._look_targets))
         if self.show is not None:
             self.show.set_state(state["show"])
         self._check_state()
@@ -634,8 +646,78 @@ class Crowd:
                                  self.storage.slot_base + ref))
 
     def agent_rows(self, agents=None) -> np.ndarray:
-        """Skinning rows ``(n, B, 3, 4)`` float32 the agents are drawn with now."""
-        return self.skinning.rows(self.agent_rows_index(agents))
+        """Skinning rows ``(n, B, 3, 4)`` float32 the agents are drawn with now, their
+        looks applied (:meth:`look_at`; the CPU reference of the look stage)."""
+        ids = np.arange(self.agents.count) if agents is None else self.agents.ids(agents)
+        rows = self.skinning.rows(self.agent_rows_index(ids))
+        w = self.looks.weights(self.frame, ids)
+        if not (w > 0).any():
+            return rows
+        for sk, chain in enumerate(self._look_chains):
+            pick = np.flatnonzero((w > 0) & (self.agent_skeleton[ids] == sk))
+            if chain is None or not pick.size:
+                continue
+            a = ids[pick]
+            turns = look_turns(rows[pick], chain, self.look_targets_model(a), w[pick])
+            rows[pick] = apply_look(rows[pick], chain, turns).astype(rows.dtype)
+        return rows
+
+    def look_targets_model(self, agents) -> np.ndarray:
+        """(n, 3) where ``agents`` (looking at something) see their target now, in
+        their model space: the target's smoothed path read ``lag`` frames late,
+        the agent's position, heading and scale undone."""
+        a = self.agents.ids(agents)
+        out = np.zeros((a.size, 3))
+        for t, target in enumerate(self._look_targets):
+            m = self.looks.target[a] == t
+            if m.any():
+                out[m] = target.at(self.frame - self._look_lags[a[m]])
+        d = out - self.agents.position[a]
+        h = -self.agents.heading[a].astype(np.float64)
+        c, s = np.cos(h), np.sin(h)
+        local = np.stack([c * d[:, 0] - s * d[:, 1], s * d[:, 0] + c * d[:, 1], d[:, 2]], 1)
+        return local / self.agents.scale[a, None]
+
+    def look_at(self, agents, target, blend: float = 8.0, hold: int = 0):
+        """``agents`` turn their heads toward look target ``target`` (a name of
+        ``config.look_targets``) from the next frame, blending in over ``blend``
+        frames, and look away again ``hold`` frames later (0: they keep looking).
+        Agents whose character has no look rig are left out; CrowdError names what is
+        wrong, before anything changes."""
+        ids = self.can_look(agents)
+        if target not in self.look_target_names:
+            raise CrowdError(f"look_at: unknown look target {target!r} (targets: "
+                             f"{list(self.look_target_names)})")
+        blend, hold = self._look_blend(blend), int(hold)
+        if hold < 0:
+            raise CrowdError(f"look_at: hold must be >= 0 frames, got {hold}")
+        self._changed()
+        self.looks.look(ids, self.look_target_names.index(target), self.frame + 1, blend,
+                        hold)
+
+    def look_away(self, agents, blend: float = 8.0):
+        """``agents`` turn back to their animation over ``blend`` frames from the next
+        frame."""
+        ids, blend = self.can_look(agents), self._look_blend(blend)
+        self._changed()
+        self.looks.look_away(ids, self.frame + 1, blend)
+
+    def can_look(self, agents) -> np.ndarray:
+        """The ids of ``agents`` whose character has a look rig."""
+        ids = self.agents.ids(agents)
+        rigged = np.array([c is not None for c in self._look_chains], bool)
+        return ids[rigged[self.agent_skeleton[ids]]]
+
+    @staticmethod
+    def _look_blend(blend) -> float:
+        try:
+            b = float(blend)
+        except (TypeError, ValueError):
+            raise CrowdError(f"look: blend must be a number of frames, got {blend!r}") \
+                from None
+        if not (np.isfinite(b) and 0 <= b <= 2 ** 31 - 1):
+            raise CrowdError(f"look: blend must be 0 .. 2**31 - 1 frames, got {blend!r}")
+        return b
 
     def pose(self, stream, offset: int = 0) -> np.ndarray:
         """``PH_stream(offset)``: the local pose ``(B, 10)`` the head had ``offset`` frames ago."""

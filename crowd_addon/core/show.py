@@ -40,7 +40,8 @@ __all__ = ["Action", "Sweep", "Cue", "Reaction", "Track", "Show", "ShowRunner",
            "ACTION_KINDS", "select_inside", "select_value", "select_fraction", "neighbours",
            "slot_speed"]
 
-ACTION_KINDS = ("stream", "unique", "trigger", "parameter")
+ACTION_KINDS = ("stream", "unique", "trigger", "parameter", "look")
+LOOK = "look"                   # a look cue's target kind (targets: crowd.look_target_names)
 _OPS = {"==": np.equal, "!=": np.not_equal, "<": np.less, "<=": np.less_equal,
         ">": np.greater, ">=": np.greater_equal}
 _NEVER = np.iinfo(np.int64).min // 4
@@ -74,7 +75,10 @@ class Action:
 
     kind : ``"stream"`` (blend to stream ``target``), ``"unique"`` (blend to unique
         ``target``, restarted), ``"trigger"`` (set trigger ``name`` on stream or unique
-        ``target``) or ``"parameter"`` (set parameter ``name`` of ``target`` to ``value``).
+        ``target``), ``"parameter"`` (set parameter ``name`` of ``target`` to ``value``)
+        or ``"look"`` (turn the agents' heads toward look target ``target``, blending
+        in over ``duration`` frames, and away again after ``hold`` frames; it moves
+        no agent, so holds and homes are left alone: :mod:`.look_at`).
     duration : blend length in frames (0 cuts).
     offset : stream actions: ``"keep"`` (each agent's own offset), ``"random"`` (a
         random offset per agent, seeded) or an offset ``0 .. M-1``.
@@ -143,6 +147,11 @@ class Action:
     @property
     def moves_agents(self) -> bool:
         return self.kind in ("stream", "unique")
+
+    @property
+    def selects_agents(self) -> bool:
+        """Whether the action applies to agents (a selection), not to an animation."""
+        return self.moves_agents or self.kind == LOOK
 
 
 @dataclass(frozen=True)
@@ -271,7 +280,7 @@ class Cue:
             ids = np.asarray(self.agents)
             if ids.ndim != 1 or (ids.size and ids.dtype.kind not in "iu"):
                 raise CrowdError(f"{what}: agents must be a 1-D array of agent ids")
-            if ids.size == 0 and self.action.moves_agents:
+            if ids.size == 0 and self.action.selects_agents:
                 raise CrowdError(f"{what}: the selection is empty (no agent to move)")
             ids = np.unique(ids.astype(np.int64))
             ids.flags.writeable = False
@@ -501,7 +510,7 @@ class ShowRunner:
             if r.event not in crowd.bank.tag_names:
                 raise CrowdError(f"reaction {r.name!r}: no clip has event {r.event!r} "
                                  f"(events: {sorted(crowd.bank.tag_names)})")
-            if not show.cue(r.cue).action.moves_agents and r.radius:
+            if not show.cue(r.cue).action.selects_agents and r.radius:
                 raise CrowdError(f"reaction {r.name!r}: cue {r.cue!r} sets a "
                                  f"{show.cue(r.cue).action.kind}, which has no agents to reach")
         self._schedule = self._compile()
@@ -524,7 +533,13 @@ class ShowRunner:
         """(kind, ref, skeleton) of the cue's target, after checking it and its agents."""
         a, what = cue.action, f"cue {cue.name!r}"
         c = self.crowd
-        kind, ref = self._root(a.target, what)
+        if a.kind == LOOK:
+            if a.target not in c.look_target_names:
+                raise CrowdError(f"{what}: unknown look target {a.target!r} (look targets: "
+                                 f"{list(c.look_target_names)})")
+            kind, ref = LOOK, c.look_target_names.index(a.target)
+        else:
+            kind, ref = self._root(a.target, what)
         start = c.config.start_frame
         if cue.timeline and not cue.muted and cue.frame <= start:
             raise CrowdError(f"{what}: frame {cue.frame} is not after the crowd's start frame "
@@ -533,7 +548,8 @@ class ShowRunner:
             raise CrowdError(f"{what}: {a.target!r} is a unique, not a stream")
         if a.kind == "unique" and kind != UNIQUE:
             raise CrowdError(f"{what}: {a.target!r} is a stream, not a unique")
-        skeleton = (c.streams.skeleton if kind == STREAM else c.uniques.skeleton)[ref]
+        skeleton = -1 if kind == LOOK else \
+            (c.streams.skeleton if kind == STREAM else c.uniques.skeleton)[ref]
         if isinstance(a.offset, int) and a.offset >= c.streams.max_offset:
             raise CrowdError(f"{what}: offset {a.offset} is outside 0..{c.streams.max_offset - 1}")
         if cue.agents is not None and cue.agents.size and \
@@ -541,14 +557,17 @@ class ShowRunner:
             bad = cue.agents[(cue.agents < 0) | (cue.agents >= self._n)][0]
             raise CrowdError(f"{what}: agent {int(bad)} does not exist (the crowd has "
                              f"{self._n} agents)")
-        if a.moves_agents and not self._agents(cue, (kind, ref, skeleton)).size:
-            raise CrowdError(f"{what}: none of its agents can play {a.target!r} (they use "
-                             "another skeleton)")
+        if a.selects_agents and not self._agents(cue, (kind, ref, skeleton)).size:
+            raise CrowdError(f"{what}: none of its agents can " + (
+                f"look at {a.target!r} (their characters have no look rig)" if kind == LOOK
+                else f"play {a.target!r} (they use another skeleton)"))
         return kind, ref, skeleton
 
     def _agents(self, cue, target):
-        """The cue's agents that can play its target."""
+        """The cue's agents that can play its target (look at it: have a look rig)."""
         ids = np.arange(self._n) if cue.agents is None else cue.agents
+        if target[0] == LOOK:
+            return self.crowd.can_look(ids)
         return ids[self.crowd.agent_skeleton[ids] == target[2]]
 
     # ------------------------------------------------------------ schedule
@@ -559,7 +578,7 @@ class ShowRunner:
         for i, cue in enumerate(self.show.cues):
             if cue.muted or not cue.timeline:
                 continue
-            if not cue.action.moves_agents:
+            if not cue.action.selects_agents:
                 due[cue.frame].append((i, None))
                 continue
             ids = self._agents(cue, self._targets[i])
@@ -719,8 +738,13 @@ class ShowRunner:
         if not selected:                     # a reaction's agents: keep the cue's own
             if cue.agents is not None:
                 ids = ids[np.isin(ids, cue.agents, assume_unique=True)]
-            ids = ids[c.agent_skeleton[ids] == skeleton]
+            ids = c.can_look(ids) if kind == LOOK else ids[c.agent_skeleton[ids] == skeleton]
         st = self.stats[cue.name]
+        if kind == LOOK:                     # a layer on top: holds and homes stay
+            if ids.size:
+                c.look_at(ids, a.target, a.duration, a.hold)
+                st["agents"] += int(ids.size)
+            return
         if not cue.interrupt:
             free = self.held_until[ids] < frame
             st["skipped"] += int(ids.size - free.sum())
@@ -844,7 +868,7 @@ class ShowRunner:
     def _describe(self) -> list:
         out = []
         for i, cue in enumerate(self.show.cues):
-            ids = self._agents(cue, self._targets[i]) if cue.action.moves_agents else None
+            ids = self._agents(cue, self._targets[i]) if cue.action.selects_agents else None
             d = {"name": cue.name, "frame": cue.frame, "agents": 0 if ids is None else
                  int(ids.size), "action": cue.action.kind, "target": cue.action.target,
                  "switched": 0, "streams": 0}

@@ -147,3 +147,150 @@ def test_smoothing_follows_its_definition_and_lag_reads_the_path_late():
 def test_bad_look_settings_are_named(make, match):
     with pytest.raises(CrowdError, match=match):
         make()
+
+
+# ----------------------------------------------------------------- in a crowd
+from crowd_addon.core import ClipPlayer, Crowd, CrowdConfig  # noqa: E402
+from crowd_addon.core.show import Action, Cue, Show  # noqa: E402
+
+M = 8
+
+
+def crowd_config(show=None, target=None):
+    """16 agents in a row facing -Y (heading 0) on one stream at offsets 0..M-1, a look
+    rig on the skeleton and a ball moving along +X in front of them."""
+    cfg = CrowdConfig(max_offset=M, transition_slots=8, fps=24.0, start_frame=1)
+    cfg.add_skeleton(SK)
+    cfg.add_clip(sy.periodic_clip(SK, "idle", frames=25, seed=3, amplitude=0.3))
+    cfg.add_stream("idle", "fan", ClipPlayer("idle"))
+    n = 16
+    cfg.add_agents(n, streams=np.zeros(n, np.int64), offsets=np.arange(n) % M,
+                   positions=np.c_[np.arange(n) * 1.0, np.zeros(n), np.zeros(n)],
+                   headings=np.linspace(-0.3, 0.3, n))
+    frames = np.arange(120)
+    path = np.c_[-20 + 0.5 * frames, np.full(120, -25.0), np.full(120, 1.0)]
+    cfg.look_rigs = {"fan": RIG}
+    cfg.look_targets = {"ball": target or LookTarget("ball", 1, path, smoothing=3.0)}
+    cfg.show = show if show is not None else Show()
+    return cfg
+
+
+def world_head(crowd, ids):
+    """(pivot, forward) of the agents' heads in world space, from agent_rows."""
+    pivot, f = head_direction(crowd.agent_rows(ids).astype(np.float64), CHAIN)
+    h = crowd.agents.heading[ids].astype(np.float64)
+    c, s = np.cos(h), np.sin(h)
+    rot = lambda v: np.stack([c * v[:, 0] - s * v[:, 1], s * v[:, 0] + c * v[:, 1], v[:, 2]], 1)
+    return rot(pivot) * crowd.agents.scale[ids, None] + crowd.agents.position[ids], rot(f)
+
+
+def test_a_look_cue_turns_every_head_to_the_ball_each_seeing_it_late_by_its_offset():
+    cue = Cue("watch", 10, Action("look", "ball", duration=6))
+    crowd = Crowd(crowd_config(Show((cue,))))
+    quiet = Crowd(crowd_config())
+    ids = np.arange(16)
+    target = crowd.config.look_targets["ball"]
+    for f in range(2, 40):
+        crowd.step()
+        quiet.step()
+        pivot, f_dir = world_head(crowd, ids)
+        if f < 10:            # before the cue: the animation as it is
+            np.testing.assert_array_equal(crowd.agent_rows(ids), quiet.agent_rows(ids))
+        if f >= 16:           # blended in: each head at the ball as it saw it, lag late
+            seen = target.at(f - crowd.agents.offset[ids])
+            assert angle(f_dir, seen - pivot).max() < 1.0, f
+            now = target.at(np.full(16, f))
+            late = crowd.agents.offset[ids] >= 4
+            assert (angle(f_dir, now - pivot)[late] > 0.5).all()     # not the ball now
+    assert crowd.show.stats["watch"]["agents"] == 16
+    # only the chain and the bones below it move: the rest is the stream's pose
+    neck = SK.bone_index("neck")
+    below = [i for i in range(SK.bone_count) if CHAIN.depth[i] == 0]
+    np.testing.assert_array_equal(crowd.agent_rows(ids)[:, below], quiet.agent_rows(ids)[:, below])
+    assert not np.allclose(crowd.agent_rows(ids)[:, neck], quiet.agent_rows(ids)[:, neck])
+
+
+def test_a_held_look_blends_away_and_a_snapshot_keeps_it():
+    cue = Cue("glance", 5, Action("look", "ball", duration=4, hold=10))
+    a = Crowd(crowd_config(Show((cue,))))
+    quiet = Crowd(crowd_config())
+    a.advance_to(9)
+    np.testing.assert_allclose(a.looks.weights(9, np.arange(16)), 1.0)
+    snap = a.snapshot()
+    a.advance_to(16)
+    np.testing.assert_allclose(a.looks.weights(16, [0]), 0.75)      # 1 of 4 frames out
+    a.advance_to(20)
+    quiet.advance_to(20)
+    np.testing.assert_array_equal(a.agent_rows(), quiet.agent_rows())
+    b = Crowd(crowd_config(Show((cue,))))
+    b.restore(snap)
+    b.advance_to(14)
+    a.advance_to(14)
+    np.testing.assert_array_equal(a.agent_rows(), b.agent_rows())
+
+
+def test_look_at_by_hand_and_look_away():
+    crowd = Crowd(crowd_config())
+    crowd.look_at([2, 3], "ball", blend=0)
+    crowd.step()
+    np.testing.assert_array_equal(crowd.looks.weights(crowd.frame, [1, 2, 3]), [0, 1, 1])
+    crowd.look_away([2], blend=4)            # from the next frame, over 4 frames
+    crowd.step()
+    np.testing.assert_allclose(crowd.looks.weights(crowd.frame, [2, 3]), [1, 1])
+    crowd.step()
+    np.testing.assert_allclose(crowd.looks.weights(crowd.frame, [2, 3]), [0.75, 1])
+    for bad, match in ((lambda: crowd.look_at([1], "moon"), "unknown look target 'moon'"),
+                       (lambda: crowd.look_at([1], "ball", blend=-1), "blend"),
+                       (lambda: crowd.look_at([99], "ball"), "99")):
+        with pytest.raises(CrowdError, match=match):
+            bad()
+
+
+def test_a_look_cue_leaves_transitions_and_holds_alone():
+    show = Show((Cue("watch", 4, Action("look", "ball", duration=2)),
+                 Cue("up", 6, Action("stream", "idle", duration=3, offset=0, hold=5),
+                     agents=np.arange(4))))
+    crowd = Crowd(crowd_config(show))
+    crowd.advance_to(8)
+    assert crowd.show.stats["up"]["agents"] == 4 and crowd.show.stats["up"]["skipped"] == 0
+    assert (crowd.looks.target == 0).all()
+
+
+@pytest.mark.parametrize("change, match", [
+    (lambda c: c.look_rigs.update(kid=RIG), "look rig: unknown skeleton 'kid'"),
+    (lambda c: c.look_rigs.update(fan=LookRig(("jaw",))), "no bone named 'jaw'"),
+    (lambda c: c.look_targets.update(moon=LookTarget("sun", 0, np.zeros((1, 3)))),
+     "look target 'moon'"),
+    (lambda c: setattr(c, "show", Show((Cue("x", 5, Action("look", "moon")),))),
+     "unknown look target 'moon'"),
+])
+def test_bad_look_configurations_are_named(change, match):
+    cfg = crowd_config()
+    change(cfg)
+    with pytest.raises(CrowdError, match=match):
+        Crowd(cfg)
+
+
+def test_looks_survive_the_config_file(tmp_path):
+    import json
+
+    from crowd_addon.core.config_io import config_digest, load_config, save_config
+    show = Show((Cue("watch", 10, Action("look", "ball", duration=6, hold=20)),))
+    cfg = crowd_config(show)
+    cfg.look_lag, cfg.look_max_lag = "seeded", 5
+    save_config(cfg, tmp_path / "c.json")
+    back = load_config(tmp_path / "c.json")
+    assert back.look_rigs == cfg.look_rigs and (back.look_lag, back.look_max_lag) == ("seeded", 5)
+    t, u = back.look_targets["ball"], cfg.look_targets["ball"]
+    assert (t.first, t.smoothing) == (u.first, u.smoothing)
+    np.testing.assert_array_equal(t.positions, u.positions)
+    a, b = Crowd(cfg), Crowd(back)
+    a.advance_to(30)
+    b.advance_to(30)
+    np.testing.assert_array_equal(a.agent_rows(), b.agent_rows())
+    # a file without looks carries no "look" key (it reads and hashes as before)
+    plain = crowd_config()
+    plain.look_rigs, plain.look_targets = {}, {}
+    save_config(plain, tmp_path / "p.json")
+    assert "look" not in json.loads((tmp_path / "p.json").read_text())
+    assert config_digest(plain) == config_digest(load_config(tmp_path / "p.json"))
