@@ -134,3 +134,27 @@ def test_auto_run_python_scripts_still_runs_every_file_s_script(tmp_path):
     export_blend(str(tmp_path / "1" / "s.usdc"), (1, 4), blend=str(tmp_path / "other.blend"),
                  ignore_scripts=True)
     assert ran(b) == []
+
+
+def test_every_command_refuses_an_untrusted_script_with_exit_code_3(tmp_path, capsys):
+    """Issue 35, item 6: ``preview_blend`` and ``snapshot_blend`` (``crowd preview`` and
+    ``crowd snapshot``) refuse before anything is baked, rendered or written, and
+    Blender's own ``-c crowd export`` (:func:`crowd_command`, on the open file) exits
+    3 with the reason; ``--ignore-scripts`` goes on without the script."""
+    from crowd_addon.blender.cli_commands import crowd_command, preview_blend, snapshot_blend
+    b = cs.scripted_blend(tmp_path / "other.blend", tmp_path, "other")
+    for run in (lambda: preview_blend(str(tmp_path / "frames"), 2,
+                                      blend=str(tmp_path / "other.blend")),
+                lambda: snapshot_blend(str(tmp_path / "snaps"), (1, 4), every=2,
+                                       blend=str(tmp_path / "other.blend"))):
+        with pytest.raises(ScriptNotTrusted, match=UNTRUSTED):
+            run()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["other.blend"] and ran(b) == []
+    out = str(tmp_path / "cli" / "s.usdc")
+    assert crowd_command(["export", "--out", out, "--frames", "1-4"]) == 3
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert err.startswith("crowd export: error: crowd script 'show.py' did not run")
+    assert not (tmp_path / "cli").exists() and ran(b) == []
+    assert crowd_command(["export", "--out", out, "--frames", "1-4",
+                          "--ignore-scripts"]) == 0
+    assert (tmp_path / "cli" / "s.usdc").is_file() and ran(b) == []
