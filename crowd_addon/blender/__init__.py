@@ -15,8 +15,8 @@ back), and holds the UI. The logic on those arrays lives in ``crowd_addon.core``
   ``core.pose_channels``).
 - :mod:`.agents`: agent sources -> agents (``core.placement``); :mod:`.scene_config`:
   the Crowd settings -> a ``CrowdConfig`` (node lists: ``core.controller_graph``).
-- :mod:`.props`, :mod:`.operators`, :mod:`.panels`, :mod:`.preview`, :mod:`.export`:
-  the UI; :mod:`.registration` registers it; :mod:`.cli_commands`: ``crowd export
+- :mod:`.props`, :mod:`.operators`, :mod:`.panels`, :mod:`.preview`, :mod:`.export`,
+  :mod:`.import_usd` (a crowd stage back through Blender's USD importer): the UI; :mod:`.registration` registers it; :mod:`.cli_commands`: ``crowd export
   --blend`` and Blender's ``-c crowd`` command.
 
 ``crowd_addon/__init__.py`` never imports this package at import time, so the core
