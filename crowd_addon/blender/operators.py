@@ -266,6 +266,7 @@ _COLLECTIONS = (
     ("transitions", "Transitions", ""), ("agent_sources", "Agent Sources", ""),
     ("cues", "Cues", ""), ("reactions", "Reactions", ""), ("parameters", "Parameters", ""),
     ("palettes", "Palettes", ""), ("variants", "Mesh Variants", ""), ("props", "Props", ""),
+    ("look_targets", "Look Targets", ""),
 )
 _INDEX = {"characters": "active_character_index", "lods": "active_lod_index",
           "streams": "active_stream_index", "uniques": "active_unique_index",
@@ -273,11 +274,12 @@ _INDEX = {"characters": "active_character_index", "lods": "active_lod_index",
           "transitions": "active_transition_index", "agent_sources": "active_source_index",
           "cues": "active_cue_index", "reactions": "active_reaction_index",
           "parameters": "active_parameter_index", "palettes": "active_palette_index",
-          "variants": "active_variant_index", "props": "active_prop_index"}
+          "variants": "active_variant_index", "props": "active_prop_index",
+          "look_targets": "active_look_target_index"}
 #: lists held by ``scene.crowd`` (or a struct of it): collection -> its owner
 _SETTINGS_LISTS = {"characters": lambda s: s, "agent_sources": lambda s: s,
                    "cues": lambda s: s.show, "reactions": lambda s: s.show,
-                   "parameters": lambda s: s.show}
+                   "parameters": lambda s: s.show, "look_targets": lambda s: s.show}
 #: lists held by the active character
 _CHARACTER_LISTS = ("lods", "streams", "uniques", "palettes", "variants", "props")
 
@@ -383,6 +385,10 @@ class CROWD_OT_item_add(_ListOperator, bpy.types.Operator):
             obj = context.active_object         # the selected mesh, when not the body
             if obj is not None and obj.type == "MESH" and obj != owner.body:
                 item.object = obj
+        elif self.collection == "look_targets":    # the selected object, by its name
+            obj = context.active_object
+            item.name = _unique_name(items, obj.name if obj is not None else "Target")
+            item.object = obj
         elif self.collection in ("cues", "reactions", "parameters"):
             item.name = _unique_name(items, self.collection[:-1].title())
             if self.collection == "cues":       # a cue starts after the first frame

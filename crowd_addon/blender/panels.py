@@ -352,6 +352,36 @@ class CROWD_PT_characters(_Panel, bpy.types.Panel):
             col.prop(prop, "share")
 
 
+class CROWD_PT_look_rig(_Panel, bpy.types.Panel):
+    """The active character's look rig: the bones that turn its head toward a look
+    target (docs/show.md, "Look-at")."""
+
+    bl_label = "Look At"
+    bl_parent_id = "CROWD_PT_characters"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        s = context.scene.crowd
+        char = _active_character(s)
+        if char is None:
+            return
+        col = self.layout.column()
+        col.use_property_split = True
+        col.prop(char, "look_bones")
+        col.prop(char, "look_shares")
+        col.prop(char, "look_yaw_limit")
+        col.prop(char, "look_pitch_limit")
+        forward = s.bl_rna.properties["forward_axis"].enum_items[s.forward_axis].name
+        col.label(text=f"The head faces {forward} at rest (Settings > Forward)", icon="INFO")
+        if char.armature is not None and char.look_bones.strip():
+            bones = char.armature.data.bones
+            missing = [b.strip() for b in char.look_bones.split(",")
+                       if b.strip() and b.strip() not in bones]
+            if missing:
+                col.label(text=f"Not bones of {char.armature.name}: {', '.join(missing)}",
+                          icon="ERROR")
+
+
 class CROWD_PT_streams(_Panel, bpy.types.Panel):
     bl_label = "Streams"
     bl_parent_id = "CROWD_PT_characters"
@@ -441,5 +471,6 @@ CLASSES = (CROWD_UL_characters, CROWD_UL_lods, CROWD_UL_palettes, CROWD_UL_varia
            CROWD_UL_props, CROWD_UL_animations,
            CROWD_UL_nodes,
            CROWD_UL_inputs, CROWD_UL_transitions, CROWD_UL_sources, CROWD_PT_main,
-           CROWD_PT_characters, CROWD_PT_streams, CROWD_PT_uniques, CROWD_PT_agents,
+           CROWD_PT_characters, CROWD_PT_look_rig, CROWD_PT_streams, CROWD_PT_uniques,
+           CROWD_PT_agents,
            CROWD_PT_settings)

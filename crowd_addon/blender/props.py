@@ -19,6 +19,8 @@ one of that character's streams. Nothing here holds runtime state except
 preview.
 """
 
+import math
+
 import bpy
 from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProperty,
                        FloatVectorProperty, IntProperty, PointerProperty, StringProperty)
@@ -242,6 +244,26 @@ class CROWD_PG_character(PropertyGroup):
                                                   "the first variant, ...")
     props: CollectionProperty(type=CROWD_PG_prop)
     active_prop_index: IntProperty()
+    # -- look-at (docs/show.md, "Look-at"): the chain that turns toward a look target
+    look_bones: StringProperty(
+        name="Look Bones",
+        description="The bones that turn the head toward a look target, comma-separated, "
+                    "parent first, the aimed bone last (e.g. \"neck, head\"; a chest first "
+                    "turns the upper body too). Empty: the character does not look at "
+                    "things")
+    look_shares: StringProperty(
+        name="Shares",
+        description="Each look bone's share of the turn, comma-separated in the same order, "
+                    "summing to 1 (e.g. \"0.4, 0.6\"). Empty: equal shares")
+    look_yaw_limit: FloatProperty(
+        name="Yaw Limit", default=math.radians(75.0), min=0.0, max=math.pi,
+        subtype="ANGLE", unit="ROTATION",
+        description="The most the head turns sideways from the body's forward (the "
+                    "Forward setting): a target further round is followed to this angle")
+    look_pitch_limit: FloatProperty(
+        name="Pitch Limit", default=math.radians(40.0), min=0.0, max=math.pi / 2,
+        subtype="ANGLE", unit="ROTATION",
+        description="The most the head turns up or down from the horizontal")
 
 
 class CROWD_PG_agent_source(PropertyGroup):
@@ -338,7 +360,8 @@ class CROWD_PG_settings(PropertyGroup):
         ("POS_Y", "+Y", "The character faces +Y in its rest pose"),
         ("POS_X", "+X", "The character faces +X in its rest pose"),
         ("NEG_X", "-X", "The character faces -X in its rest pose")),
-        description="Used to turn agents toward a target")
+        description="Used to turn agents toward a target, and the way a character's "
+                    "head faces at rest for its look rig")
     lod_near: FloatProperty(name="LOD 1 From", default=30.0, min=0.01, unit="LENGTH",
                             description="Distance from which agents use the first coarser "
                                         "mesh (a character's first LOD mesh, or 25% of the "
@@ -416,6 +439,7 @@ _UI_ONLY = {"active_character_index", "active_lod_index", "active_stream_index",
             "active_unique_index", "active_source_index", "active_node_index",
             "active_input_index", "active_transition_index", "preview_enabled",
             "active_cue_index", "active_reaction_index", "active_parameter_index",
+            "active_look_target_index",
             "active_palette_index", "active_variant_index", "active_prop_index",
             "render_crowd", "repetition_neighbours", "plan_budget_mb", "plan_max_streams",
             "plan_motion_only"}

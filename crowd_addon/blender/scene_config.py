@@ -30,7 +30,7 @@ from ..core.mesh import CARD
 from ..core.variety import expand
 
 __all__ = ["config_from_scene", "config_steps", "scene_fps", "used_actions", "node_specs",
-           "bone_collections", "lod_distances", "clip_names", "scene_actions"]
+           "bone_collections", "lod_distances", "clip_names", "scene_actions", "look_rig"]
 
 #: LOD levels the settings give distances for (*LOD 1 From*, *LOD 2 From*)
 MESH_LODS = 2
@@ -270,7 +270,7 @@ def config_steps(scene, depsgraph=None, notes=None):
     given."""
     from . import agents as agent_mod
     from .armature import skeleton_from_armature
-    from .show_data import show_from_scene
+    from .show_data import look_targets_from_scene, show_from_scene
 
     s = _settings(scene)
     chars = _characters(scene, s)
@@ -318,10 +318,44 @@ def config_steps(scene, depsgraph=None, notes=None):
     agents, placed = agent_mod.agents_from_scene(scene, dg)
     if agents.count:
         agents.add_to(cfg)
+    cfg.look_rigs = {c.name: rig for c in chars
+                     if (rig := look_rig(c, skeletons[c.name], s.forward_axis)) is not None}
+    cfg.look_targets = look_targets_from_scene(scene)
+    cfg.look_lag, cfg.look_max_lag = s.show.look_lag.lower(), s.show.look_max_lag
     cfg.show = show_from_scene(scene, dg, cfg, placed)
     if notes is not None:           # LOD levels the silhouette check refused
         notes.extend(n for n in cfg.lod_notes if n not in notes)
     return cfg
+
+
+def _names(text) -> list:
+    return [t.strip() for t in text.split(",") if t.strip()]
+
+
+def look_rig(c, skeleton, forward_axis="NEG_Y"):
+    """Character ``c``'s :class:`~crowd_addon.core.look_at.LookRig` (None when it has no
+    look bones), checked against its skeleton; the forward axis is the scene's
+    *Forward* setting, the one agents are turned by."""
+    from ..core.look_at import LookChain, LookRig
+    from ..core.placement import FORWARD
+    bones = _names(c.look_bones)
+    if not bones:
+        return None
+    what = f"character {c.name!r}: look bones"
+    try:
+        shares = tuple(float(v) for v in _names(c.look_shares))
+    except ValueError:
+        raise CrowdError(f"{what}: shares must be numbers separated by commas, got "
+                         f"{c.look_shares!r}") from None
+    fx, fy = FORWARD[forward_axis]
+    try:
+        rig = LookRig(tuple(bones), shares, c.look_yaw_limit, c.look_pitch_limit, (fx, fy, 0.0))
+        LookChain(rig, skeleton)
+    except CrowdError as e:
+        msg = str(e).split(": ", 1)[-1] if str(e).startswith("look rig") else str(e)
+        raise CrowdError(f"{what}: {msg} (armature {c.armature.name!r}; Crowd > Characters "
+                         "> Look At)") from None
+    return rig
 
 
 def _add_palettes(cfg, c):

@@ -24,6 +24,7 @@ from .agents import _attribute, _group_members
 from .compat import action_slots, assigned_slot
 
 __all__ = ["show_from_scene", "selected_agents", "parameter_values", "show_fingerprint",
+           "look_targets_from_scene", "object_positions",
            "run_script", "script_key", "script_trusted", "trust_script",
            "forget_trusted_scripts", "script_refusal", "check_script"]
 
@@ -56,6 +57,10 @@ def _cue(c, scene, depsgraph, cfg, placed, first, last) -> Cue:
     what = f"cue {c.name!r}"
     if not c.name.strip():
         raise CrowdError("a cue has no name (Crowd > Show > Cues)")
+    if c.action == "LOOK" and not c.mute and c.target not in scene.crowd.show.look_targets:
+        raise CrowdError(f"{what}: unknown look target {c.target!r} (look targets: "
+                         f"{[t.name for t in scene.crowd.show.look_targets]}; Crowd > Show > "
+                         "Look Targets)")
     if c.timeline and not c.mute and not first < c.frame <= last:
         raise CrowdError(f"{what}: frame {c.frame} is outside the scene's frames "
                          f"{first + 1}..{last} (the crowd starts at frame {first}; a cue "
@@ -124,6 +129,93 @@ def _on_points(c, p, depsgraph) -> np.ndarray:
         return np.isin(p.rows, _group_members(obj, mesh, c.vertex_group, what))
     values = _attribute(mesh, c.attribute, _SELECT_KINDS, what, obj)
     return np.isin(p.rows, select_value(values, c.op, c.compare))
+
+
+# ----------------------------------------------------------------- look targets
+def look_targets_from_scene(scene) -> dict:
+    """``{name: LookTarget}`` of the show's look targets: each object's world position
+    at every frame ``frame_start .. frame_end`` (one sample when nothing animates it),
+    all targets sampled in one pass over the frames (:func:`object_positions`)."""
+    from ..core.look_at import LookTarget
+    items = list(scene.crowd.show.look_targets)
+    seen = set()
+    for t in items:
+        what = f"look target {t.name!r}"
+        if not t.name.strip():
+            raise CrowdError("a look target has no name (Crowd > Show > Look Targets)")
+        if t.name in seen:
+            raise CrowdError(f"two look targets are named {t.name!r}")
+        seen.add(t.name)
+        if t.object is None:
+            raise CrowdError(f"{what}: no object chosen (Crowd > Show > Look Targets)")
+    paths = object_positions(scene, [t.object for t in items])
+    out = {}
+    for t, path in zip(items, paths):
+        try:
+            out[t.name] = LookTarget(t.name, scene.frame_start, path, t.smoothing)
+        except CrowdError as e:
+            raise CrowdError(str(e)) from None
+    return out
+
+
+def _animated(obj) -> bool:
+    """Whether anything may move ``obj`` over time: an action, drivers or NLA tracks on
+    it or on a parent, or a constraint (whose target may move)."""
+    while obj is not None:
+        ad = obj.animation_data
+        if ad is not None and (ad.action is not None or len(ad.drivers) or
+                               len(ad.nla_tracks)):
+            return True
+        if len(obj.constraints):
+            return True
+        obj = obj.parent
+    return False
+
+
+def object_positions(scene, objects) -> list:
+    """Per object a (T, 3) array of its world position (``matrix_world.translation``)
+    at the scene's frames ``frame_start .. frame_end``, evaluated by Blender
+    (``scene.frame_set``: parents, constraints, drivers), or (1, 3) for an object
+    nothing animates. One pass over the frames serves every animated object; the
+    scene's frame is restored after."""
+    out = [np.array([tuple(o.matrix_world.translation)], np.float64) for o in objects]
+    moving = [i for i, o in enumerate(objects) if _animated(o)]
+    if not moving:
+        return out
+    frames = range(scene.frame_start, scene.frame_end + 1)
+    paths = np.empty((len(moving), len(frames), 3), np.float64)
+    keep = scene.frame_current, scene.frame_subframe
+    try:
+        for k, f in enumerate(frames):
+            scene.frame_set(f)
+            for j, i in enumerate(moving):
+                paths[j, k] = tuple(objects[i].matrix_world.translation)
+    finally:
+        scene.frame_set(keep[0], subframe=keep[1])
+    for j, i in enumerate(moving):
+        out[i] = paths[j]
+    return out
+
+
+def _object_keys(obj) -> tuple:
+    """Every keyframe and driver of ``obj`` and its parents (what a look target's sampled
+    path depends on besides the settings), with the parents' names."""
+    out = []
+    while obj is not None:
+        ad = obj.animation_data
+        keys = ()
+        slot = None if ad is None else assigned_slot(ad)
+        if ad is not None and ad.action is not None and (
+                slot is not None or action_slots(ad.action) is None):
+            keys = tuple((fc.data_path, fc.array_index, tuple(
+                (tuple(k.co), tuple(k.handle_left), tuple(k.handle_right), k.interpolation)
+                for k in fc.keyframe_points))
+                for fc in action_fcurves(ad.action, slot))
+        drivers = () if ad is None else tuple(
+            (d.data_path, d.driver.expression) for d in ad.drivers)
+        out.append((obj.name, keys, drivers, len(obj.constraints)))
+        obj = obj.parent
+    return tuple(out)
 
 
 # -------------------------------------------------------------------- reactions
@@ -198,6 +290,8 @@ def show_fingerprint(scene) -> tuple:
         drv = ad.drivers.find(path) if ad is not None else None
         out.append((path, keys, None if drv is None else
                     (drv.driver.type, drv.driver.expression)))
+    for t in scene.crowd.show.look_targets:          # the targets' sampled paths
+        out.append((t.name, None if t.object is None else _object_keys(t.object)))
     return tuple(out)
 
 

@@ -48,6 +48,14 @@ class CROWD_UL_reactions(bpy.types.UIList):
         row.label(text=f"{item.event or '?'} -> {item.cue or '?'}")
 
 
+class CROWD_UL_look_targets(bpy.types.UIList):
+    def draw_item(self, _context, layout, _data, item, _icon, _active, _prop):
+        row = layout.row(align=True)
+        row.prop(item, "name", text="", emboss=False)
+        row.label(text=item.object.name if item.object is not None else "?",
+                  icon="OBJECT_DATA")
+
+
 class CROWD_UL_parameters(bpy.types.UIList):
     def draw_item(self, _context, layout, _data, item, _icon, _active, _prop):
         row = layout.row(align=True)
@@ -103,6 +111,19 @@ class CROWD_PT_show(_Panel, bpy.types.Panel):
             col.prop_search(r, "cue", show, "cues")
             col.prop(r, "radius")
         layout.separator()
+        layout.label(text="Look Targets (what Look At cues turn heads toward)")
+        _list(layout, "CROWD_UL_look_targets", show, "look_targets",
+              "active_look_target_index", rows=2)
+        col = layout.column()
+        col.use_property_split = True
+        if 0 <= show.active_look_target_index < len(show.look_targets):
+            t = show.look_targets[show.active_look_target_index]
+            col.prop(t, "object")
+            col.prop(t, "smoothing")
+        col.prop(show, "look_lag")
+        if show.look_lag == "SEEDED":
+            col.prop(show, "look_max_lag")
+        layout.separator()
         layout.label(text="Animated Parameters")
         _list(layout, "CROWD_UL_parameters", show, "parameters", "active_parameter_index")
         if 0 <= show.active_parameter_index < len(show.parameters):
@@ -128,27 +149,19 @@ def _draw_cue(layout, scene, c):
     if c.timeline:
         col.prop(c, "frame")
     col.prop(c, "action")
-    col.prop(c, "target")
+    if c.action == "LOOK":
+        col.prop_search(c, "target", scene.crowd.show, "look_targets")
+        col.prop(c, "duration")
+        col.prop(c, "hold")
+    else:
+        col.prop(c, "target")
     if c.action in ("TRIGGER", "PARAMETER"):
         col.prop(c, "parameter")
         if c.action == "PARAMETER":
             col.prop(c, "set_value")
         return
-    col.prop(c, "duration")
-    if c.action == "STREAM":
-        col.prop(c, "offset_mode")
-        if c.offset_mode == "GIVEN":
-            col.prop(c, "offset")
-    col.prop(c, "when_full")
-    col.prop(c, "hold")
-    col.prop(c, "interrupt")
-    col.prop(c, "switch_trigger")
-    if c.switch_trigger:
-        col.prop(c, "release_trigger")
-        d = _counts(bpy.context).get(c.name)
-        if d is not None:
-            col.label(text=f"{d['switched']:,} agents follow {d['streams']} streams, "
-                           f"{d['slots']:,} by slot", icon="INFO")
+    if c.action != "LOOK":          # a look is a layer: no slots, offsets or triggers
+        _draw_move(col, c)
     box = layout.box().column()
     box.use_property_split = True
     box.prop_search(c, "source", scene.crowd, "agent_sources")
@@ -168,5 +181,24 @@ def _draw_cue(layout, scene, c):
             box.prop(c, key)
 
 
-CLASSES = (CROWD_UL_cues, CROWD_UL_reactions, CROWD_UL_parameters, CROWD_OT_trust_script,
-           CROWD_PT_show)
+def _draw_move(col, c):
+    """A stream or unique cue's blend, offset, slots, hold and switch trigger."""
+    col.prop(c, "duration")
+    if c.action == "STREAM":
+        col.prop(c, "offset_mode")
+        if c.offset_mode == "GIVEN":
+            col.prop(c, "offset")
+    col.prop(c, "when_full")
+    col.prop(c, "hold")
+    col.prop(c, "interrupt")
+    col.prop(c, "switch_trigger")
+    if c.switch_trigger:
+        col.prop(c, "release_trigger")
+        d = _counts(bpy.context).get(c.name)
+        if d is not None:
+            col.label(text=f"{d['switched']:,} agents follow {d['streams']} streams, "
+                           f"{d['slots']:,} by slot", icon="INFO")
+
+
+CLASSES = (CROWD_UL_cues, CROWD_UL_reactions, CROWD_UL_look_targets, CROWD_UL_parameters,
+           CROWD_OT_trust_script, CROWD_PT_show)

@@ -13,7 +13,7 @@ from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProp
 from bpy.types import PropertyGroup
 
 __all__ = ["CLASSES", "CROWD_PG_cue", "CROWD_PG_reaction", "CROWD_PG_parameter",
-           "CROWD_PG_show", "ANIMATED"]
+           "CROWD_PG_look_target", "CROWD_PG_show", "ANIMATED"]
 
 #: Identifiers of properties whose value changes with the frame (animated): left out
 #: of the settings fingerprint; their F-curves and drivers count instead.
@@ -34,8 +34,12 @@ class CROWD_PG_cue(PropertyGroup):
         ("STREAM", "Go to Stream", "Blend the agents to a stream"),
         ("UNIQUE", "Play Unique", "Blend the agents to a unique animation, restarted"),
         ("TRIGGER", "Set Trigger", "Set a trigger on a stream or unique (state machines)"),
-        ("PARAMETER", "Set Parameter", "Set a parameter of a stream or unique")))
-    target: StringProperty(name="Target", description="Stream or unique animation name")
+        ("PARAMETER", "Set Parameter", "Set a parameter of a stream or unique"),
+        ("LOOK", "Look At", "Turn the agents' heads toward a look target (Show > Look "
+                            "Targets); Blend is the blend in, Hold the time before they "
+                            "look away (0: they keep looking)")))
+    target: StringProperty(name="Target", description="Stream or unique animation name "
+                                                      "(Look At: a look target's name)")
     duration: FloatProperty(name="Blend", default=8.0, min=0.0, soft_max=120.0,
                             description="Blend length in frames (0 cuts)")
     offset_mode: EnumProperty(name="Offset", default="KEEP", items=(
@@ -130,6 +134,21 @@ class CROWD_PG_parameter(PropertyGroup):
     value: FloatProperty(name="Value", description="Keyframe or drive it")
 
 
+class CROWD_PG_look_target(PropertyGroup):
+    """A point the agents can look at (a *Look At* cue names it): an object's world
+    position, sampled at every frame of the scene's range when the crowd is built."""
+
+    object: PointerProperty(name="Object", type=bpy.types.Object,
+                            description="The object whose world position the agents look "
+                                        "at (an animated ball, a player); sampled at "
+                                        "every frame of the scene's range when the crowd "
+                                        "is built, once when it is not animated")
+    smoothing: FloatProperty(name="Smoothing", default=4.0, min=0.0, soft_max=30.0,
+                             description="Frames the agents take to follow the target: a "
+                                         "sudden move is 63 % followed after this many "
+                                         "frames (0: followed exactly)")
+
+
 class CROWD_PG_show(PropertyGroup):
     cues: CollectionProperty(type=CROWD_PG_cue)
     active_cue_index: IntProperty()
@@ -137,6 +156,17 @@ class CROWD_PG_show(PropertyGroup):
     active_reaction_index: IntProperty()
     parameters: CollectionProperty(type=CROWD_PG_parameter)
     active_parameter_index: IntProperty()
+    look_targets: CollectionProperty(type=CROWD_PG_look_target)
+    active_look_target_index: IntProperty()
+    look_lag: EnumProperty(name="Look Lag", default="OFFSET", items=(
+        ("OFFSET", "Offset", "Each agent sees the target as late as its animation offset "
+                             "(0 .. M-1 frames: a stand spread over its streams' spread)"),
+        ("SEEDED", "Seeded", "Each agent sees the target late by a seeded delay of 0 .. "
+                             "Max Lag frames")),
+        description="How late each agent follows a look target, so a stand does not "
+                    "turn as one")
+    look_max_lag: IntProperty(name="Max Lag", default=12, min=0, soft_max=60,
+                              description="The longest delay in frames (Look Lag: Seeded)")
     script: PointerProperty(
         name="Script", type=bpy.types.Text,
         description="A Python module (a text in this file) whose register(crowd) runs "
@@ -144,4 +174,5 @@ class CROWD_PG_show(PropertyGroup):
                     "runs only where scripts in .blend files are trusted")
 
 
-CLASSES = (CROWD_PG_cue, CROWD_PG_reaction, CROWD_PG_parameter, CROWD_PG_show)
+CLASSES = (CROWD_PG_cue, CROWD_PG_reaction, CROWD_PG_parameter, CROWD_PG_look_target,
+           CROWD_PG_show)
