@@ -115,6 +115,30 @@ class FrameView:
         """Agents changed since ``cursor`` (:class:`~.agents.AgentChanges`; start with 0)."""
         return self._crowd.agents.changes_since(cursor)
 
+    # ------------------------------------------------------------------- looks
+    @property
+    def looks(self):
+        """The agents' looks (:class:`~.look_at.AgentLooks`: per agent ``target``,
+        ``start``, ``blend``, ``stop``; read-only). They change only when a look starts
+        or stops; ``looks.version`` counts those changes."""
+        return self._crowd.looks
+
+    @property
+    def look_targets(self) -> tuple:
+        """The look targets (:class:`~.look_at.LookTarget`, immutable), in the order
+        ``looks.target`` indexes them; ``target.smoothed()`` is the path agents read."""
+        return tuple(self._crowd._look_targets)
+
+    @property
+    def look_chains(self) -> tuple:
+        """Per skeleton its :class:`~.look_at.LookChain` (None: no look rig)."""
+        return tuple(self._crowd._look_chains)
+
+    @property
+    def look_lags(self) -> np.ndarray:
+        """(N,) int64 frames each agent reads its look target late (a copy)."""
+        return np.array(self._crowd._look_lags, np.int64)
+
     # -------------------------------------------------------------------- poses
     @property
     def substeps(self) -> int:

@@ -121,6 +121,7 @@ class Recorder:
             stream_subposes=self._stream_sub, unique_subposes=self._unique_sub,
             move_agent=mv[0], move_frame=mv[1], move_position=mv[2],
             move_heading=mv[3], events=tuple(self._events),
+            **self._look_fields(v),
             stream_events=tuple(self._stream_events.columns(order_by=2)),
             seconds=self._seconds)
 
@@ -157,6 +158,17 @@ class Recorder:
         self._cursor = v.agent_changes(0).cursor
         self._store(self.first)
         self._animation(np.arange(n), self.first)
+        # looks: every agent's (target, start, blend, stop) at ``first`` where it has a
+        # target, then a row per agent whose look changed (only after view.looks.version
+        # moved: a look starts or stops)
+        looks = v.looks
+        self._look_version = looks.version
+        self._look_now = [np.array(getattr(looks, k)) for k in looks.STATE]
+        self._looks = _Rows(i, i, i, i, np.zeros(0), i)
+        ids = np.flatnonzero(self._look_now[0] >= 0)
+        if ids.size:
+            self._looks.add(ids, np.full(ids.size, self.first, np.int64),
+                            *(a[ids] for a in self._look_now))
 
     def _frame(self, f):
         v = self.crowd.view
@@ -169,6 +181,31 @@ class Recorder:
             self._animation(agents, f)
             if changes.moved:
                 self._move(agents, f)
+        if v.looks.version != self._look_version:
+            self._look(f)
+
+    def _look(self, f):
+        """A row for each agent whose look differs from its last one."""
+        looks = self.crowd.view.looks
+        self._look_version = looks.version
+        now = [np.asarray(getattr(looks, k)) for k in looks.STATE]
+        new = np.zeros(now[0].size, bool)
+        for a, b in zip(now, self._look_now):
+            new |= a != b
+        ids = np.flatnonzero(new)
+        if ids.size:
+            for a, b in zip(now, self._look_now):
+                b[ids] = a[ids]
+            self._looks.add(ids, np.full(ids.size, f, np.int64), *(a[ids] for a in now))
+
+    def _look_fields(self, v) -> dict:
+        """The Recording's look fields: the rows (sorted by agent, then frame), each
+        agent's lag, the targets and the rigs' chains."""
+        rows = self._looks.columns(order_by=0)
+        return dict(look_agent=rows[0], look_frame=rows[1], look_target=rows[2],
+                    look_start=rows[3], look_blend=rows[4], look_stop=rows[5],
+                    look_lags=v.look_lags, look_targets=v.look_targets,
+                    look_chains=v.look_chains)
 
     def _store(self, f):
         """The heads at ``f``, and the uniques at a shot frame ``f``."""

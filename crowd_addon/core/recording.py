@@ -59,6 +59,15 @@ class Recording:
     ``stream_subposes`` (T + M - 1, N - 1, S, B, 10) and ``unique_subposes`` (T, N - 1,
     U, B, 10) hold the heads and uniques at ``F + k / N``, ``k = 1 .. N - 1``, so every
     time of :attr:`times` (from ``first`` to ``last + (N - 1) / N``) has its poses.
+    look_* (K4,) : each agent's look (:class:`~.look_at.AgentLooks`: ``target``
+    (-1: none), ``start``, ``blend``, ``stop``) from ``look_frame`` on, sorted by
+    (agent, frame): a row at ``first`` for every agent with a target, then one per
+    agent whose look changed (a look started or stopped); no row: no look.
+    look_lags (N,) : frames each agent reads its target late; look_targets : the
+    :class:`~.look_at.LookTarget` s ``look_target`` indexes; look_chains : per
+    skeleton its :class:`~.look_at.LookChain` or None. :meth:`agent_rows` rebuilds
+    ``Crowd.agent_rows`` (looks applied), :meth:`looked_pair_poses` the same turn as
+    local poses (the chain joints' rotations).
     """
 
     config: object
@@ -98,6 +107,15 @@ class Recording:
     unique_subposes: np.ndarray | None = None
     scale: np.ndarray | None = None
     palette: np.ndarray | None = None
+    look_agent: np.ndarray | None = None
+    look_frame: np.ndarray | None = None
+    look_target: np.ndarray | None = None
+    look_start: np.ndarray | None = None
+    look_blend: np.ndarray | None = None
+    look_stop: np.ndarray | None = None
+    look_lags: np.ndarray | None = None
+    look_targets: tuple = ()
+    look_chains: tuple = ()
 
     @property
     def palettes(self) -> np.ndarray:
@@ -193,12 +211,146 @@ class Recording:
         """``(position (..., k, 3) float32, heading (..., k) float32)`` of ``agents`` at
         ``frames`` (one frame, or a (T,) array of frames)."""
         frame, agents, shape = self._pairs(frames, agents)
-        pos, head = self.position[agents], self.heading[agents]
-        if self.move_agent.size:
-            i = self._find(1, frame, agents)
-            hit = (i >= 0) & (self.move_agent[np.maximum(i, 0)] == agents)
-            pos[hit], head[hit] = self.move_position[i[hit]], self.move_heading[i[hit]]
+        pos, head = self.pair_transforms(frame, agents)
         return pos.reshape(shape + (3,)), head.reshape(shape)
+
+    def pair_transforms(self, frame, agent) -> tuple:
+        """``(position (n, 3), heading (n,))`` float32 of each ``(frame[i], agent[i])``."""
+        pos, head = self.position[agent], self.heading[agent]
+        if self.move_agent.size:
+            i = self._find(1, frame, agent)
+            hit = (i >= 0) & (self.move_agent[np.maximum(i, 0)] == agent)
+            pos[hit], head[hit] = self.move_position[i[hit]], self.move_heading[i[hit]]
+        return pos, head
+
+    # -------------------------------------------------------------------- looks
+    @property
+    def has_looks(self) -> bool:
+        """Some agent had a look target during the shot."""
+        return self.look_agent is not None and bool((self.look_target >= 0).any())
+
+    def look_state(self, frame, agent) -> tuple:
+        """``(target, start, blend, stop)`` (n,) of each ``(frame[i], agent[i])`` pair:
+        the agent's look then (:class:`~.look_at.AgentLooks`; target -1: none)."""
+        from .look_at import AgentLooks
+        frame, agent = np.asarray(frame, np.int64), np.asarray(agent, np.int64)
+        looks = AgentLooks(frame.size)
+        if self.has_looks:
+            i = self._find(2, frame, agent)
+            hit = np.flatnonzero((i >= 0) & (self.look_agent[np.maximum(i, 0)] == agent))
+            for k in looks.STATE:
+                getattr(looks, k)[hit] = getattr(self, f"look_{k}")[i[hit]]
+        return looks
+
+    def look_weights(self, frame, agent) -> np.ndarray:
+        """(n,) float64 0..1: how far each ``(frame[i], agent[i])`` looked at its
+        target (core's :meth:`~.look_at.AgentLooks.weights`)."""
+        frame = np.asarray(frame, np.int64)
+        return self.look_state(frame, agent).weights(frame, np.arange(frame.size))
+
+    @cached_property
+    def looking(self) -> np.ndarray:
+        """(N,) bool: the agent's look weight is above 0 at some shot frame."""
+        out = np.zeros(self.agent_count, bool)
+        if self.has_looks:
+            ids = np.unique(self.look_agent[self.look_target >= 0])
+            frame, agent, _ = self._pairs(self.frames, ids)
+            w = self.look_weights(frame, agent).reshape(self.frames.size, ids.size)
+            out[ids] = (w > 0).any(0)
+        return out
+
+    def look_targets_model(self, frame, agent, looks=None) -> np.ndarray:
+        """(n, 3) where each ``(frame[i], agent[i])`` saw its look target, in the
+        agent's model space (core's ``Crowd.look_targets_model``)."""
+        looks = self.look_state(frame, agent) if looks is None else looks
+        out = np.zeros((frame.size, 3))
+        lag = self.look_lags[agent]
+        for t, target in enumerate(self.look_targets):
+            m = looks.target == t
+            if m.any():
+                out[m] = target.at(frame[m] - lag[m])
+        pos, head = self.pair_transforms(frame, agent)
+        d = out - pos
+        h = -head.astype(np.float64)
+        c, s = np.cos(h), np.sin(h)
+        local = np.stack([c * d[:, 0] - s * d[:, 1], s * d[:, 0] + c * d[:, 1], d[:, 2]], 1)
+        return local / self.scales[agent, None]
+
+    def agent_rows(self, frames, agents=None) -> np.ndarray:
+        """Skinning rows ``agents`` were drawn with at ``frames`` (whole frames), looks
+        applied: ``(k, B, 3, 4)`` float32 for one frame, ``(T, k, B, 3, 4)`` for a
+        (T,) array (core's ``Crowd.agent_rows``; bones past an agent's skeleton are
+        zero)."""
+        frame, pairs, shape = self._pairs(frames, agents)
+        out = self.pair_rows(frame, pairs)
+        return out.reshape(shape + out.shape[1:])
+
+    def pair_rows(self, frame, agent) -> np.ndarray:
+        """``(n, B, 3, 4)`` float32 skinning rows of ``(frame[i], agent[i])`` pairs,
+        looks applied."""
+        from .look_at import apply_look, look_turns
+        from .skinning import skinning_matrices
+        poses = self.pair_poses(frame, agent)
+        rows = np.zeros(poses.shape[:2] + (3, 4), np.float32)
+        skeletons = list(self.config.skeletons.values())
+        skel = self.agent_skeleton[agent]
+        for k in np.unique(skel).tolist():
+            m, sk = skel == k, skeletons[k]
+            rows[m, :sk.bone_count] = skinning_matrices(poses[m], sk)[:, :, :3, :]
+        looks = self.look_state(frame, agent)
+        w = looks.weights(frame, np.arange(frame.size))
+        for k, chain in enumerate(self.look_chains):
+            pick = np.flatnonzero((w > 0) & (skel == k))
+            if chain is None or not pick.size:
+                continue
+            targets = self.look_targets_model(frame[pick], agent[pick])
+            turns = look_turns(rows[pick], chain, targets, w[pick])
+            rows[pick] = apply_look(rows[pick], chain, turns).astype(np.float32)
+        return rows
+
+    def looked_pair_poses(self, frame, agent, sub=None) -> np.ndarray:
+        """:meth:`pair_poses` with each pair's look turned into its local pose: the
+        chain joints' rotations become ``parent_model'^-1 @ model'`` of the looked
+        model matrices (their translations and scales, and every other joint, are left
+        as they are: the turn is about each chain joint's own pivot, and the bones below
+        move with it). At ``frame[i] + sub[i] / N`` the look is that of ``frame[i]``."""
+        from . import quaternion as quat
+        from .look_at import apply_look, look_turns
+        from .skinning import model_matrices
+        poses = self.pair_poses(frame, agent, sub)
+        if not self.has_looks:
+            return poses
+        frame = np.asarray(frame, np.int64)
+        w = self.look_weights(frame, agent)
+        skeletons = list(self.config.skeletons.values())
+        skel = self.agent_skeleton[agent]
+        for k, chain in enumerate(self.look_chains):
+            pick = np.flatnonzero((w > 0) & (skel == k))
+            if chain is None or not pick.size:
+                continue
+            sk = skeletons[k]
+            local = poses[pick, :sk.bone_count]
+            model = model_matrices(local, sk)
+            rows = (model @ sk.inverse_bind)[:, :, :3, :]
+            turns = look_turns(rows, chain, self.look_targets_model(frame[pick],
+                                                                    agent[pick]), w[pick])
+            looked = apply_look(rows, chain, turns)
+            bind = np.linalg.inv(sk.inverse_bind)
+            for j in chain.index.tolist():
+                m = np.tile(np.eye(4), (pick.size, 1, 1))
+                m[:, :3, :] = looked[:, j]
+                m = m @ bind[j]
+                p = int(sk.parents[j])
+                if p >= 0:
+                    mp = np.tile(np.eye(4), (pick.size, 1, 1))
+                    mp[:, :3, :] = looked[:, p]
+                    m = np.linalg.inv(mp @ bind[p]) @ m
+                r = m[:, :3, :3] / local[:, j, None, sqt.SCALE].astype(np.float64)
+                q = quat.from_matrix(r)
+                old = local[:, j, sqt.ROT].astype(np.float64)
+                q = np.where(((q * old).sum(-1) < 0)[:, None], -q, q)     # nearer sign
+                poses[pick, j, sqt.ROT] = q.astype(np.float32)
+        return poses
 
     # ------------------------------------------------------------------ lookups
     def _pairs(self, frames, agents) -> tuple:
@@ -216,12 +368,15 @@ class Recording:
     def _keys(self) -> tuple:
         """Ascending search keys of the segments and of the moves."""
         span = self.last - self.first + 1
+        looks = self.look_agent * span + self.look_frame - self.first \
+            if self.look_agent is not None else np.zeros(0, np.int64)
         return (self.segment_agent * span + self.segment_frame - self.first,
-                self.move_agent * span + self.move_frame - self.first)
+                self.move_agent * span + self.move_frame - self.first, looks)
 
     def _find(self, table, frame, agents) -> np.ndarray:
-        """Per (frame, agent) pair, the index of the agent's last segment (``table`` 0)
-        or move (1) at or before ``frame``; one of an earlier agent, or -1, if none."""
+        """Per (frame, agent) pair, the index of the agent's last segment (``table`` 0),
+        move (1) or look (2) at or before ``frame``; one of an earlier agent, or -1, if
+        none."""
         key = agents * (self.last - self.first + 1) + frame - self.first
         return np.searchsorted(self._keys[table], key, "right") - 1
 

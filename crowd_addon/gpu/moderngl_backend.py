@@ -10,6 +10,7 @@ stage (``v_world``).
 
 from __future__ import annotations
 
+import math
 from contextlib import contextmanager
 
 import numpy as np
@@ -36,6 +37,9 @@ class _Mesh:
         self.ctx, self.buffers, self.copies = ctx, buffers, copies
         self.draw_program, self.capture_program = draw_program, capture_program
         batch = buffers.batched(copies)
+        #: a closed surface facing out (:attr:`~.proxies.ProxyBuffers.closed`): its
+        #: back faces are culled (hidden anyway; llvmpipe skips half the triangles)
+        self.cull = buffers.closed
         self.vbo = ctx.buffer(batch.interleaved().tobytes())
         self.ibo = ctx.buffer(batch.indices.tobytes())
         self.draws = {}
@@ -75,8 +79,12 @@ class ModernGLRenderer(CrowdRenderer):
     size : (width, height) of the offscreen image in pixels.
     light, culling, shadows : see :class:`~.renderer.CrowdRenderer`.
     owns_context : release ``ctx`` with the renderer.
-    samples : multisample anti-aliasing of the offscreen image: samples a pixel (0 or 1:
-        none; more than the GL allows: its most), resolved by :meth:`read_image`.
+    samples : anti-aliasing of the offscreen image: samples a pixel (0 or 1: none),
+        taken as a k x k grid, k = the whole square root of ``samples``, at least 2
+        (supersampling: the image is drawn k times as wide and high and each pixel is
+        the mean of its k x k samples, by :meth:`read_image`). Not multisampling:
+        llvmpipe rasterises a multisampled target's many sub-pixel crowd triangles at
+        about 2.5 times the cost (docs/gpu.md, "Anti-aliasing").
     """
 
     MAX_ROW_WRITES = 1024       # a few hundred small writes cost less than whole blocks
@@ -91,14 +99,21 @@ class ModernGLRenderer(CrowdRenderer):
         self.ctx, self._owns_context = ctx, bool(owns_context)
         self.size = (int(size[0]), int(size[1]))
         self._programs = {}
-        self.samples = min(int(samples), ctx.info["GL_MAX_SAMPLES"]) if samples > 1 else 0
-        self._attachments = (ctx.renderbuffer(self.size, 4, samples=self.samples),
-                             ctx.depth_renderbuffer(self.size, samples=self.samples))
+        #: the k of the k x k samples a pixel (1: none)
+        self.scale = max(2, math.isqrt(int(samples))) if samples > 1 else 1
+        largest = min(ctx.info["GL_MAX_TEXTURE_SIZE"], ctx.info["GL_MAX_RENDERBUFFER_SIZE"])
+        self.scale = max(1, min(self.scale, largest // max(self.size)))
+        self.samples = self.scale ** 2 if self.scale > 1 else 0
+        drawn = (self.size[0] * self.scale, self.size[1] * self.scale)
+        colour = ctx.texture(drawn, 4) if self.scale > 1 else ctx.renderbuffer(drawn, 4)
+        self._attachments = (colour, ctx.depth_renderbuffer(drawn))
         self.fbo = ctx.framebuffer(color_attachments=[self._attachments[0]],
                                    depth_attachment=self._attachments[1])
-        self._resolved = None               # the single-sample image read_image reads
+        self._resolved = None               # the image read_image reads, when supersampled
+        self._resolve = None                # (program, vertex array) of the mean
         self._shadow_view = None
-        if self.samples:
+        if self.scale > 1:
+            colour.filter = (moderngl.NEAREST, moderngl.NEAREST)
             self._attachments += (ctx.renderbuffer(self.size, 4),)
             self._resolved = ctx.framebuffer(color_attachments=[self._attachments[2]])
         super().__init__(view, ctx.info["GL_MAX_TEXTURE_SIZE"], light, culling,
@@ -197,7 +212,8 @@ class ModernGLRenderer(CrowdRenderer):
         if clear is not None:
             fbo.clear(*clear, depth=1.0)
         self.ctx.enable(self._mgl.DEPTH_TEST)
-        yield fbo.viewport[3]                    # LOD: the viewport's height
+        # LOD: the viewport's height (the image's, not its supersampled drawing's)
+        yield fbo.viewport[3] if fbo is not self.fbo else self.size[1]
 
     def _bind(self, program, uniforms, list_texture):
         _set_uniforms(program, uniforms)
@@ -209,7 +225,11 @@ class ModernGLRenderer(CrowdRenderer):
     def _draw(self, mesh, draw):
         program, vao = mesh.draw(self._fragment_defines())
         self._bind(program, draw.uniforms, self.textures["lists"])
+        if mesh.cull:
+            self.ctx.enable(self._mgl.CULL_FACE)
         vao.render(self._mgl.TRIANGLES, instances=draw.instances)
+        if mesh.cull:
+            self.ctx.disable(self._mgl.CULL_FACE)
 
     def _capture(self, mesh, capture) -> np.ndarray:
         n, count = capture.agents.size, mesh.buffers.vertex_count
@@ -280,10 +300,25 @@ class ModernGLRenderer(CrowdRenderer):
         w, h = self.size
         fbo = self.fbo
         if self._resolved is not None:
-            self.ctx.copy_framebuffer(self._resolved, self.fbo)
+            self._mean_samples()
             fbo = self._resolved
         data = fbo.read(components=4, alignment=1)
         return np.frombuffer(data, np.uint8).reshape(h, w, 4)[::-1].copy()
+
+    def _mean_samples(self):
+        """Each pixel of the image the mean of its ``scale`` x ``scale`` samples (the
+        colours as drawn, sRGB-encoded: as a multisample resolve averages them)."""
+        if self._resolve is None:
+            prog = self.ctx.program(vertex_shader=_RESOLVE_VERTEX,
+                                    fragment_shader=_RESOLVE_FRAGMENT)
+            self._resolve = prog, self.ctx.vertex_array(prog, [])
+        prog, vao = self._resolve
+        prog["scale"].value = self.scale
+        self._resolved.use()
+        self._attachments[0].use(0)
+        self.ctx.disable(self._mgl.DEPTH_TEST | self._mgl.CULL_FACE)
+        vao.render(self._mgl.TRIANGLES, vertices=3)
+        self.ctx.enable(self._mgl.DEPTH_TEST)
 
     def finish(self):
         self.ctx.finish()
@@ -296,7 +331,8 @@ class ModernGLRenderer(CrowdRenderer):
         """Free the GL objects, and the context when :meth:`standalone` made it (an
         attached context belongs to its owner and stays)."""
         objects = [*self.textures.values(), self.fbo, self._resolved, *self._attachments,
-                   *self._programs.values(), *self._lit, self._shadow_view]
+                   *self._programs.values(), *self._lit, self._shadow_view,
+                   *(self._resolve or ())]
         if self._shadow_map is not None:
             objects += [self._shadow_map.fbo, self._shadow_map.texture]
         objects = list({id(o): o for o in objects}.values())     # each once
@@ -308,6 +344,32 @@ class ModernGLRenderer(CrowdRenderer):
         self._programs = {}
         if self._owns_context:
             self.ctx.release()
+
+
+#: a triangle over the whole target, and the mean of each pixel's k x k samples
+_RESOLVE_VERTEX = """#version 430 core
+void main()
+{
+  vec2 p = vec2((gl_VertexID << 1) & 2, gl_VertexID & 2);
+  gl_Position = vec4(p * 2.0 - 1.0, 0.0, 1.0);
+}
+"""
+_RESOLVE_FRAGMENT = """#version 430 core
+uniform sampler2D image;
+uniform int scale;
+out vec4 color;
+void main()
+{
+  ivec2 origin = ivec2(gl_FragCoord.xy) * scale;
+  vec4 sum = vec4(0.0);
+  for (int y = 0; y < scale; y++) {
+    for (int x = 0; x < scale; x++) {
+      sum += texelFetch(image, origin + ivec2(x, y), 0);
+    }
+  }
+  color = sum / float(scale * scale);
+}
+"""
 
 
 def _set_uniforms(program, uniforms: dict):
