@@ -315,7 +315,9 @@ class AgentLooks:
     frame it starts to end (:data:`_NEVER`: it stays). The weight at frame ``F`` ramps
     up over ``blend`` frames from ``start`` and down over ``blend`` frames from
     ``stop`` (:meth:`weights`), so a look costs nothing per frame on the CPU: only
-    these four numbers change, when a look is started or stopped."""
+    these four numbers change, when a look is started or stopped. ``version`` counts
+    those changes (:meth:`look`, :meth:`look_away`, :meth:`reset`, :meth:`set_state`),
+    so a reader (the recorder) compares the arrays only after one."""
 
     STATE = ("target", "start", "blend", "stop")
 
@@ -324,8 +326,10 @@ class AgentLooks:
         self.start = np.zeros(agents, np.int64)
         self.blend = np.zeros(agents, np.float64)
         self.stop = np.full(agents, _NEVER, np.int64)
+        self.version = 0
 
     def reset(self):
+        self.version += 1
         self.target[:] = -1
         self.start[:] = 0
         self.blend[:] = 0.0
@@ -334,6 +338,7 @@ class AgentLooks:
     def look(self, ids, target: int, frame: int, blend: float, hold: int = 0):
         """``ids`` look at target ``target`` from ``frame``, blending in over ``blend``
         frames; with ``hold > 0`` they start to look away ``hold`` frames later."""
+        self.version += 1
         self.target[ids] = int(target)
         self.start[ids] = int(frame)
         self.blend[ids] = float(blend)
@@ -342,6 +347,7 @@ class AgentLooks:
     def look_away(self, ids, frame: int, blend: float):
         """``ids`` stop looking, blending out over ``blend`` frames from ``frame``
         (from the weight they have then)."""
+        self.version += 1
         ids = np.asarray(ids, np.int64)
         ids = ids[self.target[ids] >= 0]
         w = self.weights(frame, ids)
@@ -368,6 +374,7 @@ class AgentLooks:
         return {k: getattr(self, k) for k in self.STATE}
 
     def set_state(self, state: dict, targets: int):
+        self.version += 1
         for k in self.STATE:
             getattr(self, k)[...] = state[k]
         if not (((self.target >= -1) & (self.target < targets)).all()
