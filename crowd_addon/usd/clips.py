@@ -12,7 +12,9 @@ stream at an offset, a unique, or a blend. Its ``SkelAnimation`` holds no poses;
   banks as :data:`BANK_FRAMES` needs, so each is written and freed in turn).
 
 So a transition costs its blending frames once, and the agent's steady stretches
-stay shared. Every clip layer holds its animation at :data:`PRIM` and authors every
+stay shared. Frames an agent looks at something (*aim* pieces, :data:`~.shot.AIM`:
+its own poses with the look's turn in the chain joints) go to the same banks, read
+the same way. Every clip layer holds its animation at :data:`PRIM` and authors every
 channel as time samples (clips contribute time samples only; a constant channel is
 one sample). Pieces switch between samples, half a sample before their first frame
 (``start - 0.5 / N`` with ``N`` samples a frame, ``start - 0.5`` without sub-frame
@@ -28,7 +30,7 @@ from pxr import Sdf, Vt
 
 from .animation import author_samples, define_animation
 from .layers import attribute, define, new_layer
-from .shot import STREAM, TRANSITION
+from .shot import AIM, STREAM, TRANSITION
 
 __all__ = ["PRIM", "BANK_FRAMES", "BankLayout", "bank_layout", "bank_layer", "manifest_layer",
            "clip_sets"]
@@ -73,7 +75,7 @@ def bank_layout(shot, frames_per_bank: int | None = None) -> list:
     :class:`BankLayout` list."""
     frames_per_bank = frames_per_bank or BANK_FRAMES
     p, n = shot.pieces, shot.substeps
-    blend = np.flatnonzero(p.kind == TRANSITION)
+    blend = np.flatnonzero((p.kind == TRANSITION) | (p.kind == AIM))
     skel = shot.agent_skeleton[p.agent[blend]]
     out = []
     for k in np.unique(skel).tolist():

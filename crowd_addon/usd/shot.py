@@ -4,7 +4,11 @@ layout needs them (pure numpy, no pxr).
 An agent is *static* when it plays one ``(stream, offset)`` for the whole shot: it
 shares an offset animation. Every other agent plays a sequence of :class:`Pieces`:
 stretches of the shot on a stream at an offset, on a unique, or blending (a
-transition); only the blending frames are its own, rebuilt from the recording.
+transition); only the blending frames are its own, rebuilt from the recording. An
+agent that looks at something (its look weight above 0 at some frame) is not static
+either: the frames it looks are *aim* pieces (:data:`AIM`), its own poses with the
+look's turn in its chain joints (``Recording.looked_pair_poses``), whatever it plays
+underneath; its other frames stay pieces of what it plays.
 """
 
 from __future__ import annotations
@@ -17,7 +21,10 @@ import numpy as np
 from ..core.agents import STREAM, TRANSITION, UNIQUE
 from ..core.bodies import body_keys
 
-__all__ = ["Shot", "Pieces", "STREAM", "UNIQUE", "TRANSITION"]
+__all__ = ["Shot", "Pieces", "STREAM", "UNIQUE", "TRANSITION", "AIM"]
+
+#: a piece of frames an agent looks at something: its own poses, look applied
+AIM = 3
 
 
 @dataclass(frozen=True)
@@ -27,7 +34,8 @@ class Pieces:
 
     agent : position of the agent in :attr:`Shot.agents`; start, end : int64 frames;
     kind : STREAM (``ref`` a stream at ``offset``), UNIQUE (``ref`` a unique) or
-    TRANSITION (its frames are the agent's own blend); ref, offset : int64.
+    TRANSITION (its frames are the agent's own blend) or AIM (its frames are the agent's
+    own poses with its look; ref -1); ref, offset : int64.
     """
 
     agent: np.ndarray
@@ -52,6 +60,8 @@ class Shot:
     agent_body : (n,) int64 body index per agent (mesh variant and props,
     :func:`~crowd_addon.core.bodies.body_keys` of all the recording's agents).
     static : (n,) bool; stream, offset : (n,) int64 of static agents (-1 otherwise).
+    looking : (n,) bool, the agent looks at something at some shot frame (never
+    static).
     position : (n, 3) float32, heading : (n,) float32 radians, color : (n, 3) float32
     RGB, at ``first``; scale : (n,) float32 body scales and palette (n, 4, 3) float32
     palette colours (-1: none), constant.
@@ -66,7 +76,8 @@ class Shot:
         self.max_offset = rec.max_offset
         self.agent_skeleton = rec.agent_skeleton[ids]
         self.agent_body = body_keys(rec.config, rec.agent_skeleton)[1][ids]
-        self.static = rec.static[ids]
+        self.looking = rec.looking[ids]
+        self.static = rec.static[ids] & ~self.looking
         _, ref, off = rec.playing(rec.first, ids)
         self.stream = np.where(self.static, ref, -1).astype(np.int64)
         self.offset = np.where(self.static, off, -1).astype(np.int64)
@@ -100,9 +111,44 @@ class Shot:
         start = np.maximum(frame, rec.first)
         keep = start < end
         seg = seg[keep]
-        return Pieces(pos[agent[keep]], start[keep], end[keep],
-                      rec.segment_kind[seg].astype(np.int64), rec.segment_ref[seg],
-                      rec.segment_offset[seg])
+        return self._aims(Pieces(pos[agent[keep]], start[keep], end[keep],
+                                 rec.segment_kind[seg].astype(np.int64),
+                                 rec.segment_ref[seg], rec.segment_offset[seg]))
+
+    def _aims(self, p: Pieces) -> Pieces:
+        """``p`` with the frames looking agents look cut out as AIM pieces (runs of
+        frames with a look weight above 0, across what they play underneath)."""
+        looking = np.flatnonzero(self.looking)
+        if not looking.size:
+            return p
+        rec, first, span = self.recording, self.first, self.last - self.first + 1
+        row = np.full(self.agents.size, -1, np.int64)
+        row[looking] = np.arange(looking.size)
+        frame = np.tile(self.frames, looking.size)
+        agent = np.repeat(self.agents[looking], span)
+        aim = (rec.look_weights(frame, agent) > 0).reshape(looking.size, span)
+        code = np.empty((looking.size, span), np.int64)        # the piece at each frame
+        mine = np.flatnonzero(row[p.agent] >= 0)
+        for j, r, a, b in zip(mine.tolist(), row[p.agent[mine]].tolist(),
+                              (p.start[mine] - first).tolist(), (p.end[mine] - first).tolist()):
+            code[r, a:b] = j
+        code[aim] = -1
+        change = np.ones(code.shape, bool)
+        change[:, 1:] = code[:, 1:] != code[:, :-1]
+        r, c = np.nonzero(change)                                # by agent, then frame
+        end = np.r_[c[1:], span]
+        end[np.r_[r[1:] != r[:-1], True]] = span
+        piece = code[r, c]
+        src = np.maximum(piece, 0)
+        kind = np.where(piece < 0, AIM, p.kind[src])
+        new = Pieces(looking[r], first + c, first + end, kind,
+                     np.where(piece < 0, -1, p.ref[src]),
+                     np.where(piece < 0, 0, p.offset[src]))
+        rest = np.flatnonzero(row[p.agent] < 0)
+        cols = [np.concatenate([getattr(p, k)[rest], getattr(new, k)])
+                for k in ("agent", "start", "end", "kind", "ref", "offset")]
+        order = np.lexsort((cols[1], cols[0]))
+        return Pieces(*(col[order] for col in cols))
 
     def piece_poses(self, pieces) -> np.ndarray:
         """``(sum of lengths * N, B, 10)`` float32 poses of the samples of ``pieces``
@@ -113,8 +159,8 @@ class Shot:
         frame = np.repeat(p.start[pieces] - np.cumsum(length) + length, length) + \
             np.arange(int(length.sum()))
         agent = np.repeat(self.agents[p.agent[pieces]], length)
-        return self.recording.pair_poses(np.repeat(frame, n), np.repeat(agent, n),
-                                         np.tile(np.arange(n), frame.size))
+        return self.recording.looked_pair_poses(np.repeat(frame, n), np.repeat(agent, n),
+                                                np.tile(np.arange(n), frame.size))
 
     def agent_transforms(self, which) -> tuple:
         """``(position (frames, k, 3), heading (frames, k))`` float32 of agents ``which``."""
