@@ -7,7 +7,9 @@ coloured by their materials (a material's viewport display colour, as Workbench
 shows it, unless left at its default grey, then its Principled BSDF's base colour;
 the object's colour where a slot has no material). The crowd's own objects are left
 out, since the crowd draws those itself: characters' armatures, bodies and LOD
-meshes, agent sources and what they instance, and Render Crowd's instances.
+meshes, agent sources and what they instance, and Render Crowd's instances; so are the
+show's animated look targets (:func:`moving_look_targets`: geometry taken at one frame
+would show a moving ball frozen).
 :func:`scene_light` is the first rendering sun lamp's direction as the renderers'
 ``light``.
 """
@@ -19,7 +21,8 @@ import numpy as np
 from ..core.errors import CrowdError
 from ..gpu.scene_geometry import DEFAULT_AMBIENT, SceneGeometry, sun_light
 
-__all__ = ["scene_geometry", "scene_light", "crowd_objects", "MAX_SCENE_TRIANGLES"]
+__all__ = ["scene_geometry", "scene_light", "crowd_objects", "moving_look_targets",
+           "MAX_SCENE_TRIANGLES"]
 
 #: More scene triangles than this are refused (the preview draws them every frame).
 MAX_SCENE_TRIANGLES = 20_000_000
@@ -41,6 +44,18 @@ def crowd_objects(scene) -> set:
         names.update(lod.object.name for lod in ch.lods if lod.object is not None)
     names.update(s.object.name for s in settings.agent_sources if s.object is not None)
     return names
+
+
+def moving_look_targets(scene) -> set:
+    """Names of the show's look targets that something animates (an animated ball):
+    left out of the scene geometry, which is taken at one frame and would show them
+    frozen there (Blender's own viewport and renders draw them moving)."""
+    from .show_data import _animated
+    settings = getattr(scene, "crowd", None)
+    if settings is None:
+        return set()
+    return {t.object.name for t in settings.show.look_targets
+            if t.object is not None and _animated(t.object)}
 
 
 def _material_color(mat) -> tuple:
@@ -103,7 +118,7 @@ def scene_geometry(scene, depsgraph=None, exclude=()) -> SceneGeometry:
     :data:`MAX_SCENE_TRIANGLES` triangles is a CrowdError naming the count."""
     import bpy
     depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
-    skip = crowd_objects(scene) | set(exclude)
+    skip = crowd_objects(scene) | moving_look_targets(scene) | set(exclude)
     parts, names, total = [], [], 0
     for inst in depsgraph.object_instances:
         obj = inst.object

@@ -31,7 +31,12 @@ same crowd:
   front round a full bowl; each fan stands ``WAVE_HOLD`` frames), the **hits** (one cue per hit fan, selected
   by its ``hit`` attribute, to its own unique animation; they interrupt the cheer) and
   nothing for the claps: they are the ``clap`` action's event tags, counted by the
-  crowd (``crowd.events``). The beats are fractions of the run (:data:`BEATS`), so a
+  crowd (``crowd.events``). The **ball** ("Ball", a white sphere made here) is played
+  over the pitch from the centre spot and goes into the net of the home end's goal
+  (the end away from the away seats) at the goal beat; it is the show's look target
+  ``ball``, and a Look At cue on the first frame stepped turns every fan's head toward
+  it (:data:`LOOK_RIGS`: neck and head, the mocap's Neck, Neck1 and Head), each fan up
+  to :data:`BALL_LAG` frames late (docs/show.md, "Look-at"). The beats are fractions of the run (:data:`BEATS`), so a
   short run has all of them; a beat that still falls after the run's last frame (a
   run of one frame) is authored muted and named in :attr:`Stadium.muted`.
 - :func:`add_stand_camera` adds "StandCamera", on the pitch looking up at the home
@@ -93,7 +98,22 @@ BLEND = 6                               # blend length of every cue, frames
 #: the wave starts just before the home stand the camera looks at (angle -pi/2)
 WAVE_START_ANGLE = -math.pi / 2 - 0.4
 #: cue names (the demo's summary reads their stats)
-CUES = {"goal_home": "goal home", "goal_away": "goal away", "wave": "wave", "hit": "hit"}
+CUES = {"goal_home": "goal home", "goal_away": "goal away", "wave": "wave", "hit": "hit",
+        "look": "follow the ball"}
+#: the characters' look rigs (docs/show.md, "Look-at"): character -> (look bones,
+#: parent first; their shares; yaw and pitch limits, degrees)
+LOOK_RIGS = {"Fan": ("neck, head", "0.4, 0.6", 75.0, 50.0),
+             "Mocap": ("Neck, Neck1, Head", "0.25, 0.25, 0.5", 75.0, 50.0)}
+#: the ball the fans follow: the object, its radius (metres), the look target's name,
+#: its smoothing (frames) and the most frames a fan sees it late (a seeded lag: the
+#: streams' offsets, up to M = 60 frames, would leave some fans two seconds behind)
+BALL, BALL_RADIUS, BALL_TARGET, BALL_SMOOTHING, BALL_LAG = "Ball", 0.2, "ball", 3.0, 6
+#: the play before the goal: (share of the time from the run's first frame to the goal
+#: beat, x toward the home goal and y, as shares of the pitch's half length and width);
+#: at the goal beat the ball is in the net of the home end's goal (the goal the home
+#: fans cheer), where it stays
+BALL_PLAY = ((0.0, 0.0, 0.0), (0.25, -0.35, 0.45), (0.5, -0.05, -0.5), (0.75, 0.55, 0.3))
+BALL_NET = (1.0, 0.02, 1.1)      # metres behind the goal line, y share, height
 CAMERA = "StandCamera"
 #: where the camera stands, in metres from the middle of the home stand's front row:
 #: out over the pitch, along the stand, up; and how far along the stand it looks. The
@@ -266,6 +286,9 @@ def _add_characters(s, hits):
         _animation(fan.uniques, f"hit{k}", HIT)
     _action(MOCAP_ACTION).use_cyclic = True     # the jumps loop (its manual frame range)
     _animation(mocap.streams, "mocap", MOCAP_ACTION)
+    for c in (fan, mocap):                      # heads that follow the ball
+        c.look_bones, c.look_shares, yaw, pitch = LOOK_RIGS[c.name]
+        c.look_yaw_limit, c.look_pitch_limit = math.radians(yaw), math.radians(pitch)
     for material, colours in FAN_PALETTES.items():    # each fan its skin and trousers
         pal = fan.palettes.add()
         pal.material, pal.mode, pal.count = material, "RANDOM", len(colours)
@@ -406,6 +429,57 @@ def _wave_speed(scene, frames):
     return slot_speed(sweep, pos.reshape(n, 3)[character == 0], fps, slots, BLEND)
 
 
+def _home_goal_x() -> float:
+    """x of the goal line at the home end of the pitch: the end away from the away
+    seats (the seats' ``team``; west when there are none)."""
+    _, pos, teams = _seats()
+    half = _pitch_half()[0]
+    away = pos[teams == AWAY]
+    return half if away.size and away[:, 0].mean() < 0 else -half
+
+
+def _pitch_half() -> tuple:
+    """Half the pitch's length (x) and width (y), from the "Pitch" object's bounds."""
+    from mathutils import Vector
+    p = _obj("Pitch")
+    box = np.array([tuple(p.matrix_world @ Vector(v)) for v in p.bound_box])
+    return 0.5 * float(np.ptp(box[:, 0])), 0.5 * float(np.ptp(box[:, 1]))
+
+
+def _ball(scene, first, goal):
+    """The "Ball" (made once; its keys replaced): a small white sphere played over the
+    pitch from the centre spot from frame ``first`` (:data:`BALL_PLAY`) into the net of
+    the home end's goal at frame ``goal``, where it stays."""
+    import bmesh
+    obj = bpy.data.objects.get(BALL)
+    if obj is None:
+        me = bpy.data.meshes.new(BALL)
+        bm = bmesh.new()
+        bmesh.ops.create_uvsphere(bm, u_segments=16, v_segments=8, radius=BALL_RADIUS)
+        bm.to_mesh(me)
+        bm.free()
+        me.materials.append(plain_material("ball", (0.95, 0.95, 0.95, 1.0)))
+        obj = bpy.data.objects.new(BALL, me)
+        scene.collection.objects.link(obj)
+    obj.animation_data_clear()
+    hx, hy = _pitch_half()
+    gx = _home_goal_x()
+    sign = 1.0 if gx > 0 else -1.0               # toward the home goal
+    keys = [(first + round(share * (goal - first)), (sign * x * hx, y * hy, BALL_RADIUS))
+            for share, x, y in BALL_PLAY]
+    back, y, z = BALL_NET
+    keys.append((goal, (gx + sign * back, y * hy, z)))
+    done = set()
+    for frame, at in keys:
+        if frame in done:                         # a short run: fewer touches
+            continue
+        done.add(frame)
+        obj.location = at
+        obj.keyframe_insert("location", frame=frame)
+    obj.location = keys[0][1]
+    return obj
+
+
 def setup_show(scene, frames: int):
     """Author the stadium's show in ``scene.crowd.show`` (replacing any there) for a run
     of ``frames`` frames from the scene's start frame, and set the scene's frame range
@@ -439,6 +513,13 @@ def setup_show(scene, frames: int):
     for k in range(hits):
         _cue(show, f"{CUES['hit']} {k + 1}", at["hit"], last, f"hit{k}", action="UNIQUE",
              hold=hit_frames, interrupt=True, **_select("hit", k + 1))
+    # the ball: every fan follows it from the start, each a few frames late
+    show.look_targets.clear()
+    target = show.look_targets.add()
+    target.name, target.smoothing = BALL_TARGET, BALL_SMOOTHING
+    target.object = _ball(scene, first, min(at["goal"], last))
+    show.look_lag, show.look_max_lag = "SEEDED", BALL_LAG
+    _cue(show, CUES["look"], first + 1, last, BALL_TARGET, action="LOOK")
     return tuple(c.name for c in show.cues if c.mute)
 
 
