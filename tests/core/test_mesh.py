@@ -156,8 +156,11 @@ def test_card_stands_on_the_root_bone_and_follows_the_head():
 
 def test_card_is_the_last_lod_and_the_default_far_level():
     m = _box(0.4, 0.2, 1.8)
-    levels = build_lods(m, (0.5, CARD))   # a card per body part: two bones, two parts
-    assert levels[-1].vertex_count == 16 and len(levels) == 3
+    levels = build_lods(m, (0.5, CARD))
+    # a box per body part (two bones, two boxes: 24 triangles) would outweigh this
+    # 12-triangle box: the far level keeps the level before's triangles, under its name
+    assert levels[-1].name == "box.card" and len(levels) == 3
+    assert levels[-1].triangle_count == levels[-2].triangle_count == 12
     assert sorted(set(levels[-1].bone_indices[:, 0].tolist())) == [1, 2]
     for bad in (("card", 0.5), ("cards",)):
         with pytest.raises(CrowdError, match="'card' \\(as the last level\\)"):
