@@ -43,7 +43,7 @@ from .clips import PRIM, bank_layer, bank_layout, clip_sets, manifest_layer
 from .files import ExportFiles
 from .layers import new_layer
 from .naming import unique_identifiers
-from .shot import STREAM, UNIQUE, Shot
+from .shot import AIM, STREAM, UNIQUE, Shot
 
 __all__ = ["export_crowd", "export_steps", "check_export", "check_layout", "ExportResult",
            "FORMAT_VERSION", "LAYOUTS"]
@@ -73,7 +73,8 @@ class ExportResult:
     frames : (first, last) shot frames.
     agents : agents exported; shared_agents : those on a shared offset animation;
         clip_agents : those that change what they play, on value clips (none is baked
-        over the whole shot); blend_frames : the frames of their blends, the only
+        over the whole shot); blend_frames : the frames in the banks (their blends,
+        and their aim frames), the only
         poses written per agent; moving_agents : those whose transform is
         time-sampled.
     offset_animations, stream_animations, characters : prims/layers written
@@ -86,6 +87,8 @@ class ExportResult:
     started_from : the frame of the snapshot the simulation started from (``--snapshots``;
         None: it ran from the crowd's start frame); snapshot : the snapshot file the
         export left at its last frame (None without a snapshot folder).
+    look_agents : exported agents that look at something in the shot (each on value
+        clips); aim_frames : their looking frames (of blend_frames), each its own pose.
     repetition : the exported agents' repetition metric over the shot
         (:meth:`~crowd_addon.core.repetition.Repetition.as_dict`; None when not
         measured).
@@ -109,6 +112,8 @@ class ExportResult:
     started_from: int | None = None
     snapshot: str | None = None
     repetition: dict | None = None
+    look_agents: int = 0
+    aim_frames: int = 0
 
     @property
     def bytes(self) -> int:
@@ -240,7 +245,9 @@ def _steps(rec, ids, meshes, files, layout, measure):
         moving_agents=int(shot.moving.sum()), offset_animations=len(offsets),
         stream_animations=len(stream_assets), characters=len(char_assets),
         seconds=seconds, events=_events(rec, ids), substeps=int(rec.substeps),
-        repetition=None if measured is None else measured.as_dict())
+        repetition=None if measured is None else measured.as_dict(),
+        look_agents=int(shot.looking.sum()),
+        aim_frames=int((shot.pieces.end - shot.pieces.start)[shot.pieces.kind == AIM].sum()))
 
 
 def _staged(stage, steps):

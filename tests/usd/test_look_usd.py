@@ -97,7 +97,10 @@ def test_looking_agents_are_on_clips_and_the_rest_unchanged(exports):
     assert looked.clip_agents == plain.clip_agents + len(
         set(LOOKERS) - {1, 2, 3, 12, 39})
     assert looked.blend_frames > plain.blend_frames
+    # a blend while looking is aim frames (the blend with the look), not both
+    assert 0 < looked.blend_frames - looked.aim_frames < plain.blend_frames
+    assert (looked.look_agents, plain.look_agents, plain.aim_frames) == (len(LOOKERS), 0, 0)
     print(f"bytes: {plain.bytes} without looks, {looked.bytes} with "
           f"({looked.bytes / plain.bytes:.2f}x), aim frames "
-          f"{looked.blend_frames - plain.blend_frames}")
+          f"{looked.aim_frames}")
     assert looked.bytes <= 2 * plain.bytes
