@@ -366,14 +366,14 @@ class CROWD_PG_settings(PropertyGroup):
                             description="Distance from which agents use the first coarser "
                                         "mesh (a character's first LOD mesh, or 25% of the "
                                         "triangles), " + _LOD_VIEW)
-    lod_far: FloatProperty(name="LOD 2 From", default=90.0, min=0.01, unit="LENGTH",
+    lod_far: FloatProperty(name="LOD 2 From", default=60.0, min=0.01, unit="LENGTH",
                            description="Distance from which agents use the second coarser "
                                        "mesh (a character's second LOD mesh, or 6% of the "
                                        "triangles), " + _LOD_VIEW)
     lod_cards: BoolProperty(name="Far Cards", default=True,
-                            description="Draw the farthest agents as two crossed quads "
-                                        "(8 vertices) that follow the root bone and head")
-    lod_card: FloatProperty(name="Cards From", default=150.0, min=0.01, unit="LENGTH",
+                            description="Draw the farthest agents as a box per body part "
+                                        "(8 vertices each) that follows its bone")
+    lod_card: FloatProperty(name="Cards From", default=90.0, min=0.01, unit="LENGTH",
                             description="Distance from which agents are drawn as "
                                         "cards, " + _LOD_VIEW)
     agent_sources: CollectionProperty(type=CROWD_PG_agent_source)

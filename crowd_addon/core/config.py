@@ -16,6 +16,7 @@ from .agents import assign_offsets, assign_streams, check_offsets
 from .bodies import MAX_PROPS
 from .controllers import Controller
 from .errors import CrowdError
+from .lod import DEFAULT_LOD_PIXELS
 from .show import Show
 
 __all__ = ["AnimationDef", "CrowdConfig", "validate_config", "WHEN_FULL", "MAX_TREE_DEPTH",
@@ -149,7 +150,7 @@ class CrowdConfig:
     props: dict = field(default_factory=dict)
     agent_variant: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int16))
     agent_props: np.ndarray = field(default_factory=lambda: np.zeros(0, np.uint8))
-    lod_pixels: tuple = (90.0, 30.0, 18.0)
+    lod_pixels: tuple = DEFAULT_LOD_PIXELS
     lod_distances: tuple | None = None
     lod_budget_px: float = 1.0
     show: Show = field(default_factory=Show)

@@ -201,7 +201,7 @@ def test_config_carries_settings_mesh_uniques_and_agents(rig_scene):
     cfg = scene_config.config_from_scene(scene, progress=lambda *a: steps.append(a))
     assert (cfg.max_offset, cfg.transition_slots, cfg.when_full, cfg.seed) == (12, 5, "cut", 7)
     assert cfg.fps == 24.0 and cfg.start_frame == 1
-    assert cfg.lod_distances == (10.0, 40.0, 150.0)          # far cards on by default
+    assert cfg.lod_distances == (10.0, 40.0, 90.0)          # far cards on by default
     assert sorted(cfg.clips) == ["walk", "wave"]
     assert cfg.clips["walk"].events == (("step", 6.0),)       # marker at frame 7, clip 1..25
     assert [d.name for d in cfg.streams] == ["walk"] and [d.name for d in cfg.uniques] == ["wave"]
