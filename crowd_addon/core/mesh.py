@@ -422,8 +422,8 @@ def parts_lod(mesh: ProxyMesh, name: str | None = None, min_share: float = 0.004
     stands along the part's principal axes (bind pose), :data:`BOX_SCALE` of the
     part's extent along each. Each corner takes the influences of the part's vertex
     nearest to it (so the boxes of a bent elbow stay joined, as the mesh's blended
-    joint does), and a normal pointing out from the box's centre through the corner:
-    lit like a rounded part (its top brighter, its underside darker), where the
+    joint does), and a normal leaning out of the corner equally along the box's three
+    edges (smoothly interpolated over the faces): lit like a rounded part (its top brighter, its underside darker), where the
     former crossed quads (flat, shaded by whichever side faced the camera) drew the
     far crowd 0.026 darker than the full meshes did. A box is closed and faces out,
     so the renderer culls its back faces. So a far agent keeps its colours (shirt,

@@ -283,3 +283,32 @@ def test_the_card_per_body_part_follows_each_part():
     up = skin_vertices(card.positions, card.bone_indices, card.bone_weights, rows)[1]
     arm = card.bone_indices[:, 0] == 2
     assert up[arm, 2].max() > 1.6 and np.allclose(up[~arm], card.positions[~arm], atol=1e-6)
+
+
+def test_the_far_level_is_a_closed_box_per_part_lit_like_a_round_part():
+    from crowd_addon.core.lod_check import clip_poses, departure
+    from crowd_addon.core.mesh import parts_lod
+
+    sk = synthetic.humanoid("fan", bones=24)
+    mesh = synthetic.humanoid_mesh(sk)
+    far = parts_lod(mesh)
+    boxes = far.vertex_count // 8
+    assert far.vertex_count == 8 * boxes and far.triangle_count == 12 * boxes
+    assert far.triangle_count < mesh.triangle_count / 4
+    for b in range(boxes):
+        corners = far.positions[8 * b: 8 * b + 8].astype(np.float64)
+        centre = corners.mean(0)
+        # every normal leans out of its corner, equally along the box's three edges
+        nrm = far.normals[8 * b: 8 * b + 8].astype(np.float64)
+        assert ((nrm * (corners - centre)).sum(1) > 0).all()
+        edges = corners[[4, 2, 1]] - corners[0]
+        along = np.abs(nrm @ (edges / np.linalg.norm(edges, axis=1, keepdims=True)).T)
+        np.testing.assert_allclose(along, 3 ** -0.5, atol=1e-5)
+        # and every triangle faces out (a closed box: the renderer may cull its backs)
+        tri = far.triangles[12 * b: 12 * b + 12].astype(np.int64)
+        p = far.positions.astype(np.float64)
+        n = np.cross(p[tri[:, 1]] - p[tri[:, 0]], p[tri[:, 2]] - p[tri[:, 0]])
+        assert ((n * (p[tri].mean(1) - centre)).sum(1) > 0).all()
+    # at the far level's former switch size (18 px) its silhouette stays within the budget
+    poses = clip_poses(sk, [synthetic.periodic_clip(sk, "c")])
+    assert departure(far, mesh, sk, poses, 18.0) <= 1.0
