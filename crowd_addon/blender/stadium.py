@@ -36,9 +36,10 @@ same crowd:
   (the end away from the away seats) at the goal beat; it is the show's look target
   ``ball``, and a Look At cue on the first frame stepped turns every fan's head toward
   it (:data:`LOOK_RIGS`: neck and head, the mocap's Neck, Neck1 and Head), each fan up
-  to :data:`BALL_LAG` frames late (docs/show.md, "Look-at"). The beats are fractions of the run (:data:`BEATS`), so a
-  short run has all of them; a beat that still falls after the run's last frame (a
-  run of one frame) is authored muted and named in :attr:`Stadium.muted`.
+  to :data:`BALL_LAG` frames late (docs/show.md, "Look-at"). The beats are fractions
+  of the run (:data:`BEATS`), so a short run has all of them; a beat that still falls
+  after the run's last frame (a run of one frame) is authored muted and named in
+  :attr:`Stadium.muted`.
 - :func:`add_stand_camera` adds "StandCamera", on the pitch looking up at the home
   stand where the wave passes first, as the scene camera: the demo renders through it.
 
@@ -60,6 +61,7 @@ from ..core.errors import CrowdError
 from .looks import plain_material
 
 __all__ = ["STREAMS", "HOME_MIX", "AWAY_MIX", "FAN", "MOCAP", "BEATS", "CUES", "CAMERA",
+           "LOOK_RIGS", "BALL", "BALL_TARGET",
            "setup_crowd", "setup_show", "add_stand_camera", "stadium_config", "Stadium",
            "author_stadium"]
 
