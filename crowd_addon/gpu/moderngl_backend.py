@@ -66,6 +66,7 @@ class _ShadowMap:
 
     def __init__(self, fbo, texture):
         self.fbo, self.texture = fbo, texture
+        self.saved = None           # a GPU buffer: the depth of the scene alone
 
 
 class ModernGLRenderer(CrowdRenderer):
@@ -276,14 +277,25 @@ class ModernGLRenderer(CrowdRenderer):
         return _ShadowMap(self.ctx.framebuffer(depth_attachment=tex), tex)
 
     @contextmanager
-    def _bind_shadow(self, shadow_map):
+    def _bind_shadow(self, shadow_map, clear=True):
         outer = self.ctx.fbo
         shadow_map.fbo.use()
-        shadow_map.fbo.clear(depth=1.0)
+        if clear:
+            shadow_map.fbo.clear(depth=1.0)
         try:
             yield
         finally:
             outer.use()
+
+    def _save_depth(self, shadow_map):
+        if shadow_map.saved is None:
+            shadow_map.saved = self.ctx.buffer(reserve=shadow_map.texture.size[0]
+                                               * shadow_map.texture.size[1] * 4)
+        shadow_map.texture.read_into(shadow_map.saved)
+        return shadow_map.saved
+
+    def _restore_depth(self, shadow_map, saved):
+        shadow_map.texture.write(saved)
 
     def _matrix_texture(self, texels):
         if self._shadow_view is None:
@@ -334,7 +346,8 @@ class ModernGLRenderer(CrowdRenderer):
                    *self._programs.values(), *self._lit, self._shadow_view,
                    *(self._resolve or ())]
         if self._shadow_map is not None:
-            objects += [self._shadow_map.fbo, self._shadow_map.texture]
+            objects += [self._shadow_map.fbo, self._shadow_map.texture,
+                        self._shadow_map.saved]
         objects = list({id(o): o for o in objects}.values())     # each once
         for m in self.meshes.values():
             objects += m.objects()

@@ -18,7 +18,11 @@ A backend (:mod:`.moderngl_backend`, :mod:`.blender_backend`) subclasses
 * ``_create_shadow_map(size)`` -- a depth-only target and its depth texture (``.texture``,
   read through ``shadow_tex``); ``_bind_shadow(shadow_map)`` -- a context manager:
   bind and clear it, then give the enclosing target back; ``_matrix_texture(texels)``
-  -- the 4 x 1 RGBA32F texture of the sun's matrix (:mod:`.shadows`);
+  -- the 4 x 1 RGBA32F texture of the sun's matrix (:mod:`.shadows`); optionally
+  ``_save_depth(shadow_map)`` / ``_restore_depth(shadow_map, saved)`` (a copy of the
+  map's depth kept on the GPU, and written back; ``_save_depth`` returning None, the
+  default, means no copies) with ``_bind_shadow(shadow_map, clear=False)``: the
+  static scene is then drawn into the map once, not every frame;
 * ``_capture(mesh, capture)`` -- world positions of the crowd's vertex stage
   (:class:`~.frame_plan.Capture`) as ``(n, V, 3)`` float32;
 * ``_read_texture(texture)`` -- a float texture's texels, flat float32;
@@ -82,6 +86,8 @@ class CrowdRenderer:
         self.stats = FrameStats()
         self.scene, self._scene, self._shadow_map = None, None, None
         self._scene_bounds = None
+        #: (sun matrix bytes, the map's depth with the scene alone) once drawn
+        self._shadow_scene = None
         self.plan = FramePlan(view, max_texture_size, max_int, lod=lod)
         #: the highest bind-pose point of any proxy (metres): the shadow casters' reach
         self._tallest = self.plan.max_scale * max(
@@ -135,6 +141,7 @@ class CrowdRenderer:
         same depth buffer. A viewport that draws its scene itself needs none."""
         self._release_scene()
         self._scene_bounds = None
+        self._shadow_scene = None
         if geometry is not None and geometry.triangle_count:
             self._scene = self._create_scene(geometry)
             self._scene_bounds = geometry.bounds()     # once: the shadows' depth range
@@ -193,10 +200,20 @@ class CrowdRenderer:
         # the map's own pass reads no shadow map (SHADOWS 0, stand-in textures bound)
         self.textures["shadow"], self.textures["shadow_view"] = self._lit
         self.sampling_shadows = False
-        with self._bind_shadow(self._shadow_map):
-            if self._scene is not None:
+        # the static scene's depth is drawn once for a sun matrix and copied back each
+        # frame (a 2048^2 depth write costs about what the clear did; the scene's
+        # triangles ~65 ms on llvmpipe); the agents are drawn over it every frame
+        key = light_vp.tobytes()
+        cached = self._scene is not None and self._shadow_scene is not None \
+            and self._shadow_scene[0] == key
+        if cached:
+            self._restore_depth(self._shadow_map, self._shadow_scene[1])
+        with self._bind_shadow(self._shadow_map, **({"clear": False} if cached else {})):
+            if self._scene is not None and not cached:
                 self._draw_scene(self._scene, {"u_view_proj": gl_matrix(light_vp),
                                                "u_light": self.light})
+                saved = self._save_depth(self._shadow_map)
+                self._shadow_scene = None if saved is None else (key, saved)
             for draw in self.plan.caster_draws(light_vp, self.light):
                 self._draw(self.meshes[draw.key], draw)
         self.textures["shadow"] = self._shadow_map.texture
@@ -268,6 +285,14 @@ class CrowdRenderer:
         raise NotImplementedError
 
     def _matrix_texture(self, texels):
+        raise NotImplementedError
+
+    def _save_depth(self, shadow_map):
+        """A copy of ``shadow_map``'s depth to restore later, or None: this backend
+        keeps none, and draws the scene into the map every frame."""
+        return None
+
+    def _restore_depth(self, shadow_map, saved):
         raise NotImplementedError
 
     def _read_texture(self, texture) -> np.ndarray:
