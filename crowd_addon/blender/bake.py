@@ -22,11 +22,17 @@ the progress callback returns None and leaves the scene as it was.
 Samples per frame: a clip keyed ``samples_per_frame`` times per crowd frame plays at
 the same speed (a crowd plays a clip at the clip's own fps) but samples the action
 between crowd frames from the action itself, for playback at other speeds and motion
-blur. After an F-curve bake the curves are also evaluated halfway between the keys:
-where the crowd's interpolation misses them (a bone turning the long way round, such
-as an Euler curve from 179 to -179 degrees, which Blender plays as a full turn) the
-notes name the action, bone and frames and the samples per frame that follow it
-(:func:`crowd_addon.core.clip_sampling.interpolation_note`).
+blur. After an F-curve bake the curves are also evaluated halfway between the keys
+and the pose the crowd plays there (the keys blended) is compared with them through
+the skeleton: where a bone's head misses by more than 1e-3 scene units or its
+rotation by more than 1e-3 rad (a fast motion, or a bone turning the long way round,
+such as an Euler curve from 179 to -179 degrees, which Blender plays as a full turn)
+the notes name the action, bones, frames and sizes and the samples per frame that
+follow it (:func:`crowd_addon.core.clip_sampling.between_keys_note`).
+
+Notes are :class:`crowd_addon.core.bake_report.Note` strings: the between-frame
+misses are warnings (kind ``"between_frames"``); frame_set sampling and resampling
+remarks are information.
 """
 
 from __future__ import annotations
@@ -37,7 +43,8 @@ import numpy as np
 
 from ..core.armature_math import relative_to_parent, sqt_from_matrices
 from ..core.clip import Clip
-from ..core.clip_sampling import MAX_SAMPLES_PER_FRAME, interpolation_note
+from ..core.bake_report import INFO, WARNING, Note
+from ..core.clip_sampling import MAX_SAMPLES_PER_FRAME, between_keys_note
 from ..core.errors import CrowdError
 from ..core.pose_channels import CHANNEL_WIDTH, CHANNELS, RigChannels, local_sqt
 from ..core.skeleton import Skeleton
@@ -57,8 +64,10 @@ class BakeResult:
     skeleton : the armature's core skeleton (bone order of every clip).
     clips : one :class:`Clip` per action, in the order given.
     methods : clip name -> ``"fcurves"`` or ``"frame_set"``.
-    notes : why actions were sampled with frame_set, resampling remarks, and keys too
-        far apart to be interpolated (with the samples per frame that would do).
+    notes : :class:`~crowd_addon.core.bake_report.Note` strings: why actions were
+        sampled with frame_set and resampling remarks (information), and poses
+        between keys that miss the action's (warnings, with the samples per frame
+        that would follow it).
     """
 
     skeleton: Skeleton
@@ -166,6 +175,7 @@ def bake_actions(armature_obj, actions, fps: float, progress=None, *, loop=None,
     done = 0
     clips, methods, notes = [], {}, []
     rig = _rig_state(armature_obj, skeleton, bone_order, rest, rest_rot)
+    unit_scale = _unit_scale(armature_obj)
     with _Playback(scene, armature_obj, skeleton) as playback:
         for src in sources:
             reason = "requested" if method == FRAME_SET else rig_reason or src.frame_set_reason
@@ -176,7 +186,7 @@ def bake_actions(armature_obj, actions, fps: float, progress=None, *, loop=None,
                 done += len(src.times)
                 if progress is not None and progress(done, total) is False:
                     return None
-                missed = _interpolation_note(src, keys, rig, skeleton, samples)
+                missed = _interpolation_note(src, keys, rig, skeleton, samples, unit_scale)
             else:
                 missed = None               # the curves alone are not the pose here
                 keys = playback.bake(src, lambda k: progress is None or progress(
@@ -186,18 +196,26 @@ def bake_actions(armature_obj, actions, fps: float, progress=None, *, loop=None,
                 done += len(src.times)
                 methods[src.name] = FRAME_SET
                 if method != FRAME_SET:
-                    notes.append(f"action {src.name!r} sampled with frame_set: {reason}")
-            notes.extend(src.notes)
+                    notes.append(Note(f"action {src.name!r} sampled with frame_set: "
+                                      f"{reason}", "frame_set", INFO))
+            notes.extend(Note(n, "sampling", INFO) for n in src.notes)
             if missed is not None:
-                notes.append(missed)
+                notes.append(Note(missed, "between_frames", WARNING))
             clips.append(Clip(src.name, keys, fps=key_fps, loop=src.loop, events=src.events,
                               bone_names=skeleton.bone_names))
     return BakeResult(skeleton, tuple(clips), methods, tuple(notes))
 
 
-def _interpolation_note(src, keys, rig, skeleton, samples):
-    """The report line when the crowd's interpolation between the keys of ``src``
-    misses its curves (evaluated halfway between the keys), else None."""
+def _unit_scale(armature_obj) -> float:
+    """Scene units per armature unit: the armature object's world scale (the cube root
+    of its matrix's determinant)."""
+    m = np.array(armature_obj.matrix_world, np.float64)[:3, :3]
+    return float(abs(np.linalg.det(m)) ** (1.0 / 3.0)) or 1.0
+
+
+def _interpolation_note(src, keys, rig, skeleton, samples, unit_scale=1.0):
+    """The report line when the crowd's poses between the keys of ``src`` miss its
+    curves (evaluated halfway between the keys), else None."""
     try:
         curves, fast = (src.keys, src.fast) if src.between is None else src.between()
     except CrowdError as e:         # e.g. a NaN handle, unused when sampling on the keys
@@ -205,8 +223,8 @@ def _interpolation_note(src, keys, rig, skeleton, samples):
 
     def evaluate(times):
         return local_sqt(rig, curves, src.columns, src.bones, times, fast, _evaluator(src))
-    return interpolation_note(src.name, src.times, keys, evaluate, skeleton.bone_names,
-                              samples)
+    return between_keys_note(src.name, src.times, keys, evaluate, skeleton, samples,
+                             unit_scale)
 
 
 def _rig_state(armature_obj, skeleton, bone_order, rest, rest_rot) -> RigChannels:
