@@ -121,7 +121,10 @@ def test_config_round_trip_keeps_eight_columns(tmp_path, rig):
     save_config(cfg, tmp_path / "crowd.json")
     loaded = load_config(tmp_path / "crowd.json")
     widths = [lv.bone_indices.shape[1] for lv in loaded.meshes[sk.name]]
-    assert widths == [8, 8, 4]
+    # the full mesh and LOD 1 keep 8 columns; the far level (a box per body part whose
+    # corners take the weights of the part's nearest vertex) keeps what it was built with
+    assert widths[:2] == [8, 8]
+    assert widths == [lv.bone_indices.shape[1] for lv in cfg.meshes[sk.name]]
     for a, b in zip(cfg.meshes[sk.name], loaded.meshes[sk.name]):
         assert a.bone_indices.tobytes() == b.bone_indices.tobytes()
         assert a.bone_weights.tobytes() == b.bone_weights.tobytes()
