@@ -542,8 +542,8 @@ def _add_preview(subparsers) -> None:
                    help="with --blend: no sun shadows (they cost about as much again as "
                         "the crowd at 65k agents on a software rasterizer)")
     p.add_argument("--samples", type=int_at_least(0), default=4, metavar="N",
-                   help="multisample anti-aliasing, samples a pixel, moderngl backend "
-                        "(Blender's gpu module has no multisampled offscreen image); 0: "
+                   help="anti-aliasing, samples a pixel (a k x k grid: 4, 9, 16...), "
+                        "moderngl backend (Blender's gpu module draws without); 0: "
                         "none (default: %(default)s)")
     p.add_argument("--lod", choices=("on", "off"), default="on",
                    help="levels of detail: on (each agent's level by its height in "

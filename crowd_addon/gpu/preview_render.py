@@ -146,8 +146,8 @@ def render_preview(config, out_dir, frames: int, start: int | None = None,
     frame about to be evaluated (the simulation driving the crowd); ``camera``
     replaces the framing camera. ``scene``: a :class:`~.scene_geometry.SceneGeometry`
     drawn around the crowd with the same camera, light and depth; ``light``: the
-    renderers' ``(x, y, z, ambient)`` (None: their default); ``samples``: multisample
-    anti-aliasing of the moderngl backend (0: none); ``on_image(frame, image)`` is
+    renderers' ``(x, y, z, ambient)`` (None: their default); ``samples``: anti-aliasing
+    of the moderngl backend, samples a pixel (a k x k supersampling grid; 0: none); ``on_image(frame, image)`` is
     given each frame's ``(H, W, 3)`` uint8 image (e.g. a contact sheet); ``shadows``:
     the sun's shadows (None: with a scene); ``repetition``: the repetition metric's
     settings (their ``frames`` spread over the run, measured as they are shown; the
