@@ -12,9 +12,10 @@ same crowd:
   and the "Seats" points as the agent source. The seats get point attributes written
   here: ``character`` (0 fan, 1 mocap: 2 % of the home seats), ``stream`` (among the
   character's streams: home seats ``idle_a`` / ``idle_c`` / ``clap``, away seats
-  ``idle_b``), ``hit`` (``k`` on the seat of the k-th fan the ball hits, 0 elsewhere)
-  and ``team_colour`` (home red, away blue, varied per seat); the source scales the
-  fans 0.93 .. 1.07 (heights vary), and each fan draws a skin tone and trousers from
+  ``idle_b``), ``hit`` (``k`` on the seat of the k-th fan the ball hits, 0 elsewhere),
+  ``in_view`` (1 on the seats of the stand the camera looks at) and ``team_colour``
+  (home red, away blue, varied per seat); the source scales the fans 0.93 .. 1.07
+  (heights vary), and each fan draws a skin tone and trousers from
   the fan's palettes (:data:`FAN_PALETTES`, docs/variety.md), a body (a third of the
   fans wear the broader ``FanBodyBroad``, made from ``FanBody``) and props: a flag in
   the right hand for about one fan in seven, a cap for three in ten (:data:`FAN_PROPS`,
@@ -34,9 +35,11 @@ same crowd:
   crowd (``crowd.events``). The **ball** ("Ball", a white sphere made here) is played
   over the pitch from the centre spot and goes into the net of the home end's goal
   (the end away from the away seats) at the goal beat; it is the show's look target
-  ``ball``, and a Look At cue on the first frame stepped turns every fan's head toward
-  it (:data:`LOOK_RIGS`: neck and head, the mocap's Neck, Neck1 and Head), each fan up
-  to :data:`BALL_LAG` frames late (docs/show.md, "Look-at"). The beats are fractions
+  ``ball``, and a Look At cue on the first frame stepped turns the heads of the fans
+  in view (the camera's stand: the seats' ``in_view`` attribute) toward it until
+  :data:`BALL_WATCH` frames after the goal (:data:`LOOK_RIGS`: neck and head, the
+  mocap's Neck, Neck1 and Head), each fan up to :data:`BALL_LAG` frames late
+  (docs/show.md, "Look-at"). The beats are fractions
   of the run (:data:`BEATS`), so a short run has all of them; a beat that still falls
   after the run's last frame (a run of one frame) is authored muted and named in
   :attr:`Stadium.muted`.
@@ -116,6 +119,12 @@ BALL, BALL_RADIUS, BALL_TARGET, BALL_SMOOTHING, BALL_LAG = "Ball", 0.2, "ball", 
 #: fans cheer), where it stays
 BALL_PLAY = ((0.0, 0.0, 0.0), (0.25, -0.35, 0.45), (0.5, -0.05, -0.5), (0.75, 0.55, 0.3))
 BALL_NET = (1.0, 0.02, 1.1)      # metres behind the goal line, y share, height
+#: frames the fans in view keep watching after the goal beat before they look away: a
+#: look costs a USD export a pose sample per looking agent and frame
+#: (docs/usd_export.md, "Looks"), so the demo's looks are the camera's stand (the
+#: seats' ``in_view`` attribute) up to a second after the goal, not the whole bowl for
+#: the whole run
+BALL_WATCH = 30
 CAMERA = "StandCamera"
 #: where the camera stands, in metres from the middle of the home stand's front row:
 #: out over the pitch, along the stand, up; and how far along the stand it looks. The
@@ -370,6 +379,9 @@ def _seat_casting(seats, teams, pos, seed, hits):
     _seat_attribute(me, "character", character)
     _seat_attribute(me, "stream", stream)
     _seat_attribute(me, "hit", hit)
+    stand = _camera_stand(pos, teams)            # the fans in view follow the ball
+    _seat_attribute(me, "in_view",
+                    (stand if stand.any() else np.ones(n, bool)).astype(np.int32))
     _seat_attribute(me, "team_colour", colour, "FLOAT_COLOR")
     me.update()
 
@@ -515,13 +527,15 @@ def setup_show(scene, frames: int):
     for k in range(hits):
         _cue(show, f"{CUES['hit']} {k + 1}", at["hit"], last, f"hit{k}", action="UNIQUE",
              hold=hit_frames, interrupt=True, **_select("hit", k + 1))
-    # the ball: every fan follows it from the start, each a few frames late
+    # the ball: the fans in view follow it from the start until a while after the
+    # goal, each a few frames late
     show.look_targets.clear()
     target = show.look_targets.add()
     target.name, target.smoothing = BALL_TARGET, BALL_SMOOTHING
     target.object = _ball(scene, first, min(at["goal"], last))
     show.look_lag, show.look_max_lag = "SEEDED", BALL_LAG
-    _cue(show, CUES["look"], first + 1, last, BALL_TARGET, action="LOOK")
+    _cue(show, CUES["look"], first + 1, last, BALL_TARGET, action="LOOK",
+         hold=at["goal"] + BALL_WATCH - (first + 1), **_select("in_view", 1))
     return tuple(c.name for c in show.cues if c.mute)
 
 
