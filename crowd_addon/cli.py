@@ -203,6 +203,7 @@ def _run_plan(args) -> int:
         config, camera, settings = plan_blend(
             blend=args.blend, scene=args.scene, settings=settings,
             trust_scripts=args.trust_scripts, ignore_scripts=args.ignore_scripts,
+            strict=args.strict,
             on_bake=lambda done, total, message: print(f"crowd plan: {message}",
                                                        file=sys.stderr, flush=True))
     else:
@@ -272,7 +273,7 @@ def _run_export(args) -> int:
     source = ShotSource(config=args.config, blend=args.blend, scene=args.scene,
                         trust_scripts=args.trust_scripts, agents=args.agents,
                         layout=args.layout, substeps=args.substeps,
-                        ignore_scripts=args.ignore_scripts)
+                        ignore_scripts=args.ignore_scripts, strict=args.strict)
     progress = progress_printer("crowd export")
     if args.workers is not None or args.scheduler is not None:
         return _run_farm_export(args, source, progress)
@@ -346,7 +347,8 @@ def _add_farm(subparsers) -> None:
         description="Export every shot of a shot list (JSON: {\"shots\": [{\"config\" or "
                     "\"blend\": ..., \"frames\": \"FIRST-LAST\", \"out\": ..., optional "
                     "\"scene\", \"trust_scripts\", \"ignore_scripts\", \"agents\", \"layout\", "
-                    "\"substeps\", \"chunk_frames\"}]}, paths relative to the file) as crowd "
+                    "\"substeps\", \"chunk_frames\", \"strict\"}]}, paths relative to the "
+                    "file) as crowd "
                     "export --workers does: every shot's snapshot pass, chunks and stitch as "
                     "tasks of one Dask cluster. A shot that fails is named and writes no "
                     "stage; the others are written (docs/snapshots.md). Exit code 3 when a "
@@ -474,7 +476,7 @@ def _run_snapshot(args) -> int:
     progress = progress_printer("crowd snapshot")
     source = ShotSource(config=args.config, blend=args.blend, scene=args.scene,
                         trust_scripts=args.trust_scripts, substeps=args.substeps,
-                        ignore_scripts=args.ignore_scripts)
+                        ignore_scripts=args.ignore_scripts, strict=args.strict)
     files = write_shot_snapshots(
         source, args.out, args.frames, args.every,
         progress=lambda d, n: progress("simulate", d, n),
@@ -575,7 +577,7 @@ def _run_preview(args) -> int:
             args.out, args.frames, blend=args.blend, scene=args.scene, start=args.start,
             camera=args.camera, size=size, mp4=args.mp4, backend=args.backend,
             samples=args.samples, shadows=args.shadows, trust_scripts=args.trust_scripts,
-            ignore_scripts=args.ignore_scripts,
+            ignore_scripts=args.ignore_scripts, strict=args.strict,
             progress=progress, repetition=repetition_settings(args), lod=args.lod == "on",
             on_bake=lambda done, total, message: print(
                 f"crowd preview: {message}", file=sys.stderr, flush=True))

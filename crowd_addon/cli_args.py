@@ -172,6 +172,12 @@ def add_trust_argument(parser) -> None:
                          help="go on without the .blend's crowd script: it does not run in "
                               "this command, trusted or not (without this, a script that "
                               "is not trusted here stops the command with exit code 3)")
+    parser.add_argument("--strict", action="store_true",
+                        help="with --blend: a bake report with warnings (poses between "
+                             "frames that miss the action's, vertices with more than 8 "
+                             "bone influences, LOD levels refused) is an error, exit code "
+                             "2, nothing written (for farms); the notes are printed on "
+                             "stderr either way")
 
 
 def parse_command(parser, argv):

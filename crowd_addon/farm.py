@@ -60,7 +60,9 @@ class ShotSource:
     (as ``crowd export``). ``trust_scripts`` is passed to each of the shot's tasks and
     holds for that task only: a worker that ran a trusted shot trusts nothing after it.
     A .blend whose crowd script would not run stops the shot (ScriptNotTrusted) unless
-    ``ignore_scripts``: then every task leaves the script out."""
+    ``ignore_scripts``: then every task leaves the script out. ``strict``: a .blend whose
+    bake report has warnings stops the shot (``--strict``, BakeWarnings) before
+    anything is written."""
 
     config: str | None = None
     blend: str | None = None
@@ -70,6 +72,7 @@ class ShotSource:
     layout: str = "instanced"
     substeps: int = 1
     ignore_scripts: bool = False
+    strict: bool = False
 
     def __post_init__(self):
         if self.config is not None and self.blend is not None:
@@ -119,7 +122,7 @@ def write_shot_snapshots(source: ShotSource, folder, frames, every, progress=Non
                           scene=source.scene, substeps=source.substeps,
                           trust_scripts=source.trust_scripts,
                           ignore_scripts=source.ignore_scripts, progress=progress,
-                          on_bake=on_bake)[1]
+                          on_bake=on_bake, strict=source.strict)[1]
 
 
 def export_chunk(source: ShotSource, frames, out, snapshots=None, progress=None,
@@ -167,7 +170,7 @@ def export_chunk(source: ShotSource, frames, out, snapshots=None, progress=None,
                         substeps=source.substeps, snapshots=snapshots,
                         trust_scripts=source.trust_scripts,
                         ignore_scripts=source.ignore_scripts, progress=progress,
-                        on_bake=on_bake, repetition=repetition)
+                        on_bake=on_bake, repetition=repetition, strict=source.strict)
 
 
 def _run_chunk(source, frames, out, snapshots, name, log, _after=None):
@@ -532,7 +535,7 @@ def _error(future) -> str:
 
 #: what a shot of a shot list may say, with its JSON type
 _SHOT_KEYS = {"config": str, "blend": str, "scene": str, "trust_scripts": bool,
-              "ignore_scripts": bool, "out": str,
+              "ignore_scripts": bool, "strict": bool, "out": str,
               "frames": str, "agents": int, "layout": str, "substeps": int,
               "chunk_frames": int}
 
@@ -597,7 +600,8 @@ def load_shot_list(path) -> list:
                             trust_scripts=shot.get("trust_scripts", False),
                             ignore_scripts=shot.get("ignore_scripts", False),
                             agents=shot.get("agents"), layout=shot.get("layout", "instanced"),
-                            substeps=shot.get("substeps", 1))
+                            substeps=shot.get("substeps", 1),
+                            strict=shot.get("strict", False))
         out.append(FarmShot(source, target, frames, shot.get("chunk_frames")))
     return out
 

@@ -19,8 +19,12 @@
 This module never imports the headless command line; its ``export`` options are the
 scene-facing subset of ``crowd export`` (``--scene``, ``--out``, ``--frames``,
 ``--agents``, ``--json``). Exit codes: 0 success, 2 bad input (reported on stderr as
-``crowd export: error: <message>``, nothing written), 3 a crowd script that is not
-trusted here (the same way; ``--ignore-scripts`` goes on without it).
+``crowd export: error: <message>``, nothing written; also ``--strict`` when the
+bake report has warnings), 3 a crowd script that is not trusted here (the same way;
+``--ignore-scripts`` goes on without it).
+
+Every command prints the scene bake's report (``config.bake_report``,
+:func:`report_bake`) on stderr, one line per note (``crowd export: warning: ...``).
 """
 
 from __future__ import annotations
@@ -132,20 +136,25 @@ def blend_shot(frames: tuple | None = None, *, blend: str | None = None,
         return tuple(int(f) for f in scene_frames(found, frames))
 
 
-def report_lod_notes(config, on_bake) -> None:
-    """Pass each LOD level the silhouette check refused (``CrowdConfig.lod_notes``) to
-    ``on_bake(done, total, message)``, as the bake's remarks are: the commands print
-    them on stderr."""
+def report_bake(config, on_bake, strict: bool = False) -> None:
+    """Pass each note of the bake report (:func:`crowd_addon.core.bake_report.report_of`:
+    the bake's remarks, the meshes', the LOD levels refused) to ``on_bake(done, total,
+    message)`` as ``warning: ...`` or ``note: ...``: the commands print them on stderr.
+    ``strict``: a report with warnings then raises
+    :class:`~crowd_addon.core.bake_report.BakeWarnings` (exit code 2)."""
+    from ..core.bake_report import report_of
+    report = report_of(config)
     if on_bake is not None:
-        for note in config.lod_notes:
-            on_bake(1, 1, note)
+        for note in report:
+            on_bake(1, 1, note.line)
+    report.check_strict(strict)
 
 
 def export_blend(out: str, frames: tuple | None = None, *, blend: str | None = None,
                  scene: str | None = None, agents: int | None = None, progress=None,
                  on_bake=None, trust_scripts: bool = False, layout: str = "instanced",
                  substeps: int = 1, snapshots: str | None = None, repetition=_DEFAULT,
-                 ignore_scripts: bool = False):
+                 ignore_scripts: bool = False, strict: bool = False):
     """Export the Crowd settings of a .blend's scene (:func:`open_scene`) as UsdSkel.
 
     ``out``, ``agents``, ``layout``, ``substeps``, ``snapshots``, ``repetition``,
@@ -159,7 +168,9 @@ def export_blend(out: str, frames: tuple | None = None, *, blend: str | None = N
     nothing after the call (a later call, or another file, is not trusted by it). A
     script that would not run stops the export before anything is written
     (:class:`~crowd_addon.core.errors.ScriptNotTrusted`), unless ``ignore_scripts``:
-    then the shot is exported without it.
+    then the shot is exported without it. The bake report's notes reach ``on_bake``;
+    ``strict``: warnings among them stop the export before anything is written
+    (:class:`~crowd_addon.core.bake_report.BakeWarnings`).
     """
     with blender_output_to_stderr():        # from the import of bpy on (5.2 logs then)
         from ..core.files import folders_made
@@ -173,7 +184,7 @@ def export_blend(out: str, frames: tuple | None = None, *, blend: str | None = N
                                 progress=progress, on_bake=on_bake, layout=layout,
                                 substeps=substeps, snapshots=snapshots,
                                 repetition=repetition, trust_script=trust_scripts,
-                                ignore_script=ignore_scripts)
+                                ignore_script=ignore_scripts, strict=strict)
 
 
 def preview_blend(out: str, frames: int | None = None, *, blend: str | None = None,
@@ -181,7 +192,8 @@ def preview_blend(out: str, frames: int | None = None, *, blend: str | None = No
                   camera: str | None = None, size=(None, None), mp4: bool = False,
                   backend: str = "moderngl", progress=None, on_bake=None,
                   trust_scripts: bool = False, samples: int = 4, shadows: bool = True,
-                  repetition=_DEFAULT, lod: bool = True, ignore_scripts: bool = False):
+                  repetition=_DEFAULT, lod: bool = True, ignore_scripts: bool = False,
+                  strict: bool = False):
     """Render the Crowd settings of a .blend's scene (:func:`open_scene`) headless to
     PNG frames (:func:`crowd_addon.gpu.preview_render.render_preview`), drawn in the
     scene's own geometry and lit by its sun (:mod:`.scene_geometry`).
@@ -195,7 +207,9 @@ def preview_blend(out: str, frames: int | None = None, *, blend: str | None = No
     :func:`export_blend`;
     ``samples``: anti-aliasing of the moderngl backend; ``shadows``: the sun's
     shadows; ``repetition``: the repetition metric's settings (None: not measured);
-    ``lod``: False draws every agent with its full mesh. Returns ``(config, result, camera object name or None)``.
+    ``lod``: False draws every agent with its full mesh; ``strict``: the bake report's
+    warnings stop it before rendering (:func:`report_bake`). Returns ``(config, result,
+    camera object name or None)``.
     """
     with blender_output_to_stderr():        # from the import of bpy on (5.2 logs then)
         from ..gpu.preview_render import render_preview, writable_dir
@@ -218,7 +232,7 @@ def preview_blend(out: str, frames: int | None = None, *, blend: str | None = No
             from .headless_gpu import init_headless_gpu
             init_headless_gpu()
         config = config_from_scene(found, on_bake)
-        report_lod_notes(config, on_bake)
+        report_bake(config, on_bake, strict)
         crowd, note = build_crowd(found, config,       # with the scene's crowd script
                                   trust_script=trust_scripts,
                                   ignore_script=ignore_scripts)
@@ -233,19 +247,21 @@ def preview_blend(out: str, frames: int | None = None, *, blend: str | None = No
 
 
 def plan_blend(*, blend: str | None = None, scene: str | None = None, settings=_DEFAULT,
-               trust_scripts: bool = False, on_bake=None, ignore_scripts: bool = False):
+               trust_scripts: bool = False, on_bake=None, ignore_scripts: bool = False,
+               strict: bool = False):
     """What ``crowd plan --blend`` plans from: the scene's Crowd settings baked
     (:func:`open_scene`, as the exports bake them) and the camera and settings of its
     repetition metric (:func:`.cameras.metric_view`: the scene camera at the render
     size; None: the caller frames the agents). Returns ``(config, camera, settings)``.
     ``trust_scripts`` and ``ignore_scripts`` are accepted as the other commands take
-    them; no crowd is built here, so no crowd script runs."""
+    them; no crowd is built here, so no crowd script runs. ``strict``: the bake
+    report's warnings stop it (:func:`report_bake`)."""
     with blender_output_to_stderr():
         from .cameras import metric_view
         from .scene_config import config_from_scene
         found = open_scene(blend, scene)
         config = config_from_scene(found, on_bake)
-        report_lod_notes(config, on_bake)
+        report_bake(config, on_bake, strict)
         camera, settings = metric_view(found, settings)
         return config, camera, settings
 
@@ -253,12 +269,14 @@ def plan_blend(*, blend: str | None = None, scene: str | None = None, settings=_
 def snapshot_blend(out: str, frames: tuple | None = None, *, every: int,
                    blend: str | None = None, scene: str | None = None, substeps: int = 1,
                    trust_scripts: bool = False, progress=None, on_bake=None,
-                   ignore_scripts: bool = False):
+                   ignore_scripts: bool = False, strict: bool = False):
     """Write snapshots of a .blend's scene crowd (:func:`open_scene`, baked as the
     exports bake it, with its crowd script) into the folder ``out``:
     :func:`crowd_addon.core.snapshot.write_snapshots` over ``frames`` (default: the
     scene's frame range) every ``every`` frames; ``trust_scripts`` and
-    ``ignore_scripts`` as :func:`export_blend`. Returns ``(config, files written)``."""
+    ``ignore_scripts`` as :func:`export_blend`; ``strict``: the bake report's warnings
+    stop it before any snapshot (:func:`report_bake`). Returns ``(config, files
+    written)``."""
     with blender_output_to_stderr():
         from ..core.snapshot import SnapshotFolder, write_snapshots
         from .scene_config import build_crowd, config_from_scene
@@ -267,7 +285,7 @@ def snapshot_blend(out: str, frames: tuple | None = None, *, every: int,
         first, last = scene_frames(found, frames)
         folder = SnapshotFolder(out, create=True)
         config = config_from_scene(found, on_bake)
-        report_lod_notes(config, on_bake)
+        report_bake(config, on_bake, strict)
         crowd, note = build_crowd(found, config, substeps=substeps,
                                   trust_script=trust_scripts,
                                   ignore_script=ignore_scripts)
@@ -310,7 +328,7 @@ def crowd_command(argv) -> int:
             layout=args.layout, substeps=args.substeps, snapshots=args.snapshots,
             repetition=repetition_settings(args),
             trust_scripts=args.trust_scripts, ignore_scripts=args.ignore_scripts,
-            progress=progress_printer("crowd export"),
+            strict=args.strict, progress=progress_printer("crowd export"),
             on_bake=lambda done, total, message: print(
                 f"crowd export: {message}", file=sys.stderr, flush=True))
     except CrowdError as exc:

@@ -64,7 +64,7 @@ def check_export(scene, path, frames) -> tuple:
 def export_scene(scene, path, frames, agents=None, progress=None, on_bake=None,
                  depsgraph=None, layout="instanced", substeps=1, snapshots=None,
                  repetition=RepetitionSettings(), trust_script=False,
-                 ignore_script=False):
+                 ignore_script=False, strict=False):
     """Bake ``scene``'s Crowd settings and export the shot to ``path`` in one call
     (:func:`export_steps` run to the end).
 
@@ -81,7 +81,10 @@ def export_scene(scene, path, frames, agents=None, progress=None, on_bake=None,
     progress : optional ``progress(stage, done, total)`` after each recorded frame
         (``"simulate"``) and each step of the writing.
     on_bake : optional ``on_bake(done, total, message)`` before each bake step
-        (:func:`.scene_config.config_steps`).
+        (:func:`.scene_config.config_steps`), then with each note of the bake report
+        (``config.bake_report``) as ``warning: ...`` or ``note: ...``.
+    strict : the bake report's warnings stop the export before anything is written
+        (:class:`~crowd_addon.core.bake_report.BakeWarnings`, ``--strict``).
     depsgraph : evaluated depsgraph for the agent sources (default: the scene's).
     repetition : the repetition metric's settings (None: not measured), measured
         through the scene camera at the scene's render size when it has one
@@ -99,7 +102,7 @@ def export_scene(scene, path, frames, agents=None, progress=None, on_bake=None,
     the export the same way.
     """
     steps = export_steps(scene, path, frames, agents, depsgraph, layout, substeps, snapshots,
-                         repetition, trust_script, ignore_script)
+                         repetition, trust_script, ignore_script, strict)
     try:
         while True:
             try:
@@ -117,13 +120,15 @@ def export_scene(scene, path, frames, agents=None, progress=None, on_bake=None,
 
 def export_steps(scene, path, frames, agents=None, depsgraph=None, layout="instanced",
                  substeps=1, snapshots=None, repetition=RepetitionSettings(),
-                 trust_script=False, ignore_script=False):
+                 trust_script=False, ignore_script=False, strict=False):
     """The export of :func:`export_scene` as a generator, one unit of work per
     ``next()``: returns ``(config, result)`` (``StopIteration.value``).
 
     Yields ``(stage, done, total, message)``: stage ``"bake"`` before each bake step
     (``message`` as :func:`.scene_config.config_steps`), ``"simulate"`` after each
-    recorded frame, then each step of :func:`crowd_addon.usd.export_steps`
+    recorded frame, then each step of :func:`crowd_addon.usd.export_steps`; after the
+    bake, stage ``"bake"`` once per note of its report (``message``: the note's
+    ``line``; ``strict``: then a report with warnings stops it, nothing written)
     (``message`` is the stage). The output and the frame range are checked when it is
     called (CrowdError); a fault found later (the agent count, a missing proxy mesh:
     checked once baked, before recording) is raised by ``next()``.
@@ -138,13 +143,14 @@ def export_steps(scene, path, frames, agents=None, depsgraph=None, layout="insta
     check_layout(layout)
     return _export_steps(scene, path, frames, agents, depsgraph, layout,
                          check_substeps(substeps), snapshots, repetition, trust_script,
-                         ignore_script)
+                         ignore_script, strict)
 
 
 def _export_steps(scene, path, frames, agents, depsgraph, layout, substeps, snapshots,
-                  repetition, trust_script, ignore_script=False):
+                  repetition, trust_script, ignore_script=False, strict=False):
     import dataclasses
 
+    from ..core.bake_report import report_of
     from ..core.snapshot import ShotSnapshots
     from ..core.crowd import Crowd
     from ..core.recorder import Recorder
@@ -163,8 +169,10 @@ def _export_steps(scene, path, frames, agents, depsgraph, layout, substeps, snap
             yield "bake", done, total, message
     finally:
         bake.close()
-    for note in config.lod_notes:       # LOD levels the silhouette check refused
-        yield "bake", 1, 1, note
+    report = report_of(config)          # the bake's, meshes' and LOD levels' notes
+    for note in report:
+        yield "bake", 1, 1, note.line
+    report.check_strict(strict)
     check_output(config, path, agents, layout)
     crowd, note = scene_config.build_crowd(scene, config, substeps=substeps,
                                            trust_script=trust_script,
@@ -372,7 +380,7 @@ class CROWD_OT_export_usd(bpy.types.Operator, ExportHelper):
 
         wm.progress_begin(0, 1000)
         try:
-            _config, result = export_scene(
+            config, result = export_scene(
                 scene, path, frames, agents=self.agents or None, progress=update,
                 on_bake=lambda done, total, _what: update("bake", done, total),
                 depsgraph=context.evaluated_depsgraph_get(), layout=self.usd_layout,
@@ -384,7 +392,7 @@ class CROWD_OT_export_usd(bpy.types.Operator, ExportHelper):
             raise
         finally:
             wm.progress_end()
-        return self._finish(result)
+        return self._finish(result, config)
 
     def modal(self, context, event):
         job = self._job
@@ -408,7 +416,7 @@ class CROWD_OT_export_usd(bpy.types.Operator, ExportHelper):
             raise
         if not more:
             self._end(context)
-            return self._finish(job.result)
+            return self._finish(job.result, job.config)
         value = job.progress
         if value is not None:
             context.window_manager.progress_update(value)
@@ -443,8 +451,12 @@ class CROWD_OT_export_usd(bpy.types.Operator, ExportHelper):
         _remove_folders(self._made)
         self._made = ()
 
-    def _finish(self, result):
+    def _finish(self, result, config=None):
+        from ..core.bake_report import report_of
         self._made = ()
+        if config is not None:          # the bake's notes, as the Bake operator reports them
+            for note in report_of(config):
+                self.report({"WARNING" if note.severity == "warning" else "INFO"}, note)
         first, last = result.frames
         self.report({"INFO"}, f"Crowd: wrote {result.agents:,} agents, frames {first}-"
                               f"{last} to {result.path} and {len(result.files) - 1} "

@@ -126,10 +126,11 @@ class CROWD_OT_bake(bpy.types.Operator):
         context.workspace.status_text_set(None)
 
     def _finish(self, context, config, notes=()):
+        from ..core.bake_report import WARNING, report_of
         pv = preview.start(context.scene, config)
         c = pv.crowd
-        for note in notes:              # e.g. keys too far apart to be interpolated
-            self.report({"WARNING"}, note)
+        for note in report_of(config):  # e.g. poses between frames that miss the action's
+            self.report({"WARNING" if note.severity == WARNING else "INFO"}, note)
         self.report({"INFO"}, f"Crowd: {len(config.clips)} clips, {c.streams.count} streams, "
                               f"{c.uniques.count} uniques, {c.agents.count} agents")
         return {"FINISHED"}

@@ -33,6 +33,7 @@ import numpy as np
 import bpy
 
 from .. import api
+from ..core.bake_report import report_of
 from ..core.crowd import Crowd
 from ..core.errors import CrowdError
 from . import prefs, scene_config, shared_gl
@@ -63,6 +64,7 @@ class Preview:
     renderer: object = None
     draw_error: str = ""
     script_note: str = ""          # why the scene's crowd script did not run
+    bake_report: object = None     # core.bake_report.BakeReport of the crowd's bake
     render_frame: int | None = None    # the frame the Render Crowd data shows
     render_stats: object = None        # render_crowd.RenderStats of the last sync
     render_error: str = ""
@@ -80,6 +82,10 @@ class Preview:
             return f"Paused: {self.paused}"
         if self.stale:
             return "Settings changed since the crowd was built: Bake to update"
+        if self.bake_report is not None and self.bake_report.warnings:
+            first = self.bake_report.warnings[0]
+            return (f"Bake: {self.bake_report.summary()} (the first: "
+                    f"{first[:120]}{'...' if len(first) > 120 else ''})")
         return ""
 
 
@@ -120,6 +126,7 @@ def start(scene, config=None) -> Preview:
                  tuple(a.name for a in scene_config.scene_actions(s)),
                  settings_fingerprint(s))
     pv.script_note = note
+    pv.bake_report = report_of(config)
     if crowd.agents.count and not config.meshes:
         pv.draw_error = "no proxy mesh chosen: agents run but are not drawn"
     old = _PREVIEWS.pop(scene.name, None)

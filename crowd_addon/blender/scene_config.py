@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 
+from ..core.bake_report import WARNING, BakeReport
 from ..core.config import PALETTE_COLUMNS, CrowdConfig
 from ..core.controller_graph import InputSpec, NodeSpec, TransitionSpec, build_tree
 from ..core.errors import CrowdError
@@ -264,16 +265,20 @@ def config_steps(scene, depsgraph=None, notes=None):
     meshes, then the agents) and returns the :class:`CrowdConfig`
     (``StopIteration.value``). Raises CrowdError on bad input.
 
-    Actions are baked at the scene's fps times *Samples per Frame*; the bake's remarks
-    (``BakeResult.notes``) and the proxy meshes' (``ProxyMesh.notes``: vertices that had
-    more than eight bone influences) are appended to the list ``notes`` when one is
-    given."""
+    Actions are baked at the scene's fps times *Samples per Frame*. The bake report
+    (:class:`~crowd_addon.core.bake_report.BakeReport`, carried as
+    ``config.bake_report``) holds the bake's remarks (``BakeResult.notes``: poses
+    between frames that miss the action's, frame_set sampling, resampling), the proxy
+    meshes' (``ProxyMesh.notes``: vertices that had more than eight bone influences,
+    kind ``"mesh"``) and the LOD levels the silhouette check refused (kind ``"lod"``);
+    its notes are also appended to the list ``notes`` when one is given."""
     from . import agents as agent_mod
     from .armature import skeleton_from_armature
     from .show_data import look_targets_from_scene, show_from_scene
 
     s = _settings(scene)
     chars = _characters(scene, s)
+    found = []                          # the bake's and the meshes' remarks, in order
     skeletons = {c.name: skeleton_from_armature(c.armature, name=c.name) for c in chars}
     clips = clip_names(chars)
     trees = {c.name: _trees(scene, c, skeletons[c.name], clips) for c in chars}
@@ -292,7 +297,7 @@ def config_steps(scene, depsgraph=None, notes=None):
             f" for character {c.name!r}" if several else "")
         try:
             clip = _bake_action(scene, c.armature, act, skeletons[c.name], fps,
-                                s.samples_per_frame, [] if notes is None else notes)
+                                s.samples_per_frame, found)
             name = clips[c.name, act.name]
             cfg.add_clip(clip if clip.name == name else dataclasses.replace(clip, name=name))
         except CrowdError as e:
@@ -311,7 +316,7 @@ def config_steps(scene, depsgraph=None, notes=None):
     for k, c in enumerate(chars):
         yield len(jobs) + k, total, "reading the proxy mesh" + (
             f" of character {c.name!r}" if several else "")
-        _add_mesh(cfg, c, skeletons[c.name], s.lod_cards, [] if notes is None else notes)
+        _add_mesh(cfg, c, skeletons[c.name], s.lod_cards, found)
         _add_palettes(cfg, c)
     yield total - 1, total, "placing agents"
     dg = depsgraph if depsgraph is not None else _depsgraph(scene)
@@ -323,8 +328,12 @@ def config_steps(scene, depsgraph=None, notes=None):
     cfg.look_targets = look_targets_from_scene(scene)
     cfg.look_lag, cfg.look_max_lag = s.show.look_lag.lower(), s.show.look_max_lag
     cfg.show = show_from_scene(scene, dg, cfg, placed)
-    if notes is not None:           # LOD levels the silhouette check refused
-        notes.extend(n for n in cfg.lod_notes if n not in notes)
+    report = BakeReport()
+    report.extend(found, "mesh", WARNING)       # Notes keep their own kind
+    report.extend(cfg.lod_notes, "lod", WARNING)    # levels the silhouette check refused
+    cfg.bake_report = report
+    if notes is not None:
+        notes.extend(n for n in report if n not in notes)
     return cfg
 
 
@@ -407,7 +416,8 @@ def build_crowd(scene, config, skinning="gpu", substeps=1, trust_script=False,
 
 def config_from_scene(scene, progress=None, depsgraph=None, notes=None) -> CrowdConfig:
     """Build the scene's :class:`CrowdConfig`; ``progress(done, total, message)`` is
-    called before each step; the bake's remarks go to the list ``notes`` if given."""
+    called before each step. Its bake report is ``config.bake_report``
+    (:func:`config_steps`); its notes also go to the list ``notes`` if given."""
     steps = config_steps(scene, depsgraph, notes)
     while True:
         try:

@@ -332,14 +332,19 @@ def between_keys_note(name: str, times: np.ndarray, keys: np.ndarray, evaluate, 
               if rot[ir, br] > math.pi / 2 else "")
     worst = ", ".join(f"{0.5 * (times[i] + times[i + 1]):g}" for i in order[:5].tolist())
     n = len(flagged)
+    misses = []
+    if pos[ip, bp] > position_tolerance:
+        misses.append(f"halfway between the keys at frames {span(ip)} bone {names[bp]!r}'s "
+                      f"head is {pos[ip, bp]:.3g} scene units off")
+    if rot[ir, br] > rotation_tolerance:
+        misses.append(f"halfway between the keys at frames {span(ir)} bone {names[br]!r} "
+                      f"is turned {rot[ir, br]:.3g} rad off{around}")
     text = (f"action {name!r}: between frames the crowd's pose misses the action's: "
-            f"halfway between the keys at frames {span(ip)} bone {names[bp]!r} is "
-            f"{pos[ip, bp]:.3g} scene units off, and halfway between the keys at frames "
-            f"{span(ir)} bone {names[br]!r} is turned {rot[ir, br]:.3g} rad off{around}; "
-            f"{n} of {len(times) - 1} key interval{'s' if len(times) != 2 else ''} "
-            f"miss{'' if n != 1 else 'es'} by more than {position_tolerance:g} scene units "
-            f"or {rotation_tolerance:g} rad (worst at frames {worst}); motion blur "
-            f"(substeps) and crowds playing at other speeds show these poses")
+            f"{'; '.join(misses)}; {n} of {len(times) - 1} key "
+            f"interval{'s' if len(times) != 2 else ''} miss{'' if n != 1 else 'es'} by "
+            f"more than {position_tolerance:g} scene units or {rotation_tolerance:g} rad "
+            f"(worst halfway at frames {worst}); motion blur (substeps) and crowds playing "
+            f"at other speeds show these poses")
     if advice is not None:
         return (text + f"; bake with {advice} samples per frame (Crowd > Settings > "
                        f"Samples per Frame) to follow it")
