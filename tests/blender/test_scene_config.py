@@ -266,8 +266,8 @@ def test_timing_variation_makes_speed_streams_that_play_as_blender_does(rig_scen
      r"stream names must be unique and not empty \('w'\)"),
     (lambda s, a: (cs.add_stream(s, "w", a["walk"]), setattr(s, "lod_far", 20.0)),
      r"Crowd settings: LOD 2 From \(20 m\) must be farther than LOD 1 From \(30 m\)"),
-    (lambda s, a: (cs.add_stream(s, "w", a["walk"]), setattr(s, "lod_card", 90.0)),
-     r"Crowd settings: Cards From \(90 m\) must be farther than LOD 2 From \(90 m\)"),
+    (lambda s, a: (cs.add_stream(s, "w", a["walk"]), setattr(s, "lod_card", 60.0)),
+     r"Crowd settings: Cards From \(60 m\) must be farther than LOD 2 From \(60 m\)"),
 ])
 def test_bad_scenes_name_what_is_at_fault(rig_scene, setup, message):
     """Scene-level faults; the graph's own (unknown inputs, input counts, cycles, masks
@@ -285,7 +285,7 @@ def test_far_cards_can_be_turned_off(rig_scene):
     cs.add_stream(s, "walk", acts["walk"])
     s.lod_cards, s.lod_card = False, 10.0          # ignored when off
     cfg = scene_config.config_from_scene(scene)
-    assert cfg.lod_distances == (30.0, 90.0) and len(cfg.meshes["Rig"]) == 3
+    assert cfg.lod_distances == (30.0, 60.0) and len(cfg.meshes["Rig"]) == 3
     assert not any(lv.name.endswith(".card") for lv in cfg.meshes["Rig"])
 
 
