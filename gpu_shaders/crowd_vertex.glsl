@@ -10,8 +10,9 @@
  * colours that material (column `col.a`, 255: none), the agent's palette colour.
  * One function for every vertex stage that
  * draws or captures the crowd (crowd_vert.glsl, capture_vert.glsl), so they cannot
- * disagree. Needs block_layout.glsl, pose_layout.glsl, pose_rows.glsl, agents.glsl
- * and skinning.glsl before it.
+ * disagree. An agent that looks at something (look_at.glsl) is skinned from its
+ * pose row with its look applied. Needs block_layout.glsl, pose_layout.glsl,
+ * pose_rows.glsl, agents.glsl, skinning.glsl and look_at.glsl before it.
  */
 
 /* `base` tinted by `tint` in proportion to how grey it is: saturation 0 takes the tint
@@ -30,10 +31,21 @@ void crowd_vertex(int agent_id)
   int row = agent_pose_row(agent.kind, agent.ref, agent.offset);
   vec3 p, n;
 #if INFLUENCES > 4
-  skin_vertex(row, bone_idx, bone_w, bone_idx2, bone_w2, pos, nor, p, n);
+  uvec4 bones2 = bone_idx2;
+  vec4 weights2 = bone_w2;
 #else
-  skin_vertex(row, bone_idx, bone_w, uvec4(0u), vec4(0.0), pos, nor, p, n);
+  uvec4 bones2 = uvec4(0u);
+  vec4 weights2 = vec4(0.0);
 #endif
+  vec4 look = look_texel(agent_id, 0);
+  float weight = look_weight(look);
+  if (weight > 0.0) {
+    skin_vertex_looking(agent_id, agent, look, weight, row, bone_idx, bone_w, bones2,
+                        weights2, pos, nor, p, n);
+  }
+  else {
+    skin_vertex(row, bone_idx, bone_w, bones2, weights2, pos, nor, p, n);
+  }
   vec2 turn = agent_turn(agent);
   v_world = turn_z(turn, p * agent.scale) + agent.position;
   v_normal = turn_z(turn, n);

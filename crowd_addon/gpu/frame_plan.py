@@ -23,6 +23,7 @@ from ..core.lod import agent_heights, switch_pixels
 from ..core.pose_storage import TextureRegion
 from .draw_lists import DrawLists, proxy_bounds
 from .instances import InstanceData
+from .look_data import LookData
 from .programs import SKIN_GROUP
 from .proxies import copies_per_instance, crowd_proxies
 from .skeleton_data import batch_image, fill_batch, skeleton_image
@@ -32,7 +33,9 @@ __all__ = ["FramePlan", "FrameStats", "TextureSpec", "SkinningWork", "Draw", "Ca
 
 #: Sampler of the draw program -> name of the texture it reads.
 DRAW_SAMPLERS = {"pose_tex": "pose", "agent_tex": "agents", "agent_list_tex": "lists",
-                 "shadow_tex": "shadow", "shadow_view_tex": "shadow_view"}
+                 "shadow_tex": "shadow", "shadow_view_tex": "shadow_view",
+                 "look_tex": "looks", "look_target_tex": "look_targets",
+                 "look_chain_tex": "look_chains"}
 #: Sampler of the skinning-rows program -> name of the texture it reads (``batch``: the
 #: batch texture the backend keeps or makes for :class:`SkinningWork`).
 SKIN_SAMPLERS = {"local_tex": "local", "skeleton_tex": "skeletons", "batch_tex": "batch"}
@@ -43,8 +46,9 @@ class FrameStats:
     """What the last ``sync`` / ``render`` of a renderer did.
 
     ``pose_bytes``/``local_bytes``: pose / local-pose texture bytes written;
-    ``instance_bytes``, ``list_bytes``, ``batch_bytes``: agent texture, draw list
-    and skinning batch bytes; ``skinned_rows``: pose rows the compute shader wrote;
+    ``instance_bytes``, ``list_bytes``, ``batch_bytes``, ``look_bytes``: agent
+    texture, draw list, skinning batch and looks texture bytes (the last only in a
+    frame where a look started or stopped); ``skinned_rows``: pose rows the compute shader wrote;
     ``draws``, ``instances``, ``vertices``: instanced calls, agents and skinned
     vertices of the last render. Bytes are what the backend sent (a backend without
     partial texture writes adds a row number to each row).
@@ -55,6 +59,7 @@ class FrameStats:
     instance_bytes: int = 0
     list_bytes: int = 0
     batch_bytes: int = 0
+    look_bytes: int = 0
     skinned_rows: int = 0
     draws: int = 0
     instances: int = 0
@@ -63,7 +68,7 @@ class FrameStats:
     @property
     def upload_bytes(self) -> int:
         return (self.pose_bytes + self.local_bytes + self.instance_bytes + self.list_bytes
-                + self.batch_bytes)
+                + self.batch_bytes + self.look_bytes)
 
 
 @dataclass(frozen=True)
@@ -148,6 +153,8 @@ class FramePlan:
         #: ``u_pose_layout`` of every program reading the pose texture
         self.pose_layout = (lay.height, lay.row_texels, lay.max_offset, lay.streams)
         self.instances = InstanceData(view, limit)
+        #: the looks' textures (:mod:`.look_data`)
+        self.looks = LookData(view, limit)
         self.proxies = crowd_proxies(view)
         #: the largest agent scale: bounds and reaches grow with it
         self.max_scale = float(view.agents.scale.max(initial=1.0))
@@ -179,6 +186,13 @@ class FramePlan:
         specs += [TextureSpec("agents", (inst.width, inst.height), "RGBA32F",
                               inst.texture_image()),
                   TextureSpec("lists", (self.lists.width, self.lists.height), "R32I")]
+        looks = self.looks
+        specs += [TextureSpec("looks", (looks.width, looks.height), "RGBA32F",
+                              looks.texture_image()),
+                  TextureSpec("look_targets", looks.targets_image.shape[1::-1], "RGBA32F",
+                              looks.targets_image),
+                  TextureSpec("look_chains", looks.chains_image.shape[1::-1], "RGBA32F",
+                              looks.chains_image)]
         return specs
 
     def meshes(self) -> dict:
@@ -193,8 +207,10 @@ class FramePlan:
 
     # ------------------------------------------------------------------- frame
     def pose_regions(self) -> tuple:
-        """``u_pose_regions``: (first unique row, first slot row, ring slice, 0)."""
-        return (self.layout.unique_base, self.layout.slot_base, self.view.ring_slice, 0)
+        """``u_pose_regions``: (first unique row, first slot row, ring slice, frame);
+        the frame is what the looks are worked out at (gpu_shaders/look_at.glsl)."""
+        return (self.layout.unique_base, self.layout.slot_base, self.view.ring_slice,
+                int(self.view.frame))
 
     def take_pose_regions(self) -> list:
         """Core's upload regions since the last take, for :attr:`upload_target`."""
@@ -209,6 +225,11 @@ class FramePlan:
         if self.instances.moved:
             self._list_key = None
         return regions
+
+    def take_look_regions(self, max_regions: int | None) -> list:
+        """Looks texture regions of the agents whose look state changed since the last
+        take (nothing unless ``looks.version`` moved)."""
+        return self.looks.update(self.view, max_regions)
 
     def take_skinning(self) -> SkinningWork | None:
         """The skinning-rows pass for the rows pending in core (GPU skinning), or None

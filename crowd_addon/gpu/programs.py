@@ -78,7 +78,7 @@ class ProgramSpec:
 CROWD_DRAW = ProgramSpec(
     name="crowd_draw",
     vertex=("block_layout.glsl", "pose_layout.glsl", "pose_rows.glsl", "agents.glsl",
-            "skinning.glsl", "crowd_vertex.glsl", "crowd_vert.glsl"),
+            "skinning.glsl", "look_at.glsl", "crowd_vertex.glsl", "crowd_vert.glsl"),
     fragment=("crowd_frag.glsl",),
     vertex_in=((0, "VEC3", "pos"), (1, "VEC3", "nor"), (2, "UVEC4", "bone_idx"),
                (3, "VEC4", "bone_w"), (6, "VEC4", "col")),
@@ -90,7 +90,8 @@ CROWD_DRAW = ProgramSpec(
                     ("VEC4", "u_light")),
     samplers=((0, "FLOAT_2D", "pose_tex"), (1, "FLOAT_2D", "agent_tex"),
               (2, "INT_2D", "agent_list_tex"), (3, "FLOAT_2D", "shadow_tex"),
-              (4, "FLOAT_2D", "shadow_view_tex")),
+              (4, "FLOAT_2D", "shadow_view_tex"), (5, "FLOAT_2D", "look_tex"),
+              (6, "FLOAT_2D", "look_target_tex"), (7, "FLOAT_2D", "look_chain_tex")),
     fragment_out=((0, "VEC4", "frag_color"),),
     defines=("INFLUENCES", "SHADOWS", "ENCODE_SRGB"),
 )

@@ -129,6 +129,8 @@ class CrowdRenderer:
         s.instance_bytes = self._write_rows(self.textures["agents"],
                                             plan.instances.block_rows,
                                             plan.take_instance_regions(self.MAX_ROW_WRITES))
+        s.look_bytes = self._write_rows(self.textures["looks"], plan.looks.block_rows,
+                                        plan.take_look_regions(self.MAX_ROW_WRITES))
         work = plan.take_skinning()
         if work is not None:
             s.batch_bytes, s.skinned_rows = self._skin(work), work.count
