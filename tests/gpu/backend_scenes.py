@@ -101,6 +101,34 @@ def lods(make):
     return out
 
 
+def looks(make):
+    """Agents looking at a moving target (a neck, head chain), blending in, held and
+    looking away, over six frames: every agent against core's skinning of
+    ``Crowd.agent_rows`` (the looks applied on the CPU), and the look bytes each sync
+    sends (only when a look starts or stops)."""
+    import math
+    from crowd_addon.core.look_at import LookRig, LookTarget
+    cfg = c.make_config(M=8, agents=20)
+    cfg.look_rigs["fan"] = LookRig(("neck", "head"), (0.4, 0.6),
+                                   yaw_limit=math.radians(70), pitch_limit=math.radians(35))
+    t = np.arange(60.0)
+    cfg.look_targets["ball"] = LookTarget(
+        "ball", 0, np.c_[3 + 8 * np.cos(t / 7), 3 + 8 * np.sin(t / 7), 2 + np.sin(t / 4)],
+        smoothing=3.0)
+    crowd = c.Crowd(cfg)
+    r, out = make(crowd, None), {}
+    agents = np.arange(crowd.agents.count)
+    crowd.look_at(agents[::2], "ball", blend=3)
+    crowd.look_at(agents[1::4], "ball", blend=0, hold=3)
+    for f in range(6):
+        if f == 4:
+            crowd.look_away(agents[::4], blend=2)
+        crowd.step()
+        out[f"gpu/look_bytes{f}"] = np.array(r.sync().look_bytes)
+        _positions(out, f"frame{f}", r, crowd, agents)
+    return out
+
+
 def many_influences(make, k=6):
     """A body with ``k`` bones a vertex (up to eight are kept exactly): every agent of
     the full mesh against core skinning with the vertices' own ``k`` influences, and

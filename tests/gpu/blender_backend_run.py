@@ -75,6 +75,7 @@ def main(path):
             "transitions_cpu": lambda: scenes.transitions(make, "cpu"),
             "transitions_gpu": lambda: scenes.transitions(make, "gpu"),
             "lods": lambda: scenes.lods(make),
+            "looks": lambda: scenes.looks(make),
             "many_influences": lambda: scenes.many_influences(make),
             "flat": lambda: scenes.wrapped(make, 16384),
             "wrapped": lambda: scenes.wrapped(make, 256),

@@ -53,6 +53,17 @@ def test_streamed_agents_match_cpu_skinning_and_only_dirty_rows_travel(blender, 
     assert [int(d[f"gpu/instance_bytes{f}"]) for f in range(3)] == [0, 3 * (48 + 4), 0]
 
 
+def test_looking_agents_match_cpu_skinning_to_1e5(blender, h):
+    """The look stage in Blender's vertex stage (gpu_shaders/look_at.glsl) against
+    core's CPU skinning of the looked rows, frame by frame, within 1e-5 m."""
+    d = blender("looks")
+    for f in range(6):
+        assert np.abs(d[f"gpu/frame{f}"] - d[f"ref/frame{f}"]).max() <= 1e-5
+    # the looks' texels go up at the first sync and when looks change, not each frame
+    sent = [int(d[f"gpu/look_bytes{f}"]) for f in range(6)]
+    assert sent[1:4] == [0, 0, 0] and sent[4] > 0 and sent[5] == 0
+
+
 def test_unique_agents_match_cpu_skinning(blender, h):
     d = blender("unique")
     h.assert_close_relative(d["gpu/unique"], d["ref/unique"])
