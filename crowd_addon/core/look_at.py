@@ -44,7 +44,7 @@ from .errors import CrowdError
 from .skeleton import Skeleton
 
 __all__ = ["LookRig", "LookTarget", "LookChain", "AgentLooks", "agent_lags", "look_turns",
-           "apply_look", "head_direction"]
+           "look_angles", "turns_of", "apply_look", "head_direction"]
 
 _Z = np.array([0.0, 0.0, 1.0])
 
@@ -244,8 +244,13 @@ def look_turns(rows, chain: LookChain, targets, weights) -> np.ndarray:
     """(n, K, 3, 4) each chain bone's turn about its (moved) pivot, in model space, for
     agents drawn with skinning rows ``rows`` (n, B, 3, 4) looking at ``targets`` (n, 3,
     in their model space) with ``weights`` (n,) 0..1 (module doc, steps 1-3)."""
+    dyaw, dpitch = look_angles(rows, chain, targets, weights)
+    return turns_of(rows, chain, dyaw, dpitch)
+
+
+def look_angles(rows, chain: LookChain, targets, weights) -> tuple:
+    """``(dyaw, dpitch)`` (n,) each: the head's turn (module doc, step 2), weighted."""
     rows = np.asarray(rows, np.float64)
-    n, k = rows.shape[0], chain.index.size
     pivot, f = head_direction(rows, chain)
     d = np.asarray(targets, np.float64) - pivot
     d /= np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-9)
@@ -258,6 +263,17 @@ def look_turns(rows, chain: LookChain, targets, weights) -> np.ndarray:
     w = np.clip(np.asarray(weights, np.float64), 0.0, 1.0)
     dyaw = w * (np.mod(yaw_d - yaw_f + np.pi, 2 * np.pi) - np.pi)
     dpitch = w * (pitch_d - pitch_f)
+    return dyaw, dpitch
+
+
+def turns_of(rows, chain: LookChain, dyaw, dpitch) -> np.ndarray:
+    """:func:`look_turns` of the head's turn ``(dyaw, dpitch)`` (:func:`look_angles`;
+    Render Crowd passes them quantised: docs/gpu.md)."""
+    rows = np.asarray(rows, np.float64)
+    n, k = rows.shape[0], chain.index.size
+    f = head_direction(rows, chain)[1]
+    left = chain.left
+    dyaw, dpitch = np.asarray(dyaw, np.float64), np.asarray(dpitch, np.float64)
     # Q = yaw about +Z after pitch about the head's horizontal right axis
     right = np.cross(f, _Z)
     norm = np.linalg.norm(right, axis=-1, keepdims=True)
