@@ -4,8 +4,9 @@ F12 (Workbench, EEVEE, Cycles), viewport renders and playblasts know nothing of 
 preview's GPU drawing, so with ``scene.crowd.render_crowd`` on the crowd is also made
 of ordinary Blender data, with the paper's sharing kept:
 
-* one **pose mesh** per pose in use: a (part, level of detail, pose texture row)
-  triple, a part being a mesh variant of a character or one of its props
+* one **pose mesh** per pose in use: a (part, level of detail, pose texture row, aim
+  class) key (the aim class: a looking agent's head turn rounded to
+  :data:`AIM_STEP`, 0 for none: :func:`aim_classes`), a part being a mesh variant of a character or one of its props
   (:mod:`crowd_addon.core.bodies`). Agents of a stream at the same offset read the
   same row, so they share one mesh; an agent in a transition or playing a unique has
   a row of its own. A prop is a piece of its own, not merged into the body as the GPU
@@ -41,6 +42,7 @@ use (not the agents) and a ``foreach_set`` each, plus three point attributes.
 from __future__ import annotations
 
 import hashlib
+import math
 import time
 from dataclasses import dataclass
 
@@ -49,6 +51,7 @@ import numpy as np
 import bpy
 
 from ..core.errors import CrowdError
+from ..core.look_at import apply_look, look_angles, turns_of
 from ..core.skinning import skin_vertices
 from ..core.lod import agent_heights, levels_from_pixels, projected_heights, switch_pixels
 from ..gpu.draw_lists import view_depths
@@ -311,6 +314,49 @@ def _pieces(crowd, scene):
             np.concatenate(level), levels, palettes)
 
 
+#: Render Crowd's aim step: a looking agent's head turn (yaw, pitch) is rounded to it,
+#: so agents of one pose whose turns round alike share a pose mesh (docs/gpu.md)
+AIM_STEP = math.radians(2.0)
+
+
+def aim_classes(crowd, step: float = AIM_STEP) -> tuple:
+    """``(aim, turns)``: per agent its aim class (0: not turned: no look, or a turn
+    that rounds to nothing) and per class the head's turn ``(dyaw, dpitch)``, each a
+    whole number of ``step`` (core/look_at.py's turn of that agent's look, rounded)."""
+    view = crowd.view
+    n = view.agent_count
+    ids = np.arange(n)
+    w = view.looks.weights(view.frame, ids)
+    angles = np.zeros((n, 2))
+    for sk, chain in enumerate(view.look_chains):
+        pick = np.flatnonzero((w > 0) & (view.agent_skeleton == sk))
+        if chain is None or not pick.size:
+            continue
+        rows = view.skinning.rows(view.agent_rows_index(pick))
+        angles[pick] = np.c_[look_angles(rows, chain, crowd.look_targets_model(pick),
+                                         w[pick])]
+    q = np.rint(angles / step).astype(np.int64)
+    turned = (q != 0).any(1)
+    aim = np.zeros(n, np.int64)
+    pairs, inverse = np.unique(q[turned], axis=0, return_inverse=True)
+    aim[turned] = inverse.reshape(-1) + 1
+    return aim, np.r_[np.zeros((1, 2)), pairs.reshape(-1, 2) * step]
+
+
+def _aimed_rows(crowd, agents, aims, turns) -> np.ndarray:
+    """Skinning rows of ``agents`` (one skeleton), their looks as aim classes
+    ``aims`` (:func:`aim_classes`)."""
+    view = crowd.view
+    rows = view.skinning.rows(view.agent_rows_index(agents))
+    m = np.flatnonzero(aims > 0)
+    if m.size:
+        chain = view.look_chains[int(view.agent_skeleton[agents[0]])]
+        t = turns[aims[m]]
+        rows[m] = apply_look(rows[m], chain, turns_of(rows[m], chain, t[:, 0], t[:, 1])) \
+            .astype(rows.dtype)
+    return rows
+
+
 def sync(scene, crowd) -> RenderStats:
     """Make the render data (see the module docstring) show ``crowd`` at its current
     frame; returns :class:`RenderStats`."""
@@ -319,7 +365,10 @@ def sync(scene, crowd) -> RenderStats:
     n = agent.size
     rows = np.asarray(crowd.view.agent_rows_index(), np.int64)[agent]
     drawn = np.array([bool(lv) for lv in levels], bool)[part] if n else np.zeros(0, bool)
-    key = (rows * len(levels) + part) * 16 + lod
+    # a looking agent's pose meshes are its pose's turned to its aim class
+    aim, turns = aim_classes(crowd)
+    classes = turns.shape[0]
+    key = ((rows * len(levels) + part) * 16 + lod) * classes + aim[agent]
     keys, first, pose_of_piece = np.unique(np.where(drawn, key, -1), return_index=True,
                                            return_inverse=True)
     real = keys >= 0
@@ -333,12 +382,14 @@ def sync(scene, crowd) -> RenderStats:
     existing = _Existing(coll)
     for k in np.unique(part[drawn]):
         for level in np.unique(lod[drawn & (part == k)]):
-            sel = np.flatnonzero(real & (((keys // 16) % len(levels)) == k)
-                                 & ((keys % 16) == level))
+            base = keys // classes
+            sel = np.flatnonzero(real & (((base // 16) % len(levels)) == k)
+                                 & ((base % 16) == level))
             pieces = first[sel]
             proxy = levels[k][int(level)]
             verts = skin_vertices(proxy.positions, proxy.bone_indices, proxy.bone_weights,
-                                  crowd.view.agent_rows(agent[pieces])).astype(np.float32)
+                                  _aimed_rows(crowd, agent[pieces], keys[sel] % classes,
+                                              turns)).astype(np.float32)
             meshes = existing.meshes_for(proxy, int(k), int(level), pieces.size,
                                          palettes[k])
             for j, mesh, co in zip(sel - offset, meshes, verts):
