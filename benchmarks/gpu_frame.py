@@ -28,6 +28,9 @@ that deep in a 540-pixel image); LODs off: the full mesh for every agent. Prints
   (a ground plane and 24 terraces around the crowd, ~9k triangles, more than the
   demo's 5,436), interleaved; the extra time over the crowd alone (target <= 25%),
   and with the sun's shadows on as well;
+* ``look_at_overhead``: 65,000 agents with LODs all looking at a target circling
+  above the crowd (neck and head turned in the vertex stage) over none looking, same
+  crowd and renderer, interleaved (target <= 1.10; ``--look-only`` prints just it);
 * with the ``bpy`` module, the Render Crowd path (``crowd_addon.blender.render_crowd``:
   pose meshes skinned on the CPU and written into Blender meshes for F12) at 2,000 and
   65,000 agents through the camera above: the first sync (meshes made) and the
@@ -36,7 +39,7 @@ that deep in a 540-pixel image); LODs off: the full mesh for every agent. Prints
 
 then one line of JSON with the figures.
 
-    .venv/bin/python benchmarks/gpu_frame.py [--quick] [--backend moderngl|blender]
+    .venv/bin/python benchmarks/gpu_frame.py [--quick] [--look-only] [--backend moderngl|blender]
                                              [--size 960x540] [--agents 1000,10000,65000]
 """
 
@@ -54,6 +57,7 @@ import numpy as np
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
 from crowd_addon.core import ClipPlayer, Crowd, CrowdConfig  # noqa: E402
+from crowd_addon.core.look_at import LookRig, LookTarget  # noqa: E402
 from crowd_addon.core.mesh import CARD  # noqa: E402
 from crowd_addon.core.synthetic import humanoid, humanoid_mesh, periodic_clip  # noqa: E402
 from crowd_addon.gpu.backends import BACKENDS, make_renderer  # noqa: E402
@@ -67,9 +71,18 @@ PER_FRAME = SLOTS // BLEND + 1               # requests a frame: keeps every slo
 THROUGHPUT_AGENTS = 2_000
 
 
-def build(agents: int, lods: bool) -> Crowd:
+def build(agents: int, lods: bool, looks: bool = False) -> Crowd:
+    """The benchmark crowd; ``looks``: with a neck-head look rig and a look target
+    circling above the crowd (:func:`look_cost`)."""
     sk = humanoid("fan", BONES)
     cfg = CrowdConfig(max_offset=M, transition_slots=SLOTS, seed=1)
+    if looks:
+        side = 0.9 * np.sqrt(agents)
+        t = np.arange(2_000.0)
+        cfg.look_rigs["fan"] = LookRig(("neck", "head"), (0.4, 0.6))
+        cfg.look_targets["ball"] = LookTarget(
+            "ball", 0, np.c_[side / 2 + side * 0.4 * np.cos(t / 40),
+                             side / 2 + side * 0.4 * np.sin(t / 40), 3 + np.sin(t / 9)])
     cfg.add_skeleton(sk)
     for i in range(12):
         cfg.add_clip(periodic_clip(sk, f"clip{i}", frames=90 + 20 * i, seed=i, amplitude=0.3))
@@ -333,6 +346,30 @@ def scene_cost(backend, size, rounds, rng) -> dict:
     return res
 
 
+def look_cost(backend, size, rounds, rng, agents=65_000) -> dict:
+    """ms per frame at ``agents`` agents with LODs, every agent looking at a target
+    circling above the crowd (a neck-head chain turned in the vertex stage) and none
+    looking, same crowd and renderer, interleaved ``rounds`` times (median of each);
+    the frame after each switch (the looks' texels going up) is not measured."""
+    crowd = build(agents, True, looks=True)
+    r = make_renderer(crowd.view, backend, size)
+    camera = frame_crowd(crowd, aspect=size[0] / size[1])
+    everyone = np.arange(crowd.agents.count)
+    frames(crowd, r, camera, 1, rng)                        # warm: fill the slots
+    on, off = [], []
+    for _ in range(rounds):
+        crowd.look_at(everyone, "ball", blend=0)
+        on.append(frames(crowd, r, camera, 2, rng, warm=1)["gpu_ms"])
+        assert (crowd.looks.weights(crowd.frame, everyone) == 1).all()
+        crowd.look_away(everyone, blend=0)
+        off.append(frames(crowd, r, camera, 2, rng, warm=1)["gpu_ms"])
+        assert not crowd.looks.weights(crowd.frame, everyone).any()
+    r.release()
+    res = {"looking_ms": statistics.median(on), "still_ms": statistics.median(off)}
+    res["overhead"] = res["looking_ms"] / res["still_ms"]
+    return res
+
+
 def render_crowd_cost(agents, size, rng, count=3) -> dict | None:
     """ms of ``render_crowd.sync`` for the crowd of :func:`build` (LODs on) seen by
     :func:`frame_crowd`'s camera as the scene camera; None without ``bpy``."""
@@ -400,6 +437,15 @@ def one_mesh_cost(crowd) -> float:
 
 
 # ------------------------------------------------------------------------- main
+def report_looks(backend, size, rounds, rng) -> dict:
+    lk = look_cost(backend, size, rounds, rng)
+    print(f"  look_at_overhead at 65,000 agents with LODs, all looking at a moving "
+          f"target over none: {lk['overhead']:.3f} ({lk['looking_ms']:.1f} ms against "
+          f"{lk['still_ms']:.1f} ms; {'met' if lk['overhead'] <= 1.10 else 'NOT met'}, "
+          f"target <= 1.10)", flush=True)
+    return lk
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true",
@@ -410,6 +456,8 @@ def main(argv=None):
                     help="comma-separated agent counts of the ms-per-frame table; 65000 is "
                          "always among them (the upload and fps figures are read there); "
                          "default 1000,10000,65000")
+    ap.add_argument("--look-only", action="store_true",
+                    help="only the look-at overhead at 65,000 agents")
     args = ap.parse_args(argv)
     try:
         counts = sorted({int(v) for v in args.agents.split(",") if v.strip()} | {65_000})
@@ -423,6 +471,13 @@ def main(argv=None):
         from crowd_addon.blender.headless_gpu import init_headless_gpu
         init_headless_gpu()
     rng = np.random.default_rng(7)
+    if args.look_only:
+        lk = report_looks(backend, size, 2 if args.quick else 4, rng)
+        print(json.dumps({"backend": backend, "size": list(size),
+                          "look_at_overhead": round(lk["overhead"], 4),
+                          "look_at_ms_65k": round(lk["looking_ms"], 2),
+                          "no_look_ms_65k": round(lk["still_ms"], 2)}))
+        return
     best, device = throughput(backend, size, 3 if args.quick else 5, rng)
     proto, raw, real = best["prototype"] or None, best["draw_only"], best["real_work"]
     limit = proto or raw
@@ -449,6 +504,7 @@ def main(argv=None):
           f"{sc['overhead']:+.1%} ({'met' if sc['overhead'] <= 0.25 else 'NOT met'}, "
           f"target <= +25%); with the sun's shadows {sc['shadows_ms']:.1f} ms "
           f"({sc['shadow_overhead']:+.1%})", flush=True)
+    lk = report_looks(backend, size, 2 if args.quick else 4, rng)
     rc = {}
     for agents in (2_000, 65_000):
         res = render_crowd_cost(agents, size, rng, 2 if args.quick else 3)
@@ -477,6 +533,8 @@ def main(argv=None):
         "scene_pass_overhead": round(sc["overhead"], 4),
         "shadows_ms_65k": round(sc["shadows_ms"], 2),
         "shadows_overhead": round(sc["shadow_overhead"], 4),
+        "look_at_overhead": round(lk["overhead"], 4),
+        "look_at_ms_65k": round(lk["looking_ms"], 2),
         "render_crowd_ms": {str(a): round(v["ms"], 1) for a, v in rc.items()} or None,
         "render_crowd_one_mesh_ms": {str(a): round(v["one_mesh_ms"], 1)
                                      for a, v in rc.items()} or None}))
