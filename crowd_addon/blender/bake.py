@@ -221,8 +221,9 @@ def _interpolation_note(src, keys, rig, skeleton, samples, unit_scale=1.0):
     except CrowdError as e:         # e.g. a NaN handle, unused when sampling on the keys
         return f"action {src.name!r}: the interpolation between keys was not checked: {e}"
 
-    def evaluate(times):
-        return local_sqt(rig, curves, src.columns, src.bones, times, fast, _evaluator(src))
+    def evaluate(times):        # component-major: the check reads a component at a time
+        return local_sqt(rig, curves, src.columns, src.bones, times, fast, _evaluator(src),
+                         component_major=True)
     return between_keys_note(src.name, src.times, keys, evaluate, skeleton, samples,
                              unit_scale)
 

@@ -23,6 +23,7 @@ import numpy as np
 
 from . import pose as sqt
 from .errors import CrowdError
+from .quaternion import multiply_parts
 
 __all__ = ["sample_times", "marker_events", "interpolation_misses", "interpolation_note",
            "between_key_misses", "between_keys_note", "MISS_TOLERANCE",
@@ -178,95 +179,96 @@ def between_key_misses(lo: np.ndarray, hi: np.ndarray, halfway: np.ndarray, skel
     ``unit_scale`` (the armature object's scale: scene units), ``rotation`` the angle
     in radians between the bone's armature-space rotations (scale divided out).
 
-    tolerance : optional ``(position, rotation)``: only the intervals that may exceed
-        either are computed exactly; the others (a bound puts them within both) get
-        that bound instead, which is then below the tolerance. Without scale keys the
-        bound is the errors carried down the hierarchy (a parent turned by ``a`` moves
-        a child's head by at most ``a`` times its offset; angles add up), and the
-        exact poses are composed as quaternions; scale keys take model matrices.
+    Without scale keys the misses themselves are carried down the hierarchy, one
+    depth level of bones at a time over all intervals (:func:`_difference_misses`),
+    so float32 keeps them to about 1e-7 rad and 1e-7 of a bone's offset whatever the
+    armature's size; scale keys take model matrices. Component-major arrays
+    (``pose_channels.local_sqt(..., component_major=True)``) turn into the pass's
+    layout fastest. ``tolerance`` is accepted for callers of the earlier screened version and
+    changes nothing: every interval is computed exactly.
     """
-    lo = np.asarray(lo, np.float32)
-    hi = np.asarray(hi, np.float32)
-    mid = sqt.blend2(lo, hi, np.float32(0.5))
-    true = np.asarray(halfway, np.float64)
-    scaled = (np.abs(lo[..., sqt.SCALE] - 1).max(initial=0) > 1e-6
-              or np.abs(hi[..., sqt.SCALE] - 1).max(initial=0) > 1e-6
-              or np.abs(true[..., sqt.SCALE] - 1).max(initial=0) > 1e-6)
+    return _component_misses(_bones_by_intervals(lo), _bones_by_intervals(hi),
+                             _bones_by_intervals(halfway), skeleton, unit_scale)
+
+
+def _bones_by_intervals(poses):
+    """``(10, B, n)`` float32 components of ``(n, B, 10)`` poses, each bone's row over
+    the intervals contiguous (the layout the hierarchy pass gathers from)."""
+    return np.ascontiguousarray(np.asarray(poses, np.float32).transpose(2, 1, 0))
+
+
+def _component_misses(lo, hi, true, skeleton, unit_scale):
+    """:func:`between_key_misses` of ``(10, B, n)`` float32 components."""
+    scaled = any(float(np.abs(x[c] - 1).max(initial=0)) > 1e-6
+                 for x in (lo, hi, true) for c in (0, 1, 2))
     if scaled:
-        return _matrix_misses(mid, true, skeleton, unit_scale)
-    parents = skeleton.parents
-    n, b = mid.shape[:2]
-    position, rotation = _bound(mid, true, parents, unit_scale)
-    if tolerance is None:
-        position[:], rotation[:] = 0, 0
-    if tolerance is not None:
-        rows = np.flatnonzero((position > tolerance[0]).any(1)
-                              | (rotation > tolerance[1]).any(1))
-    else:
-        rows = np.arange(n)
-    if len(rows):
-        p, r = _quaternion_misses(mid[rows], true[rows], parents, unit_scale)
-        position[rows], rotation[rows] = p, r
-    return position, rotation
+        mid = sqt.blend2(lo.transpose(2, 1, 0), hi.transpose(2, 1, 0), np.float32(0.5))
+        return _matrix_misses(mid, true.transpose(2, 1, 0), skeleton, unit_scale)
+    # the crowd's pose halfway, as blend2 makes it: lerp, shortest-arc nlerp
+    half = np.float32(0.5)
+    sign = np.where(lo[3] * hi[3] + lo[4] * hi[4] + lo[5] * hi[5] + lo[6] * hi[6] < 0,
+                    np.float32(-1), np.float32(1))
+    q = [lo[c] + (sign * hi[c] - lo[c]) * half for c in (3, 4, 5, 6)]
+    norm = np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    norm[norm == 0] = 1
+    q = [c / norm for c in q]
+    t = [lo[c] + (hi[c] - lo[c]) * half for c in (7, 8, 9)]
+    qb = true[3:7] / np.sqrt((true[3:7] ** 2).sum(0))     # the action's, unit
+    return _difference_misses(q, t, qb, true[7:10], skeleton, unit_scale)
 
 
-def _bound(mid, true, parents, unit_scale):
-    """Upper bounds ``(position, rotation)`` (n, B) of the armature-space misses of
-    ``mid`` against ``true`` (local SQT, unit scale), from the local misses, in
-    float32 bone-major rows (a screen: its margin covers float32's rounding)."""
-    a = np.ascontiguousarray(np.asarray(mid, np.float32).transpose(2, 1, 0))   # (10, B, n)
-    b = np.ascontiguousarray(np.asarray(true, np.float32).transpose(2, 1, 0))
-    qa, qb = a[3:7], b[3:7]
-    sign = np.where((qa * qb).sum(0) < 0, np.float32(-1), np.float32(1))
-    chord = np.sqrt(((qa - sign * qb) ** 2).sum(0))           # |qa - qb| = 2 sin(angle / 4)
-    # angle = 4 asin(chord / 2) <= 2 chord / sqrt(1 - chord^2 / 4)
-    local_rot = 2 * chord / np.sqrt(np.maximum(1 - 0.25 * chord * chord, 1e-12))
-    diff = (np.asarray(mid[..., sqt.TRANS], np.float64) - true[..., sqt.TRANS]).T
-    local_pos = np.sqrt((diff.astype(np.float32) ** 2).sum(0))   # (B, n); roots far out too
-    length = np.sqrt((b[7:] ** 2).sum(0))
-    rot = local_rot
-    pos = local_pos
-    for j, p in enumerate(parents.tolist()):
-        if p >= 0:                              # parents come first: theirs are final
-            pos[j] += pos[p] + np.minimum(rot[p], 2.0) * length[j]
-            rot[j] += rot[p]
-    margin = np.float32(1e-6) * (1 + pos)           # float32 rounding, relative
-    return ((pos + margin) * unit_scale).T.astype(np.float64), (rot + 1e-5).T.astype(np.float64)
+def _cross(a, b):
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
 
 
-def _quaternion_misses(mid, true, parents, unit_scale):
-    """Exact armature-space misses of local SQT ``mid`` against ``true`` (unit scale):
-    both composed as quaternions and offsets, parents first."""
-    n, b = mid.shape[:2]
-    both = np.concatenate([np.asarray(mid, np.float64), true]).transpose(2, 1, 0)  # (10, B, 2n)
-    w, x, y, z = both[3].copy(), both[4].copy(), both[5].copy(), both[6].copy()
-    norm = np.sqrt(w * w + x * x + y * y + z * z)
-    w, x, y, z = w / norm, x / norm, y / norm, z / norm
-    px, py, pz = both[7].copy(), both[8].copy(), both[9].copy()
-    for j, p in enumerate(parents.tolist()):
-        if p < 0:
-            continue
-        aw, ax, ay, az = w[p], x[p], y[p], z[p]
-        tx, ty, tz = px[j], py[j], pz[j]
-        # the offset turned by the parent's rotation: t + 2 w (v x t) + 2 v x (v x t)
-        cx, cy, cz = ay * tz - az * ty, az * tx - ax * tz, ax * ty - ay * tx
-        ex, ey, ez = ay * cz - az * cy, az * cx - ax * cz, ax * cy - ay * cx
-        px[j] = px[p] + tx + 2 * (aw * cx + ex)
-        py[j] = py[p] + ty + 2 * (aw * cy + ey)
-        pz[j] = pz[p] + tz + 2 * (aw * cz + ez)
-        bw, bx, by, bz = w[j].copy(), x[j].copy(), y[j].copy(), z[j].copy()
-        w[j] = aw * bw - ax * bx - ay * by - az * bz
-        x[j] = aw * bx + ax * bw + ay * bz - az * by
-        y[j] = aw * by - ax * bz + ay * bw + az * bx
-        z[j] = aw * bz + ax * by - ay * bx + az * bw
-    d = np.sqrt((px[:, :n] - px[:, n:]) ** 2 + (py[:, :n] - py[:, n:]) ** 2
-                + (pz[:, :n] - pz[:, n:]) ** 2)
-    dot = np.abs(w[:, :n] * w[:, n:] + x[:, :n] * x[:, n:] + y[:, :n] * y[:, n:]
-                 + z[:, :n] * z[:, n:])
-    # the angle from |q_a - q_b| (shortest sign): exact near 0, where arccos is not
-    chord = np.sqrt(np.maximum(2 - 2 * np.minimum(dot, 1.0), 0.0))
-    angle = 4 * np.arcsin(np.minimum(chord / 2, 1.0))
-    return d.T * unit_scale, angle.T
+def _difference_misses(qa, ta, qb, tb, skeleton, unit_scale):
+    """Exact armature-space misses ``(position, rotation)`` (n, B) float64 of the local
+    rotations ``qa`` and offsets ``ta`` (components, each (B, n) float32) against
+    ``qb``, ``tb`` (unit quaternions), carried down the hierarchy as differences;
+    the components are (B, n) here, the results (n, B).
+
+    With ``Q``/``P`` a bone's armature-space rotation and head, ``a`` the crowd's pose
+    and ``b`` the action's: ``F = Qb^-1 Qa`` (the rotation miss, seen from the bone)
+    and ``D = Qb^-1 (Pa - Pb)`` (the head miss, likewise) follow from the parent's as
+
+        G = D_p + (t_a - t_b) + (F_p - 1) t_a     (the head miss in the parent's frame)
+        D = q_b^-1 G,   F = q_b^-1 F_p q_a
+
+    with ``q``, ``t`` the bone's local rotation and offset. ``|G|`` is the position
+    miss and ``F``'s angle the rotation miss; ``(F - 1) t = 2 w (v x t) + 2 v x (v x t)``
+    is formed from ``F``'s small vector part, so the misses keep their own relative
+    precision in float32 instead of being differences of whole positions. All the
+    intervals go through one depth level of bones at a time.
+    """
+    bones, n = qa[0].shape
+    f = np.empty((4, bones, n), np.float32)          # F per bone
+    d = np.empty((3, bones, n), np.float32)          # D per bone
+    position = np.empty((bones, n), np.float32)
+    roots = np.flatnonzero(skeleton.parents < 0)
+    for js, ps in [(roots, None)] + list(skeleton.levels):
+        a = [c[js] for c in qa]
+        t = [c[js] for c in ta]
+        g = [t[i] - tb[i][js] for i in range(3)]
+        if ps is not None:
+            fp = f[:, ps]
+            v = fp[1:]
+            c = _cross(v, t)
+            e = _cross(v, c)
+            for i in range(3):
+                g[i] += d[i][ps] + 2 * (fp[0] * c[i] + e[i])
+            a = multiply_parts(fp, a)
+        bw, bx, by, bz = (c[js] for c in qb)
+        f[:, js] = multiply_parts((bw, -bx, -by, -bz), a)
+        position[js] = np.sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2])
+        # D = q_b^-1 G: G turned by the conjugate, G - 2 w (v x G) + 2 v x (v x G)
+        v = (bx, by, bz)
+        c = _cross(v, g)
+        e = _cross(v, c)
+        for i in range(3):
+            d[i][js] = g[i] - 2 * (bw * c[i] - e[i])
+    vector = np.sqrt(f[1] * f[1] + f[2] * f[2] + f[3] * f[3])
+    rotation = 2 * np.arctan2(vector, np.abs(f[0]))
+    return position.T.astype(np.float64) * unit_scale, rotation.T.astype(np.float64)
 
 
 def _matrix_misses(mid, true, skeleton, unit_scale):
@@ -303,15 +305,15 @@ def between_keys_note(name: str, times: np.ndarray, keys: np.ndarray, evaluate, 
     The note names the largest position miss and the largest rotation miss (each with
     its bone and key frames), the worst key intervals, how many intervals miss, and the
     fewest samples per frame (up to :data:`MAX_SAMPLES_PER_FRAME`) whose keys follow
-    the action within the tolerances over the :data:`ADVICE_INTERVALS` worst
-    intervals (all candidates evaluated in one call).
+    the action within the tolerances over the :data:`BETWEEN_ADVICE_INTERVALS` worst
+    intervals (estimated from the 1/n^2 law of interpolation and verified there: one
+    evaluation, two where the law does not hold).
     """
     times = np.asarray(times, np.float64)
     keys = np.asarray(keys)
-    tol = (position_tolerance, rotation_tolerance)
-    pos, rot = between_key_misses(keys[:-1], keys[1:],
-                                  evaluate(0.5 * (times[:-1] + times[1:])), skeleton,
-                                  unit_scale, tol)
+    both = _bones_by_intervals(keys)                  # (10, B, F): lo and hi are views
+    pos, rot = _component_misses(both[..., :-1], both[..., 1:], _bones_by_intervals(
+        evaluate(0.5 * (times[:-1] + times[1:]))), skeleton, unit_scale)
     score = np.maximum(pos / position_tolerance, rot / rotation_tolerance)
     per_interval = score.max(1)
     flagged = np.flatnonzero(per_interval > 1.0)
@@ -322,7 +324,8 @@ def between_keys_note(name: str, times: np.ndarray, keys: np.ndarray, evaluate, 
     order = flagged[np.argsort(-per_interval[flagged], kind="stable")]
     check = order[:BETWEEN_ADVICE_INTERVALS]
     advice, left = _advice(times, check, evaluate, skeleton, samples_per_frame, unit_scale,
-                           position_tolerance, rotation_tolerance)
+                           position_tolerance, rotation_tolerance,
+                           float(per_interval[check].max()))
     names = skeleton.bone_names
 
     def span(i):
@@ -352,40 +355,58 @@ def between_keys_note(name: str, times: np.ndarray, keys: np.ndarray, evaluate, 
                    f"{left[0]:.3g} scene units or {left[1]:.3g} rad there")
 
 
-def _advice(times, check, evaluate, skeleton, samples_per_frame, unit_scale, ptol, rtol):
+def _advice(times, check, evaluate, skeleton, samples_per_frame, unit_scale, ptol, rtol,
+            worst):
     """``(n, (position, rotation) left at the most samples)``: the fewest samples per
     frame above ``samples_per_frame`` whose keys follow the action over key intervals
-    ``check`` (None when even :data:`MAX_SAMPLES_PER_FRAME` do not). A miss shrinks as
-    keys get closer, so the candidates are bisected: one evaluation per probe."""
+    ``check`` (None when even :data:`MAX_SAMPLES_PER_FRAME` do not, and then their
+    misses with that many; else ``left`` is None); ``worst``: their
+    largest miss over its tolerance at the bake's samples.
+
+    An interpolation's miss shrinks as the square of the key spacing, so ``n`` is
+    first estimated as ``samples_per_frame * sqrt(worst)`` and that estimate and the
+    one below are evaluated together (one call of ``evaluate``); only where the law
+    does not hold (a bone turning the long way round follows with 2 whatever its
+    miss, a step never does) are the other candidates evaluated, all in one more call.
+    """
     frame = (times[1] - times[0]) * samples_per_frame     # Blender frames per crowd frame
-
-    def misses(n):
-        step = frame / n
-        lo_t, hi_t = [], []
-        for c in check.tolist():                           # their keys over each interval
-            j = np.arange(math.floor((times[c] - times[0]) / step + 1e-9),
-                          math.ceil((times[c + 1] - times[0]) / step - 1e-9) + 1)
-            g = times[0] + j * step
-            lo_t.append(g[:-1])
-            hi_t.append(g[1:])
-        lo_t, hi_t = np.concatenate(lo_t), np.concatenate(hi_t)
-        m = len(lo_t)
-        poses = evaluate(np.concatenate([lo_t, hi_t, 0.5 * (lo_t + hi_t)]))
-        pos, rot = between_key_misses(poses[:m], poses[m:2 * m], poses[2 * m:], skeleton,
-                                      unit_scale, (ptol, rtol))
-        return float(pos.max()), float(rot.max())
-
     low, high = samples_per_frame + 1, MAX_SAMPLES_PER_FRAME
     if low > high:
         return None, (0.0, 0.0)
-    left = misses(high)
-    if left[0] > ptol or left[1] > rtol:
-        return None, left
-    while low < high:                       # the fewest that pass lies in low..high
-        n = (low + high) // 2
-        pos, rot = misses(n)
-        if pos <= ptol and rot <= rtol:
-            high = n
-        else:
-            low = n + 1
-    return high, left
+
+    def misses(candidates):
+        """{n: (position, rotation) largest misses with n samples per frame}."""
+        lo_t, hi_t, count = [], [], []
+        for n in candidates:
+            step = frame / n
+            m = 0
+            for c in check.tolist():                       # their keys over each interval
+                j = np.arange(math.floor((times[c] - times[0]) / step + 1e-9),
+                              math.ceil((times[c + 1] - times[0]) / step - 1e-9) + 1)
+                g = times[0] + j * step
+                lo_t.append(g[:-1])
+                hi_t.append(g[1:])
+                m += len(g) - 1
+            count.append(m)
+        lo_t, hi_t = np.concatenate(lo_t), np.concatenate(hi_t)
+        m = len(lo_t)
+        poses = _bones_by_intervals(evaluate(np.concatenate([lo_t, hi_t, 0.5 * (lo_t + hi_t)])))
+        pos, rot = _component_misses(poses[..., :m], poses[..., m:2 * m],
+                                     poses[..., 2 * m:], skeleton, unit_scale)
+        at = np.cumsum([0] + count)
+        return {n: (float(pos[at[k]:at[k + 1]].max()), float(rot[at[k]:at[k + 1]].max()))
+                for k, n in enumerate(candidates)}
+
+    def passes(miss):
+        return miss[0] <= ptol and miss[1] <= rtol
+
+    guess = min(high, max(low, math.ceil(samples_per_frame * math.sqrt(worst) - 1e-9)))
+    found = misses(sorted({max(low, guess - 1), guess}))
+    if passes(found[guess]) and (guess == low or not passes(found[guess - 1])):
+        return guess, None
+    rest = [n for n in range(low, high + 1) if n not in found
+            and (n < guess if passes(found[guess]) else n > guess)]
+    if rest:
+        found.update(misses(rest))
+    fewest = [n for n in sorted(found) if passes(found[n])]
+    return (fewest[0], None) if fewest else (None, found[high])

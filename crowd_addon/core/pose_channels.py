@@ -176,7 +176,7 @@ def _unit_quaternions(raw):
 
 
 def local_sqt(rig: RigChannels, curves: fcurve.CurveSet, columns, bones, times,
-              fast=None, evaluate=None) -> np.ndarray:
+              fast=None, evaluate=None, component_major: bool = False) -> np.ndarray:
     """Local SQT keys ``(F, B, 10)`` float32 of bone F-curves at Blender frames ``times``.
 
     Parameters
@@ -189,6 +189,9 @@ def local_sqt(rig: RigChannels, curves: fcurve.CurveSet, columns, bones, times,
     fast : (C,) bool, curves :func:`.fcurve.evaluate_frames` reproduces (default all).
     evaluate : ``evaluate(c, times)`` -> (F,) values of curve ``c`` where ``fast`` is
         False (Blender's own evaluation); needed only then.
+    component_major : return the ``(F, B, 10)`` keys as a view of a ``(10, F, B)``
+        array (each SQT component contiguous, as the composition makes them), for
+        consumers that work a component at a time (the bake's between-frame check).
 
     Works component-major (``(17, F, B)`` channels) so that every quaternion product
     is a few whole-array operations.
@@ -212,17 +215,21 @@ def local_sqt(rig: RigChannels, curves: fcurve.CurveSet, columns, bones, times,
         chan[columns[c], :, bones[c]] = evaluate(c, times)
     moving = np.zeros(len(modes), bool)
     moving[bones[columns < 3]] = True
-    return _compose(rig, chan, moving)
+    return _compose(rig, chan, moving, component_major)
 
 
-def _compose(rig, chan, moving):
+def _compose(rig, chan, moving, component_major=False):
     """Local SQT keys ``(F, B, 10)`` float32 of channels ``(17, F, B)``; ``moving``:
-    (B,) bool, bones whose location is animated."""
+    (B,) bool, bones whose location is animated; ``component_major``: the keys are a
+    view of a ``(10, F, B)`` array."""
     modes, r0 = rig.modes, rig._r0
     frames = chan.shape[1]
     loc = chan[0:3]
     loc[:, :, rig.connected] = 0               # BKE_pchan_to_mat4: chains stay closed
-    keys = np.empty((frames, len(modes), sqt.WIDTH), np.float32)
+    if component_major:
+        keys = np.empty((sqt.WIDTH, frames, len(modes)), np.float32).transpose(1, 2, 0)
+    else:
+        keys = np.empty((frames, len(modes), sqt.WIDTH), np.float32)
     # rotation = rest rotation * basis rotation, a block of frames at a time so that
     # the temporaries stay small (long motion capture clips); the rest rotation is
     # repeated over a block's frames (products of equal shapes run faster than ones
