@@ -174,14 +174,17 @@ class CrowdRenderer:
             if self.shadows:
                 self._shadow_pass()
                 self.sampling_shadows = True
-            if self._scene is not None:
-                self._draw_scene(self._scene, {"u_view_proj": gl_matrix(vp),
-                                               "u_light": self.light})
+            # the crowd before the scene: the stands' fragments behind the agents then
+            # fail the depth test before they are shaded (-40% of the scene pass on
+            # llvmpipe at 65k; only depth ties, a few pixels, can tell the orders apart)
             for draw in self.plan.draws(vp, self.light):
                 self._draw(self.meshes[draw.key], draw)
                 s.draws += 1
                 s.instances += draw.agents
                 s.vertices += draw.vertices
+            if self._scene is not None:
+                self._draw_scene(self._scene, {"u_view_proj": gl_matrix(vp),
+                                               "u_light": self.light})
         return s
 
     def _fragment_defines(self) -> dict:
