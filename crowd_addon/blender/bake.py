@@ -180,13 +180,20 @@ def bake_actions(armature_obj, actions, fps: float, progress=None, *, loop=None,
         for src in sources:
             reason = "requested" if method == FRAME_SET else rig_reason or src.frame_set_reason
             if reason is None:
-                keys = local_sqt(rig, src.keys, src.columns, src.bones, src.times,
-                                 src.fast, _evaluator(src))
+                # the curves read for any time (the usual hand-keyed case): the halfway
+                # poses of the between-frame check come from the same evaluation
+                halves = (0.5 * (src.times[:-1] + src.times[1:])
+                          if src.between is None else src.times[:0])
+                both = local_sqt(rig, src.keys, src.columns, src.bones,
+                                 np.concatenate([src.times, halves]), src.fast,
+                                 _evaluator(src))
+                keys = both[:len(src.times)]
                 methods[src.name] = FCURVES
                 done += len(src.times)
                 if progress is not None and progress(done, total) is False:
                     return None
-                missed = _interpolation_note(src, keys, rig, skeleton, samples, unit_scale)
+                missed = _interpolation_note(src, keys, rig, skeleton, samples, unit_scale,
+                                             both[len(src.times):] if len(halves) else None)
             else:
                 missed = None               # the curves alone are not the pose here
                 keys = playback.bake(src, lambda k: progress is None or progress(
@@ -213,9 +220,10 @@ def _unit_scale(armature_obj) -> float:
     return float(abs(np.linalg.det(m)) ** (1.0 / 3.0)) or 1.0
 
 
-def _interpolation_note(src, keys, rig, skeleton, samples, unit_scale=1.0):
+def _interpolation_note(src, keys, rig, skeleton, samples, unit_scale=1.0, halfway=None):
     """The report line when the crowd's poses between the keys of ``src`` miss its
-    curves (evaluated halfway between the keys), else None."""
+    curves (evaluated halfway between the keys, unless given as ``halfway``), else
+    None."""
     try:
         curves, fast = (src.keys, src.fast) if src.between is None else src.between()
     except CrowdError as e:         # e.g. a NaN handle, unused when sampling on the keys
@@ -225,7 +233,7 @@ def _interpolation_note(src, keys, rig, skeleton, samples, unit_scale=1.0):
         return local_sqt(rig, curves, src.columns, src.bones, times, fast, _evaluator(src),
                          component_major=True)
     return between_keys_note(src.name, src.times, keys, evaluate, skeleton, samples,
-                             unit_scale)
+                             unit_scale, halfway=halfway)
 
 
 def _rig_state(armature_obj, skeleton, bone_order, rest, rest_rot) -> RigChannels:

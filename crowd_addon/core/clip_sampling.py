@@ -288,7 +288,7 @@ def _matrix_misses(mid, true, skeleton, unit_scale):
 def between_keys_note(name: str, times: np.ndarray, keys: np.ndarray, evaluate, skeleton,
                       samples_per_frame: int = 1, unit_scale: float = 1.0,
                       position_tolerance: float = POSITION_TOLERANCE,
-                      rotation_tolerance: float = ROTATION_TOLERANCE):
+                      rotation_tolerance: float = ROTATION_TOLERANCE, halfway=None):
     """A bake report line when the crowd's poses between the keys of action ``name``
     miss the action's (:func:`between_key_misses` halfway between every two keys, above
     ``position_tolerance`` scene units or ``rotation_tolerance`` radians anywhere), else
@@ -301,6 +301,8 @@ def between_keys_note(name: str, times: np.ndarray, keys: np.ndarray, evaluate, 
         frames (the F-curves evaluated, e.g. ``pose_channels.local_sqt``).
     skeleton : the clip's skeleton; samples_per_frame : keys per crowd frame of the
         bake; unit_scale : scene units per armature unit.
+    halfway : optional (F - 1, B, 10) ``evaluate`` of the midpoints between the keys,
+        when the caller has it (evaluated together with the keys).
 
     The note names the largest position miss and the largest rotation miss (each with
     its bone and key frames), the worst key intervals, how many intervals miss, and the
@@ -312,8 +314,10 @@ def between_keys_note(name: str, times: np.ndarray, keys: np.ndarray, evaluate, 
     times = np.asarray(times, np.float64)
     keys = np.asarray(keys)
     both = _bones_by_intervals(keys)                  # (10, B, F): lo and hi are views
-    pos, rot = _component_misses(both[..., :-1], both[..., 1:], _bones_by_intervals(
-        evaluate(0.5 * (times[:-1] + times[1:]))), skeleton, unit_scale)
+    if halfway is None:
+        halfway = evaluate(0.5 * (times[:-1] + times[1:]))
+    pos, rot = _component_misses(both[..., :-1], both[..., 1:],
+                                 _bones_by_intervals(halfway), skeleton, unit_scale)
     score = np.maximum(pos / position_tolerance, rot / rotation_tolerance)
     per_interval = score.max(1)
     flagged = np.flatnonzero(per_interval > 1.0)
@@ -376,23 +380,24 @@ def _advice(times, check, evaluate, skeleton, samples_per_frame, unit_scale, pto
 
     def misses(candidates):
         """{n: (position, rotation) largest misses with n samples per frame}."""
-        lo_t, hi_t, count = [], [], []
+        grids, count = [], []
         for n in candidates:
             step = frame / n
             m = 0
             for c in check.tolist():                       # their keys over each interval
                 j = np.arange(math.floor((times[c] - times[0]) / step + 1e-9),
                               math.ceil((times[c + 1] - times[0]) / step - 1e-9) + 1)
-                g = times[0] + j * step
-                lo_t.append(g[:-1])
-                hi_t.append(g[1:])
-                m += len(g) - 1
+                grids.append(times[0] + j * step)
+                m += len(j) - 1
             count.append(m)
-        lo_t, hi_t = np.concatenate(lo_t), np.concatenate(hi_t)
-        m = len(lo_t)
-        poses = _bones_by_intervals(evaluate(np.concatenate([lo_t, hi_t, 0.5 * (lo_t + hi_t)])))
-        pos, rot = _component_misses(poses[..., :m], poses[..., m:2 * m],
-                                     poses[..., 2 * m:], skeleton, unit_scale)
+        # each grid's keys once, then the halfway points of all of them
+        keys = np.concatenate(grids)
+        ends = np.cumsum([len(g) for g in grids])
+        lo = np.delete(np.arange(len(keys)), ends - 1)            # keys with one after
+        poses = _bones_by_intervals(evaluate(np.concatenate([keys, 0.5 * (keys[lo]
+                                                                          + keys[lo + 1])])))
+        pos, rot = _component_misses(poses[..., lo], poses[..., lo + 1],
+                                     poses[..., len(keys):], skeleton, unit_scale)
         at = np.cumsum([0] + count)
         return {n: (float(pos[at[k]:at[k + 1]].max()), float(rot[at[k]:at[k + 1]].max()))
                 for k, n in enumerate(candidates)}
