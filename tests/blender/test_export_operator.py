@@ -550,8 +550,10 @@ def test_modal_export_errors_are_reported_and_end_the_timer(scene, tmp_path, eve
     # found after the bake, on a timer event
     op, ctx = _ModalExport(tmp_path / "shot.usdc", agents=31), _Context()
     assert op.execute(ctx) == {"RUNNING_MODAL"}
-    results = [op.modal(ctx, TIMER) for _ in range(4)]
-    assert results == [{"RUNNING_MODAL"}] * 3 + [{"CANCELLED"}]
+    results = [op.modal(ctx, TIMER)]
+    while results[-1] == {"RUNNING_MODAL"} and len(results) < 20:     # bake, report, ...
+        results.append(op.modal(ctx, TIMER))
+    assert results[-1] == {"CANCELLED"} and len(results) > 2
     assert op.reports[-1] == ({"ERROR"}, "Crowd export: 31 agents requested but the "
                                          "crowd has 30")
     assert ctx.window_manager.calls[-2:] == ["timer_remove", "progress_end"]
@@ -600,7 +602,9 @@ def test_export_scene_drops_the_export_when_a_callback_raises(scene, tmp_path, n
     bakes = []
     config, result = crowd_export.export_scene(
         scene, path, (1, 12), on_bake=lambda *a: bakes.append(a))
-    assert [b[2] for b in bakes] == ["baking action 'walk'", "reading the proxy mesh",
-                                     "placing agents"]
+    # the bake's steps, then its report (the test's random walk misses between frames)
+    steps = [b[2] for b in bakes if not b[2].startswith("warning:")]
+    assert steps == ["baking action 'walk'", "reading the proxy mesh", "placing agents"]
+    assert all("between frames" in b[2] for b in bakes if b[2].startswith("warning:"))
     assert result.agents == 30 and config.start_frame == 1
     assert listing(tmp_path) == ["shot.layers", "shot.usdc"]

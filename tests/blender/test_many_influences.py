@@ -115,7 +115,8 @@ def test_the_bake_reports_the_mesh_and_how_many_vertices_lost_influences():
                 pass
         finally:
             preview.stop_all()
-    warnings = [m for kind, m in op.reports if kind == {"WARNING"}]
+    # the mesh's note (the test's random walk may also miss between frames: its own note)
+    warnings = [m for kind, m in op.reports if kind == {"WARNING"} and m.startswith("mesh")]
     n = len(body.data.vertices)
     assert warnings == [f"mesh 'Crowd Guy': {n} of {n} vertices have more than 8 bone "
                         "influences (up to 9); each keeps its 8 strongest, "
