@@ -85,3 +85,40 @@ def test_interpolation_note_is_none_for_smooth_motion_and_says_when_16_do_not_do
                               samples_per_frame=2)
     assert "between the keys at frames 7 and 7.5" in note
     assert note.endswith("; 16 samples per frame still miss by 1.00 rad there")
+
+
+def test_between_key_misses_carried_as_differences_equal_composed_poses():
+    """The hierarchy pass (misses carried down as differences, float32) against both
+    poses composed as model matrices in float64 and compared: heads and rotations,
+    with a misses from 1e-4 to a half turn and an armature scaled 100x."""
+    from crowd_addon.core import pose as sqt
+    from crowd_addon.core.clip_sampling import between_key_misses
+    from crowd_addon.core.skinning import model_matrices
+    from crowd_addon.core.synthetic import humanoid
+
+    sk = humanoid("fan", 82)
+    rng = np.random.default_rng(3)
+    n = 40
+    lo = np.repeat(sk.bind_pose[None].astype(np.float32), n, 0)
+    q = rng.normal(0, 1, (n, sk.bone_count, 4))
+    lo[..., 3:7] = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    hi = lo.copy()
+    hi[..., 3:7] += rng.normal(0, 0.1, hi[..., 3:7].shape)
+    hi[..., 3:7] /= np.linalg.norm(hi[..., 3:7], axis=-1, keepdims=True)
+    hi[..., 7:10] += rng.normal(0, 0.01, hi[..., 7:10].shape)
+    true = sqt.blend2(lo, hi, np.float32(0.5))
+    size = 10.0 ** rng.uniform(-4, -1, (n, sk.bone_count, 1))
+    true[..., 3:7] += rng.normal(0, 1, (n, sk.bone_count, 4)) * size
+    true[..., 7:10] += rng.normal(0, 1, (n, sk.bone_count, 3)) * size
+    true[0, 5, 3:7] = -true[0, 5, [4, 3, 6, 5]] * [1, -1, 1, -1]  # a half turn off
+    true[..., 3:7] /= np.linalg.norm(true[..., 3:7], axis=-1, keepdims=True)
+    position, rotation = between_key_misses(lo, hi, true, sk, unit_scale=100.0)
+    a = model_matrices(sqt.blend2(lo, hi, np.float32(0.5)).astype(np.float64), sk)
+    b = model_matrices(true.astype(np.float64), sk)
+    want_position = np.linalg.norm(a[..., :3, 3] - b[..., :3, 3], axis=-1) * 100
+    ra, rb = a[..., :3, :3], b[..., :3, :3]
+    chord = np.linalg.norm(ra - rb, axis=(-2, -1)) / (2 * np.sqrt(2))
+    want_rotation = 2 * np.arcsin(np.minimum(chord, 1))
+    assert rotation.max() > 3.0                                 # the half turn is seen
+    np.testing.assert_allclose(position, want_position, rtol=1e-3, atol=2e-4)
+    np.testing.assert_allclose(rotation, want_rotation, rtol=1e-3, atol=2e-6)
