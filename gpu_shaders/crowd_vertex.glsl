@@ -25,6 +25,13 @@ vec3 agent_tint(vec3 base, vec3 tint)
   return mix(base, base * tint, clamp(1.0 - 4.0 * saturation, 0.0, 1.0));
 }
 
+/* LOOKS 0 leaves the look out: for a frame where no agent looks (LookData.active).
+ * A branch on a per-vertex value is run by llvmpipe for every vertex, lanes masked,
+ * so the look path cost every vertex ~2.5x its skinning even with no look on. */
+#ifndef LOOKS
+#define LOOKS 1
+#endif
+
 void crowd_vertex(int agent_id)
 {
   Agent agent = agent_record(agent_id);
@@ -37,6 +44,7 @@ void crowd_vertex(int agent_id)
   uvec4 bones2 = uvec4(0u);
   vec4 weights2 = vec4(0.0);
 #endif
+#if LOOKS
   vec4 look = look_texel(agent_id, 0);
   float weight = look_weight(look);
   if (weight > 0.0) {
@@ -46,6 +54,9 @@ void crowd_vertex(int agent_id)
   else {
     skin_vertex(row, bone_idx, bone_w, bones2, weights2, pos, nor, p, n);
   }
+#else
+  skin_vertex(row, bone_idx, bone_w, bones2, weights2, pos, nor, p, n);
+#endif
   vec2 turn = agent_turn(agent);
   v_world = turn_z(turn, p * agent.scale) + agent.position;
   v_normal = turn_z(turn, n);

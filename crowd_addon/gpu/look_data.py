@@ -65,9 +65,18 @@ class LookData:
         self.records[:, 1, 1] = view.agent_skeleton
         self._state = None
         self._version = None
+        #: frames [first, end) within which some agent's look may weigh above 0
+        self._window = (0.0, 0.0)
         self.targets_image = _targets_image(view.look_targets, limit)
         self.chains_image = _chains_image(view.look_chains, view.layout.bones, limit)
         self.update(view)
+
+    def active(self, frame) -> bool:
+        """Whether some agent may look at ``frame`` (a look's weight is 0 before its
+        start and from its stop plus its blend on): draws of a frame where none does
+        can leave the look out of the vertex stage (``LOOKS 0``), which llvmpipe
+        otherwise runs for every vertex, looking or not (masked SIMD lanes)."""
+        return self._window[0] <= float(frame) < self._window[1]
 
     def texture_image(self) -> np.ndarray:
         """The whole looks texture ``(height, width, 4)`` float32."""
@@ -89,6 +98,8 @@ class LookData:
             frames = np.r_[looks.start[on], looks.stop[on & ~stays]]
             if np.abs(frames).max(initial=0) >= _EXACT:
                 raise CrowdError("look frames must stay below 2**24 on the GPU")
+        self._window = (float(state[on, 1].min()), float((state[on, 3] + np.maximum(
+            state[on, 2], 0.0)).max())) if on.any() else (0.0, 0.0)
         state = state.astype(np.float32)
         changed = np.arange(self.count) if self._state is None \
             else np.flatnonzero((state != self._state).any(1))

@@ -224,7 +224,8 @@ class ModernGLRenderer(CrowdRenderer):
             tex.use(slot)
 
     def _draw(self, mesh, draw):
-        program, vao = mesh.draw(self._fragment_defines())
+        looks = int(self.plan.looks.active(self.view.frame))    # LOOKS 0: none looks
+        program, vao = mesh.draw({**self._fragment_defines(), "LOOKS": looks})
         self._bind(program, draw.uniforms, self.textures["lists"])
         if mesh.cull:
             self.ctx.enable(self._mgl.CULL_FACE)

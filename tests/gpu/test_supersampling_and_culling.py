@@ -67,3 +67,37 @@ def test_culling_back_faces_changes_no_pixel(h, renderer):
         m.cull = False
     two_sided.render(camera)
     assert np.array_equal(culled.read_image(), two_sided.read_image())
+
+
+def test_the_look_stage_is_left_out_only_in_frames_where_no_agent_looks(h, renderer):
+    import math
+
+    from crowd_addon.core.look_at import LookRig, LookTarget
+    cfg = h.make_config(M=8, agents=24)
+    cfg.look_rigs["fan"] = LookRig(("neck", "head"), (0.4, 0.6),
+                                   yaw_limit=math.radians(70), pitch_limit=math.radians(35))
+    t = np.arange(60.0)
+    cfg.look_targets["ball"] = LookTarget(
+        "ball", -3, np.c_[4 + 9 * np.cos(t / 9), 4 + 9 * np.sin(t / 9), 2.5 + 0 * t],
+        smoothing=3.0)
+    crowd = h.Crowd(cfg)
+    r = renderer(crowd, SIZE, samples=0)
+    camera = frame_crowd(crowd, aspect=SIZE[0] / SIZE[1])
+    everyone = np.arange(crowd.agents.count)
+    assert not r.plan.looks.active(crowd.frame)
+    crowd.look_at(everyone[::2], "ball", blend=3, hold=4)
+    seen = []
+    for _ in range(14):
+        crowd.step()
+        r.sync()
+        looking = bool((crowd.looks.weights(crowd.frame, everyone) > 0).any())
+        active = r.plan.looks.active(crowd.frame)
+        assert active or not looking
+        seen.append(active)
+        r.render(camera)
+        image = r.read_image()
+        r.plan.looks.active = lambda frame: True           # the look stage forced on
+        r.render(camera)
+        assert np.array_equal(r.read_image(), image)
+        del r.plan.looks.active
+    assert seen[0] and not seen[-1]            # on while looking, off once it is over
