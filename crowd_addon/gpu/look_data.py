@@ -78,6 +78,13 @@ class LookData:
         otherwise runs for every vertex, looking or not (masked SIMD lanes)."""
         return self._window[0] <= float(frame) < self._window[1]
 
+    def looking(self, frame) -> np.ndarray:
+        """``(N,)`` bool: the agents whose look may weigh above 0 at ``frame`` (its
+        start up to its stop plus its blend), for drawing them apart."""
+        s, f = self._state, float(frame)
+        return (s[:, 0] >= 0) & (s[:, 1] <= f) & \
+            (f < s[:, 3].astype(np.float64) + np.maximum(s[:, 2], 0.0))
+
     def texture_image(self) -> np.ndarray:
         """The whole looks texture ``(height, width, 4)`` float32."""
         return block_image(self.records, self.block_rows, self.blocks)

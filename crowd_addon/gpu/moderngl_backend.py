@@ -224,7 +224,7 @@ class ModernGLRenderer(CrowdRenderer):
             tex.use(slot)
 
     def _draw(self, mesh, draw):
-        looks = int(self.plan.looks.active(self.view.frame))    # LOOKS 0: none looks
+        looks = int(self.draw_looks)           # LOOKS 0: no agent of this call looks
         program, vao = mesh.draw({**self._fragment_defines(), "LOOKS": looks})
         self._bind(program, draw.uniforms, self.textures["lists"])
         if mesh.cull:

@@ -69,7 +69,7 @@ def test_culling_back_faces_changes_no_pixel(h, renderer):
     assert np.array_equal(culled.read_image(), two_sided.read_image())
 
 
-def test_the_look_stage_is_left_out_only_in_frames_where_no_agent_looks(h, renderer):
+def test_the_look_stage_runs_only_for_the_agents_that_look(h, renderer):
     import math
 
     from crowd_addon.core.look_at import LookRig, LookTarget
@@ -96,8 +96,12 @@ def test_the_look_stage_is_left_out_only_in_frames_where_no_agent_looks(h, rende
         seen.append(active)
         r.render(camera)
         image = r.read_image()
-        r.plan.looks.active = lambda frame: True           # the look stage forced on
+        if active:                  # the lookers are drawn apart, the rest without it
+            parts = [p for d in r.plan.draws(camera.view_projection, r.light)
+                     for p in r._look_parts(d)]
+            assert {looks for _, looks in parts} == {False, True}
+        r._look_parts = lambda draw: [(draw, True)]          # the look stage everywhere
         r.render(camera)
         assert np.array_equal(r.read_image(), image)
-        del r.plan.looks.active
+        del r._look_parts
     assert seen[0] and not seen[-1]            # on while looking, off once it is over
