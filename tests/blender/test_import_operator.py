@@ -24,7 +24,8 @@ from pxr import Usd  # noqa: E402
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import crowd_scene as cs  # noqa: E402
-from test_usd_import import TOLERANCE, core_vertices, world_vertices  # noqa: E402
+from test_usd_import import (TOLERANCE, core_vertices, imported_agents,  # noqa: E402
+                             world_vertices)
 from usd.conftest import FIRST, LAST, core_truth, make_config, recording  # noqa: E402
 
 from crowd_addon.core.mesh import Look  # noqa: E402
@@ -60,20 +61,6 @@ def truth():
     return core_truth()
 
 
-def agent_meshes() -> dict:
-    """agent id -> its imported mesh object."""
-    out = {}
-    for obj in bpy.data.objects:
-        if obj.type != "MESH":
-            continue
-        holder = obj
-        while holder is not None and not holder.name.startswith("agent_"):
-            holder = holder.parent
-        assert holder is not None, f"{obj.name} is not under an agent"
-        out[int(holder.name.split("_")[1].split(".")[0])] = obj
-    return out
-
-
 def fresh_scene():
     """An empty scene at Blender's defaults (24 fps, frames 1-250) holding the crowd's
     template material "Shirt", which reads no agent colour."""
@@ -96,7 +83,7 @@ def test_the_imported_crowd_plays_at_the_stages_rate_sharing_one_material_per_lo
     assert (scene.frame_start, scene.frame_end) == (stage.GetStartTimeCode(),
                                                     stage.GetEndTimeCode()) == (FIRST, LAST)
     # one material per look, shared by every agent; the template kept and not worn
-    agents = agent_meshes()
+    agents = imported_agents()
     n = len(make_config().agent_stream)
     assert sorted(agents) == list(range(n))
     worn = {m for obj in agents.values() for m in obj.data.materials}
@@ -123,7 +110,7 @@ def test_without_sharing_blenders_default_copies_every_look_per_agent(stages):
     scene, _ = fresh_scene()
     assert bpy.ops.crowd.import_usd(filepath=str(stages["blender"]), shared_materials=False,
                                     scene_timing=False) == {"FINISHED"}
-    agents = agent_meshes()
+    agents = imported_agents()
     worn = {m for obj in agents.values() for m in obj.data.materials}
     assert len(worn) == len(agents) * len(LOOKS)
     assert (scene.render.fps, scene.frame_start, scene.frame_end) == (24, 1, 250)

@@ -20,32 +20,9 @@ from usd.conftest import FIRST, LAST  # noqa: E402
 from usd.look_shot import AGENTS, LOOKERS, core_rows, look_config, simulate_looks  # noqa: E402
 
 from crowd_addon.core.skinning import skin_vertices  # noqa: E402
+from test_usd_import import import_agents, world_vertices  # noqa: E402
 
 TOLERANCE = 1e-4          # metres
-
-
-def import_agents(path) -> dict:
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    bpy.ops.wm.usd_import(filepath=str(path))
-    out = {}
-    for obj in bpy.data.objects:
-        if obj.type != "MESH":
-            continue
-        holder = obj
-        while holder is not None and not holder.name.startswith("agent_"):
-            holder = holder.parent
-        out[int(holder.name.split("_")[1].split(".")[0])] = obj
-    return out
-
-
-def world_vertices(obj) -> np.ndarray:
-    ev = obj.evaluated_get(bpy.context.evaluated_depsgraph_get())
-    mesh = ev.to_mesh()
-    co = np.empty(len(mesh.vertices) * 3, np.float32)
-    mesh.vertices.foreach_get("co", co)
-    ev.to_mesh_clear()
-    m = np.array(ev.matrix_world, np.float64)
-    return co.reshape(-1, 3) @ m[:3, :3].T + m[:3, 3]
 
 
 def rotation(p, q) -> np.ndarray:

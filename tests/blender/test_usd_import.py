@@ -30,6 +30,11 @@ def import_agents(path, instancing=False) -> dict:
     """Import ``path`` into an empty scene: agent id -> its mesh object."""
     bpy.ops.wm.read_factory_settings(use_empty=True)
     bpy.ops.wm.usd_import(filepath=str(path), support_scene_instancing=instancing)
+    return imported_agents()
+
+
+def imported_agents() -> dict:
+    """agent id -> its imported mesh object, for every mesh of the scene."""
     out = {}
     for obj in bpy.data.objects:
         if obj.type != "MESH":

@@ -18,21 +18,12 @@ pytest.importorskip("pxr")
 from pxr import Usd  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "blender"))
 import crowd_scene as cs  # noqa: E402
+from test_usd_import import world_vertices as mesh_positions  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 AGENTS, FRAMES = 40, 12
 
 extension = cs.extension_fixture()
-
-
-def mesh_positions(obj) -> np.ndarray:
-    ev = obj.evaluated_get(bpy.context.evaluated_depsgraph_get())
-    mesh = ev.to_mesh()
-    co = np.empty(len(mesh.vertices) * 3, np.float32)
-    mesh.vertices.foreach_get("co", co)
-    ev.to_mesh_clear()
-    m = np.array(ev.matrix_world, np.float64)
-    return co.reshape(-1, 3) @ m[:3, :3].T + m[:3, 3]
 
 
 def test_the_demos_blender_layout_plays_in_blender(tmp_path):
