@@ -94,6 +94,30 @@ def far_stand(seats, spec):
     return (seats.position[:, 1] < 0) & (np.abs(seats.position[:, 0]) <= straight)
 
 
+def _framing_camera(name, collection, eye, points, forward, aspect, clip_end):
+    """A camera ``name`` at ``eye`` aimed (from ``forward``) at the middle of
+    ``points`` as seen from there, with the horizontal field of view that frames them
+    all in ``aspect`` (:data:`FRAME_MARGIN` of room)."""
+    for _ in range(3):                  # aim at the middle of the points' extent in view
+        f = forward / np.linalg.norm(forward)
+        right = np.cross(f, (0.0, 0.0, 1.0))
+        right /= np.linalg.norm(right)
+        up = np.cross(right, f)
+        rel = points - eye
+        depth = rel @ f
+        x, y = (rel @ right) / depth, (rel @ up) / depth
+        forward = f + 0.5 * (x.max() + x.min()) * right + 0.5 * (y.max() + y.min()) * up
+    tan_half = FRAME_MARGIN * max(0.5 * np.ptp(x), 0.5 * np.ptp(y) * aspect)
+    cam = bpy.data.objects.new(name, bpy.data.cameras.new(name))
+    cam.data.sensor_fit = "HORIZONTAL"
+    cam.data.lens = 0.5 * cam.data.sensor_width / tan_half
+    cam.data.clip_start, cam.data.clip_end = 1.0, clip_end
+    cam.location = Vector(eye)
+    cam.rotation_euler = Vector(forward).to_track_quat("-Z", "Y").to_euler()
+    collection.objects.link(cam)
+    return cam
+
+
 def _broadcast_camera(scene, seats, collection):
     """The "Camera": the main broadcast camera on the halfway line of the north stand,
     hung under the top tier's front (or 12 m up if that is lower), looking across the
@@ -103,25 +127,8 @@ def _broadcast_camera(scene, seats, collection):
     eye = np.array([0.0, edge + seats.fronts[-1] - 1.0, max(seats.heights[-1] - 1.0, 12.0)])
     far = seats.position[far_stand(seats, spec)].astype(np.float64)
     aspect = scene.render.resolution_x / scene.render.resolution_y
-    forward = far.mean(0) - eye
-    for _ in range(3):                  # aim at the middle of the far stand's extent
-        f = forward / np.linalg.norm(forward)
-        right = np.cross(f, (0.0, 0.0, 1.0))
-        right /= np.linalg.norm(right)
-        up = np.cross(right, f)
-        rel = far - eye
-        depth = rel @ f
-        x, yy = (rel @ right) / depth, (rel @ up) / depth
-        mid_x, mid_y = 0.5 * (x.max() + x.min()), 0.5 * (yy.max() + yy.min())
-        forward = f + mid_x * right + mid_y * up
-    tan_half = FRAME_MARGIN * max(0.5 * np.ptp(x), 0.5 * np.ptp(yy) * aspect)
-    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
-    cam.data.sensor_fit = "HORIZONTAL"
-    cam.data.lens = 0.5 * cam.data.sensor_width / tan_half
-    cam.data.clip_start, cam.data.clip_end = 1.0, 20.0 * float(np.abs(far).max())
-    cam.location = Vector(eye)
-    cam.rotation_euler = Vector(forward).to_track_quat("-Z", "Y").to_euler()
-    collection.objects.link(cam)
+    cam = _framing_camera("Camera", collection, eye, far, far.mean(0) - eye, aspect,
+                          20.0 * float(np.abs(far).max()))
     scene.camera = cam
     return cam
 
@@ -133,25 +140,7 @@ def _aerial_camera(seats, collection, aspect):
     pos = seats.position.astype(np.float64)
     reach = float(np.abs(pos[:, :2]).max())
     eye = np.array([-0.9 * reach, -1.25 * reach, 0.75 * reach])
-    forward = -eye
-    for _ in range(3):                  # aim at the middle of the bowl's extent in view
-        f = forward / np.linalg.norm(forward)
-        right = np.cross(f, (0.0, 0.0, 1.0))
-        right /= np.linalg.norm(right)
-        up = np.cross(right, f)
-        rel = pos - eye
-        depth = rel @ f
-        x, y = (rel @ right) / depth, (rel @ up) / depth
-        forward = f + 0.5 * (x.max() + x.min()) * right + 0.5 * (y.max() + y.min()) * up
-    tan_half = FRAME_MARGIN * max(0.5 * np.ptp(x), 0.5 * np.ptp(y) * aspect)
-    cam = bpy.data.objects.new("AerialCamera", bpy.data.cameras.new("AerialCamera"))
-    cam.data.sensor_fit = "HORIZONTAL"
-    cam.data.lens = 0.5 * cam.data.sensor_width / tan_half
-    cam.data.clip_start, cam.data.clip_end = 1.0, 10.0 * reach
-    cam.location = Vector(eye)
-    cam.rotation_euler = Vector(forward).to_track_quat("-Z", "Y").to_euler()
-    collection.objects.link(cam)
-    return cam
+    return _framing_camera("AerialCamera", collection, eye, pos, -eye, aspect, 10.0 * reach)
 
 
 def _camera_and_sun(scene, seats, collection):
