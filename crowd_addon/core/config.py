@@ -174,16 +174,19 @@ class CrowdConfig:
 
     def add_mesh(self, mesh, lods=(0.25, 0.06, "card")):
         """Set ``mesh`` as its skeleton's proxy, with LODs built at ``lods`` triangle
-        ratios and, last, ``"card"`` for :func:`~.mesh.card_lod` (``()`` for none), or
-        ready :class:`~.mesh.ProxyMesh` levels (of the same skeleton), optionally
-        followed by ``"card"`` (the card of ``mesh``). LOD ``k`` is drawn once the
-        agent is shorter than ``lod_pixels[k - 1]`` pixels (:mod:`.lod`).
+        ratios and, last, ``"card"`` for the far level (:func:`~.mesh.parts_lod`;
+        ``()`` for none), or ready :class:`~.mesh.ProxyMesh` levels (of the same
+        skeleton), optionally followed by ``"card"`` (the far level of ``mesh``). LOD
+        ``k`` is drawn once the agent is shorter than ``lod_pixels[k - 1]`` pixels
+        (:mod:`.lod`).
 
-        Every level after the first is checked over the poses of the skeleton's clips
-        added so far (:func:`.lod_check.check_levels`) at the size it is switched in
-        at: one whose silhouette strays from the full mesh's by more than
-        ``lod_budget_px`` (1 pixel; ``inf``: no check) is replaced by the level before it, and a note
-        saying so is added to :attr:`lod_notes` (the bake and the CLI print them)."""
+        Every automatic level is checked over the poses of the skeleton's clips added
+        so far at the size it is switched in at (:func:`.lod_check.fit_levels`): each
+        decimated level is the lightest of a few tries whose silhouette strays from the
+        full mesh's by at most ``lod_budget_px`` (1 pixel; ``inf``: no check); a level
+        none of whose tries passes is replaced by the level before it, and a note
+        saying so is added to :attr:`lod_notes` (the bake and the CLI print them).
+        Levels an artist made are kept as made."""
         levels = self._levels(mesh, lods)
         self.meshes[mesh.skeleton] = levels
         return levels
@@ -226,11 +229,11 @@ class CrowdConfig:
         return len(have) - 1
 
     def _levels(self, mesh, lods) -> list:
-        from .mesh import CARD, ProxyMesh, build_lods, parts_lod
+        from .mesh import CARD, ProxyMesh, parts_lod
         self._check_mesh(mesh)
         ready = [m for m in lods if isinstance(m, ProxyMesh)]
         if not ready:
-            levels = build_lods(mesh, tuple(lods))
+            return self._fitted(mesh, tuple(lods))
         else:
             lods = list(lods)
             rest = lods[len(ready):]
@@ -248,7 +251,6 @@ class CrowdConfig:
             # levels an artist made are kept as made: the silhouette check judges the
             # automatic ones
             return [mesh, *ready] + ([parts_lod(mesh)] if rest else [])
-        return self._checked(levels)
 
     @property
     def lod_notes(self) -> list:
@@ -256,16 +258,15 @@ class CrowdConfig:
         (one line per level; not saved: loading checks nothing again)."""
         return self.__dict__.setdefault("_lod_notes", [])
 
-    def _checked(self, levels) -> list:
-        """``levels`` with the torn ones refused (:func:`.lod_check.check_levels`)."""
+    def _fitted(self, mesh, lods) -> list:
+        """``mesh``'s automatic levels, each the lightest that passes the silhouette check
+        at its switch size (:func:`.lod_check.fit_levels`)."""
         from .lod import switch_pixels
-        from .lod_check import check_levels, clip_poses
-        if len(levels) < 2 or not np.isfinite(self.lod_budget_px):
-            return levels
-        sk = self.skeletons[levels[0].skeleton]
-        levels, notes = check_levels(levels, sk, clip_poses(sk, self.clips.values()),
-                                     switch_pixels(self), float(self.lod_budget_px))
-        self.lod_notes.extend(f"mesh {levels[0].name!r}: {n}" for n in notes)
+        from .lod_check import clip_poses, fit_levels
+        sk = self.skeletons[mesh.skeleton]
+        levels, notes = fit_levels(mesh, lods, sk, clip_poses(sk, self.clips.values()),
+                                   switch_pixels(self), float(self.lod_budget_px))
+        self.lod_notes.extend(f"mesh {mesh.name!r}: {n}" for n in notes)
         return levels
 
     def _check_mesh(self, mesh, what=""):

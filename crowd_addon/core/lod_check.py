@@ -8,7 +8,7 @@ full mesh's height in that pose spans that many pixels. A level's departure is t
 pixels where the two silhouettes differ over the full silhouette's outline length:
 about how far, in pixels, its outline strays from the full mesh's. A level that tears
 (vertices of two body parts merged, so a raised arm drags a wedge of torso up with it)
-departs by many pixels; :func:`check_levels` refuses it.
+departs by many pixels; :func:`fit_levels` refuses it.
 """
 
 from __future__ import annotations
@@ -19,13 +19,17 @@ import numpy as np
 
 from .skinning import skin_vertices, skinning_matrices
 
-__all__ = ["silhouette", "departure", "check_levels", "clip_poses", "BUDGET_PX"]
+__all__ = ["silhouette", "departure", "fit_levels", "clip_poses",
+           "BUDGET_PX", "ERROR_PIXELS"]
 
 #: the largest departure (pixels of outline) a level may have at its switch size
 BUDGET_PX = 1.0
 #: the share of the full silhouette's outline (in pixels) that may stray further
 SLACK = 0.02
 VIEWS = (0.0, 60.0, 120.0)       # degrees about +Z
+#: the collapse error bounds :func:`fit_levels` tries for a decimated level, in pixels
+#: at its switch height, coarsest first: the first whose level passes the check wins
+ERROR_PIXELS = (1.0, 0.5, 0.25)
 _WIN = 6                         # the window of a small triangle, pixels
 
 
@@ -126,6 +130,121 @@ def departure(level, full, skeleton, poses, pixels: float) -> float:
             slack = max(1, int(SLACK * _outline(fa)))
             worst = max(worst, _stray(fa, fb, slack), _stray(fb, fa, slack))
     return float(worst)
+
+
+def fit_levels(mesh, lods, skeleton, poses, switch_px, budget_px: float = BUDGET_PX):
+    """``(levels, notes)``: ``mesh`` and its automatic levels ``lods`` (triangle ratios,
+    then optionally :data:`~.mesh.CARD`), each the lightest that passes the check.
+
+    A decimated level ``k`` (:func:`~.mesh.decimated`, from the level before) is tried
+    with its collapses bounded by each of :data:`ERROR_PIXELS` in turn, as pixels of
+    the mesh's bind height at its switch size ``switch_px[k - 1]``; the first whose
+    :func:`departure` there is within ``budget_px`` is kept. The far level is tried
+    once. A level none of whose tries passes is refused: the level before is used
+    under its name, with a note. ``budget_px`` infinite: no check, the coarsest try."""
+    from .errors import CrowdError
+    from .mesh import CARD, decimated, far_level
+    lods = tuple(lods)
+    for k, entry in enumerate(lods, start=1):
+        if isinstance(entry, str) and (entry != CARD or k != len(lods)):
+            raise CrowdError(f"mesh {mesh.name!r}: LOD {entry!r} must be a triangle ratio "
+                             f"in (0, 1) or {CARD!r} (as the last level)")
+    height = max(float(np.ptp(mesh.positions[:, 2])), 1e-6)
+    check = bool(np.isfinite(budget_px))
+    levels, notes = [mesh], []
+    for k, entry in enumerate(lods, start=1):
+        px = float(switch_px[min(k - 1, len(switch_px) - 1)])
+        name = f"{mesh.name}.{CARD}" if entry == CARD else f"{mesh.name}.lod{k}"
+        if entry == CARD:
+            tries = [lambda: far_level(mesh, levels[-1])]
+        else:
+            tries = [lambda e=e: decimated(mesh, levels[-1], entry, e * height / px, name)
+                     for e in (ERROR_PIXELS if check else ERROR_PIXELS[:1])]
+        chosen, worst = None, np.inf
+        for make in tries:
+            level = make()
+            same = level.triangle_count == levels[-1].triangle_count    # nothing collapsed
+            d = departure(level, mesh, skeleton, poses, px) if check and not same else 0.0
+            if d <= budget_px:
+                chosen = level
+                break
+            worst = min(worst, d)
+        if chosen is None:
+            notes.append(f"LOD {k} {name!r} refused: its silhouette departs from the full "
+                         f"mesh by {worst:.2f} px at {px:.0f} px tall (budget "
+                         f"{budget_px:g} px); the level before is used")
+            chosen = replace(levels[-1], name=name)
+        levels.append(chosen)
+    return levels, notes
+
+
+def clip_poses(skeleton, clips, per_clip: int = 4, most: int = 16) -> np.ndarray:
+    """``(n, B, 10)`` poses of ``skeleton`` to check levels over: its bind pose and
+    ``per_clip`` evenly spaced keys of each clip that matches it (by bone names, or
+    by bone count without them), at most ``most`` in all."""
+    from .errors import CrowdError
+    bind = np.asarray(skeleton.bind_pose, np.float64)
+    poses = [bind[None]]
+    for clip in clips:
+        try:
+            order = clip.bone_order(skeleton)
+        except CrowdError:
+            continue
+        keys = np.asarray(clip.keys, np.float64)
+        if order is not None:
+            keys = keys[:, order]
+        pick = np.unique(np.linspace(0, keys.shape[0] - 1, per_clip).round().astype(int))
+        poses.append(keys[pick])
+    out = np.concatenate(poses)
+    if out.shape[0] > most:
+        out = out[np.unique(np.linspace(0, out.shape[0] - 1, most).round().astype(int))]
+    return out
+
+
+def fit_levels(mesh, lods, skeleton, poses, switch_px, budget_px: float = BUDGET_PX):
+    """``(levels, notes)``: ``mesh`` and its automatic levels ``lods`` (triangle ratios,
+    then optionally :data:`~.mesh.CARD`), each the lightest that passes the check.
+
+    A decimated level ``k`` (:func:`~.mesh.decimated`, from the level before) is tried
+    with its collapses bounded by each of :data:`ERROR_PIXELS` in turn, as pixels of
+    the mesh's bind height at its switch size ``switch_px[k - 1]``; the first whose
+    :func:`departure` there is within ``budget_px`` is kept. The far level is tried
+    once. A level none of whose tries passes is refused: the level before is used
+    under its name, with a note. ``budget_px`` infinite: no check, the coarsest try."""
+    from .errors import CrowdError
+    from .mesh import CARD, decimated, far_level
+    lods = tuple(lods)
+    for k, entry in enumerate(lods, start=1):
+        if isinstance(entry, str) and (entry != CARD or k != len(lods)):
+            raise CrowdError(f"mesh {mesh.name!r}: LOD {entry!r} must be a triangle ratio "
+                             f"in (0, 1) or {CARD!r} (as the last level)")
+    height = max(float(np.ptp(mesh.positions[:, 2])), 1e-6)
+    check = bool(np.isfinite(budget_px))
+    levels, notes = [mesh], []
+    for k, entry in enumerate(lods, start=1):
+        px = float(switch_px[min(k - 1, len(switch_px) - 1)])
+        name = f"{mesh.name}.{CARD}" if entry == CARD else f"{mesh.name}.lod{k}"
+        if entry == CARD:
+            tries = [lambda: far_level(mesh, levels[-1])]
+        else:
+            tries = [lambda e=e: decimated(mesh, levels[-1], entry, e * height / px, name)
+                     for e in (ERROR_PIXELS if check else ERROR_PIXELS[:1])]
+        chosen, worst = None, np.inf
+        for make in tries:
+            level = make()
+            same = level.triangle_count == levels[-1].triangle_count    # nothing collapsed
+            d = departure(level, mesh, skeleton, poses, px) if check and not same else 0.0
+            if d <= budget_px:
+                chosen = level
+                break
+            worst = min(worst, d)
+        if chosen is None:
+            notes.append(f"LOD {k} {name!r} refused: its silhouette departs from the full "
+                         f"mesh by {worst:.2f} px at {px:.0f} px tall (budget "
+                         f"{budget_px:g} px); the level before is used")
+            chosen = replace(levels[-1], name=name)
+        levels.append(chosen)
+    return levels, notes
 
 
 def clip_poses(skeleton, clips, per_clip: int = 4, most: int = 16) -> np.ndarray:

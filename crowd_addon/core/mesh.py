@@ -5,8 +5,8 @@ pose, in the skeleton's armature space; ``uint32`` triangles; per vertex up to
 eight bone influences with weights that sum to 1, stored four wide, or eight wide
 for a mesh where some vertex has more than four), the form both GPU backends and the
 USD writer consume. :func:`build_lods` makes cheaper versions for far
-agents by vertex clustering, keeping each cluster's most central vertex (and so its
-influences exactly), so an LOD deforms like the full mesh. A mesh may carry how it
+agents by half-edge collapses (:mod:`.simplify`) that keep the mesh's own vertices
+(and so their influences exactly), so an LOD deforms like the full mesh. A mesh may carry how it
 looks: texture coordinates per triangle corner and a :class:`Look` (material) per
 triangle, which LODs keep for the triangles they keep.
 """
@@ -296,26 +296,22 @@ CARD = "card"
 """A ``build_lods`` / ``CrowdConfig.add_mesh`` level: the :func:`card_lod` of the mesh."""
 
 
-#: a level's cells are at most this share of a body part's thinnest extent: a part
-#: keeps its volume (a thin forearm collapsed to nothing, a level departs by its length)
-THIN_CELL = 0.99
-
-
-def build_lods(mesh: ProxyMesh, ratios=(0.25, 0.06)) -> list:
+def build_lods(mesh: ProxyMesh, ratios=(0.25, 0.06), max_errors=None) -> list:
     """``[mesh, lod1, lod2, ...]``: each LOD keeps about ``ratio`` of the triangles;
-    the entry :data:`CARD` (last only) adds the 8-vertex :func:`card_lod`.
+    the entry :data:`CARD` (last only) adds the far level, :func:`parts_lod`.
 
-    Vertex clustering on a uniform grid over the bind pose, per dominant bone (a
-    cell holds the vertices of one bone only, so a cluster never joins two body parts
-    that move apart: an arm raised never drags the torso's vertices with it): the cell size is
-    searched (bisection on its logarithm) until the triangle count is close to the
-    target; each cell is represented by its vertex nearest the cell's mean, with
-    that vertex's own position, normal and influences (all of them: a mesh stored
-    eight wide gives eight-wide LODs); triangles that collapse are dropped. LODs never
-    have more triangles than the level before, nor fewer than
-    :data:`MIN_LOD_TRIANGLES`: a level whose target is below it aims at it, and where
-    the level before is already that light, or clustering cannot stay above it, the
-    level is a copy of the level before (named as its own level).
+    Each level is the level before simplified by skinning-aware half-edge collapses
+    (:func:`.simplify.simplify`: cheapest first by plane distance plus how far a
+    collapse across differing bone weights moves when the joint bends; material
+    borders kept), down to ``ratio`` of the mesh's triangles or, when ``max_errors``
+    gives the level a size in metres (``CrowdConfig.add_mesh``: a share of a pixel at
+    the level's switch height), until the next collapse would cost more. Every vertex
+    of a level is a vertex of the mesh with its own position, normal and influences
+    (all of them: a mesh stored eight wide gives eight-wide LODs), so a level deforms
+    like the mesh. LODs never have more triangles than the level before, nor fewer
+    than :data:`MIN_LOD_TRIANGLES`: a level whose target is below it aims at it, and
+    where nothing can be collapsed the level is a copy of the level before (named as
+    its own level).
     """
     lods = [mesh]
     for k, ratio in enumerate(ratios, start=1):
@@ -323,40 +319,33 @@ def build_lods(mesh: ProxyMesh, ratios=(0.25, 0.06)) -> list:
             if ratio != CARD or k != len(ratios):
                 raise CrowdError(f"mesh {mesh.name!r}: LOD {ratio!r} must be a triangle ratio "
                                  f"in (0, 1) or {CARD!r} (as the last level)")
-            card = parts_lod(mesh)
-            if card.triangle_count > lods[-1].triangle_count:    # a light body: no lighter
-                card = replace(lods[-1], name=f"{mesh.name}.{CARD}")
-            lods.append(card)
+            lods.append(far_level(mesh, lods[-1]))
             continue
-        if not 0 < ratio < 1:
-            raise CrowdError(f"mesh {mesh.name!r}: LOD ratio {ratio} must be in (0, 1)")
-        target = max(MIN_LOD_TRIANGLES, int(round(mesh.triangle_count * ratio)))
-        prev = lods[-1]
-        if prev.triangle_count <= target:     # light enough already: keep its triangles
-            lods.append(replace(prev, name=f"{mesh.name}.lod{k}"))
-            continue
-        lo, hi = np.log(1e-4), np.log(float(np.ptp(mesh.positions, 0).max()) + 1e-6)
-        thin = THIN_CELL
-        best = None
-        for _ in range(24):
-            mid = 0.5 * (lo + hi)
-            cand = _cluster(prev, np.exp(mid), f"{mesh.name}.lod{k}", thin=thin)
-            if cand is None:                  # everything collapsed: cells too coarse
-                hi = mid
-                continue
-            if cand.triangle_count <= min(target, prev.triangle_count):
-                best = cand
-                hi = mid                      # fine enough: try finer cells
-                if cand.triangle_count >= 0.9 * target:
-                    break
-            else:
-                lo = mid
-        if best is None:
-            best = _cluster(prev, np.exp(hi), f"{mesh.name}.lod{k}", thin=thin)
-        if best is None or best.triangle_count < MIN_LOD_TRIANGLES:
-            best = replace(prev, name=f"{mesh.name}.lod{k}")
-        lods.append(best)
+        error = np.inf if max_errors is None else float(max_errors[k - 1])
+        lods.append(decimated(mesh, lods[-1], ratio, error, f"{mesh.name}.lod{k}"))
     return lods
+
+
+def decimated(mesh: ProxyMesh, prev: ProxyMesh, ratio, max_error: float, name: str):
+    """The level after ``prev`` keeping about ``ratio`` of ``mesh``'s triangles (at least
+    :data:`MIN_LOD_TRIANGLES`), collapses costing at most ``max_error`` metres; a copy
+    of ``prev`` named ``name`` where nothing collapses."""
+    from .simplify import simplify
+    if not 0 < ratio < 1:
+        raise CrowdError(f"mesh {mesh.name!r}: LOD ratio {ratio} must be in (0, 1)")
+    target = max(MIN_LOD_TRIANGLES, int(round(mesh.triangle_count * ratio)))
+    if prev.triangle_count <= target:     # light enough already: keep its triangles
+        return replace(prev, name=name)
+    return replace(simplify(prev, target, max_error, name), name=name)
+
+
+def far_level(mesh: ProxyMesh, prev: ProxyMesh) -> ProxyMesh:
+    """The :data:`CARD` level of ``mesh`` after ``prev``: :func:`parts_lod`, or ``prev``
+    renamed where that is no lighter (a light body)."""
+    card = parts_lod(mesh)
+    if card.triangle_count > prev.triangle_count:
+        card = replace(prev, name=f"{mesh.name}.{CARD}")
+    return card
 
 
 def card_lod(mesh: ProxyMesh, name: str | None = None) -> ProxyMesh:
@@ -472,55 +461,3 @@ def parts_lod(mesh: ProxyMesh, name: str | None = None, min_share: float = 0.004
         name or f"{mesh.name}.{CARD}", mesh.skeleton, np.concatenate(pos),
         np.concatenate(tris), np.concatenate(idx), np.concatenate(wts),
         np.concatenate(normals), mesh.bone_count, **look)
-
-
-def _cluster(mesh: ProxyMesh, cell: float, name: str, by_bone: bool = True,
-             by_normal: bool = True, outer: bool = True, thin: float = 0.99):
-    p = mesh.positions.astype(np.float64)
-    bone = mesh.bone_indices[:, 0].astype(np.int64)
-    size = np.full(p.shape[0], float(cell))
-    if by_bone:     # a cell never spans a part across: a thin forearm keeps its box
-        nb = int(bone.max()) + 1
-        lo = np.full((nb, 3), np.inf)
-        hi = np.full((nb, 3), -np.inf)
-        np.minimum.at(lo, bone, p)
-        np.maximum.at(hi, bone, p)
-        size = np.minimum(size, np.maximum(thin * (hi - lo).min(1)[bone], 1e-4))
-    key = np.floor((p - p.min(0)) / size[:, None]).astype(np.int64)
-    if by_bone:     # a cluster never spans two bones: parts that move apart stay apart
-        key = np.c_[bone, key]
-    if by_normal:   # nor two faces of a corner: a box keeps its edges and its shading
-        nrm = mesh.normals.astype(np.float64)
-        side = np.argmax(np.abs(nrm), 1) * 2 + (nrm[np.arange(nrm.shape[0]),
-                                                     np.argmax(np.abs(nrm), 1)] < 0)
-        key = np.c_[side, key]
-    _, cluster = np.unique(key, axis=0, return_inverse=True)
-    cluster = cluster.reshape(-1)
-    n = int(cluster.max()) + 1
-    count = np.bincount(cluster, minlength=n).astype(np.float64)
-    mean = np.stack([np.bincount(cluster, p[:, k], n) for k in range(3)], 1) / count[:, None]
-    dist = np.linalg.norm(p - mean[cluster], axis=1)
-    if outer:       # the vertex furthest out from its part's centre: outlines stay out
-        nb = int(bone.max()) + 1
-        cnt = np.maximum(np.bincount(bone, minlength=nb), 1).astype(np.float64)
-        centre = np.stack([np.bincount(bone, p[:, k], nb) for k in range(3)], 1) / cnt[:, None]
-        dist = -np.linalg.norm(p - centre[bone], axis=1)
-    order = np.lexsort((dist, cluster))                 # by cluster, best first
-    first = np.ones(order.size, bool)
-    first[1:] = cluster[order[1:]] != cluster[order[:-1]]
-    rep = order[first]                                  # representative vertex per cluster
-    tri = cluster[mesh.triangles.astype(np.int64)]
-    keep = (tri[:, 0] != tri[:, 1]) & (tri[:, 1] != tri[:, 2]) & (tri[:, 0] != tri[:, 2])
-    tri = tri[keep]
-    if tri.shape[0] == 0:
-        return None
-    kept = np.flatnonzero(keep)[np.sort(np.unique(np.sort(tri, 1), axis=0,
-                                                  return_index=True)[1])]
-    tri = cluster[mesh.triangles.astype(np.int64)][kept]
-    used = np.unique(tri)
-    remap = np.full(n, -1, np.int64)
-    remap[used] = np.arange(used.size)
-    src = rep[used]
-    return ProxyMesh(name, mesh.skeleton, mesh.positions[src], remap[tri],
-                     mesh.bone_indices[src], mesh.bone_weights[src], mesh.normals[src],
-                     mesh.bone_count, **mesh.looks_of(kept))

@@ -170,8 +170,64 @@ def test_card_is_the_last_lod_and_the_default_far_level():
     levels = cfg.add_mesh(synthetic.humanoid_mesh(sk))
     assert [lv.name.rsplit(".", 1)[-1] for lv in levels[1:]] == ["lod1", "lod2", "card"]
     assert len(cfg.lod_pixels) == len(levels) - 1
-    # the thin synthetic body's first level strays at 90 px: refused, with a note
     assert all("refused" in n for n in cfg.lod_notes)
+
+
+def _tube_arm(rings=13, sides=8):
+    """A closed octagonal tube 0.8 m long (the fan's limbs are such tubes) along +Z from
+    a shoulder bone 1 to a forearm bone 2 that pivots at its middle, its rings blending
+    from one bone to the other over the middle fifth, capped at both ends; and the
+    skeleton with the forearm bent 90 degrees as a second pose."""
+    from crowd_addon.core.skeleton import Skeleton
+    bind = np.zeros((3, 10))
+    bind[:, :4] = 1.0
+    bind[2, 7:] = (0.0, 0.0, 0.4)
+    sk = Skeleton("sk", ("root", "upper", "fore"), np.array([-1, 0, 1]), bind)
+    z = np.linspace(0.0, 0.8, rings)
+    a = np.arange(sides) * 2 * np.pi / sides
+    ring = np.stack([0.05 * np.cos(a), 0.05 * np.sin(a)], 1)
+    pos = np.concatenate([np.c_[np.tile(ring, (rings, 1)), np.repeat(z, sides)],
+                          [[0, 0, 0.0], [0, 0, 0.8]]])
+    tri = []
+    for r in range(rings - 1):
+        for k in range(sides):
+            a0, a1 = r * sides + k, r * sides + (k + 1) % sides
+            tri += [(a0, a1, a1 + sides), (a0, a1 + sides, a0 + sides)]
+    bottom, top = rings * sides, rings * sides + 1
+    for k in range(sides):
+        tri += [(bottom, (k + 1) % sides, k),
+                (top, (rings - 1) * sides + k, (rings - 1) * sides + (k + 1) % sides)]
+    fore = np.clip((pos[:, 2] - 0.32) / 0.16, 0.0, 1.0)
+    mesh = ProxyMesh.from_influences("arm", "sk", pos, np.array(tri),
+                                     np.tile([1, 2], (len(pos), 1)),
+                                     np.c_[1.0 - fore, fore], bone_count=3)
+    bent = np.broadcast_to(bind, (1, 3, 10)).copy()
+    bent[0, 2, 3:7] = (np.cos(np.pi / 4), np.sin(np.pi / 4), 0.0, 0.0)   # about X
+    return sk, mesh, np.concatenate([bind[None], bent])
+
+
+def test_decimated_levels_of_a_tube_limb_pass_the_check_and_keep_the_elbow():
+    """The fan's limbs are closed octagonal tubes: clustering on a grid per bone could not
+    thin them without straying 3 px at 90 px, so both decimated levels were refused and
+    the 65k stadium drew its 30-90 px fans with the full mesh. Half-edge collapses take
+    the straight stretches' rings first and keep the elbow's blended rings."""
+    from crowd_addon.core.lod_check import departure, fit_levels
+
+    sk, mesh, poses = _tube_arm()
+    levels, notes = fit_levels(mesh, (0.25, 0.06), sk, poses, (90.0, 45.0))
+    assert not notes, notes
+    full, lod1, lod2 = levels
+    assert lod1.triangle_count <= 0.4 * full.triangle_count
+    assert lod2.triangle_count <= lod1.triangle_count
+    for level, px in ((lod1, 90.0), (lod2, 45.0)):
+        assert departure(level, full, sk, poses, px) <= 1.0
+    # the elbow keeps rings whose weights blend (the bend stays round, not a hinge)
+    blended = (lod1.bone_weights[:, 0] > 0.05) & (lod1.bone_weights[:, 0] < 0.95)
+    assert blended.sum() >= 8
+    # closed stays closed: every edge used twice
+    e = np.sort(np.concatenate([lod2.triangles[:, [0, 1]], lod2.triangles[:, [1, 2]],
+                                lod2.triangles[:, [2, 0]]]), 1)
+    assert (np.unique(e, axis=0, return_counts=True)[1] == 2).all()
 
 
 @pytest.mark.parametrize("bones, sides, rings", [(24, 8, 4), (12, 4, 3), (12, 3, 2), (5, 3, 2)])
@@ -228,41 +284,52 @@ def _two_part_body():
     return sk, mesh, np.concatenate([bind[None], raised])
 
 
-def test_the_lod_check_refuses_a_level_that_tears_and_keeps_one_that_does_not():
-    from crowd_addon.core.lod_check import check_levels, departure
-    from crowd_addon.core.mesh import _cluster
+def _kept_and_torn(mesh):
+    """A decimated level of :func:`_two_part_body` and the same level torn: the arm's
+    lower vertices bound to the torso (as a decimation across parts would), so they
+    hang where they were while the arm is raised."""
+    from crowd_addon.core.simplify import simplify
 
-    sk, mesh, poses = _two_part_body()
-    kept = _cluster(mesh, 0.12, "body.kept", by_bone=True)     # a cluster per bone
-    # a clustering across parts: the arm's lower vertices merged into torso clusters
-    # (bound to the torso), so they hang where they were while the arm is raised
+    kept = simplify(mesh, mesh.triangle_count // 3, name="body.kept")
     idx = kept.bone_indices.copy()
     idx[(idx[:, 0] == 2) & (kept.positions[:, 2] < 1.2), 0] = 1
     torn = ProxyMesh("body.torn", "sk", kept.positions, kept.triangles, idx,
                      kept.bone_weights, kept.normals, 3)
+    return kept, torn
+
+
+def test_the_lod_check_refuses_a_level_that_tears_and_keeps_one_that_does_not(monkeypatch):
+    from dataclasses import replace
+
+    from crowd_addon.core import mesh as mesh_module
+    from crowd_addon.core.lod_check import departure, fit_levels
+
+    sk, mesh, poses = _two_part_body()
+    kept, torn = _kept_and_torn(mesh)
     assert torn.triangle_count < mesh.triangle_count and kept.triangle_count < mesh.triangle_count
     assert departure(mesh, mesh, sk, poses, 40) == 0.0
     assert departure(kept, mesh, sk, poses[:1], 40) == departure(torn, mesh, sk, poses[:1], 40)
     assert departure(torn, mesh, sk, poses, 40) >= 4.0           # the arm strays by pixels
     assert departure(kept, mesh, sk, poses, 40) <= 1.0
-    levels, notes = check_levels([mesh, kept, torn], sk, poses, (40, 40))
-    assert levels[1] is kept and levels[2].name == "body.torn"
-    assert levels[2].triangle_count == kept.triangle_count       # the level before, renamed
-    assert len(notes) == 1 and "LOD 2 'body.torn' refused" in notes[0]
+    levels, notes = fit_levels(mesh, (0.3,), sk, poses, (40,))
+    assert not notes and levels[1].name == "body.lod1"
+    assert levels[1].triangle_count < mesh.triangle_count
+    assert departure(levels[1], mesh, sk, poses, 40) <= 1.0
+    # a decimation that tears on every try is refused: the level before, renamed
+    monkeypatch.setattr(mesh_module, "decimated",
+                        lambda mesh, prev, ratio, error, name: replace(torn, name=name))
+    levels, notes = fit_levels(mesh, (0.3,), sk, poses, (40,))
+    assert levels[1].name == "body.lod1" and levels[1].triangle_count == mesh.triangle_count
+    assert len(notes) == 1 and "LOD 1 'body.lod1' refused" in notes[0]
 
 
 def test_a_config_keeps_the_levels_it_is_given():
     """``add_mesh`` keeps levels an artist made as made (commit 2797fbb: the silhouette
     check judges the automatic levels only), even one the check would refuse."""
     from crowd_addon.core.clip import Clip
-    from crowd_addon.core.mesh import _cluster
 
     sk, mesh, poses = _two_part_body()
-    kept = _cluster(mesh, 0.12, "body.kept", by_bone=True)
-    idx = kept.bone_indices.copy()
-    idx[(idx[:, 0] == 2) & (kept.positions[:, 2] < 1.2), 0] = 1
-    torn = ProxyMesh("body.torn", "sk", kept.positions, kept.triangles, idx,
-                     kept.bone_weights, kept.normals, 3)
+    kept, torn = _kept_and_torn(mesh)
     cfg = CrowdConfig(lod_pixels=(40.0, 30.0))
     cfg.add_skeleton(sk)
     levels = cfg.add_mesh(mesh, lods=(kept, torn))     # no clip yet: the bind pose only

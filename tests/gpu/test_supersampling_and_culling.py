@@ -38,7 +38,10 @@ def test_closed_surfaces_are_told_from_open_or_inside_out_ones():
 
 
 def test_supersampled_image_is_the_mean_of_the_drawing_twice_as_large(h, renderer):
-    crowd = h.Crowd(h.make_config(M=8, agents=12, spacing=0.9, lod_distances=FAR))
+    cfg = h.make_config(M=8, agents=12, spacing=0.9, lod_distances=FAR)
+    cfg.lod_budget_px = float("inf")         # the far level as made: a closed box a part
+    cfg.add_mesh(cfg.meshes["fan"][0], lods=("card",))
+    crowd = h.Crowd(cfg)
     for _ in range(3):
         crowd.step()
     camera = frame_crowd(crowd, aspect=SIZE[0] / SIZE[1])
@@ -55,12 +58,15 @@ def test_supersampled_image_is_the_mean_of_the_drawing_twice_as_large(h, rendere
 
 
 def test_culling_back_faces_changes_no_pixel(h, renderer):
-    crowd = h.Crowd(h.make_config(M=8, agents=12, spacing=0.9, lod_distances=FAR))
+    cfg = h.make_config(M=8, agents=12, spacing=0.9, lod_distances=FAR)
+    cfg.lod_budget_px = float("inf")         # the far level as made: a closed box a part
+    cfg.add_mesh(cfg.meshes["fan"][0], lods=("card",))
+    crowd = h.Crowd(cfg)
     for _ in range(3):
         crowd.step()
     camera = frame_crowd(crowd, aspect=SIZE[0] / SIZE[1])
     culled = renderer(crowd, SIZE, samples=4)
-    assert any(m.cull for m in culled.meshes.values())   # the synthetic body is closed
+    assert any(m.cull for m in culled.meshes.values())   # the boxes are closed
     culled.render(camera)
     two_sided = renderer(crowd, SIZE, samples=4)
     for m in two_sided.meshes.values():
