@@ -299,10 +299,11 @@ def turns_of(rows, chain: LookChain, dyaw, dpitch) -> np.ndarray:
     return turns
 
 
-def apply_look(rows, chain: LookChain, turns) -> np.ndarray:
+def apply_look(rows, chain: LookChain, turns, only=None) -> np.ndarray:
     """``rows`` (n, B, 3, 4) with the chain's ``turns`` (:func:`look_turns`) applied:
     each bone at or below chain bone ``k`` is moved by the turns of chain bones
-    ``0 .. k`` (float64 copy)."""
+    ``0 .. k`` (float64 copy). ``only``: bone indices to move (the rest are copied as
+    they are), for a reader that needs a few bones' looked rows."""
     out = np.array(rows, np.float64)
     n, k = out.shape[0], chain.index.size
     acc = np.zeros((n, k, 3, 4))                    # A after chain bone i
@@ -312,6 +313,8 @@ def apply_look(rows, chain: LookChain, turns) -> np.ndarray:
         r, t = np.einsum("nij,njk->nik", tr, r), np.einsum("nij,nj->ni", tr, t) + tt
         acc[:, i, :, :3], acc[:, i, :, 3] = r, t
     bones = np.flatnonzero(chain.depth > 0)
+    if only is not None:
+        bones = np.intersect1d(bones, np.asarray(only, np.int64))
     if bones.size:
         a = acc[:, chain.depth[bones] - 1]          # (n, J, 3, 4)
         s = out[:, bones]                               # (n, J, 3, 4)
