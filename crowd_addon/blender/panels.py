@@ -465,6 +465,9 @@ class CROWD_PT_settings(_Panel, bpy.types.Panel):
         row = layout.row()
         row.enabled = s.lod_cards
         row.prop(s, "lod_card")
+        row = layout.row()
+        row.enabled = s.lod_cards
+        row.prop(s, "lod_joined")
 
 
 CLASSES = (CROWD_UL_characters, CROWD_UL_lods, CROWD_UL_palettes, CROWD_UL_variants,

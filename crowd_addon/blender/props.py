@@ -376,6 +376,12 @@ class CROWD_PG_settings(PropertyGroup):
     lod_card: FloatProperty(name="Cards From", default=90.0, min=0.01, unit="LENGTH",
                             description="Distance from which agents are drawn as "
                                         "cards, " + _LOD_VIEW)
+    lod_joined: FloatProperty(name="Joined Boxes From", default=180.0, min=0.01,
+                              unit="LENGTH",
+                              description="Distance from which agents are drawn with "
+                                          "their small parts' boxes joined (fewer boxes, "
+                                          "when they pass the silhouette check there), "
+                                          + _LOD_VIEW)
     agent_sources: CollectionProperty(type=CROWD_PG_agent_source)
     show: PointerProperty(type=show_props.CROWD_PG_show,
                           description="Cues, reactions and animated parameters "

@@ -123,7 +123,8 @@ def _settings(scene):
 def lod_distances(settings) -> tuple:
     """The LOD switch distances of the Crowd settings (with the card's when on); a
     clear error when they do not increase."""
-    names = ["lod_near", "lod_far"] + (["lod_card"] if settings.lod_cards else [])
+    names = ["lod_near", "lod_far"] + (["lod_card", "lod_joined"] if settings.lod_cards
+                                       else [])
     values = [float(getattr(settings, n)) for n in names]
     for (a, va), (b, vb) in zip(zip(names, values), zip(names[1:], values[1:])):
         if vb <= va:
@@ -200,12 +201,13 @@ def _trees(scene, c, skeleton, clips) -> dict:
 
 def _lod_levels(c, skeleton, cards, notes) -> tuple:
     """The ``lods`` argument of ``CrowdConfig.add_mesh`` for character ``c``: its LOD
-    meshes (one serves both levels) or the automatic ratios, then the card when on;
+    meshes (one serves both levels), then the card when on, or the automatic ratios,
+    then the two far levels when on;
     the meshes' remarks (``ProxyMesh.notes``) go to the list ``notes``."""
     from .armature import proxy_mesh_from_object
     card = (CARD,) if cards else ()
     if len(c.lods) == 0:
-        return (0.25, 0.06) + card
+        return (0.25, 0.06) + card * 2         # the far level, then with parts joined
     what = f"character {c.name!r}"
     if len(c.lods) > MESH_LODS:
         raise CrowdError(f"{what}: {len(c.lods)} LOD meshes; there are {MESH_LODS} levels "
@@ -238,7 +240,7 @@ def _add_mesh(cfg, c, skeleton, cards, notes):
         raise CrowdError(f"character {c.name!r}: body: {e}") from None
     notes.extend(body.notes)            # e.g. vertices with more than eight bones
     cfg.add_mesh(body, lods=_lod_levels(c, skeleton, cards, notes))
-    auto = (0.25, 0.06) + ((CARD,) if cards else ())
+    auto = (0.25, 0.06) + ((CARD, CARD) if cards else ())
     for k, v in enumerate(c.variants, start=1):
         what = f"character {c.name!r}: mesh variant {k}"
         if v.object is None:

@@ -172,11 +172,11 @@ class CrowdConfig:
         self.clips[clip.name] = clip
         return clip
 
-    def add_mesh(self, mesh, lods=(0.25, 0.06, "card")):
+    def add_mesh(self, mesh, lods=(0.25, 0.06, "card", "card")):
         """Set ``mesh`` as its skeleton's proxy, with LODs built at ``lods`` triangle
-        ratios and, last, ``"card"`` for the far level (:func:`~.mesh.parts_lod`;
-        ``()`` for none), or ready :class:`~.mesh.ProxyMesh` levels (of the same
-        skeleton), optionally followed by ``"card"`` (the far level of ``mesh``). LOD
+        ratios and, last, ``"card"`` for each far level (:func:`~.mesh.parts_lod`: a box
+        per body part, then with small parts joined; ``()`` for none), or ready
+        :class:`~.mesh.ProxyMesh` levels (of the same skeleton), optionally followed by ``"card"`` (the far level of ``mesh``). LOD
         ``k`` is drawn once the agent is shorter than ``lod_pixels[k - 1]`` pixels
         (:mod:`.lod`).
 
@@ -191,7 +191,7 @@ class CrowdConfig:
         self.meshes[mesh.skeleton] = levels
         return levels
 
-    def add_variant(self, mesh, lods=(0.25, 0.06, "card")):
+    def add_variant(self, mesh, lods=(0.25, 0.06, "card", "card")):
         """Add ``mesh`` as a further mesh variant of its skeleton (after the body of
         :meth:`add_mesh`, which must be set); ``lods`` as for :meth:`add_mesh`. Returns
         the variant's index."""

@@ -20,7 +20,7 @@ import numpy as np
 from .skinning import skin_vertices, skinning_matrices
 
 __all__ = ["silhouette", "departure", "fit_levels", "clip_poses",
-           "BUDGET_PX", "ERROR_PIXELS"]
+           "BUDGET_PX", "ERROR_PIXELS", "JOIN_SHARES"]
 
 #: the largest departure (pixels of outline) a level may have at its switch size
 BUDGET_PX = 1.0
@@ -30,6 +30,10 @@ VIEWS = (0.0, 60.0, 120.0)       # degrees about +Z
 #: the collapse error bounds :func:`fit_levels` tries for a decimated level, in pixels
 #: at its switch height, coarsest first: the first whose level passes the check wins
 ERROR_PIXELS = (1.0, 0.5, 0.25)
+#: the shares of the surface under which a far level's parts are joined to a neighbour
+#: (:func:`~.mesh.parts_lod`), tried coarsest first: the fan's 22 boxes become 5 at
+#: 0.15, 10 at 0.045, 15 at 0.025; 0 keeps a box for every part
+JOIN_SHARES = (0.15, 0.1, 0.045, 0.025, 0.0)
 _WIN = 6                         # the window of a small triangle, pixels
 
 
@@ -134,29 +138,32 @@ def departure(level, full, skeleton, poses, pixels: float) -> float:
 
 def fit_levels(mesh, lods, skeleton, poses, switch_px, budget_px: float = BUDGET_PX):
     """``(levels, notes)``: ``mesh`` and its automatic levels ``lods`` (triangle ratios,
-    then optionally :data:`~.mesh.CARD`), each the lightest that passes the check.
+    then optionally one or more :data:`~.mesh.CARD`), each the lightest that passes
+    the check.
 
     A decimated level ``k`` (:func:`~.mesh.decimated`, from the level before) is tried
     with its collapses bounded by each of :data:`ERROR_PIXELS` in turn, as pixels of
     the mesh's bind height at its switch size ``switch_px[k - 1]``; the first whose
-    :func:`departure` there is within ``budget_px`` is kept. The far level is tried
-    once. A level none of whose tries passes is refused: the level before is used
-    under its name, with a note. ``budget_px`` infinite: no check, the coarsest try."""
-    from .errors import CrowdError
-    from .mesh import CARD, decimated, far_level
+    :func:`departure` there is within ``budget_px`` is kept. A far level
+    (:func:`~.mesh.far_level`, named ``<mesh>.card``, then ``<mesh>.joined.card``,
+    ``<mesh>.joined2.card``...) is tried with its small parts joined at each of
+    :data:`JOIN_SHARES` in turn, and never heavier than the level before. A level
+    none of whose tries passes is refused: the level before is used under its name,
+    with a note. ``budget_px`` infinite: no check, the first (decimated) or last (far)
+    try."""
+    from .mesh import decimated, far_level, far_levels_start, far_name
     lods = tuple(lods)
-    for k, entry in enumerate(lods, start=1):
-        if isinstance(entry, str) and (entry != CARD or k != len(lods)):
-            raise CrowdError(f"mesh {mesh.name!r}: LOD {entry!r} must be a triangle ratio "
-                             f"in (0, 1) or {CARD!r} (as the last level)")
+    first_card = far_levels_start(mesh, lods)
     height = max(float(np.ptp(mesh.positions[:, 2])), 1e-6)
     check = bool(np.isfinite(budget_px))
     levels, notes = [mesh], []
     for k, entry in enumerate(lods, start=1):
         px = float(switch_px[min(k - 1, len(switch_px) - 1)])
-        name = f"{mesh.name}.{CARD}" if entry == CARD else f"{mesh.name}.lod{k}"
-        if entry == CARD:
-            tries = [lambda: far_level(mesh, levels[-1])]
+        far = k - 1 - first_card
+        name = f"{mesh.name}.lod{k}" if far < 0 else far_name(mesh, far)
+        if far >= 0:
+            tries = [lambda j=j: far_level(mesh, levels[-1], j, name)
+                     for j in (JOIN_SHARES if check else JOIN_SHARES[-1:])]
         else:
             tries = [lambda e=e: decimated(mesh, levels[-1], entry, e * height / px, name)
                      for e in (ERROR_PIXELS if check else ERROR_PIXELS[:1])]
@@ -203,29 +210,32 @@ def clip_poses(skeleton, clips, per_clip: int = 4, most: int = 16) -> np.ndarray
 
 def fit_levels(mesh, lods, skeleton, poses, switch_px, budget_px: float = BUDGET_PX):
     """``(levels, notes)``: ``mesh`` and its automatic levels ``lods`` (triangle ratios,
-    then optionally :data:`~.mesh.CARD`), each the lightest that passes the check.
+    then optionally one or more :data:`~.mesh.CARD`), each the lightest that passes
+    the check.
 
     A decimated level ``k`` (:func:`~.mesh.decimated`, from the level before) is tried
     with its collapses bounded by each of :data:`ERROR_PIXELS` in turn, as pixels of
     the mesh's bind height at its switch size ``switch_px[k - 1]``; the first whose
-    :func:`departure` there is within ``budget_px`` is kept. The far level is tried
-    once. A level none of whose tries passes is refused: the level before is used
-    under its name, with a note. ``budget_px`` infinite: no check, the coarsest try."""
-    from .errors import CrowdError
-    from .mesh import CARD, decimated, far_level
+    :func:`departure` there is within ``budget_px`` is kept. A far level
+    (:func:`~.mesh.far_level`, named ``<mesh>.card``, then ``<mesh>.joined.card``,
+    ``<mesh>.joined2.card``...) is tried with its small parts joined at each of
+    :data:`JOIN_SHARES` in turn, and never heavier than the level before. A level
+    none of whose tries passes is refused: the level before is used under its name,
+    with a note. ``budget_px`` infinite: no check, the first (decimated) or last (far)
+    try."""
+    from .mesh import decimated, far_level, far_levels_start, far_name
     lods = tuple(lods)
-    for k, entry in enumerate(lods, start=1):
-        if isinstance(entry, str) and (entry != CARD or k != len(lods)):
-            raise CrowdError(f"mesh {mesh.name!r}: LOD {entry!r} must be a triangle ratio "
-                             f"in (0, 1) or {CARD!r} (as the last level)")
+    first_card = far_levels_start(mesh, lods)
     height = max(float(np.ptp(mesh.positions[:, 2])), 1e-6)
     check = bool(np.isfinite(budget_px))
     levels, notes = [mesh], []
     for k, entry in enumerate(lods, start=1):
         px = float(switch_px[min(k - 1, len(switch_px) - 1)])
-        name = f"{mesh.name}.{CARD}" if entry == CARD else f"{mesh.name}.lod{k}"
-        if entry == CARD:
-            tries = [lambda: far_level(mesh, levels[-1])]
+        far = k - 1 - first_card
+        name = f"{mesh.name}.lod{k}" if far < 0 else far_name(mesh, far)
+        if far >= 0:
+            tries = [lambda j=j: far_level(mesh, levels[-1], j, name)
+                     for j in (JOIN_SHARES if check else JOIN_SHARES[-1:])]
         else:
             tries = [lambda e=e: decimated(mesh, levels[-1], entry, e * height / px, name)
                      for e in (ERROR_PIXELS if check else ERROR_PIXELS[:1])]

@@ -296,34 +296,52 @@ CARD = "card"
 """A ``build_lods`` / ``CrowdConfig.add_mesh`` level: the :func:`card_lod` of the mesh."""
 
 
-def build_lods(mesh: ProxyMesh, ratios=(0.25, 0.06), max_errors=None) -> list:
-    """``[mesh, lod1, lod2, ...]``: each LOD keeps about ``ratio`` of the triangles;
-    the entry :data:`CARD` (last only) adds the far level, :func:`parts_lod`.
+def build_lods(mesh: ProxyMesh, ratios=(0.25, 0.06)) -> list:
+    """``[mesh, lod1, lod2, ...]`` unchecked: each LOD keeps about ``ratio`` of the
+    triangles; each :data:`CARD` entry (last only) adds the far level,
+    :func:`parts_lod`. (``CrowdConfig.add_mesh`` makes its levels with
+    :func:`.lod_check.fit_levels`, which checks each at its switch size.)
 
     Each level is the level before simplified by skinning-aware half-edge collapses
     (:func:`.simplify.simplify`: cheapest first by plane distance plus how far a
     collapse across differing bone weights moves when the joint bends; material
-    borders kept), down to ``ratio`` of the mesh's triangles or, when ``max_errors``
-    gives the level a size in metres (``CrowdConfig.add_mesh``: a share of a pixel at
-    the level's switch height), until the next collapse would cost more. Every vertex
-    of a level is a vertex of the mesh with its own position, normal and influences
-    (all of them: a mesh stored eight wide gives eight-wide LODs), so a level deforms
-    like the mesh. LODs never have more triangles than the level before, nor fewer
-    than :data:`MIN_LOD_TRIANGLES`: a level whose target is below it aims at it, and
-    where nothing can be collapsed the level is a copy of the level before (named as
-    its own level).
+    borders kept) down to ``ratio`` of the mesh's triangles. Every vertex of a level is
+    a vertex of the mesh with its own position, normal and influences (all of them: a
+    mesh stored eight wide gives eight-wide LODs), so a level deforms like the mesh.
+    LODs never have more triangles than the level before, nor fewer than
+    :data:`MIN_LOD_TRIANGLES`: a level whose target is below it aims at it, and where
+    nothing can be collapsed the level is a copy of the level before (named as its own
+    level).
     """
+    first = far_levels_start(mesh, ratios)
     lods = [mesh]
     for k, ratio in enumerate(ratios, start=1):
-        if isinstance(ratio, str):
-            if ratio != CARD or k != len(ratios):
-                raise CrowdError(f"mesh {mesh.name!r}: LOD {ratio!r} must be a triangle ratio "
-                                 f"in (0, 1) or {CARD!r} (as the last level)")
-            lods.append(far_level(mesh, lods[-1]))
-            continue
-        error = np.inf if max_errors is None else float(max_errors[k - 1])
-        lods.append(decimated(mesh, lods[-1], ratio, error, f"{mesh.name}.lod{k}"))
+        if k - 1 >= first:
+            lods.append(far_level(mesh, lods[-1], name=far_name(mesh, k - 1 - first)))
+        else:
+            lods.append(decimated(mesh, lods[-1], ratio, np.inf, f"{mesh.name}.lod{k}"))
     return lods
+
+
+def far_levels_start(mesh: ProxyMesh, lods) -> int:
+    """The index of the first :data:`CARD` entry of ``lods`` (its length when none);
+    raises CrowdError naming an entry that is neither a ratio nor a far level last."""
+    lods = tuple(lods)
+    first = next((k for k, e in enumerate(lods) if isinstance(e, str)), len(lods))
+    for k, entry in enumerate(lods):
+        if (isinstance(entry, str) and entry != CARD) or \
+                (k > first and not isinstance(entry, str)):
+            raise CrowdError(f"mesh {mesh.name!r}: LOD {entry!r} must be a triangle ratio "
+                             f"in (0, 1) or {CARD!r} (the far levels, last)")
+    return first
+
+
+def far_name(mesh: ProxyMesh, far: int) -> str:
+    """The name of ``mesh``'s far level ``far`` (0: ``<mesh>.card``, then
+    ``<mesh>.joined.card``, ``<mesh>.joined2.card``...)."""
+    if far == 0:
+        return f"{mesh.name}.{CARD}"
+    return f"{mesh.name}.joined{far if far > 1 else ''}.{CARD}"
 
 
 def decimated(mesh: ProxyMesh, prev: ProxyMesh, ratio, max_error: float, name: str):
@@ -339,12 +357,15 @@ def decimated(mesh: ProxyMesh, prev: ProxyMesh, ratio, max_error: float, name: s
     return replace(simplify(prev, target, max_error, name), name=name)
 
 
-def far_level(mesh: ProxyMesh, prev: ProxyMesh) -> ProxyMesh:
-    """The :data:`CARD` level of ``mesh`` after ``prev``: :func:`parts_lod`, or ``prev``
-    renamed where that is no lighter (a light body)."""
-    card = parts_lod(mesh)
-    if card.triangle_count > prev.triangle_count:
-        card = replace(prev, name=f"{mesh.name}.{CARD}")
+def far_level(mesh: ProxyMesh, prev: ProxyMesh, join_share: float = 0.0,
+              name: str | None = None) -> ProxyMesh:
+    """A :data:`CARD` level of ``mesh`` after ``prev``: :func:`parts_lod` with parts
+    under ``join_share`` joined to a neighbour, or ``prev`` renamed where that is no
+    lighter (a light body); named ``name`` (default ``<mesh>.card``)."""
+    name = name or f"{mesh.name}.{CARD}"
+    card = parts_lod(mesh, name, join_share=join_share)
+    if card.triangle_count >= prev.triangle_count:
+        card = replace(prev, name=name)
     return card
 
 
@@ -402,7 +423,8 @@ _BOX_FACES = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0
                        [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]])
 
 
-def parts_lod(mesh: ProxyMesh, name: str | None = None, min_share: float = 0.004) -> ProxyMesh:
+def parts_lod(mesh: ProxyMesh, name: str | None = None, min_share: float = 0.004,
+              join_share: float = 0.0) -> ProxyMesh:
     """The farthest LOD: a box per body part (8 vertices, 12 triangles) for each bone
     that carries a share of at least ``min_share`` of the mesh's surface, in the look
     covering most of that part.
@@ -418,13 +440,16 @@ def parts_lod(mesh: ProxyMesh, name: str | None = None, min_share: float = 0.004
     so the renderer culls its back faces. So a far agent keeps its colours (shirt,
     skin, hair, trousers: the agent's palette and tint reach each part's look), its
     pose (its arms follow the arms) and its shading. A mesh with no part above the
-    share falls back to :func:`card_lod`.
+    share falls back to :func:`card_lod`. ``join_share``: a part carrying less than that
+    share is first joined to the neighbouring part it shares most vertices with,
+    smallest first (a toe to its foot, a hand to its forearm): fewer, longer boxes for
+    agents a dozen pixels tall (:func:`.lod_check.fit_levels` tries them).
     """
     p = mesh.positions.astype(np.float64)
     t = mesh.triangles.astype(np.int64)
     area = 0.5 * np.linalg.norm(np.cross(p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]]),
                                 axis=1)
-    bone = mesh.bone_indices[t[:, 0], 0].astype(np.int64)
+    bone = _joined_parts(t, mesh.bone_indices[t[:, 0], 0].astype(np.int64), area, join_share)
     share = np.bincount(bone, area) / max(area.sum(), 1e-12)
     mat = np.zeros(t.shape[0], np.int64) if mesh.material is None else \
         mesh.material.astype(np.int64)
@@ -461,3 +486,26 @@ def parts_lod(mesh: ProxyMesh, name: str | None = None, min_share: float = 0.004
         name or f"{mesh.name}.{CARD}", mesh.skeleton, np.concatenate(pos),
         np.concatenate(tris), np.concatenate(idx), np.concatenate(wts),
         np.concatenate(normals), mesh.bone_count, **look)
+
+
+def _joined_parts(t, part, area, join_share: float) -> np.ndarray:
+    """``part`` (T,) with every part carrying less than ``join_share`` of the surface
+    joined to the neighbouring part it shares most vertices with, smallest first,
+    until none is left that small (or with a neighbour)."""
+    part = part.copy()
+    if join_share <= 0:
+        return part
+    total = max(float(area.sum()), 1e-12)
+    while True:
+        share = np.bincount(part, area) / total
+        present = np.unique(part)
+        for b in present[np.argsort(share[present])].tolist():
+            if share[b] >= join_share:
+                return part
+            touching = np.isin(t, np.unique(t[part == b])).any(1) & (part != b)
+            if touching.any():
+                part[part == b] = int(np.argmax(np.bincount(part[touching])))
+                break
+        else:
+            return part
+

@@ -274,14 +274,16 @@ class FramePlan:
     def caster_draws(self, view_projection, light) -> list:
         """The shadow map's crowd draws (:mod:`.shadows`), seen through the sun's
         ``view_projection``: the agents of the current draw lists, each group as its
-        body's coarsest level, except those drawn at that level already (far
-        away, a few pixels tall: their shadows would not show, and at 65k agents
-        they are nearly all of them)."""
+        body's coarsest level, except those drawn at a far level (a card, or boxes
+        per part: far away, a few pixels tall, their shadows would not show, and at
+        65k agents they are nearly all of them)."""
+        from ..core.bodies import is_card
         common = self._draw_uniforms(view_projection, light)
         out = []
         for g in self.lists.groups:
-            coarsest = len(self.proxies[g.body]) - 1
-            if g.lod < coarsest or coarsest == 0:
+            levels = self.view.bodies[g.body].levels
+            coarsest = len(levels) - 1
+            if coarsest == 0 or not is_card(levels[g.lod]) and g.lod < coarsest:
                 out.append(self._draw(g, coarsest, common))
         return out
 

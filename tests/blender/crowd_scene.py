@@ -162,7 +162,7 @@ def walking_crowd(markers=()):
     src = s.agent_sources.add()
     src.name, src.object = "seats", make_seats(6, 5, spacing=1.5)
     src.heading_mode, src.heading = "FIXED", 0.4
-    s.lod_near, s.lod_far, s.lod_card = 500.0, 600.0, 700.0
+    s.lod_near, s.lod_far, s.lod_card, s.lod_joined = 500.0, 600.0, 700.0, 800.0
     return scene, rig, body, walk
 
 

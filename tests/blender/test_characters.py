@@ -243,7 +243,7 @@ def test_user_lod_meshes_replace_the_automatic_levels(two):
     # decimated below MIN_LOD_TRIANGLES
     from crowd_addon.core.mesh import MIN_LOD_TRIANGLES
     kid = cfg.meshes["Kid"]
-    assert [lv.name for lv in kid[1:3]] == ["KidBody.lod1", "KidBody.lod2"] and len(kid) == 4
+    assert [lv.name for lv in kid[1:3]] == ["KidBody.lod1", "KidBody.lod2"] and len(kid) == 5
     assert kid[0].triangle_count >= kid[1].triangle_count >= kid[2].triangle_count
     assert kid[2].triangle_count >= MIN_LOD_TRIANGLES
     # one LOD mesh serves both levels; cards off leaves them out

@@ -201,12 +201,12 @@ def test_config_carries_settings_mesh_uniques_and_agents(rig_scene):
     cfg = scene_config.config_from_scene(scene, progress=lambda *a: steps.append(a))
     assert (cfg.max_offset, cfg.transition_slots, cfg.when_full, cfg.seed) == (12, 5, "cut", 7)
     assert cfg.fps == 24.0 and cfg.start_frame == 1
-    assert cfg.lod_distances == (10.0, 40.0, 90.0)          # far cards on by default
+    assert cfg.lod_distances == (10.0, 40.0, 90.0, 180.0)   # far cards on by default
     assert sorted(cfg.clips) == ["walk", "wave"]
     assert cfg.clips["walk"].events == (("step", 6.0),)       # marker at frame 7, clip 1..25
     assert [d.name for d in cfg.streams] == ["walk"] and [d.name for d in cfg.uniques] == ["wave"]
     assert list(cfg.meshes) == ["Rig"] and cfg.meshes["Rig"][0].positions.shape == (40, 3)
-    assert cfg.meshes["Rig"][-1].name.endswith(".card") and len(cfg.meshes["Rig"]) == 4
+    assert cfg.meshes["Rig"][-1].name.endswith(".joined.card") and len(cfg.meshes["Rig"]) == 5
     assert cfg.agent_count == 20 and (cfg.agent_offset < 12).all()
     assert [a[:2] for a in steps] == [(0, 4), (1, 4), (2, 4), (3, 4)]
     # a unique's clip time starts at 0 when it starts, not at the scene start
@@ -268,6 +268,8 @@ def test_timing_variation_makes_speed_streams_that_play_as_blender_does(rig_scen
      r"Crowd settings: LOD 2 From \(20 m\) must be farther than LOD 1 From \(30 m\)"),
     (lambda s, a: (cs.add_stream(s, "w", a["walk"]), setattr(s, "lod_card", 60.0)),
      r"Crowd settings: Cards From \(60 m\) must be farther than LOD 2 From \(60 m\)"),
+    (lambda s, a: (cs.add_stream(s, "w", a["walk"]), setattr(s, "lod_joined", 80.0)),
+     r"Crowd settings: Joined Boxes From \(80 m\) must be farther than Cards From \(90 m\)"),
 ])
 def test_bad_scenes_name_what_is_at_fault(rig_scene, setup, message):
     """Scene-level faults; the graph's own (unknown inputs, input counts, cycles, masks
@@ -283,7 +285,7 @@ def test_far_cards_can_be_turned_off(rig_scene):
     s = scene.crowd
     s.characters[0].body = cs.make_proxy(rig)
     cs.add_stream(s, "walk", acts["walk"])
-    s.lod_cards, s.lod_card = False, 10.0          # ignored when off
+    s.lod_cards, s.lod_card, s.lod_joined = False, 10.0, 5.0    # ignored when off
     cfg = scene_config.config_from_scene(scene)
     assert cfg.lod_distances == (30.0, 60.0) and len(cfg.meshes["Rig"]) == 3
     assert not any(lv.name.endswith(".card") for lv in cfg.meshes["Rig"])

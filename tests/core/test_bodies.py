@@ -244,7 +244,7 @@ def test_a_body_merges_its_props_into_every_level_but_the_card():
     # the card of a body with props is its variant's own
     assert by_name["fan_body+flag+cap"].levels[-1] is cfg.meshes["fan"][-1]
     assert [m.name for m in by_name["slim+cap"].levels] == [
-        "slim+cap", "slim.lod1+cap", "slim.lod2+cap", "slim.card"]
+        "slim+cap", "slim.lod1+cap", "slim.lod2+cap", "slim.card", "slim.joined.card"]
     assert by_name["fan_body+flag"].levels[0].vertex_count == \
         cfg.meshes["fan"][0].vertex_count + fan_props[0].mesh.vertex_count
 

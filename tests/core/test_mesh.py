@@ -163,12 +163,14 @@ def test_card_is_the_last_lod_and_the_default_far_level():
     assert levels[-1].triangle_count == levels[-2].triangle_count == 12
     assert sorted(set(levels[-1].bone_indices[:, 0].tolist())) == [1, 2]
     for bad in (("card", 0.5), ("cards",)):
-        with pytest.raises(CrowdError, match="'card' \\(as the last level\\)"):
+        with pytest.raises(CrowdError, match="'card' \\(the far levels, last\\)"):
             build_lods(m, bad)
     cfg = CrowdConfig()
     sk = cfg.add_skeleton(synthetic.humanoid("fan", bones=24))
     levels = cfg.add_mesh(synthetic.humanoid_mesh(sk))
-    assert [lv.name.rsplit(".", 1)[-1] for lv in levels[1:]] == ["lod1", "lod2", "card"]
+    assert [lv.name for lv in levels[1:]] == ["fan_body.lod1", "fan_body.lod2", "fan_body.card",
+                                              "fan_body.joined.card"]
+    assert levels[4].triangle_count <= levels[3].triangle_count
     assert len(cfg.lod_pixels) == len(levels) - 1
     assert all("refused" in n for n in cfg.lod_notes)
 
@@ -379,3 +381,24 @@ def test_the_far_level_is_a_closed_box_per_part_lit_like_a_round_part():
     # at the far level's former switch size (18 px) its silhouette stays within the budget
     poses = clip_poses(sk, [synthetic.periodic_clip(sk, "c")])
     assert departure(far, mesh, sk, poses, 18.0) <= 1.0
+
+
+def test_the_joined_far_level_has_fewer_boxes_and_passes_where_it_is_drawn(monkeypatch):
+    """The second far level joins small parts' boxes into their neighbours (a hand into
+    its forearm), kept only where it passes the check at its switch size: the tube
+    arm's two parts joined into one box pass while it hangs straight, not once the
+    elbow bends (the box cannot bend): then the level keeps a box per part."""
+    from crowd_addon.core import lod_check
+    from crowd_addon.core.mesh import parts_lod
+
+    sk, mesh, poses = _tube_arm()
+    assert parts_lod(mesh).triangle_count == 24                      # a box per part
+    assert parts_lod(mesh, join_share=0.6).triangle_count == 12      # joined: one box
+    monkeypatch.setattr(lod_check, "JOIN_SHARES", (0.6, 0.0))
+    straight, _ = lod_check.fit_levels(mesh, (CARD, CARD), sk, poses[:1], (30.0, 10.0))
+    bent, _ = lod_check.fit_levels(mesh, (CARD, CARD), sk, poses, (30.0, 10.0))
+    assert [lv.name for lv in bent[1:]] == ["arm.card", "arm.joined.card"]
+    assert straight[2].triangle_count == 12          # one box passes at 10 px
+    assert bent[2].triangle_count == 24              # bent, a box a part at 10 px
+    assert lod_check.departure(bent[2], mesh, sk, poses, 10.0) <= 1.0
+    assert lod_check.departure(parts_lod(mesh, join_share=0.6), mesh, sk, poses, 10.0) > 1.0

@@ -93,8 +93,8 @@ def test_reading_back_agents_of_several_bodies_is_an_error_naming_them(h, render
         r.skinned_positions([b, a])
     # one body at a time is fine, and a level it lacks is named with the body
     assert r.skinned_positions([a]).shape[0] == 1
-    with pytest.raises(CrowdError, match=r"body 'slim\+flag\+cap' has no LOD 4"):
-        r.skinned_positions([b], lod=4)
+    with pytest.raises(CrowdError, match=r"body 'slim\+flag\+cap' has no LOD 5"):
+        r.skinned_positions([b], lod=5)
 
 
 def differs(a, b, level=12):
