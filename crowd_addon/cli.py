@@ -667,8 +667,10 @@ def _run_demo(args) -> int:
     t = s["seconds"]
     print("\n".join([
         f"stadium demo in {args.out} ({t['total']:.1f} s: "
-        + ", ".join(f"{k} {t[k]:.1f}" for k in ("build_scene", "bake", "simulate", "upload",
-                                                 "draw", "encode", "usd") if k in t) + ")",
+        + ", ".join(f"{k} {t[k]:.1f}" for k in ("build_scene", "bake", "record", "simulate",
+                                                 "upload", "draw", "encode", "usd") if k in t)
+        + (f"; the USD export took {t['usd_beside']:.1f} s beside the frames"
+           if "usd_beside" in t else "") + ")",
         f"  {s['agents']:,} agents, {s['streams']} streams, {s['uniques']} uniques, "
         f"{s['characters']} character types, {s['frames']} frames",
         f"  core step {s['ms_per_step']:.2f} ms/frame, {s['upload_bytes_per_frame']:,} B "

@@ -7,14 +7,16 @@
    configuration next to it: both hold everything the demo runs, the two characters
    with its show (goal, Mexican wave, hits: scene data, ``scene.crowd.show``) and the
    camera the frames are rendered through, the scene's frame range set to the run;
-3. run the crowd built from that configuration once (it runs its show itself: no
-   Python in the loop; the claps are the clap action's event tags, counted by the
-   crowd), render preview frames headless with the GPU path as it runs, in the
-   stadium's own geometry and sun (PNG, MP4 when imageio-ffmpeg is there, and
-   ``contact_sheet.png``: six frames, the show's beats among them), and record it
-   (:mod:`crowd_addon.core.recording`);
-4. export that recording to ``stadium.usdc`` (UsdSkel): the same show, not simulated
-   again; measure its repetition metric (docs/variety.md) through the demo's camera;
+3. run the crowd built from that configuration (it runs its show itself: no Python in
+   the loop) and record it (:mod:`crowd_addon.core.recording`), then
+4. export that recording to ``stadium.usdc`` (UsdSkel) in a process of its own (the
+   same show, not simulated again; its repetition metric, docs/variety.md, measured
+   through the demo's camera) while this process runs the crowd again and renders
+   preview frames headless with the GPU path as it runs (the claps are the clap
+   action's event tags, counted by the crowd), in the stadium's own geometry and sun
+   (PNG, MP4 when imageio-ffmpeg is there, and ``contact_sheet.png``: six frames, the
+   show's beats among them). llvmpipe draws a crowd's vertices on one thread, so the
+   export takes the other core's idle time rather than following the frames;
 5. print a summary and write it as ``summary.json`` (``repetition``: the metric).
 """
 
@@ -162,24 +164,37 @@ def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
         log(f"beats after the last of {frames} frames, muted: {', '.join(stadium.muted)}")
 
     from ..core.crowd import Crowd
-    from ..core.recorder import Recorder
+    from ..core.recorder import record
     from ..gpu.contact_sheet import ContactSheet
     from ..gpu.png import write_png
     from ..gpu.preview_render import render_preview
 
-    log(f"simulating and rendering {frames} frames of {cfg.agent_count:,} agents")
+    # the frames the preview shows, recorded first: the USD export reads the recording
     t = time.perf_counter()
-    crowd = Crowd(cfg, skinning="gpu")          # it runs its show (cfg.show) itself
-    sheet = ContactSheet(_beat_frames(crowd, crowd.frame, crowd.frame + frames - 1))
-    # the frames the preview shows, recorded as they are rendered
-    recorder = Recorder(crowd, crowd.frame, crowd.frame + frames - 1)
-    preview = render_preview(crowd, out / "frames", frames, size=size, mp4=mp4,
-                             before_step=lambda crowd, frame: recorder.capture(),  # shown
-                             camera=stadium.camera, scene=stadium.scene,
-                             light=stadium.light, repetition=None,   # measured below
-                             progress=lambda d, n: _bar(d, n, "render"),
-                             on_image=sheet.offer)
-    write_png(out / "contact_sheet.png", sheet.image())
+    first = Crowd(cfg)                           # it runs its show (cfg.show) itself
+    shot = record(first, first.frame, first.frame + frames - 1)
+    del first
+    seconds["record"] = time.perf_counter() - t
+    # the repetition metric through the demo's camera, at the frames' size
+    measure = RepetitionSettings(width=size[0], height=size[1])
+    export = _UsdExport(shot, out / "stadium.usdc", stadium.camera, measure, layout) \
+        if usd else None
+    log(f"simulating and rendering {frames} frames of {cfg.agent_count:,} agents"
+        + (", exporting USD beside them" if usd else ""))
+    t = time.perf_counter()
+    try:
+        crowd = Crowd(cfg, skinning="gpu")      # the same show, run again to be drawn
+        sheet = ContactSheet(_beat_frames(crowd, crowd.frame, crowd.frame + frames - 1))
+        preview = render_preview(crowd, out / "frames", frames, size=size, mp4=mp4,
+                                 camera=stadium.camera, scene=stadium.scene,
+                                 light=stadium.light, repetition=None,   # measured below
+                                 progress=lambda d, n: _bar(d, n, "render"),
+                                 on_image=sheet.offer)
+        write_png(out / "contact_sheet.png", sheet.image())
+    except BaseException:
+        if export is not None:
+            export.stop()
+        raise
     seconds["simulate_render"] = time.perf_counter() - t
     for stage, key in (("simulate", "simulate"), ("sync", "upload"), ("render", "draw"),
                        ("write", "encode")):
@@ -195,23 +210,15 @@ def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
                "contact_sheet": str(out / "contact_sheet.png"),
                "contact_sheet_frames": sorted(sheet.frames)}
 
-    recorder.capture()                           # the last frame
-    shot = recorder.finish()
-    # the repetition metric through the demo's camera, at the frames' size
-    measure = RepetitionSettings(width=size[0], height=size[1])
     t = time.perf_counter()
-    if usd:
-        from ..usd.export import export_crowd
-        log("exporting the show to USD")
-        res = export_crowd(shot, out / "stadium.usdc", camera=stadium.camera,
-                           repetition=measure, progress=lambda stage, d, n: _bar(d, n, stage),
-                           layout=layout)
-        seconds["usd"] = time.perf_counter() - t
-        summary.update(usd=str(res.path), usd_layout=layout,
-                       usd_bytes=int(sum(res.files.values())),
-                       usd_clip_agents=res.clip_agents,
-                       usd_export={k: getattr(res, k) for k in USD_COUNTS})
-        summary["repetition"] = res.repetition
+    if export is not None:
+        log("waiting for the USD export" if export.running else "the USD export is done")
+        res = export.result()
+        seconds["usd"] = time.perf_counter() - t          # what the frames did not hide
+        seconds["usd_beside"] = res["seconds"]
+        summary.update(usd=res["path"], usd_layout=layout, usd_bytes=res["bytes"],
+                       usd_clip_agents=res["clip_agents"], usd_export=res["counts"])
+        summary["repetition"] = res["repetition"]
     else:
         summary["repetition"] = recording_repetition(
             shot, stadium.camera.view_projection, settings=measure).as_dict()
@@ -221,3 +228,64 @@ def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
     with open(out / "summary.json", "w", encoding="utf-8") as f:
         json.dump(summary, f, indent=2)
     return summary
+
+
+class _UsdExport:
+    """``export_crowd`` of ``shot`` in a process of its own (spawned: a fork would copy
+    Blender's and the GL driver's threads), started at once; :meth:`result` waits for
+    it and returns what the summary keeps, or raises its error as a CrowdError;
+    :meth:`stop` ends it (the demo failed or was interrupted: no half-written stage
+    is left behind, ``export_crowd`` writes its layers before it moves them into
+    place)."""
+
+    def __init__(self, shot, path, camera, measure, layout):
+        import multiprocessing
+        ctx = multiprocessing.get_context("spawn")
+        self._recv, send = ctx.Pipe(duplex=False)
+        self._proc = ctx.Process(target=_export_in_child,
+                                 args=(send, shot, str(path), camera, measure, layout),
+                                 name="crowd demo USD export", daemon=True)
+        self._proc.start()
+        send.close()
+
+    @property
+    def running(self) -> bool:
+        return self._proc.is_alive() and not self._recv.poll()
+
+    def result(self) -> dict:
+        try:
+            kind, value = self._recv.recv()
+        except EOFError:
+            self._proc.join()
+            raise CrowdError(f"the USD export process ended without a result (exit code "
+                             f"{self._proc.exitcode})") from None
+        finally:
+            self._proc.join(timeout=60)
+        if kind == "error":
+            raise CrowdError(f"USD export: {value}")
+        return value
+
+    def stop(self):
+        if self._proc.is_alive():
+            self._proc.terminate()
+        self._proc.join(timeout=10)
+
+
+def _export_in_child(send, shot, path, camera, measure, layout):
+    """The child's side of :class:`_UsdExport`: ``("done", summary)`` or ``("error",
+    message)`` down ``send``."""
+    try:
+        from ..usd.export import export_crowd
+        t = time.perf_counter()
+        res = export_crowd(shot, path, camera=camera, repetition=measure, layout=layout)
+        send.send(("done", {"path": str(res.path), "bytes": int(sum(res.files.values())),
+                            "clip_agents": res.clip_agents,
+                            "counts": {k: getattr(res, k) for k in USD_COUNTS},
+                            "repetition": res.repetition,
+                            "seconds": time.perf_counter() - t}))
+    except Exception as e:  # noqa: BLE001 - the parent names it
+        send.send(("error", f"{type(e).__name__}: {e}" if not isinstance(e, CrowdError)
+                   else str(e)))
+    finally:
+        send.close()
+
