@@ -277,12 +277,11 @@ def _pieces(crowd, scene):
     """What the points instance: each agent's mesh variant, then one piece per prop an
     agent carries (props are small and rigid: their pose meshes are shared by every
     agent whose bone is in the same pose, instead of a pose mesh per combination of
-    props; at the card levels, as on the GPU, no prop). Returns ``(agent, drawable,
+    props; at every level, as on the GPU). Returns ``(agent, drawable,
     prop, lod, levels, palettes)``: per piece its agent, drawable index (a (skeleton,
     variant) or (skeleton, prop) pair), prop index (-1: the body) and level (through
     ``scene``'s camera: :func:`agent_lods`), and per drawable its LOD meshes (empty:
     not drawn) and its character's palette materials."""
-    from ..core.bodies import is_card
     cfg = crowd.config
     names = list(cfg.skeletons)
     skel = np.asarray(crowd.view.agent_skeleton, np.int64)
@@ -296,13 +295,9 @@ def _pieces(crowd, scene):
     lod = agent_lods(crowd, scene, np.array([len(lv) for lv in levels], np.int64)[of_agent])
     agent = [np.arange(skel.size)]
     drawable, prop, level = [of_agent], [np.full(skel.size, -1)], [lod]
-    # per drawable, its first card level (the far levels are last): no props from there
-    card = np.array([next((k for k, m in enumerate(lv) if is_card(m)), len(lv))
-                     for lv in levels] + [1 << 30])
     for k, name in enumerate(names):
         for j, p in enumerate(cfg.props.get(name, ())):
             on = (skel == k) & (mask >> j & 1 == 1)
-            on &= lod < card[of_agent]
             ids = np.flatnonzero(on)
             if ids.size:
                 agent.append(ids)

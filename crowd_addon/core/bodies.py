@@ -9,13 +9,12 @@ of props (``CrowdConfig.agent_props``, a bit per prop), chosen once when the age
 are placed and stored in the configuration.
 
 A **body** is one (skeleton, variant, props) triple that some agent uses: the
-variant's levels with the props' triangles merged into each level but the card (far
-agents a dozen pixels tall show no prop), so that a body draws, skins and exports
-as one mesh; the GPU preview, the USD export (a layer per body) and the repetition
+variant's levels with the props' triangles merged into each level, the far levels too
+(a flag raised above a crowd of 10-pixel fans is what shows their goal; a prop is a
+few boxes), so that a body draws, skins and exports as one mesh; the GPU preview, the USD export (a layer per body) and the repetition
 metric see the same bodies in the same order: :func:`crowd_bodies`. (*Render Crowd*,
 whose cost is a pose mesh per pose in use, instances the variant and each prop as
-pieces of their own instead, so that props share pose meshes across bodies; it too
-leaves props out at the card level.) A prop skinned by a single bone with weight 1 is the
+pieces of their own instead, so that props share pose meshes across bodies.) A prop skinned by a single bone with weight 1 is the
 bone's rigid motion: the vertex moves by the bone's skinning matrix, as Blender moves
 an object parented to that bone.
 """
@@ -195,8 +194,17 @@ def _body(config, s: int, skeleton: str, v: int, mask: int) -> Body:
     levels = variants[v]
     extra = [props[j].mesh for j in chosen]
     name = "+".join([levels[0].name] + [props[j].name for j in chosen])
-    out = tuple(m if is_card(m) or not extra else
-                merge_meshes(m.name + name[len(levels[0].name):], [m, *extra])
+    suffix = name[len(levels[0].name):]
+    out = tuple(m if not extra else merge_meshes(_with_props(m.name, suffix), [m, *extra])
                 for m in levels)
     return Body(s, v, mask, name, out)
+
+
+def _with_props(level: str, suffix: str) -> str:
+    """A level's name with its props' (``"+flag+cap"``): after the level's, before the
+    far levels' ``.card`` (so ``is_card`` still knows them)."""
+    end = "." + CARD
+    if level.endswith(end):
+        return level[:-len(end)] + suffix + end
+    return level + suffix
 

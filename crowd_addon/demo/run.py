@@ -184,7 +184,10 @@ def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
     t = time.perf_counter()
     try:
         crowd = Crowd(cfg, skinning="gpu")      # the same show, run again to be drawn
-        sheet = ContactSheet(_beat_frames(crowd, crowd.frame, crowd.frame + frames - 1))
+        # the frames at their own size: at 65,000 fans a fan is ~10 px tall, and halved
+        # the goal's standing home end read as a change of texture
+        sheet = ContactSheet(_beat_frames(crowd, crowd.frame, crowd.frame + frames - 1),
+                             scale=1)
         preview = render_preview(crowd, out / "frames", frames, size=size, mp4=mp4,
                                  camera=stadium.camera, scene=stadium.scene,
                                  light=stadium.light, repetition=None,   # measured below

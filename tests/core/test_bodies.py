@@ -3,7 +3,7 @@ checks, the bodies the agents use and their merged meshes, the seeded placement
 draws, the validation, the file round trip and the repetition metric.
 
 The oracles are written here from the definitions: a body is the variant's levels
-with each prop's vertices appended (bit order) to every level but the card; bodies
+with each prop's vertices appended (bit order) to every level; bodies
 are ordered by (skeleton, variant, props) (the sorted set of the agents' triples);
 a prop weighted 1 to one bone moves by that bone's skinning matrix (CPU skinning of
 the parts one by one, and of the bind positions by the bone's row alone); shares
@@ -206,7 +206,7 @@ def test_bodies_are_ordered_by_skeleton_variant_props():
         body_keys(cfg, skel[:9])
 
 
-def test_a_body_merges_its_props_into_every_level_but_the_card():
+def test_a_body_merges_its_props_into_every_level():
     cfg = hand_made_config()
     bodies, _ = crowd_bodies(cfg, [s for s, _, _ in HAND_MADE])
     by_name = {b.name: b for b in bodies}
@@ -217,9 +217,7 @@ def test_a_body_merges_its_props_into_every_level_but_the_card():
         parts = [cfg.props[skeleton][j].mesh for j in body.prop_ids]
         assert len(body.levels) == len(variant)
         for level, mesh in zip(body.levels, variant):
-            if is_card(mesh):
-                assert level is mesh       # no prop on a card (one per body part)
-                continue
+            assert is_card(level) == is_card(mesh)    # the far levels keep their kind
             if not parts:
                 assert level is mesh
                 continue
@@ -241,10 +239,9 @@ def test_a_body_merges_its_props_into_every_level_but_the_card():
                     level.bone_weights[start:start + p.vertex_count, :w], p.bone_weights)
                 assert not level.bone_weights[start:start + p.vertex_count, w:].any()
                 t += p.triangle_count
-    # the card of a body with props is its variant's own
-    assert by_name["fan_body+flag+cap"].levels[-1] is cfg.meshes["fan"][-1]
+    # the far levels carry the props too (a raised flag is what shows above far fans)
     assert [m.name for m in by_name["slim+cap"].levels] == [
-        "slim+cap", "slim.lod1+cap", "slim.lod2+cap", "slim.card", "slim.joined.card"]
+        "slim+cap", "slim.lod1+cap", "slim.lod2+cap", "slim+cap.card", "slim.joined+cap.card"]
     assert by_name["fan_body+flag"].levels[0].vertex_count == \
         cfg.meshes["fan"][0].vertex_count + fan_props[0].mesh.vertex_count
 
@@ -290,7 +287,7 @@ def test_merged_skinning_is_the_parts_skinned_apart_and_props_move_rigidly():
             merged = skin_vertices(level.positions, level.bone_indices, level.bone_weights, rows)
             apart = np.concatenate(
                 [skin_vertices(m.positions, m.bone_indices, m.bone_weights, rows)
-                 for m in [mesh] + ([] if is_card(mesh) else [p.mesh for p in props])], 1)
+                     for m in [mesh] + [p.mesh for p in props]], 1)
             np.testing.assert_allclose(merged, apart, rtol=0, atol=1e-9)
         for p in props:
             moved = skin_vertices(p.mesh.positions, p.mesh.bone_indices, p.mesh.bone_weights,

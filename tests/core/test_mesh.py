@@ -402,3 +402,31 @@ def test_the_joined_far_level_has_fewer_boxes_and_passes_where_it_is_drawn(monke
     assert bent[2].triangle_count == 24              # bent, a box a part at 10 px
     assert lod_check.departure(bent[2], mesh, sk, poses, 10.0) <= 1.0
     assert lod_check.departure(parts_lod(mesh, join_share=0.6), mesh, sk, poses, 10.0) > 1.0
+
+
+def test_a_flat_part_keeps_its_length_when_decimated():
+    """A part with no thickness (a box per bone offset sideways in x and y only, as the
+    Blender tests' proxy builds it: its horizontal arms are flat, folded onto one plane):
+    all its triangles share that plane, so their quadrics let a corner slide along it
+    for nothing, and the arms were shortened (that scene's levels strayed 24 px and were
+    refused). A fold (a triangle of no area beside an edge, or normals turned back)
+    now charges leaving its line."""
+    from crowd_addon.core.simplify import simplify
+
+    cube = np.array([(x, y, z) for x in (-1, 1) for y in (-1, 1) for z in (0, 1)], float)
+    quads = ((0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4),
+             (1, 5, 7, 3))
+    pos, tri, bone = [], [], []
+    for b, (head, tail) in enumerate((((0.0, 0, 1.0), (0.0, 0, 1.35)),      # upright
+                                      ((0.04, 0, 1.35), (0.36, 0, 1.35)),   # flat
+                                      ((0.36, 0, 1.35), (0.66, 0, 1.35)))):
+        h, t = np.array(head), np.array(tail)
+        base = len(pos)
+        pos += [h + (t - h) * c[2] + 0.06 * np.array([c[0], c[1], 0.0]) for c in cube]
+        tri += [(base + a, base + b_, base + c_) for q in quads
+                for a, b_, c_ in ((q[0], q[1], q[2]), (q[0], q[2], q[3]))]
+        bone += [b] * 8
+    mesh = ProxyMesh.from_influences("plank", "sk", np.array(pos), np.array(tri),
+                                     np.array(bone)[:, None], np.ones((24, 1)), bone_count=3)
+    low = simplify(mesh, 4, max_error=0.01)
+    np.testing.assert_allclose(low.extent, mesh.extent)             # the arm's ends stay

@@ -195,8 +195,8 @@ def test_contact_sheet_holds_six_frames_of_the_run_and_its_beats(demo):
     out, _ = demo
     s = json.loads((out / "summary.json").read_text())
     sheet = read_png(out / "contact_sheet.png")
-    # six 160 x 90 cells (the frames halved), three a row, 4 pixels apart
-    assert sheet.shape == (2 * 94 + 4, 3 * 164 + 4, 3)
+    # six 320 x 180 cells (the frames at their size), three a row, 4 pixels apart
+    assert sheet.shape == (2 * 184 + 4, 3 * 324 + 4, 3)
     shot = [int(p.stem.split("_")[1]) for p in sorted((out / "frames").glob("frame_*.png"))]
     frames = s["contact_sheet_frames"]
     cue = {c["name"]: c["frame"] for c in s["cues"]}
@@ -207,7 +207,7 @@ def test_contact_sheet_holds_six_frames_of_the_run_and_its_beats(demo):
     hold = round(FRAMES * 90 / 240)
     assert {cue["wave"] + 8, cue["wave"] + max(cue["goal home"] - cue["wave"] - 1, 16),
             cue["goal home"] + min(60, max(12, hold - 6)), cue["hit 1"] + 12} <= set(frames)
-    expected = ContactSheet(frames)
+    expected = ContactSheet(frames, scale=1)
     for f in frames:
         expected.offer(f, read_png(out / "frames" / f"frame_{f:04d}.png"))
     assert np.array_equal(sheet, expected.image())
