@@ -11,12 +11,13 @@ are placed and stored in the configuration.
 A **body** is one (skeleton, variant, props) triple that some agent uses: the
 variant's levels with the props' triangles merged into each level, the far levels too
 (a flag raised above a crowd of 10-pixel fans is what shows their goal; a prop is a
-few boxes), so that a body draws, skins and exports as one mesh; the GPU preview, the USD export (a layer per body) and the repetition
-metric see the same bodies in the same order: :func:`crowd_bodies`. (*Render Crowd*,
-whose cost is a pose mesh per pose in use, instances the variant and each prop as
-pieces of their own instead, so that props share pose meshes across bodies.) A prop skinned by a single bone with weight 1 is the
-bone's rigid motion: the vertex moves by the bone's skinning matrix, as Blender moves
-an object parented to that bone.
+few boxes), so that a body draws, skins and exports as one mesh; the GPU preview, the
+USD export (a layer per body) and the repetition metric see the same bodies in the
+same order: :func:`crowd_bodies`. (*Render Crowd*, whose cost is a pose mesh per pose
+in use, instances the variant and each prop as pieces of their own instead, so that
+props share pose meshes across bodies.) A prop skinned by a single bone with weight 1
+is the bone's rigid motion: the vertex moves by the bone's skinning matrix, as Blender
+moves an object parented to that bone.
 """
 
 from __future__ import annotations

@@ -176,9 +176,9 @@ class CrowdConfig:
         """Set ``mesh`` as its skeleton's proxy, with LODs built at ``lods`` triangle
         ratios and, last, ``"card"`` for each far level (:func:`~.mesh.parts_lod`: a box
         per body part, then with small parts joined; ``()`` for none), or ready
-        :class:`~.mesh.ProxyMesh` levels (of the same skeleton), optionally followed by ``"card"`` (the far level of ``mesh``). LOD
-        ``k`` is drawn once the agent is shorter than ``lod_pixels[k - 1]`` pixels
-        (:mod:`.lod`).
+        :class:`~.mesh.ProxyMesh` levels (of the same skeleton), optionally followed by
+        ``"card"`` (the far level of ``mesh``). LOD ``k`` is drawn once the agent is
+        shorter than ``lod_pixels[k - 1]`` pixels (:mod:`.lod`).
 
         Every automatic level is checked over the poses of the skeleton's clips added
         so far at the size it is switched in at (:func:`.lod_check.fit_levels`): each

@@ -6,8 +6,8 @@ eight bone influences with weights that sum to 1, stored four wide, or eight wid
 for a mesh where some vertex has more than four), the form both GPU backends and the
 USD writer consume. :func:`build_lods` makes cheaper versions for far
 agents by half-edge collapses (:mod:`.simplify`) that keep the mesh's own vertices
-(and so their influences exactly), so an LOD deforms like the full mesh. A mesh may carry how it
-looks: texture coordinates per triangle corner and a :class:`Look` (material) per
+(and so their influences exactly), so an LOD deforms like the full mesh. A mesh may
+carry how it looks: texture coordinates per triangle corner and a :class:`Look` (material) per
 triangle, which LODs keep for the triangles they keep.
 """
 
@@ -490,7 +490,7 @@ def parts_lod(mesh: ProxyMesh, name: str | None = None, min_share: float = 0.004
 
 def _joined_parts(t, part, area, join_share: float) -> np.ndarray:
     """``part`` (T,) with every part carrying less than ``join_share`` of the surface
-    joined to the neighbouring part it shares most vertices with, smallest first,
+    joined to the neighbouring part with most triangles on its vertices, smallest first,
     until none is left that small (or with a neighbour)."""
     part = part.copy()
     if join_share <= 0:

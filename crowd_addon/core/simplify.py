@@ -18,8 +18,9 @@ through each border edge), and one on a non-manifold edge or where borders meet 
 never removed, so shirt and skin meet where they met. Creases (a flat part's rim, folded
 back on itself) charge the same constraint planes without holding their vertices: its
 triangles' planes coincide and leave a point free to slide within them, which would
-let the flat part's ends slide inwards for nothing. A collapse is refused when it would pinch the surface (the
-two vertices share neighbours beyond their common triangles) or turn a triangle over.
+let the flat part's ends slide inwards for nothing. A collapse is refused when it would
+pinch the surface (the two vertices share neighbours beyond their common triangles) or
+turn a triangle over.
 
 :func:`simplify` returns the mesh after collapsing, cheapest first, until the next
 collapse would take it below a triangle count or cost more than a given error: the
