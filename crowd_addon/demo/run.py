@@ -23,6 +23,7 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 import time
@@ -237,12 +238,13 @@ class _UsdExport:
     """``export_crowd`` of ``shot`` in a process of its own (spawned: a fork would copy
     Blender's and the GL driver's threads), started at once; :meth:`result` waits for
     it and returns what the summary keeps, or raises its error as a CrowdError;
-    :meth:`stop` ends it (the demo failed or was interrupted: no half-written stage
-    is left behind, ``export_crowd`` writes its layers before it moves them into
-    place)."""
+    :meth:`stop` ends it (the demo failed or was interrupted) and removes what it had
+    staged: ``export_crowd`` writes its layers in a hidden folder before it moves them
+    into place, so no half-written stage is left behind."""
 
     def __init__(self, shot, path, camera, measure, layout):
         import multiprocessing
+        self._path = str(path)
         ctx = multiprocessing.get_context("spawn")
         self._recv, send = ctx.Pipe(duplex=False)
         self._proc = ctx.Process(target=_export_in_child,
@@ -269,9 +271,12 @@ class _UsdExport:
         return value
 
     def stop(self):
+        from ..usd.files import remove_stale_temporaries
         if self._proc.is_alive():
             self._proc.terminate()
         self._proc.join(timeout=10)
+        remove_stale_temporaries(os.path.dirname(self._path) or ".",
+                                 os.path.basename(self._path))
 
 
 def _export_in_child(send, shot, path, camera, measure, layout):

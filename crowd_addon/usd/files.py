@@ -35,7 +35,7 @@ from pxr import Tf
 from ..core.errors import CrowdError
 from .references import READERS, versions_in_use
 
-__all__ = ["ExportFiles", "FORMATS"]
+__all__ = ["ExportFiles", "FORMATS", "remove_stale_temporaries"]
 
 #: file extension -> Sdf file format of every layer of the export
 FORMATS = {".usdc": "usdc", ".usd": "usdc", ".usda": "usda"}
@@ -74,7 +74,7 @@ class ExportFiles:
         self.written = {}            # relative path -> bytes
 
     def __enter__(self):
-        _remove_stale_temporaries(self.directory, os.path.basename(self.path))
+        remove_stale_temporaries(self.directory, os.path.basename(self.path))
         try:
             self._tmp = tempfile.mkdtemp(prefix=f".{os.path.basename(self.path)}.",
                                          suffix=".tmp", dir=self.directory)
@@ -209,7 +209,7 @@ def _next_version(layers_root) -> int:
     return max(found, default=0) + 1
 
 
-def _remove_stale_temporaries(directory, main_name):
+def remove_stale_temporaries(directory, main_name):
     """Remove ``.MAIN.XXXX.tmp`` folders of exports to ``main_name`` in ``directory``
     whose owner process (on this host) is gone, or that name no owner."""
     pattern = re.compile(re.escape(f".{main_name}.") + r"[A-Za-z0-9_]+\.tmp")

@@ -47,3 +47,18 @@ def test_a_failed_export_beside_the_frames_is_named_and_writes_nothing(shot, tmp
     with pytest.raises(CrowdError, match=r"^USD export: .*crowd\.txt"):
         export.result()
     assert not export.running and list(tmp_path.iterdir()) == []
+
+
+def test_an_export_stopped_beside_the_frames_leaves_nothing(tmp_path):
+    """The demo failed or was interrupted while the export ran: stopping it removes what
+    it had staged (its hidden layer folder), and writes no stage."""
+    import time
+    crowd = Crowd(make_config())
+    long = record(crowd, crowd.frame, crowd.frame + 299)     # seconds of export to stop
+    export = _UsdExport(long, tmp_path / "crowd.usdc", None, RepetitionSettings(),
+                        "instanced")
+    deadline = time.monotonic() + 60
+    while not list(tmp_path.iterdir()) and time.monotonic() < deadline and export.running:
+        time.sleep(0.01)                      # until the child has staged something
+    export.stop()
+    assert not export.running and list(tmp_path.iterdir()) == []
