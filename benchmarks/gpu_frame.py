@@ -4,7 +4,7 @@
 blends), skinned and blended by the compute shader (``Crowd(config, skinning="gpu")``:
 the CPU uploads local poses, paper s.4.5),
 82-bone ``core.synthetic`` humanoid with ``humanoid_mesh``; agents on a 0.9 m grid
-seen by the camera that frames the whole crowd (``gpu.camera.frame_crowd``).
+seen by the camera that frames the whole crowd (``core.camera.frame_crowd``).
 LODs on: ``CrowdConfig.add_mesh``'s defaults -- the mesh (2,058 vertices), 25 % and
 6 % of its triangles and the 8-vertex card (``core.mesh.card_lod``) -- switched at the
 default ``lod_distances`` (30, 90, 150 m in the 1080-pixel reference view, so half
@@ -62,7 +62,7 @@ from crowd_addon.core.mesh import CARD  # noqa: E402
 from crowd_addon.core.synthetic import humanoid, humanoid_mesh, periodic_clip  # noqa: E402
 from crowd_addon.gpu.backends import BACKENDS, make_renderer  # noqa: E402
 from crowd_addon.gpu.programs import AGENT_TEXELS  # noqa: E402
-from crowd_addon.gpu.camera import frame_crowd  # noqa: E402
+from crowd_addon.core.camera import frame_crowd  # noqa: E402
 from crowd_addon.gpu.scene_geometry import SceneGeometry  # noqa: E402
 
 STREAMS, M, SLOTS, BONES = 256, 60, 800, 82

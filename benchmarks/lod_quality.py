@@ -196,7 +196,7 @@ def boxy_character(name="boxy"):
 def _boxy_case(size):
     from crowd_addon.core.config import CrowdConfig
     from crowd_addon.core.controllers import ClipPlayer
-    from crowd_addon.gpu.camera import Camera
+    from crowd_addon.core.camera import Camera
 
     sk, mesh, clip = boxy_character()
     cfg = CrowdConfig(max_offset=30, transition_slots=0)

@@ -21,7 +21,7 @@ sides), frame after frame through ``scene.frame_set``:
   renderer the viewport would use here) into a bound ``gpu.types.GPUOffScreen``
   cleared first, then one pixel read back through Blender's framebuffer, which waits
   for the GPU to finish the frame. The camera frames every agent
-  (``gpu.camera.frame_crowd``, so it backs off as N grows) and the crowd's own LODs
+  (``core.camera.frame_crowd``, so it backs off as N grows) and the crowd's own LODs
   apply (the Crowd settings' defaults: 25 % and 6 % of the triangles and the 8-vertex
   card, 590, 127, 32 and 8 vertices, from 30, 90 and 150 m in the 1080-pixel reference
   view, so at half those depths in a 540-pixel image): the agents per LOD and the
@@ -263,7 +263,7 @@ def run_crowd(blend, action, n, frames, size):
     import gpu
 
     from crowd_addon.blender import preview
-    from crowd_addon.gpu.camera import frame_crowd
+    from crowd_addon.core.camera import frame_crowd
     scene, pv = crowd_scene(blend, action, n)
     cam = frame_crowd(pv.crowd, aspect=size[0] / size[1])
     view, proj = cam.view, cam.projection

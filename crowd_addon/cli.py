@@ -192,7 +192,7 @@ def _run_plan(args) -> int:
 
     from .core.repetition import RepetitionSettings
     from .core.variety_plan import plan_input, plan_variety
-    from .gpu.camera import frame_positions
+    from .core.camera import frame_positions
     from .plan_report import plot, summary_lines, table
 
     settings = RepetitionSettings(k=args.neighbours, appearance=not args.motion_only)

@@ -141,7 +141,7 @@ class Stadium:
     stadium itself (bowl, pitch) with its sun as the renderers draw them."""
 
     config: CrowdConfig
-    camera: object                  # crowd_addon.gpu.camera.Camera
+    camera: object                  # crowd_addon.core.camera.Camera
     muted: tuple = ()
     scene: object = None            # crowd_addon.gpu.scene_geometry.SceneGeometry
     light: tuple | None = None      # the renderers' light from the scene's sun

@@ -24,7 +24,7 @@ from ..core.crowd import Crowd
 from ..core.errors import CrowdError
 from ..core.repetition import RepetitionSettings, combine, crowd_repetition, measure_frames
 from .backends import BACKENDS, make_renderer
-from .camera import frame_crowd
+from ..core.camera import frame_crowd
 from .png import write_png
 
 __all__ = ["PreviewResult", "render_preview", "output_dir", "BACKENDS", "MAX_SIZE"]

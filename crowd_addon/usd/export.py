@@ -137,7 +137,7 @@ def export_crowd(recording, path, agents=None, progress=None, layout="instanced"
         Blender's USD importer animates them only then; and their colour primvars are
         authored on each of their meshes, where that importer reads them);
         :data:`LAYOUTS`.
-    camera : the :class:`~crowd_addon.gpu.camera.Camera` the repetition metric is
+    camera : the :class:`~crowd_addon.core.camera.Camera` the repetition metric is
         measured from (default: one framing the exported agents).
     repetition : :class:`~crowd_addon.core.repetition.RepetitionSettings` of the
         metric (stage ``repetition``, one step a frame measured), or None to skip it.
@@ -183,7 +183,7 @@ def export_steps(recording, path, agents=None, layout="instanced", camera=None,
 def _view_projection(rec, ids, camera, settings) -> np.ndarray:
     """The repetition metric's camera: ``camera``'s, or one framing the agents ``ids``
     at the settings' aspect."""
-    from ..gpu.camera import frame_positions
+    from ..core.camera import frame_positions
     if camera is None:
         camera = frame_positions(rec.position[ids], settings.width / settings.height)
     return camera.view_projection

@@ -22,7 +22,7 @@ from crowd_addon.blender import preview, registration  # noqa: E402
 from crowd_addon.blender.props import settings_fingerprint  # noqa: E402
 from crowd_addon.core import Crowd  # noqa: E402
 from crowd_addon.core.skinning import skin_vertices  # noqa: E402
-from crowd_addon.gpu.camera import look_at, perspective  # noqa: E402
+from crowd_addon.core.camera import look_at, perspective  # noqa: E402
 
 
 extension = cs.extension_fixture()

@@ -14,7 +14,7 @@ import os
 
 import numpy as np
 
-from crowd_addon.gpu.camera import frame_crowd
+from crowd_addon.core.camera import frame_crowd
 
 
 def _load_conftest():

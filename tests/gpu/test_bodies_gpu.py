@@ -13,7 +13,7 @@ import pytest
 from crowd_addon.core import CrowdError
 from crowd_addon.core import synthetic as sy
 from crowd_addon.core.bodies import is_card
-from crowd_addon.gpu.camera import frame_crowd
+from crowd_addon.core.camera import frame_crowd
 
 SIZE = (200, 150)
 FAR = (1e3, 2e3, 3e3)           # every agent at LOD 0 in the images

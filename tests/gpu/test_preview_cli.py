@@ -73,7 +73,7 @@ def test_the_repetition_metric_of_the_frames_shown(config_path, tmp_path, capsys
     measured at the same frames through the same camera."""
     from crowd_addon.core.config_io import load_config
     from crowd_addon.core.repetition import RepetitionSettings, crowd_repetition
-    from crowd_addon.gpu.camera import frame_crowd
+    from crowd_addon.core.camera import frame_crowd
     code, out, err = run(capsys, "--config", config_path, "--out", tmp_path / "r",
                          "--frames", 7, "--width", 96, "--height", 64, "--neighbours", 3,
                          "--repetition-frames", 3, "--json")

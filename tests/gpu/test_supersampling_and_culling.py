@@ -4,7 +4,7 @@ two-sided), docs/gpu.md "Anti-aliasing" (issue 36, item 5)."""
 
 import numpy as np
 
-from crowd_addon.gpu.camera import frame_crowd
+from crowd_addon.core.camera import frame_crowd
 from crowd_addon.gpu.proxies import ProxyBuffers
 
 SIZE = (120, 90)

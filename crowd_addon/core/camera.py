@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core.errors import CrowdError
+from .errors import CrowdError
 
 __all__ = ["Camera", "look_at", "perspective", "frame_crowd", "frame_points",
            "frame_positions"]
