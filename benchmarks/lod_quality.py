@@ -83,8 +83,11 @@ def _build_stadium(seats: int, size, cache: Path | None):
     camera framed for ``size``; from ``cache`` when it holds them."""
     key = cache / f"stadium_{seats}_{size[0]}x{size[1]}.pickle" if cache else None
     if key is not None and key.is_file():
-        with open(key, "rb") as f:
-            return pickle.load(f)
+        try:
+            with open(key, "rb") as f:
+                return pickle.load(f)
+        except Exception as e:  # noqa: BLE001 - a cache of older code: build it again
+            print(f"(cache {key.name} not read: {e}; building again)", file=sys.stderr)
     with tempfile.TemporaryDirectory() as tmp:
         blend = Path(tmp) / "stadium.blend"
         run = subprocess.run([sys.executable, str(ROOT / "sample_scenes" / "build_stadium.py"),
