@@ -6,7 +6,7 @@ the CPU uploads local poses, paper s.4.5),
 82-bone ``core.synthetic`` humanoid with ``humanoid_mesh``; agents on a 0.9 m grid
 seen by the camera that frames the whole crowd (``core.camera.frame_crowd``).
 LODs on: ``CrowdConfig.add_mesh``'s defaults -- the mesh (2,058 vertices), 25 % and
-6 % of its triangles and the 8-vertex card (``core.mesh.card_lod``) -- switched at the
+6 % of its triangles and the 8-vertex card (``core.levels.card_lod``) -- switched at the
 default ``lod_distances`` (30, 90, 150 m in the 1080-pixel reference view, so half
 that deep in a 540-pixel image); LODs off: the full mesh for every agent. Prints:
 
@@ -58,7 +58,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
 from crowd_addon.core import ClipPlayer, Crowd, CrowdConfig  # noqa: E402
 from crowd_addon.core.look_at import LookRig, LookTarget  # noqa: E402
-from crowd_addon.core.mesh import CARD  # noqa: E402
+from crowd_addon.core.levels import CARD  # noqa: E402
 from crowd_addon.core.synthetic import humanoid, humanoid_mesh, periodic_clip  # noqa: E402
 from crowd_addon.gpu.backends import BACKENDS, make_renderer  # noqa: E402
 from crowd_addon.gpu.programs import AGENT_TEXELS  # noqa: E402

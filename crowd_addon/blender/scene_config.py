@@ -27,7 +27,7 @@ from ..core.bake_report import WARNING, BakeReport
 from ..core.config import PALETTE_COLUMNS, CrowdConfig
 from ..core.controller_graph import InputSpec, NodeSpec, TransitionSpec, build_tree
 from ..core.errors import CrowdError
-from ..core.mesh import CARD
+from ..core.levels import CARD
 from ..core.variety import expand
 
 __all__ = ["config_from_scene", "config_steps", "scene_fps", "used_actions", "node_specs",

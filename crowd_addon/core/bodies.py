@@ -27,7 +27,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import CrowdError
-from .mesh import CARD, Look, ProxyMesh
+from .levels import CARD
+from .mesh import Look, ProxyMesh
 
 __all__ = ["Prop", "Body", "MAX_PROPS", "crowd_bodies", "body_keys", "merge_meshes",
            "rigid_mesh", "is_card", "prop_names"]
@@ -77,8 +78,8 @@ def rigid_mesh(name, skeleton, bone, positions, triangles, bone_count=None,
 
 
 def is_card(mesh: ProxyMesh) -> bool:
-    """Whether ``mesh`` is a card level (:func:`~.mesh.card_lod`, or the card per body
-    part of :func:`~.mesh.parts_lod`, both named ``<mesh>.card``)."""
+    """Whether ``mesh`` is a card level (:func:`~.levels.card_lod`, or the card per body
+    part of :func:`~.levels.parts_lod`, both named ``<mesh>.card``)."""
     return mesh.name.endswith("." + CARD)
 
 

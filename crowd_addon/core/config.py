@@ -174,7 +174,7 @@ class CrowdConfig:
 
     def add_mesh(self, mesh, lods=(0.25, 0.06, "card", "card")):
         """Set ``mesh`` as its skeleton's proxy, with LODs built at ``lods`` triangle
-        ratios and, last, ``"card"`` for each far level (:func:`~.mesh.parts_lod`: a box
+        ratios and, last, ``"card"`` for each far level (:func:`~.levels.parts_lod`: a box
         per body part, then with small parts joined; ``()`` for none), or ready
         :class:`~.mesh.ProxyMesh` levels (of the same skeleton), optionally followed by
         ``"card"`` (the far level of ``mesh``). LOD ``k`` is drawn once the agent is
@@ -229,7 +229,8 @@ class CrowdConfig:
         return len(have) - 1
 
     def _levels(self, mesh, lods) -> list:
-        from .mesh import CARD, ProxyMesh, parts_lod
+        from .levels import CARD, parts_lod
+        from .mesh import ProxyMesh
         self._check_mesh(mesh)
         ready = [m for m in lods if isinstance(m, ProxyMesh)]
         if not ready:

@@ -31,7 +31,7 @@ REFERENCE_HEIGHT_M = 1.8
 """The agent height ``lod_distances`` are converted to pixel thresholds with."""
 DEFAULT_LOD_PIXELS = (90.0, 45.0, 30.0, 15.0)
 """LOD 1 below 90 px tall, LOD 2 below 45 px, the far level (a box per body part,
-:func:`.mesh.parts_lod`) below 30 px, and the far level with its small parts joined
+:func:`.levels.parts_lod`) below 30 px, and the far level with its small parts joined
 (fewer boxes, :func:`.lod_check.fit_levels`) below 15 px (what the default distances
 30, 60, 90, 180 m give a 1.8 m agent in the reference view). The far level switched in
 at 18 px until its crossed quads were replaced by boxes lit like round parts: at 30 px

@@ -31,7 +31,7 @@ VIEWS = (0.0, 60.0, 120.0)       # degrees about +Z
 #: at its switch height, coarsest first: the first whose level passes the check wins
 ERROR_PIXELS = (1.0, 0.5, 0.25)
 #: the shares of the surface under which a far level's parts are joined to a neighbour
-#: (:func:`~.mesh.parts_lod`), tried coarsest first: the fan's 22 boxes become 5 at
+#: (:func:`~.levels.parts_lod`), tried coarsest first: the fan's 22 boxes become 5 at
 #: 0.15, 10 at 0.045, 15 at 0.025; 0 keeps a box for every part
 JOIN_SHARES = (0.15, 0.1, 0.045, 0.025, 0.0)
 _WIN = 6                         # the window of a small triangle, pixels
@@ -138,20 +138,20 @@ def departure(level, full, skeleton, poses, pixels: float) -> float:
 
 def fit_levels(mesh, lods, skeleton, poses, switch_px, budget_px: float = BUDGET_PX):
     """``(levels, notes)``: ``mesh`` and its automatic levels ``lods`` (triangle ratios,
-    then optionally one or more :data:`~.mesh.CARD`), each the lightest that passes
+    then optionally one or more :data:`~.levels.CARD`), each the lightest that passes
     the check.
 
-    A decimated level ``k`` (:func:`~.mesh.decimated`, from the level before) is tried
+    A decimated level ``k`` (:func:`~.levels.decimated`, from the level before) is tried
     with its collapses bounded by each of :data:`ERROR_PIXELS` in turn, as pixels of
     the mesh's bind height at its switch size ``switch_px[k - 1]``; the first whose
     :func:`departure` there is within ``budget_px`` is kept. A far level
-    (:func:`~.mesh.far_level`, named ``<mesh>.card``, then ``<mesh>.joined.card``,
+    (:func:`~.levels.far_level`, named ``<mesh>.card``, then ``<mesh>.joined.card``,
     ``<mesh>.joined2.card``...) is tried with its small parts joined at each of
     :data:`JOIN_SHARES` in turn, and never heavier than the level before. A level
     none of whose tries passes is refused: the level before is used under its name,
     with a note. ``budget_px`` infinite: no check, the first (decimated) or last (far)
     try."""
-    from .mesh import decimated, far_level, far_levels_start, far_name
+    from .levels import decimated, far_level, far_levels_start, far_name
     lods = tuple(lods)
     first_card = far_levels_start(mesh, lods)
     height = max(float(np.ptp(mesh.positions[:, 2])), 1e-6)

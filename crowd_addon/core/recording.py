@@ -316,6 +316,7 @@ class Recording:
         move with it). At ``frame[i] + sub[i] / N`` the look is that of ``frame[i]``."""
         from . import quaternion as quat
         from .look_at import apply_look, look_turns
+        from .skinning import model_matrices, with_ancestors
         poses = self.pair_poses(frame, agent, sub)
         if not self.has_looks:
             return poses
@@ -332,9 +333,9 @@ class Recording:
             # only the chain's bones and those above them: the turns read the chain,
             # the local rotations below read the chain and its parents (a third of the
             # fan's 23 bones; all of them cost the 65k demo's export 10 s)
-            need = _with_ancestors(chain.index, sk.parents)
+            need = with_ancestors(chain.index, sk)
             rows = np.zeros((pick.size, sk.bone_count, 3, 4))
-            rows[:, need] = (_model_of(local, need, sk.parents)
+            rows[:, need] = (model_matrices(local, sk, need)
                              @ sk.inverse_bind[need])[:, :, :3, :]
             turns = look_turns(rows, chain, self.look_targets_model(frame[pick],
                                                                     agent[pick]), w[pick])
@@ -401,26 +402,3 @@ class Recording:
                 out[st] = self.stream_subposes[srow, k - 1, ref[st]]
                 out[un] = self.unique_subposes[row[un], k - 1, ref[un]]
         return out
-
-
-def _with_ancestors(bones, parents) -> np.ndarray:
-    """``bones`` and every bone above them, ascending (parents before children)."""
-    out = set()
-    for b in np.asarray(bones, np.int64).tolist():
-        while b >= 0 and b not in out:
-            out.add(b)
-            b = int(parents[b])
-    return np.array(sorted(out), np.int64)
-
-
-def _model_of(local, bones, parents) -> np.ndarray:
-    """Model matrices ``(n, len(bones), 4, 4)`` of ``bones`` (closed under parents,
-    ascending) from local SQT ``local`` (n, B, 10)."""
-    mats = sqt.pose_to_matrices(local[:, bones])
-    at = {int(b): i for i, b in enumerate(bones)}
-    for i, b in enumerate(bones.tolist()):
-        p = int(parents[b])
-        if p >= 0:
-            mats[:, i] = mats[:, at[p]] @ mats[:, i]
-    return mats
-

@@ -150,9 +150,31 @@ class SkinningPlan:
         return out
 
 
-def model_matrices(local: np.ndarray, skeleton: Skeleton) -> np.ndarray:
-    """Reference model matrices ``(n, B, 4, 4)`` float64 of local SQT ``(n, B, 10)``."""
-    return local_to_model(sqt.pose_to_matrices(local[:, :skeleton.bone_count]), skeleton)
+def model_matrices(local: np.ndarray, skeleton: Skeleton, bones=None) -> np.ndarray:
+    """Reference model matrices ``(n, B, 4, 4)`` of local SQT ``(n, B, 10)``; with
+    ``bones`` (indices, each bone's parent among them: :func:`with_ancestors`), only
+    theirs, ``(n, len(bones), 4, 4)``, in that order (a look reads a third of a fan's
+    bones)."""
+    if bones is None:
+        return local_to_model(sqt.pose_to_matrices(local[:, :skeleton.bone_count]), skeleton)
+    bones = np.asarray(bones, np.int64)
+    mats = sqt.pose_to_matrices(local[:, bones])
+    at = {int(b): i for i, b in enumerate(bones.tolist())}
+    for i, b in enumerate(bones.tolist()):
+        p = int(skeleton.parents[b])
+        if p >= 0:
+            mats[:, i] = mats[:, at[p]] @ mats[:, i]
+    return mats
+
+
+def with_ancestors(bones, skeleton: Skeleton) -> np.ndarray:
+    """``bones`` and every bone above them, ascending (parents before children)."""
+    out = set()
+    for b in np.asarray(bones, np.int64).tolist():
+        while b >= 0 and b not in out:
+            out.add(b)
+            b = int(skeleton.parents[b])
+    return np.array(sorted(out), np.int64)
 
 
 def skinning_matrices(local: np.ndarray, skeleton: Skeleton) -> np.ndarray:

@@ -241,7 +241,7 @@ def test_user_lod_meshes_replace_the_automatic_levels(two):
         np.testing.assert_allclose(level.positions, co(obj), atol=1e-6)
     # the kid keeps the automatic levels: its light body (84 triangles) is not
     # decimated below MIN_LOD_TRIANGLES
-    from crowd_addon.core.mesh import MIN_LOD_TRIANGLES
+    from crowd_addon.core.levels import MIN_LOD_TRIANGLES
     kid = cfg.meshes["Kid"]
     assert [lv.name for lv in kid[1:3]] == ["KidBody.lod1", "KidBody.lod2"] and len(kid) == 5
     assert kid[0].triangle_count >= kid[1].triangle_count >= kid[2].triangle_count

@@ -7,7 +7,8 @@ import pytest
 from crowd_addon.core import synthetic
 from crowd_addon.core.config import CrowdConfig
 from crowd_addon.core.errors import CrowdError
-from crowd_addon.core.mesh import CARD, ProxyMesh, card_lod, parts_lod
+from crowd_addon.core.levels import CARD, card_lod, parts_lod
+from crowd_addon.core.mesh import ProxyMesh
 
 
 @pytest.fixture

@@ -13,7 +13,8 @@ import pytest
 
 from crowd_addon.core import ClipPlayer, CrowdConfig, CrowdError, synthetic
 from crowd_addon.core.config_io import load_config, save_config
-from crowd_addon.core.mesh import ProxyMesh, build_lods, card_lod
+from crowd_addon.core.levels import build_lods, card_lod
+from crowd_addon.core.mesh import ProxyMesh
 from crowd_addon.core.skinning import skin_vertices, skinning_matrices
 
 QUAD = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], np.float32)

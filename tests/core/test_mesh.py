@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from crowd_addon.core import CrowdConfig, CrowdError, synthetic
-from crowd_addon.core.mesh import CARD, ProxyMesh, build_lods, card_lod, vertex_normals
+from crowd_addon.core.levels import CARD, build_lods, card_lod
+from crowd_addon.core.mesh import ProxyMesh, vertex_normals
 from crowd_addon.core.skinning import skin_vertices, skinning_matrices
 
 QUAD = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], np.float32)
@@ -237,7 +238,7 @@ def test_automatic_lods_never_decimate_below_a_body(bones, sides, rings):
     """A light body is not crushed (a 72-triangle body once became a 4-triangle
     tetrahedron): decimated levels keep MIN_LOD_TRIANGLES, and a body already that
     light keeps its own triangles; only the explicit card is smaller."""
-    from crowd_addon.core.mesh import MIN_LOD_TRIANGLES
+    from crowd_addon.core.levels import MIN_LOD_TRIANGLES
 
     m = synthetic.humanoid_mesh(synthetic.humanoid("s", bones), sides=sides, rings=rings)
     lods = build_lods(m, (0.25, 0.06, CARD))
@@ -303,7 +304,7 @@ def _kept_and_torn(mesh):
 def test_the_lod_check_refuses_a_level_that_tears_and_keeps_one_that_does_not(monkeypatch):
     from dataclasses import replace
 
-    from crowd_addon.core import mesh as mesh_module
+    from crowd_addon.core import levels as levels_module
     from crowd_addon.core.lod_check import departure, fit_levels
 
     sk, mesh, poses = _two_part_body()
@@ -318,7 +319,7 @@ def test_the_lod_check_refuses_a_level_that_tears_and_keeps_one_that_does_not(mo
     assert levels[1].triangle_count < mesh.triangle_count
     assert departure(levels[1], mesh, sk, poses, 40) <= 1.0
     # a decimation that tears on every try is refused: the level before, renamed
-    monkeypatch.setattr(mesh_module, "decimated",
+    monkeypatch.setattr(levels_module, "decimated",
                         lambda mesh, prev, ratio, error, name: replace(torn, name=name))
     levels, notes = fit_levels(mesh, (0.3,), sk, poses, (40,))
     assert levels[1].name == "body.lod1" and levels[1].triangle_count == mesh.triangle_count
@@ -342,7 +343,7 @@ def test_a_config_keeps_the_levels_it_is_given():
 
 
 def test_the_card_per_body_part_follows_each_part():
-    from crowd_addon.core.mesh import parts_lod
+    from crowd_addon.core.levels import parts_lod
     from crowd_addon.core.skinning import skin_vertices, skinning_matrices
 
     sk, mesh, poses = _two_part_body()
@@ -356,7 +357,7 @@ def test_the_card_per_body_part_follows_each_part():
 
 def test_the_far_level_is_a_closed_box_per_part_lit_like_a_round_part():
     from crowd_addon.core.lod_check import clip_poses, departure
-    from crowd_addon.core.mesh import parts_lod
+    from crowd_addon.core.levels import parts_lod
 
     sk = synthetic.humanoid("fan", bones=24)
     mesh = synthetic.humanoid_mesh(sk)
@@ -389,7 +390,7 @@ def test_the_joined_far_level_has_fewer_boxes_and_passes_where_it_is_drawn(monke
     arm's two parts joined into one box pass while it hangs straight, not once the
     elbow bends (the box cannot bend): then the level keeps a box per part."""
     from crowd_addon.core import lod_check
-    from crowd_addon.core.mesh import parts_lod
+    from crowd_addon.core.levels import parts_lod
 
     sk, mesh, poses = _tube_arm()
     assert parts_lod(mesh).triangle_count == 24                      # a box per part

@@ -7,7 +7,8 @@ import pytest
 
 from crowd_addon.core import CrowdConfig, CrowdError
 from crowd_addon.core.config_io import load_config, save_config
-from crowd_addon.core.mesh import Look, ProxyMesh, build_lods, card_lod
+from crowd_addon.core.levels import build_lods, card_lod
+from crowd_addon.core.mesh import Look, ProxyMesh
 from crowd_addon.core.synthetic import humanoid, humanoid_mesh
 
 SHIRT = Look("shirt", (0.8, 0.1, 0.1, 1.0))
