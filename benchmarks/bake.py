@@ -35,8 +35,8 @@ import bpy  # noqa: E402
 from bpy_extras import anim_utils  # noqa: E402
 
 from crowd_addon.blender.bake import bake_actions  # noqa: E402
-from crowd_addon.core.skinning import model_matrices  # noqa: E402
-from crowd_addon.core.synthetic import humanoid  # noqa: E402
+from crowd_addon.core.base.skinning import model_matrices  # noqa: E402
+from crowd_addon.core.authoring.synthetic import humanoid  # noqa: E402
 
 BVH_DIR = "/usr/share/assimp/models/BVH"
 

@@ -30,11 +30,11 @@ import numpy as np
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
 from crowd_addon.core import Crowd  # noqa: E402
-from crowd_addon.core.graph import TreeEvaluator  # noqa: E402
-from crowd_addon.core.show import Action, Cue, Show, Sweep  # noqa: E402
-from crowd_addon.core.skinning import SkinningPlan  # noqa: E402
-from crowd_addon.core.synthetic import paper_config  # noqa: E402
-from crowd_addon.core.variety import Timing, choose_variants, expand, spread_offsets  # noqa: E402
+from crowd_addon.core.anim.graph import TreeEvaluator  # noqa: E402
+from crowd_addon.core.authoring.show import Action, Cue, Show, Sweep  # noqa: E402
+from crowd_addon.core.base.skinning import SkinningPlan  # noqa: E402
+from crowd_addon.core.authoring.synthetic import paper_config  # noqa: E402
+from crowd_addon.core.variety.timing import Timing, choose_variants, expand, spread_offsets  # noqa: E402
 
 STREAMS, M, SLOTS, BONES = 256, 60, 800, 82
 
@@ -53,7 +53,7 @@ def variety_config(agents: int):
     appearance: a body with a second mesh variant and two props, each agent a variant,
     props, a scale and a palette colour at random. The same stream count as the plain
     configuration, so the two compare per stream."""
-    from crowd_addon.core.synthetic import box_prop, humanoid_mesh
+    from crowd_addon.core.authoring.synthetic import box_prop, humanoid_mesh
     cfg = paper_config(agents, STREAMS, M, SLOTS, BONES)
     sk = cfg.skeletons["fan"]
     cfg.add_mesh(humanoid_mesh(sk), lods=(0.25, "card"))

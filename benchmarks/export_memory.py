@@ -53,10 +53,9 @@ def small_config():
     """A small crowd with a show: a clip, a 2-way blend and a state machine stream, a
     unique, a held sweep and a cue for the unique, so the export writes stream layers,
     blend banks and value clips."""
-    from crowd_addon.core import (Blend2, ClipPlayer, CrowdConfig, StateMachine,
-                                  StateTransition)
-    from crowd_addon.core.show import Action, Cue, Show, Sweep
-    from crowd_addon.core.synthetic import humanoid, humanoid_mesh, periodic_clip
+    from crowd_addon.core import Blend2, ClipPlayer, CrowdConfig, StateMachine, StateTransition
+    from crowd_addon.core.authoring.show import Action, Cue, Show, Sweep
+    from crowd_addon.core.authoring.synthetic import humanoid, humanoid_mesh, periodic_clip
     sk = humanoid("fan", bones=24)
     cfg = CrowdConfig(max_offset=8, transition_slots=4)
     cfg.add_skeleton(sk)
@@ -86,7 +85,7 @@ def config_exporter(folder, workers=None):
     """``export()``: one ``crowd export --config`` in this process (``--workers N``: in
     chunks on a local Dask cluster of N workers started and closed by each export)."""
     from crowd_addon.cli import main
-    from crowd_addon.core.config_io import save_config
+    from crowd_addon.core.authoring.config_io import save_config
     config = os.path.join(folder, "crowd.json")
     save_config(small_config(), config)
     out = os.path.join(folder, "out", "shot.usdc")

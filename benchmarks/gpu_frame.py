@@ -57,12 +57,12 @@ import numpy as np
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
 from crowd_addon.core import ClipPlayer, Crowd, CrowdConfig  # noqa: E402
-from crowd_addon.core.look_at import LookRig, LookTarget  # noqa: E402
-from crowd_addon.core.levels import CARD  # noqa: E402
-from crowd_addon.core.synthetic import humanoid, humanoid_mesh, periodic_clip  # noqa: E402
+from crowd_addon.core.runtime.look_at import LookRig, LookTarget  # noqa: E402
+from crowd_addon.core.meshes.levels import CARD  # noqa: E402
+from crowd_addon.core.authoring.synthetic import humanoid, humanoid_mesh, periodic_clip  # noqa: E402
 from crowd_addon.gpu.backends import BACKENDS, make_renderer  # noqa: E402
 from crowd_addon.gpu.programs import AGENT_TEXELS  # noqa: E402
-from crowd_addon.core.camera import frame_crowd  # noqa: E402
+from crowd_addon.core.base.camera import frame_crowd  # noqa: E402
 from crowd_addon.gpu.scene_geometry import SceneGeometry  # noqa: E402
 
 STREAMS, M, SLOTS, BONES = 256, 60, 800, 82
@@ -422,7 +422,7 @@ def one_mesh_cost(crowd) -> float:
     Blender mesh, every agent as its coarsest level (the card: the cheapest case for
     it), written with one ``foreach_set``."""
     import bpy
-    from crowd_addon.core.skinning import skin_vertices
+    from crowd_addon.core.base.skinning import skin_vertices
     mesh = crowd.config.meshes["fan"][-1]
     t = time.perf_counter()
     world = skin_vertices(mesh.positions, mesh.bone_indices, mesh.bone_weights,

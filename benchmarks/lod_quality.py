@@ -122,10 +122,10 @@ def boxy_character(name="boxy"):
     """A boxy character: 11 bones, a box per body part bound rigidly to its bone
     (each face split 4 x 4, ~2,100 triangles), shirt, skin and trousers looks; and
     its cheer (arms up and down, a little hop)."""
-    from crowd_addon.core import pose as sqt
-    from crowd_addon.core.clip import Clip
-    from crowd_addon.core.mesh import Look, ProxyMesh
-    from crowd_addon.core.skeleton import Skeleton
+    from crowd_addon.core.base import pose as sqt
+    from crowd_addon.core.anim.clip import Clip
+    from crowd_addon.core.meshes.mesh import Look, ProxyMesh
+    from crowd_addon.core.base.skeleton import Skeleton
 
     parents = [-1, 0, 1, 1, 3, 1, 5, 0, 7, 0, 9]
     heads = np.array([[0, 0, 0.95], [0, 0, 1.0], [0, 0, 1.52], [0.24, 0, 1.45],
@@ -197,9 +197,9 @@ def boxy_character(name="boxy"):
 
 
 def _boxy_case(size):
-    from crowd_addon.core.config import CrowdConfig
-    from crowd_addon.core.controllers import ClipPlayer
-    from crowd_addon.core.camera import Camera
+    from crowd_addon.core.authoring.config import CrowdConfig
+    from crowd_addon.core.anim.controllers import ClipPlayer
+    from crowd_addon.core.base.camera import Camera
 
     sk, mesh, clip = boxy_character()
     cfg = CrowdConfig(max_offset=30, transition_slots=0)
@@ -223,7 +223,7 @@ def _boxy_case(size):
 
 def measure(cfg, camera, scene, light, size, frame=None, out=None, name="", timing=False):
     """``(error, default seconds, off seconds, levels used)`` of one frame."""
-    from crowd_addon.core.crowd import Crowd
+    from crowd_addon.core.shots.crowd import Crowd
     from crowd_addon.gpu.backends import make_renderer
 
     crowd = Crowd(cfg, skinning="gpu")

@@ -148,8 +148,8 @@ def export_throughput(agents: int, frames: int) -> dict:
     is checked against the single export's poses at a few frames."""
     import tempfile
 
-    from crowd_addon.core.config_io import save_config
-    from crowd_addon.core.synthetic import humanoid_mesh
+    from crowd_addon.core.authoring.config_io import save_config
+    from crowd_addon.core.authoring.synthetic import humanoid_mesh
     from crowd_addon.farm import ShotSource, export_chunk, farm_export
     cfg = show_config(agents, frames)
     cfg.add_mesh(humanoid_mesh(cfg.skeletons["fan"]), lods=())

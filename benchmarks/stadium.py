@@ -64,8 +64,8 @@ def _build(path: Path, seats: int):
 
 def _record(cfg, first, last, watch=None):
     """Record ``cfg``'s crowd over ``first .. last``; ``watch(crowd)`` after each step."""
-    from crowd_addon.core.crowd import Crowd
-    from crowd_addon.core.recorder import Recorder
+    from crowd_addon.core.shots.crowd import Crowd
+    from crowd_addon.core.shots.recorder import Recorder
 
     crowd = Crowd(cfg, skinning="gpu")
     rec = Recorder(crowd, first, last)
@@ -86,7 +86,7 @@ def _angles(a, b):
 def _by_slots(cfg):
     """``cfg`` with the goal cues' switch triggers taken out: every fan by slot."""
     from crowd_addon.blender.stadium import CUES
-    from crowd_addon.core.show import Show
+    from crowd_addon.core.authoring.show import Show
 
     goals = (CUES["goal_home"], CUES["goal_away"])
     cues = tuple(replace(c, action=replace(c.action, trigger="", release=""))
@@ -109,7 +109,7 @@ def stadium_config(agents: int, frames: int, work: Path):
 
 def measure(cfg, frames: int, build_s: float = 0.0) -> dict:
     from crowd_addon.blender.stadium import CUES
-    from crowd_addon.core.show import Show
+    from crowd_addon.core.authoring.show import Show
 
     show = cfg.show
     goals = [show.cue(CUES["goal_home"]), show.cue(CUES["goal_away"])]

@@ -41,7 +41,7 @@ ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
 sys.path.insert(0, ROOT)
 
 from crowd_addon.core import CrowdConfig  # noqa: E402
-from crowd_addon.core.synthetic import humanoid_mesh, paper_config  # noqa: E402
+from crowd_addon.core.authoring.synthetic import humanoid_mesh, paper_config  # noqa: E402
 
 STREAMS, M, BONES, SLOTS, FRAMES = 256, 60, 82, 800, 300
 FIRST = 1
@@ -113,7 +113,7 @@ def run_export(case: str, agents: int, frames: int, react: float, directory: str
     share of the crowd reacts three times) or ``transition_heavy`` (every agent blends
     once, :func:`every_agent_once`, with slots enough that none waits)."""
     from crowd_addon.core import Crowd
-    from crowd_addon.core.recorder import record
+    from crowd_addon.core.shots.recorder import record
     from crowd_addon.usd import export_crowd
 
     cfg = build(agents)
@@ -146,7 +146,7 @@ def blender_baseline(agents: int, frames: int, directory: str) -> dict:
     """Bake the streams the first ``agents`` agents play (core, this process), then
     time Blender's exporter on them in a child process (bpy's own pxr)."""
     from crowd_addon.core import Crowd
-    from crowd_addon.core.recorder import record
+    from crowd_addon.core.shots.recorder import record
 
     cfg = build(agents, streams=agents)          # one stream each: no sharing to help it
     last = FIRST + frames - 1

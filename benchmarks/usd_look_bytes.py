@@ -32,8 +32,8 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from usd_export import FIRST, build, reactions  # noqa: E402
 
 from crowd_addon.core import Crowd  # noqa: E402
-from crowd_addon.core.look_at import LookRig, LookTarget  # noqa: E402
-from crowd_addon.core.recorder import record  # noqa: E402
+from crowd_addon.core.runtime.look_at import LookRig, LookTarget  # noqa: E402
+from crowd_addon.core.shots.recorder import record  # noqa: E402
 from crowd_addon.usd import export_crowd  # noqa: E402
 
 

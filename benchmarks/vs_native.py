@@ -263,7 +263,7 @@ def run_crowd(blend, action, n, frames, size):
     import gpu
 
     from crowd_addon.blender import preview
-    from crowd_addon.core.camera import frame_crowd
+    from crowd_addon.core.base.camera import frame_crowd
     scene, pv = crowd_scene(blend, action, n)
     cam = frame_crowd(pv.crowd, aspect=size[0] / size[1])
     view, proj = cam.view, cam.projection
@@ -403,7 +403,7 @@ def main(argv=None):
         import gpu
     except ImportError as e:
         fail(f"Blender's bpy module is needed ({e}); run with .venv/bin/python")
-    from crowd_addon.core.errors import CrowdError
+    from crowd_addon.core.base.errors import CrowdError
     from crowd_addon.blender.headless_gpu import init_headless_gpu
 
     import crowd_addon

@@ -32,8 +32,8 @@ import logging
 
 import numpy as np
 
-from .core.errors import CrowdError
-from .core.events import EventDispatcher
+from .core.base.errors import CrowdError
+from .core.runtime.events import EventDispatcher
 
 __all__ = ["CrowdHandle", "wrap", "scene_crowd", "on_event", "off", "transition_to_streamed",
            "transition_to_unique", "set_trigger", "set_parameter", "detach_all"]
@@ -109,7 +109,7 @@ class CrowdHandle:
         """Step the crowd to ``frame``. Going backwards re-simulates from the start
         (deterministic) or from the nearest snapshot the crowd keeps; the frames
         replayed before ``frame`` report no events."""
-        from .core.bounds import whole_frame
+        from .core.base.bounds import whole_frame
         crowd = self._need()
         frame = whole_frame(frame, "advance_to")      # CrowdError, as Crowd.advance_to
         if frame < crowd.frame or crowd.jump_snapshot(frame) is not None:

@@ -16,9 +16,9 @@ latter so ``crowd --help`` stays fast. What needs Blender (``export --blend`` an
 camera) is :mod:`crowd_addon.blender.cli_commands`, imported only for them; that
 package never imports this module (inside Blender, ``blender -c crowd export`` is its
 own command). Exit codes: 0 success, 2 bad input (usage
-errors and :class:`~crowd_addon.core.errors.CrowdError`, reported on stderr as
+errors and :class:`~crowd_addon.core.base.errors.CrowdError`, reported on stderr as
 ``crowd <command>: error: <message>``), 3 a .blend's crowd script that is not trusted
-here (:class:`~crowd_addon.core.errors.ScriptNotTrusted`, reported the same way;
+here (:class:`~crowd_addon.core.base.errors.ScriptNotTrusted`, reported the same way;
 ``--ignore-scripts`` goes on without it).
 
 Units: sizes in bytes; ``--budget-mb`` is in MB of 10**6 bytes, or MiB (2**20 bytes)
@@ -32,11 +32,10 @@ import os
 import sys
 
 from .cli_args import (add_repetition_arguments, add_shot_arguments, add_trust_argument,
-                       frame_number, frame_range,
-                       int_at_least, parse_command, path_arg, positive_float,
-                       progress_printer, repetition_settings)
-from .core.config import MAX_SUBSTEPS, USD_LAYOUTS
-from .core.errors import CrowdError
+                       frame_number, frame_range, int_at_least, parse_command, path_arg,
+                       positive_float, progress_printer, repetition_settings)
+from .core.authoring.config import MAX_SUBSTEPS, USD_LAYOUTS
+from .core.base.errors import CrowdError
 
 __all__ = ["build_parser", "main"]
 
@@ -47,7 +46,7 @@ MIB = 2**20
 # ------------------------------------------------------------------------- budget
 
 def _add_budget(subparsers) -> None:
-    from .core import budget as b  # only for the defaults shown in --help
+    from .core.planning import budget as b  # only for the defaults shown in --help
 
     p = subparsers.add_parser(
         "budget",
@@ -104,8 +103,8 @@ def _add_budget(subparsers) -> None:
 def _run_budget(args) -> int:
     import json
 
-    from .core import budget as b
-    from .core.budget_report import report, report_dict
+    from .core.planning import budget as b
+    from .core.planning.budget_report import report, report_dict
 
     unit = MIB if args.mib else MB
     budget_bytes = args.budget_mb * unit
@@ -138,8 +137,8 @@ def _run_budget(args) -> int:
 # --------------------------------------------------------------------------- plan
 
 def _add_plan(subparsers) -> None:
-    from .core import budget as b
-    from .core.variety_plan import MAX_STREAMS
+    from .core.planning import budget as b
+    from .core.planning.variety_plan import MAX_STREAMS
 
     p = subparsers.add_parser(
         "plan",
@@ -190,9 +189,9 @@ def _run_plan(args) -> int:
     import dataclasses
     import json
 
-    from .core.repetition import RepetitionSettings
-    from .core.variety_plan import plan_input, plan_variety
-    from .core.camera import frame_positions
+    from .core.variety.repetition import RepetitionSettings
+    from .core.planning.variety_plan import plan_input, plan_variety
+    from .core.base.camera import frame_positions
     from .plan_report import plot, summary_lines, table
 
     settings = RepetitionSettings(k=args.neighbours, appearance=not args.motion_only)
@@ -207,7 +206,7 @@ def _run_plan(args) -> int:
             on_bake=lambda done, total, message: print(f"crowd plan: {message}",
                                                        file=sys.stderr, flush=True))
     else:
-        from .core.config_io import load_config
+        from .core.authoring.config_io import load_config
         if args.scene is not None:
             raise CrowdError("--scene needs --blend (a configuration has no scenes)")
         config = load_config(args.config)
@@ -268,7 +267,7 @@ def _run_export(args) -> int:
     import dataclasses
     import json
 
-    from .core.repetition import describe
+    from .core.variety.repetition import describe
     from .farm import ShotSource, export_chunk
     source = ShotSource(config=args.config, blend=args.blend, scene=args.scene,
                         trust_scripts=args.trust_scripts, agents=args.agents,
@@ -415,7 +414,7 @@ def _run_stitch(args) -> int:
     import dataclasses
     import json
 
-    from .core.files import folders_made
+    from .core.base.files import folders_made
     from .gpu.preview_render import writable_dir
     from .usd.stitch import stitch
     folder = writable_dir(os.path.dirname(os.path.abspath(args.out)))
@@ -561,7 +560,7 @@ def _add_preview(subparsers) -> None:
 def _run_preview(args) -> int:
     import json
 
-    from .core.repetition import describe
+    from .core.variety.repetition import describe
     from .gpu.preview_render import render_preview
     shown = [-1]
 
@@ -582,7 +581,7 @@ def _run_preview(args) -> int:
             on_bake=lambda done, total, message: print(
                 f"crowd preview: {message}", file=sys.stderr, flush=True))
     else:
-        from .core.config_io import load_config
+        from .core.authoring.config_io import load_config
         for option in ("scene", "camera"):
             if getattr(args, option) is not None:
                 raise CrowdError(f"--{option} needs --blend (a configuration has no "
@@ -656,7 +655,7 @@ def _add_demo(subparsers) -> None:
 
 
 def _run_demo(args) -> int:
-    from .core.repetition import describe
+    from .core.variety.repetition import describe
     from .demo.run import run_demo
 
     import importlib.util

@@ -10,7 +10,7 @@ import math
 import re
 import sys
 
-from .core.config import MAX_SUBSTEPS, USD_LAYOUTS
+from .core.authoring.config import MAX_SUBSTEPS, USD_LAYOUTS
 
 __all__ = ["int_at_least", "positive_float", "frame_range", "frame_number", "path_arg",
            "progress_printer", "add_shot_arguments", "add_trust_argument", "parse_command"]
@@ -149,10 +149,10 @@ def add_repetition_arguments(parser, frames: bool = True) -> None:
 
 
 def repetition_settings(args, **size):
-    """The :class:`~crowd_addon.core.repetition.RepetitionSettings` of parsed
+    """The :class:`~crowd_addon.core.variety.repetition.RepetitionSettings` of parsed
     arguments (:func:`add_repetition_arguments`), None when ``--repetition-frames`` is
     0; ``size``: ``width``/``height`` of the screen."""
-    from .core.repetition import RepetitionSettings
+    from .core.variety.repetition import RepetitionSettings
     frames = getattr(args, "repetition_frames", 1)
     if frames == 0:
         return None

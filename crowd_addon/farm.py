@@ -44,8 +44,8 @@ import time
 import traceback
 from dataclasses import dataclass, field
 
-from .core.errors import CrowdError, ScriptNotTrusted
-from .core.repetition import RepetitionSettings
+from .core.base.errors import CrowdError, ScriptNotTrusted
+from .core.variety.repetition import RepetitionSettings
 
 __all__ = ["ShotSource", "FarmShot", "chunk_ranges", "chunk_folder", "write_shot_snapshots",
            "export_chunk", "farm_export", "farm_export_shots", "load_shot_list",
@@ -108,9 +108,9 @@ def write_shot_snapshots(source: ShotSource, folder, frames, every, progress=Non
     range (a configuration needs them); ``on_bake(done, total, message)``: the .blend's
     bake steps."""
     if source.config is not None:
-        from .core.config_io import load_config
-        from .core.crowd import Crowd
-        from .core.snapshot import SnapshotFolder, write_snapshots
+        from .core.authoring.config_io import load_config
+        from .core.shots.crowd import Crowd
+        from .core.shots.snapshot import SnapshotFolder, write_snapshots
         if frames is None:
             raise CrowdError("--frames FIRST-LAST is required with --config (a .blend "
                              "gives its scene's frame range)")
@@ -138,11 +138,11 @@ def export_chunk(source: ShotSource, frames, out, snapshots=None, progress=None,
     if source.config is not None:
         import dataclasses
 
-        from .core.config_io import load_config
-        from .core.crowd import Crowd
-        from .core.files import folders_made
-        from .core.recorder import record
-        from .core.snapshot import ShotSnapshots
+        from .core.authoring.config_io import load_config
+        from .core.shots.crowd import Crowd
+        from .core.base.files import folders_made
+        from .core.shots.recorder import record
+        from .core.shots.snapshot import ShotSnapshots
         from .gpu.preview_render import writable_dir
         from .usd import check_export, export_crowd
         if frames is None:
@@ -546,7 +546,7 @@ def load_shot_list(path) -> list:
     paths relative to the file's folder. Every problem is a CrowdError naming the
     file, the shot and the key."""
     from .cli_args import frame_range
-    from .core.config import MAX_SUBSTEPS, USD_LAYOUTS
+    from .core.authoring.config import MAX_SUBSTEPS, USD_LAYOUTS
     path = os.fspath(path)
     try:
         with open(path, encoding="utf-8") as f:

@@ -21,7 +21,7 @@ import subprocess
 import sys
 import tempfile
 
-from .core.errors import CrowdError
+from .core.base.errors import CrowdError
 
 __all__ = ["WHEELS", "PLATFORMS", "PYTHONS", "fetch_wheels", "build_extension",
            "extension_tool", "REPO_ROOT"]

@@ -1,7 +1,7 @@
 """What ``crowd plan`` shows: the candidates as a table and as a plot.
 
 :func:`table` lists every candidate of a
-:class:`~crowd_addon.core.variety_plan.VarietyPlan` (M, copies, offsets, streams,
+:class:`~crowd_addon.core.planning.variety_plan.VarietyPlan` (M, copies, offsets, streams,
 memory, metric), the default and the chosen one marked; :func:`plot` draws the metric
 against M, one line per copies count and offset mode, with the chosen point and the
 default marked, into a PNG (matplotlib, the ``plot`` extra).
@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .core.errors import CrowdError
+from .core.base.errors import CrowdError
 
 __all__ = ["table", "plot", "summary_lines", "metric_text"]
 

@@ -1,7 +1,7 @@
 """The sample stadium's bowl as a seat generator spec (numpy only, no bpy).
 
 A two-tier bowl round a 105 x 68 m pitch, built with the extension's own seat
-generator (:mod:`crowd_addon.core.seats`, the *Generate Seats* operator): four
+generator (:mod:`crowd_addon.core.authoring.seats`, the *Generate Seats* operator): four
 straight stands joined by rounded corners; a lower tier of 32 rows (tread 0.8 m,
 riser 0.4 m, behind a 1.2 m front wall) and an upper tier of 36 steeper rows that
 hangs 3.2 m over the lower tier's back rows, its first row 4 m above the lower
@@ -20,7 +20,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from crowd_addon.core.seats import HOME, AWAY, SeatSpec, Tier, Tunnel, generate_seats
+from crowd_addon.core.authoring.seats import HOME, AWAY, SeatSpec, Tier, Tunnel, generate_seats
 
 __all__ = ["SPEC", "HOME", "AWAY", "PAPER_SEATS", "layout_seats"]
 
@@ -38,5 +38,5 @@ SPEC = SeatSpec(
 
 def layout_seats(count: int):
     """The bowl sized for exactly ``count`` seats: a
-    :class:`crowd_addon.core.seats.SeatLayout` (a CrowdError names a bad count)."""
+    :class:`crowd_addon.core.authoring.seats.SeatLayout` (a CrowdError names a bad count)."""
     return generate_seats(replace(SPEC, seats=count))

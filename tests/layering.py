@@ -9,6 +9,12 @@ The rules (docs/testing.md):
 ``core``
     imports nothing of ours outside ``core`` and none of Blender's modules
     (:data:`BLENDER_MODULES`, ``gpu`` included), ``moderngl``/``glcontext`` or ``pxr``.
+core's sub-packages
+    come in the order of :data:`CORE_ORDER` (``base``, ``anim``, ``bake``, ``meshes``,
+    ``runtime``, ``variety``, ``authoring``, ``planning``, ``shots``): a module of one
+    imports only its own sub-package and those before it, never ``<package>.core``
+    itself (the facade that re-exports them). Every module of core is in a
+    sub-package listed there (only ``core/__init__.py`` sits at core's top).
 ``gpu``, ``usd``
     never import ``<package>.blender``.
 Blender's API (:data:`BLENDER_API`: ``bpy``, ``bpy_extras``, ``mathutils``, ``bmesh``...)
@@ -36,7 +42,8 @@ import ast
 from dataclasses import dataclass, field
 from pathlib import Path
 
-__all__ = ["BLENDER_API", "BLENDER_GPU", "BLENDER_MODULES", "CORE_FORBIDDEN", "Import",
+__all__ = ["BLENDER_API", "BLENDER_GPU", "BLENDER_MODULES", "CORE_FORBIDDEN", "CORE_ORDER",
+           "Import",
            "Violation", "imports", "graph", "find", "check"]
 
 #: Blender's Python API modules other than its ``gpu`` module.
@@ -48,11 +55,14 @@ BLENDER_GPU = frozenset({"gpu", "gpu_extras"})
 BLENDER_MODULES = BLENDER_API | BLENDER_GPU
 #: What core never imports, besides the rest of the package.
 CORE_FORBIDDEN = BLENDER_MODULES | {"moderngl", "glcontext", "_moderngl", "pxr"}
+#: core's sub-packages, lowest first: each imports only itself and those before it.
+CORE_ORDER = ("base", "anim", "bake", "meshes", "runtime", "variety", "authoring",
+              "planning", "shots")
 
 
 @dataclass(frozen=True)
 class Import:
-    """One import: ``target`` is absolute (``crowd_addon.core.pose`` or ``bpy.props``)."""
+    """One import: ``target`` is absolute (``crowd_addon.core.base.pose`` or ``bpy.props``)."""
 
     module: str          # importing module, e.g. "crowd_addon.gpu.programs"
     path: str            # its file, relative to the package's parent folder
@@ -194,6 +204,53 @@ def _node(package: str, dotted: str) -> str | None:
     return parts[1] if len(parts) > 1 else "__init__"
 
 
+def _core_part(package: str, dotted: str) -> str | None:
+    """The core sub-package a module of ours is in (``"base"`` for
+    ``<package>.core.base`` and ``<package>.core.base.pose``), ``""`` for core's own
+    ``__init__``, None outside core."""
+    parts = dotted.split(".")
+    if parts[:2] != [package, "core"]:
+        return None
+    return parts[2] if len(parts) > 2 else ""
+
+
+def _core_order(package: str, imp: Import, order) -> Violation | None:
+    """The sub-package order rule for one import made inside a core sub-package."""
+    src = _core_part(package, imp.module)
+    parts = imp.target.split(".")
+    if src not in order or parts[:2] != [package, "core"]:
+        return None         # outside core, or core's facade (core/__init__.py)
+    dst = parts[2] if len(parts) > 2 else ""
+    if dst in order and order.index(dst) <= order.index(src):
+        return None
+    msg = f"{imp.where()}: {imp.module} {'lazily imports' if imp.lazy else 'imports'} " \
+          f"{imp.target}"
+    why = (f"{package}.core is the facade; import the module itself" if dst == ""
+           else f"core.{src} comes before core.{dst} ({' < '.join(order)})"
+           if dst in order else f"core.{dst} is not in CORE_ORDER")
+    return Violation("core-order", f"{imp.module} -> {package}.core"
+                     + (f".{dst}" if dst else ""), f"[core-order] {msg} ({why})", (imp,))
+
+
+def _core_strays(package_dir: Path, order) -> list[Violation]:
+    """Modules at core's top (other than its ``__init__``) and sub-packages of core
+    that are not in the order."""
+    core, out = package_dir / "core", []
+    if not core.is_dir():
+        return out
+    for path in sorted(core.iterdir()):
+        name = f"{package_dir.name}.core.{path.stem}"
+        if path.suffix == ".py" and path.name != "__init__.py":
+            out.append(Violation("core-order", f"{name} (at core's top)",
+                                 f"[core-order] {name}: every module of core belongs to "
+                                 f"a sub-package of CORE_ORDER", ()))
+        elif (path / "__init__.py").is_file() and path.name not in order:
+            out.append(Violation("core-order", f"{name} (not in CORE_ORDER)",
+                                 f"[core-order] {name}: a sub-package of core missing from "
+                                 f"CORE_ORDER ({', '.join(order)})", ()))
+    return out
+
+
 def _cycles(edges: dict) -> list[list[str]]:
     """Strongly connected components with more than one node (Tarjan), sorted."""
     index, low, stack, on, out = {}, {}, [], set(), []
@@ -239,18 +296,23 @@ def graph(package_dir, found=None) -> dict[str, dict[str, list[Import]]]:
     return edges
 
 
-def find(package_dir, ignore_edges=(), found=None) -> list[Violation]:
+def find(package_dir, ignore_edges=(), found=None, core_order=CORE_ORDER) -> list[Violation]:
     """Every violation of the rules in the module doc, in a stable order.
 
     ``ignore_edges``: ``(node, node)`` pairs left out of the cycle search (a temporary
     allow-list names the one import edge being removed, so any other cycle still fails).
-    ``found``: the package's :func:`imports` when already read.
+    ``found``: the package's :func:`imports` when already read. ``core_order``: core's
+    sub-packages, lowest first.
     """
     package_dir = Path(package_dir)
     pkg = package_dir.name
     out: list[Violation] = []
     every = imports(package_dir) if found is None else found
+    out += _core_strays(package_dir, tuple(core_order))
     for imp in every:
+        wrong = _core_order(pkg, imp, tuple(core_order))
+        if wrong is not None:
+            out.append(wrong)
         src = _node(pkg, imp.module)
         dst = _node(pkg, imp.target)
         how = "lazily imports" if imp.lazy else "imports"
@@ -292,9 +354,9 @@ def find(package_dir, ignore_edges=(), found=None) -> list[Violation]:
     return sorted(out, key=lambda v: (v.rule, v.key, [(i.path, i.line) for i in v.imports]))
 
 
-def check(package_dir, ignore_edges=()) -> list[str]:
+def check(package_dir, ignore_edges=(), core_order=CORE_ORDER) -> list[str]:
     """The messages of :func:`find` (empty when the package keeps the rules)."""
-    return [str(v) for v in find(package_dir, ignore_edges)]
+    return [str(v) for v in find(package_dir, ignore_edges, core_order=core_order)]
 
 
 if __name__ == "__main__":       # python tests/layering.py [PACKAGE_DIR]

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from crowd_addon.cli import main
-from crowd_addon.core.config_io import save_config
+from crowd_addon.core.authoring.config_io import save_config
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from core.test_variety_plan import config  # noqa: E402

@@ -59,8 +59,8 @@ import pytest
 from crowd_addon.cli import main as crowd_main
 from crowd_addon.core import (Blend2, BlendMask, BlendSpace2D, ClipPlayer, Crowd, CrowdConfig,
                               CrowdError, Layer, StateMachine, StateTransition)
-from crowd_addon.core import synthetic as sy
-from crowd_addon.core.config_io import load_config, save_config
+from crowd_addon.core.authoring import synthetic as sy
+from crowd_addon.core.authoring.config_io import load_config, save_config
 
 SEED = int(os.environ.get("CROWD_FUZZ_SEED", "1711"))
 SECONDS = float(os.environ.get("CROWD_FUZZ_SECONDS", "24"))
@@ -682,7 +682,7 @@ def snapshot_crowd() -> Crowd:
 
 def mutated_snapshot(rng, good: Path, path: Path, notes) -> None:
     """A snapshot file with its header, its arrays or its bytes damaged."""
-    from crowd_addon.core.snapshot import HEADER
+    from crowd_addon.core.shots.snapshot import HEADER
     kind = rng.choice(["header", "header", "values", "values", "arrays", "bytes"])
     if kind == "bytes":
         path.write_bytes(npz_bytes(rng, good.read_bytes(), notes))
@@ -740,7 +740,7 @@ def mutated_snapshot(rng, good: Path, path: Path, notes) -> None:
 def restore_outcome(crowd: Crowd, path: Path, steps=3) -> tuple:
     """("ok" | "named" | "other", detail) for loading and restoring ``path`` into
     ``crowd`` and stepping it; a refused snapshot must leave the crowd as it was."""
-    from crowd_addon.core.snapshot import load_snapshot
+    from crowd_addon.core.shots.snapshot import load_snapshot
     before = (crowd.frame, crowd.agent_poses().copy(), crowd.agents.kind.copy())
     try:
         with case_limits():

@@ -61,25 +61,37 @@ FAKE = {
             from .blender import ops          # lazy, fine
             ops.go()
         """,
-    "core/__init__.py": "",
-    "core/pure.py": """
+    "core/__init__.py": "from .high.leaky import later  # the facade may import any part\n",
+    "core/low/__init__.py": "",
+    "core/low/pure.py": """
         import numpy as np
-        from . import sibling                # core -> core is fine
+        from . import sibling                # within a sub-package is fine
         from .sibling import helper
         """,
-    "core/sibling.py": "def helper(): pass\n",
-    "core/leaky.py": """
-        from ..gpu import render             # core imports ours
+    "core/low/sibling.py": "def helper(): pass\n",
+    "core/low/upward.py": """
+        from ..high import leaky             # low comes before high
+        from fake.core import later          # core's facade, from inside core
+
+        def lazily():
+            from ..high.leaky import later   # lazy, still against the order
+        """,
+    "core/high/__init__.py": "",
+    "core/high/leaky.py": """
+        from ...gpu import render            # core imports ours
         from fake.usd.writer import Thing    # absolute, also ours
         import moderngl
         from pxr import Usd
         import gpu                           # Blender's gpu module
+        from ..low import pure               # high may import low
 
         def later():
             import bpy                       # lazy, still a violation
             import importlib
             return importlib.import_module("mathutils")
         """,
+    "core/stray.py": "",                     # a module at core's top
+    "core/extra/__init__.py": "",            # a sub-package missing from the order
     "gpu/__init__.py": "",
     "gpu/render.py": """
         import numpy as np                   # (no gpu -> core edge: core -> gpu above
@@ -145,18 +157,25 @@ def make_fake(tmp_path, files=FAKE, name="fake"):
     return pkg
 
 
+FAKE_ORDER = ("low", "high")
+
+
 def test_checker_reports_each_rule_on_a_fake_package(tmp_path):
     pkg = make_fake(tmp_path)
-    found = layering.find(pkg)
+    found = layering.find(pkg, core_order=FAKE_ORDER)
     keys = {(v.rule, v.key) for v in found}
     assert keys == {
-        ("core", "fake.core.leaky -> fake.gpu"),
-        ("core", "fake.core.leaky -> fake.usd"),
-        ("core", "fake.core.leaky -> moderngl"),
-        ("core", "fake.core.leaky -> pxr"),
-        ("core", "fake.core.leaky -> gpu"),
-        ("core", "fake.core.leaky -> bpy"),            # lazy
-        ("core", "fake.core.leaky -> mathutils"),      # importlib.import_module
+        ("core", "fake.core.high.leaky -> fake.gpu"),
+        ("core", "fake.core.high.leaky -> fake.usd"),
+        ("core", "fake.core.high.leaky -> moderngl"),
+        ("core", "fake.core.high.leaky -> pxr"),
+        ("core", "fake.core.high.leaky -> gpu"),
+        ("core", "fake.core.high.leaky -> bpy"),            # lazy
+        ("core", "fake.core.high.leaky -> mathutils"),      # importlib.import_module
+        ("core-order", "fake.core.low.upward -> fake.core.high"),   # eager and lazy
+        ("core-order", "fake.core.low.upward -> fake.core"),        # the facade
+        ("core-order", "fake.core.stray (at core's top)"),
+        ("core-order", "fake.core.extra (not in CORE_ORDER)"),
         ("backend-imports-blender", "fake.gpu.leans_on_blender -> fake.blender"),
         ("backend-imports-blender", "fake.usd.writer -> fake.blender"),   # lazy
         ("blender-api", "fake.gpu.eager -> gpu"),
@@ -164,8 +183,11 @@ def test_checker_reports_each_rule_on_a_fake_package(tmp_path):
         ("blender-api", "fake.cli -> bpy_extras"),     # lazy
         ("cycle", "cycle: blender <-> cli"),
     }, "\n".join(map(str, found))
-    messages = layering.check(pkg)
-    assert any("fake/core/leaky.py:9: fake.core.leaky lazily imports bpy" in m
+    upward = [v for v in found if v.key == "fake.core.low.upward -> fake.core.high"]
+    assert [(i.line, i.lazy) for v in upward for i in v.imports] == [(2, False), (6, True)]
+    assert "core.low comes before core.high (low < high)" in str(upward[0])
+    messages = layering.check(pkg, core_order=FAKE_ORDER)
+    assert any("fake/core/high/leaky.py:10: fake.core.high.leaky lazily imports bpy" in m
                for m in messages), messages
     cycle = next(m for m in messages if m.startswith("[cycle]"))
     assert "fake/blender/ops.py:12 fake.blender.ops -> fake.cli" in cycle
@@ -175,8 +197,8 @@ def test_checker_reports_each_rule_on_a_fake_package(tmp_path):
 def test_checker_resolves_relative_imports(tmp_path):
     pkg = make_fake(tmp_path)
     got = {(i.module, i.target, i.lazy, i.type_checking) for i in layering.imports(pkg)}
-    assert ("fake.core.leaky", "fake.gpu.render", False, False) in got  # a module
-    assert ("fake.core.pure", "fake.core.sibling", False, False) in got
+    assert ("fake.core.high.leaky", "fake.gpu.render", False, False) in got  # a module
+    assert ("fake.core.low.pure", "fake.core.low.sibling", False, False) in got
     assert ("fake.usd.writer", "fake.blender.ops", True, False) in got
     assert ("fake", "fake.blender.ops", True, False) in got     # from __init__
     assert ("fake.blender.ops", "fake.demo.show", False, True) in got
@@ -187,22 +209,24 @@ def test_checker_resolves_relative_imports(tmp_path):
 
 def test_ignored_edge_breaks_only_its_cycle(tmp_path):
     pkg = make_fake(tmp_path)
-    assert not [v for v in layering.find(pkg, ignore_edges={("blender", "cli")})
-                if v.rule == "cycle"]
+    assert not [v for v in layering.find(pkg, ignore_edges={("blender", "cli")},
+                                         core_order=FAKE_ORDER) if v.rule == "cycle"]
     # a second cycle, not through that edge, is still reported
     files = dict(FAKE)
     files["packaging.py"] = "def build():\n    from .api import wrap\n"
     files["api.py"] = "from . import packaging\n"
     pkg = make_fake(tmp_path / "two", files)
-    cycles = [v.key for v in layering.find(pkg, ignore_edges={("blender", "cli")})
-              if v.rule == "cycle"]
+    cycles = [v.key for v in layering.find(pkg, ignore_edges={("blender", "cli")},
+                                           core_order=FAKE_ORDER) if v.rule == "cycle"]
     assert cycles == ["cycle: api <-> packaging"]
 
 
 def test_a_clean_package_has_no_violations(tmp_path):
     clean = {k: v for k, v in FAKE.items()
-             if k not in ("core/leaky.py", "gpu/eager.py", "gpu/leans_on_blender.py")}
-    clean["usd/writer.py"] = "from pxr import Usd\nfrom ..core import pure\n"
+             if k not in ("core/high/leaky.py", "core/low/upward.py", "core/stray.py",
+                          "core/extra/__init__.py", "core/__init__.py", "gpu/eager.py",
+                          "gpu/leans_on_blender.py")}
+    clean["usd/writer.py"] = "from pxr import Usd\nfrom ..core.low import pure\n"
     clean["blender/ops.py"] = "import bpy\nimport mathutils\nimport gpu\nfrom .. import core\n"
     clean["cli.py"] = "from .blender import ops\n"
-    assert layering.check(make_fake(tmp_path, clean)) == []
+    assert layering.check(make_fake(tmp_path, clean), core_order=FAKE_ORDER) == []

@@ -5,9 +5,9 @@ Handles slotted actions (Blender 4.4+: ``action.slots``,
 ``action.fcurves``). :func:`read_action` names the action and the bone at fault for
 bones the armature lacks, NaN keys, empty or one-frame actions, and works out the
 frames to sample, the pose markers in clip frames and the loop flag. What it reads
-is handed to core as arrays: keys packed into a :class:`~crowd_addon.core.fcurve.CurveSet`,
-data paths mapped by :func:`~crowd_addon.core.pose_channels.channel_targets`, key
-times and events from :mod:`crowd_addon.core.clip_sampling`.
+is handed to core as arrays: keys packed into a :class:`~crowd_addon.core.bake.fcurve.CurveSet`,
+data paths mapped by :func:`~crowd_addon.core.bake.pose_channels.channel_targets`, key
+times and events from :mod:`crowd_addon.core.bake.clip_sampling`.
 """
 
 from __future__ import annotations
@@ -17,10 +17,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..core.clip_sampling import marker_events, sample_times
-from ..core.errors import CrowdError
-from ..core.fcurve import BEZIER, LINEAR, CurveSet, check_finite
-from ..core.pose_channels import CHANNELS, channel_targets
+from ..core.bake.clip_sampling import marker_events, sample_times
+from ..core.base.errors import CrowdError
+from ..core.bake.fcurve import BEZIER, LINEAR, CurveSet, check_finite
+from ..core.bake.pose_channels import CHANNELS, channel_targets
 from .compat import action_slots, assigned_slot, fcurve_owner
 
 __all__ = ["BoneCurve", "ActionSource", "resolve_slot", "action_fcurves", "read_action"]

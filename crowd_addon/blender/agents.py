@@ -6,9 +6,9 @@ read from the depsgraph-evaluated object (modifiers and geometry nodes applied) 
 ``foreach_get`` into numpy; only the vertex-group filter walks the vertices, because
 Blender exposes no array access to group weights. The placement policy (headings,
 a character and one of its streams per agent, an offset in ``0 .. M-1`` frames, a
-colour) is :func:`crowd_addon.core.placement.place_agents`, with the source's
-settings as a :class:`~crowd_addon.core.placement.PlacementPolicy`, the scene's
-characters as :class:`~crowd_addon.core.placement.CharacterStreams` and its point
+colour) is :func:`crowd_addon.core.authoring.placement.place_agents`, with the source's
+settings as a :class:`~crowd_addon.core.authoring.placement.PlacementPolicy`, the scene's
+characters as :class:`~crowd_addon.core.authoring.placement.CharacterStreams` and its point
 attributes read here. Random choices are seeded from ``scene.crowd.seed`` and the
 source's index, so the same scene gives the same agents.
 """
@@ -19,10 +19,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core.errors import CrowdError
-from ..core.placement import (SOURCE_SEED, AgentSet, CharacterStreams, Palette, PlacementPolicy,
-                              place_agents, z_angle)
-from ..core.variety import Timing
+from ..core.base.errors import CrowdError
+from ..core.authoring.placement import (SOURCE_SEED, AgentSet, CharacterStreams, Palette,
+                                        PlacementPolicy, place_agents, z_angle)
+from ..core.variety.timing import Timing
 
 __all__ = ["agents_from_source", "agents_from_scene", "describe_source", "placement_policy",
            "character_streams", "PlacedSource"]
@@ -125,7 +125,7 @@ def placement_policy(source) -> PlacementPolicy:
 
 def character_streams(settings) -> tuple:
     """The scene's characters (``scene.crowd.characters``) as plain
-    :class:`~crowd_addon.core.placement.CharacterStreams`, in list order."""
+    :class:`~crowd_addon.core.authoring.placement.CharacterStreams`, in list order."""
     return tuple(CharacterStreams(c.name, tuple(a.name for a in c.streams),
                                   tuple(a.weight for a in c.streams), c.weight,
                                   tuple(stream_timing(a) for a in c.streams),
@@ -139,7 +139,7 @@ def character_streams(settings) -> tuple:
 
 
 def stream_timing(anim) -> Timing:
-    """A stream's timing variation (:class:`~crowd_addon.core.variety.Timing`) from its
+    """A stream's timing variation (:class:`~crowd_addon.core.variety.timing.Timing`) from its
     properties."""
     return Timing(anim.speed_min, anim.speed_max, anim.speed_streams, anim.copies)
 
@@ -199,9 +199,9 @@ def agents_from_source(source, depsgraph, *, characters, max_offset, seed,
     source : a ``CROWD_PG_agent_source``.
     depsgraph : the evaluated depsgraph to read geometry from.
     characters : the scene's characters as
-        :class:`~crowd_addon.core.placement.CharacterStreams` (:func:`character_streams`).
+        :class:`~crowd_addon.core.authoring.placement.CharacterStreams` (:func:`character_streams`).
     max_offset : M. seed : int. forward_axis : key of
-        :data:`crowd_addon.core.placement.FORWARD`.
+        :data:`crowd_addon.core.authoring.placement.FORWARD`.
     index : the source's place in the scene's list, named in errors when it has no name.
     """
     return _place(source, depsgraph, characters, max_offset, seed, forward_axis, index)[0]

@@ -1,7 +1,7 @@
 """Armature objects -> core :class:`Skeleton`; skinned mesh objects -> core :class:`ProxyMesh`.
 
 This module reads the Blender data (bones, rest matrices, vertices, vertex groups)
-into arrays; the math on them is :mod:`crowd_addon.core.armature_math`. Every bone
+into arrays; the math on them is :mod:`crowd_addon.core.bake.armature_math`. Every bone
 of the armature becomes a skeleton bone, ordered parents first
 (:meth:`Skeleton.from_parent_names`); ``skeleton.bone_names`` is the name -> index
 mapping. The local SQT of bone ``i`` is its transform relative
@@ -19,12 +19,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core import quaternion as quat
-from ..core.armature_math import (check_hierarchy, relative_to_parent, rest_skeleton,
-                                  vertex_influences)
-from ..core.errors import CrowdError
-from ..core.mesh import ProxyMesh
-from ..core.skeleton import Skeleton
+from ..core.base import quaternion as quat
+from ..core.bake.armature_math import (check_hierarchy, relative_to_parent, rest_skeleton,
+                                       vertex_influences)
+from ..core.base.errors import CrowdError
+from ..core.meshes.mesh import ProxyMesh
+from ..core.base.skeleton import Skeleton
 from .looks import mesh_looks
 
 __all__ = ["skeleton_from_armature", "check_skeleton", "skeleton_and_rest", "matrices",
@@ -185,7 +185,7 @@ def proxy_mesh_from_object(mesh_obj, armature_obj, skeleton: Skeleton | None = N
 
 
 def prop_from_object(obj, armature_obj, skeleton: Skeleton, bone: str = ""):
-    """A mesh object as a core :class:`~crowd_addon.core.bodies.Prop` moving rigidly with
+    """A mesh object as a core :class:`~crowd_addon.core.meshes.bodies.Prop` moving rigidly with
     bone ``bone`` of ``armature_obj`` (empty: the bone the object is parented to).
 
     The prop keeps where it sits on the bone. Parented to that bone, an object is at
@@ -199,7 +199,7 @@ def prop_from_object(obj, armature_obj, skeleton: Skeleton, bone: str = ""):
     Skinned with weight 1 to the bone (``M_pose @ inv(M_rest)``), that is exactly where
     Blender puts an object parented to the bone, at every pose. Materials and the
     active UV map come along (:func:`.looks.mesh_looks`)."""
-    from ..core.bodies import Prop, rigid_mesh
+    from ..core.meshes.bodies import Prop, rigid_mesh
     _checked(obj, "MESH", "mesh")
     _armature(armature_obj)
     if not bone:

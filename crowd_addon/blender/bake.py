@@ -6,9 +6,9 @@ Two ways, one result:
 - **F-curves** (the fast path): every bone F-curve is read in bulk
   (:mod:`.action_data`) and the armature's pose channels and rest pose once; core
   evaluates the curves in numpy at all sample times at once
-  (:mod:`crowd_addon.core.fcurve`, Blender's own algorithm) and composes the
+  (:mod:`crowd_addon.core.bake.fcurve`, Blender's own algorithm) and composes the
   channels into local SQT as Blender's ``BKE_pchan_to_mat4`` does
-  (:mod:`crowd_addon.core.pose_channels`).
+  (:mod:`crowd_addon.core.bake.pose_channels`).
 - **frame_set** (exact by definition, slower): the action is played on the armature,
   ``scene.frame_set`` per key, ``pose.bones[].matrix`` read and made local. Used
   where the fast path cannot be exact: constraints, drivers on the pose, bones that
@@ -28,9 +28,9 @@ the skeleton: where a bone's head misses by more than 1e-3 scene units or its
 rotation by more than 1e-3 rad (a fast motion, or a bone turning the long way round,
 such as an Euler curve from 179 to -179 degrees, which Blender plays as a full turn)
 the notes name the action, bones, frames and sizes and the samples per frame that
-follow it (:func:`crowd_addon.core.clip_sampling.between_keys_note`).
+follow it (:func:`crowd_addon.core.bake.clip_sampling.between_keys_note`).
 
-Notes are :class:`crowd_addon.core.bake_report.Note` strings: the between-frame
+Notes are :class:`crowd_addon.core.bake.bake_report.Note` strings: the between-frame
 misses are warnings (kind ``"between_frames"``); frame_set sampling and resampling
 remarks are information.
 """
@@ -41,13 +41,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core.armature_math import relative_to_parent, sqt_from_matrices
-from ..core.clip import Clip
-from ..core.bake_report import INFO, WARNING, Note
-from ..core.clip_sampling import MAX_SAMPLES_PER_FRAME, between_keys_note
-from ..core.errors import CrowdError
-from ..core.pose_channels import CHANNEL_WIDTH, CHANNELS, RigChannels, local_sqt
-from ..core.skeleton import Skeleton
+from ..core.bake.armature_math import relative_to_parent, sqt_from_matrices
+from ..core.anim.clip import Clip
+from ..core.bake.bake_report import INFO, WARNING, Note
+from ..core.bake.clip_sampling import MAX_SAMPLES_PER_FRAME, between_keys_note
+from ..core.base.errors import CrowdError
+from ..core.bake.pose_channels import CHANNEL_WIDTH, CHANNELS, RigChannels, local_sqt
+from ..core.base.skeleton import Skeleton
 from .action_data import read_action
 from .armature import matrices, skeleton_and_rest
 from .compat import assigned_slot, play
@@ -64,7 +64,7 @@ class BakeResult:
     skeleton : the armature's core skeleton (bone order of every clip).
     clips : one :class:`Clip` per action, in the order given.
     methods : clip name -> ``"fcurves"`` or ``"frame_set"``.
-    notes : :class:`~crowd_addon.core.bake_report.Note` strings: why actions were
+    notes : :class:`~crowd_addon.core.bake.bake_report.Note` strings: why actions were
         sampled with frame_set and resampling remarks (information), and poses
         between keys that miss the action's (warnings, with the samples per frame
         that would follow it).

@@ -1,7 +1,7 @@
 """A scene's camera object as the headless renderer's camera.
 
 :func:`find_camera` picks a camera object of a scene by name (or the scene camera);
-:func:`camera_from_object` converts it to a :class:`crowd_addon.core.camera.Camera` for
+:func:`camera_from_object` converts it to a :class:`crowd_addon.core.base.camera.Camera` for
 images of a given aspect, as Blender frames that camera for a render of that aspect:
 the lens and sensor (with its fit: *Auto* fits the sensor width to the larger side),
 the object's world matrix without its scale (the camera looks down its local -Z, +Y
@@ -15,8 +15,8 @@ import math
 
 import numpy as np
 
-from ..core.errors import CrowdError
-from ..core.camera import Camera
+from ..core.base.errors import CrowdError
+from ..core.base.camera import Camera
 
 __all__ = ["find_camera", "camera_from_object", "scene_size", "metric_view"]
 

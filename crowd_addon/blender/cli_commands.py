@@ -37,8 +37,8 @@ import os
 import sys
 
 from ..cli_args import add_shot_arguments, parse_command, progress_printer, repetition_settings
-from ..core.errors import CrowdError
-from ..core.repetition import RepetitionSettings, describe
+from ..core.base.errors import CrowdError
+from ..core.variety.repetition import RepetitionSettings, describe
 
 _DEFAULT = RepetitionSettings()
 
@@ -137,12 +137,12 @@ def blend_shot(frames: tuple | None = None, *, blend: str | None = None,
 
 
 def report_bake(config, on_bake, strict: bool = False) -> None:
-    """Pass each note of the bake report (:func:`crowd_addon.core.bake_report.report_of`:
+    """Pass each note of the bake report (:func:`crowd_addon.core.bake.bake_report.report_of`:
     the bake's remarks, the meshes', the LOD levels refused) to ``on_bake(done, total,
     message)`` as ``warning: ...`` or ``note: ...``: the commands print them on stderr.
     ``strict``: a report with warnings then raises
-    :class:`~crowd_addon.core.bake_report.BakeWarnings` (exit code 2)."""
-    from ..core.bake_report import report_of
+    :class:`~crowd_addon.core.bake.bake_report.BakeWarnings` (exit code 2)."""
+    from ..core.bake.bake_report import report_of
     report = report_of(config)
     if on_bake is not None:
         for note in report:
@@ -167,13 +167,13 @@ def export_blend(out: str, frames: tuple | None = None, *, blend: str | None = N
     script in this call even where scripts in .blend files are not trusted; it trusts
     nothing after the call (a later call, or another file, is not trusted by it). A
     script that would not run stops the export before anything is written
-    (:class:`~crowd_addon.core.errors.ScriptNotTrusted`), unless ``ignore_scripts``:
+    (:class:`~crowd_addon.core.base.errors.ScriptNotTrusted`), unless ``ignore_scripts``:
     then the shot is exported without it. The bake report's notes reach ``on_bake``;
     ``strict``: warnings among them stop the export before anything is written
-    (:class:`~crowd_addon.core.bake_report.BakeWarnings`).
+    (:class:`~crowd_addon.core.bake.bake_report.BakeWarnings`).
     """
     with blender_output_to_stderr():        # from the import of bpy on (5.2 logs then)
-        from ..core.files import folders_made
+        from ..core.base.files import folders_made
         from ..gpu.preview_render import writable_dir
         from .export import export_scene
         found = open_scene(blend, scene)
@@ -272,13 +272,13 @@ def snapshot_blend(out: str, frames: tuple | None = None, *, every: int,
                    ignore_scripts: bool = False, strict: bool = False):
     """Write snapshots of a .blend's scene crowd (:func:`open_scene`, baked as the
     exports bake it, with its crowd script) into the folder ``out``:
-    :func:`crowd_addon.core.snapshot.write_snapshots` over ``frames`` (default: the
+    :func:`crowd_addon.core.shots.snapshot.write_snapshots` over ``frames`` (default: the
     scene's frame range) every ``every`` frames; ``trust_scripts`` and
     ``ignore_scripts`` as :func:`export_blend`; ``strict``: the bake report's warnings
     stop it before any snapshot (:func:`report_bake`). Returns ``(config, files
     written)``."""
     with blender_output_to_stderr():
-        from ..core.snapshot import SnapshotFolder, write_snapshots
+        from ..core.shots.snapshot import SnapshotFolder, write_snapshots
         from .scene_config import build_crowd, config_from_scene
         found = open_scene(blend, scene)
         _check_script(found, trust_scripts, ignore_scripts)

@@ -4,7 +4,7 @@
 :func:`export_steps` is the export, one unit of work per step, all on the caller's
 thread: it checks the output and the frame range against the scene, bakes the
 scene's Crowd settings (:func:`.scene_config.config_steps`, one action per step),
-records the shot once (:class:`crowd_addon.core.recorder.Recorder`, one frame per
+records the shot once (:class:`crowd_addon.core.shots.recorder.Recorder`, one frame per
 step, a crowd that skins nothing) and writes the recording
 (:func:`crowd_addon.usd.export_steps`, a layer or a batch of agents per step; all or
 nothing: a failure or a cancel leaves no new file and a previous export as it was).
@@ -21,9 +21,9 @@ import bpy
 from bpy.props import BoolProperty, EnumProperty, IntProperty, StringProperty
 from bpy_extras.io_utils import ExportHelper
 
-from ..core.config import MAX_SUBSTEPS
-from ..core.errors import CrowdError
-from ..core.repetition import RepetitionSettings
+from ..core.authoring.config import MAX_SUBSTEPS
+from ..core.base.errors import CrowdError
+from ..core.variety.repetition import RepetitionSettings
 from . import preview, scene_config
 from .cameras import metric_view
 
@@ -77,14 +77,14 @@ def export_scene(scene, path, frames, agents=None, progress=None, on_bake=None,
         for motion blur: ``Crowd(..., substeps=N)``).
     snapshots : optional snapshot folder (``crowd export --snapshots``): the crowd
         starts from its latest snapshot there before ``first`` and leaves one at
-        ``last`` (:class:`crowd_addon.core.snapshot.ShotSnapshots`).
+        ``last`` (:class:`crowd_addon.core.shots.snapshot.ShotSnapshots`).
     progress : optional ``progress(stage, done, total)`` after each recorded frame
         (``"simulate"``) and each step of the writing.
     on_bake : optional ``on_bake(done, total, message)`` before each bake step
         (:func:`.scene_config.config_steps`), then with each note of the bake report
         (``config.bake_report``) as ``warning: ...`` or ``note: ...``.
     strict : the bake report's warnings stop the export before anything is written
-        (:class:`~crowd_addon.core.bake_report.BakeWarnings`, ``--strict``).
+        (:class:`~crowd_addon.core.bake.bake_report.BakeWarnings`, ``--strict``).
     depsgraph : evaluated depsgraph for the agent sources (default: the scene's).
     repetition : the repetition metric's settings (None: not measured), measured
         through the scene camera at the scene's render size when it has one
@@ -96,7 +96,7 @@ def export_scene(scene, path, frames, agents=None, progress=None, on_bake=None,
 
     Returns
     -------
-    ``(config, result)``: the baked :class:`~crowd_addon.core.config.CrowdConfig` and
+    ``(config, result)``: the baked :class:`~crowd_addon.core.authoring.config.CrowdConfig` and
     the :class:`~crowd_addon.usd.export.ExportResult`. Raises CrowdError (nothing
     written then); the scene is not changed. An exception raised by a callback stops
     the export the same way.
@@ -137,7 +137,7 @@ def export_steps(scene, path, frames, agents=None, depsgraph=None, layout="insta
     export: close returns once its temporary files are removed; nothing is written, a
     previous export at ``path`` is left as it was, the scene is unchanged.
     """
-    from ..core.crowd import check_substeps
+    from ..core.shots.crowd import check_substeps
     from ..usd.export import check_layout
     frames = check_export(scene, path, frames)
     check_layout(layout)
@@ -150,10 +150,10 @@ def _export_steps(scene, path, frames, agents, depsgraph, layout, substeps, snap
                   repetition, trust_script, ignore_script=False, strict=False):
     import dataclasses
 
-    from ..core.bake_report import report_of
-    from ..core.snapshot import ShotSnapshots
-    from ..core.crowd import Crowd
-    from ..core.recorder import Recorder
+    from ..core.bake.bake_report import report_of
+    from ..core.shots.snapshot import ShotSnapshots
+    from ..core.shots.crowd import Crowd
+    from ..core.shots.recorder import Recorder
     from ..usd.export import check_export as check_output
     from ..usd.export import export_steps as write_steps
 
@@ -452,7 +452,7 @@ class CROWD_OT_export_usd(bpy.types.Operator, ExportHelper):
         self._made = ()
 
     def _finish(self, result, config=None):
-        from ..core.bake_report import report_of
+        from ..core.bake.bake_report import report_of
         self._made = ()
         if config is not None:          # the bake's notes, as the Bake operator reports them
             for note in report_of(config):

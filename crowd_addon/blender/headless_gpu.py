@@ -18,7 +18,7 @@ import tempfile
 
 import bpy
 
-from ..core.errors import CrowdError
+from ..core.base.errors import CrowdError
 
 __all__ = ["init_headless_gpu"]
 

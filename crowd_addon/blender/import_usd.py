@@ -29,7 +29,7 @@ import bpy
 from bpy.props import BoolProperty, StringProperty
 from bpy_extras.io_utils import ImportHelper
 
-from ..core.errors import CrowdError
+from ..core.base.errors import CrowdError
 
 __all__ = ["CLASSES", "MENUS", "ImportResult", "import_crowd", "scene_rate",
            "CROWD_OT_import_usd", "menu_import"]

@@ -1,5 +1,5 @@
 """How a mesh object looks, for the proxy mesh: its active UV map per triangle corner
-and its material slots as :class:`~crowd_addon.core.mesh.Look` s.
+and its material slots as :class:`~crowd_addon.core.meshes.mesh.Look` s.
 
 A material's look is what its Principled BSDF shows: the *Base Color* input's colour
 (and *Alpha*), or the image of an *Image Texture* node plugged into *Base Color* (its
@@ -15,7 +15,7 @@ import os
 import bpy
 import numpy as np
 
-from ..core.mesh import Look
+from ..core.meshes.mesh import Look
 
 __all__ = ["mesh_looks", "plain_material", "principled"]
 
@@ -25,7 +25,7 @@ EMPTY = (0.8, 0.8, 0.8, 1.0)
 
 def mesh_looks(mesh_obj, me, loops: np.ndarray) -> dict:
     """``uvs``, ``material`` and ``looks`` keyword arguments of
-    :class:`~crowd_addon.core.mesh.ProxyMesh` for ``me`` (the object's mesh data, its
+    :class:`~crowd_addon.core.meshes.mesh.ProxyMesh` for ``me`` (the object's mesh data, its
     loop triangles computed) whose loop triangles use ``loops`` ((T, 3) loop indices)."""
     out = {}
     layer = me.uv_layers.active

@@ -10,7 +10,7 @@ import time
 import bpy
 from bpy.props import EnumProperty, IntProperty
 
-from ..core.errors import CrowdError
+from ..core.base.errors import CrowdError
 from . import preview, scene_config
 from .agents import agents_from_scene
 from .show_data import show_from_scene
@@ -126,7 +126,7 @@ class CROWD_OT_bake(bpy.types.Operator):
         context.workspace.status_text_set(None)
 
     def _finish(self, context, config, notes=()):
-        from ..core.bake_report import WARNING, report_of
+        from ..core.bake.bake_report import WARNING, report_of
         pv = preview.start(context.scene, config)
         c = pv.crowd
         for note in report_of(config):  # e.g. poses between frames that miss the action's

@@ -4,7 +4,7 @@ USD export, stats."""
 
 import bpy
 
-from ..core.errors import CrowdError
+from ..core.base.errors import CrowdError
 from . import preview
 
 __all__ = ["CLASSES"]

@@ -33,9 +33,9 @@ import numpy as np
 import bpy
 
 from .. import api
-from ..core.bake_report import report_of
-from ..core.crowd import Crowd
-from ..core.errors import CrowdError
+from ..core.bake.bake_report import report_of
+from ..core.shots.crowd import Crowd
+from ..core.base.errors import CrowdError
 from . import prefs, scene_config, shared_gl
 from .props import settings_fingerprint
 
@@ -389,7 +389,7 @@ def _metric_view(scene, region_data, region):
     metric: the scene camera at the render size (:func:`.cameras.metric_view`), or
     the viewport ``region_data``/``region`` when the scene has no camera the renderer
     can draw."""
-    from ..core.repetition import RepetitionSettings
+    from ..core.variety.repetition import RepetitionSettings
     from .cameras import metric_view
     settings = RepetitionSettings(k=scene.crowd.repetition_neighbours)
     camera, settings = metric_view(scene, settings)
@@ -414,7 +414,7 @@ def measure_repetition(scene, region_data=None, region=None):
     """Measure the previewed crowd's repetition metric at its frame (docs/variety.md)
     through the scene camera or the viewport (:func:`_metric_view`); kept in
     :attr:`Preview.repetition` for the panel."""
-    from ..core.repetition import crowd_repetition
+    from ..core.variety.repetition import crowd_repetition
     pv = _running(scene)
     vp, settings, seen = _metric_view(scene, region_data, region)
     pv.repetition = crowd_repetition(pv.crowd.view, vp, settings=settings)
@@ -423,13 +423,13 @@ def measure_repetition(scene, region_data=None, region=None):
 
 
 def plan_variety(scene, region_data=None, region=None, progress=None):
-    """Run the variety planner (:mod:`crowd_addon.core.variety_plan`) on the previewed
+    """Run the variety planner (:mod:`crowd_addon.core.planning.variety_plan`) on the previewed
     crowd's configuration, seen as :func:`measure_repetition` sees it, within the
     settings' *Budget* and *Max Streams* (and *Motion Only*: motion compared alone);
     kept in :attr:`Preview.plan`.
     ``progress(done, total)`` after each candidate."""
-    from ..core.variety_plan import plan_input
-    from ..core.variety_plan import plan_variety as plan
+    from ..core.planning.variety_plan import plan_input
+    from ..core.planning.variety_plan import plan_variety as plan
     pv = _running(scene)
     vp, settings, seen = _metric_view(scene, region_data, region)
     s = scene.crowd

@@ -3,8 +3,8 @@
 A stream (or unique animation) is a controller tree written as a flat list of named
 nodes; a node's inputs name other nodes of the same animation, and the root is the
 node named by ``root`` (default: the first node); core validates and builds it
-(:mod:`crowd_addon.core.controller_graph`). Node kinds mirror the core controllers
-(``crowd_addon.core.controllers``): an action clip, a 2-way blend, a
+(:mod:`crowd_addon.core.authoring.controller_graph`). Node kinds mirror the core controllers
+(``crowd_addon.core.anim.controllers``): an action clip, a 2-way blend, a
 layer (override or additive, masked by bone names or a bone collection), a 2-D
 blend space (inputs placed at (x, y) points) and a state machine (inputs are its
 states; transitions fire on triggers and parameter conditions with a fade).
@@ -26,9 +26,9 @@ from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProp
                        FloatVectorProperty, IntProperty, PointerProperty, StringProperty)
 from bpy.types import PropertyGroup
 
-from ..core import controller_graph
+from ..core.authoring import controller_graph
 from . import show_props
-from ..core.clip_sampling import MAX_SAMPLES_PER_FRAME
+from ..core.bake.clip_sampling import MAX_SAMPLES_PER_FRAME
 
 __all__ = ["CLASSES", "NODE_KINDS", "settings_fingerprint", "CROWD_PG_character"]
 

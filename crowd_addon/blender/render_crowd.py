@@ -7,7 +7,7 @@ of ordinary Blender data, with the paper's sharing kept:
 * one **pose mesh** per pose in use: a (part, level of detail, pose texture row, aim
   class) key (the aim class: a looking agent's head turn rounded to
   :data:`AIM_STEP`, 0 for none: :func:`aim_classes`), a part being a mesh variant of a character or one of its props
-  (:mod:`crowd_addon.core.bodies`). Agents of a stream at the same offset read the
+  (:mod:`crowd_addon.core.meshes.bodies`). Agents of a stream at the same offset read the
   same row, so they share one mesh; an agent in a transition or playing a unique has
   a row of its own. A prop is a piece of its own, not merged into the body as the GPU
   draws it: a flag's pose mesh is shared by every agent whose hand is in that pose,
@@ -15,7 +15,7 @@ of ordinary Blender data, with the paper's sharing kept:
   meshes. Each pose mesh is the level's proxy (its triangles, UVs and materials,
   as the crowd's copies that tint each agent as the preview does:
   :mod:`.crowd_materials`) skinned on the CPU by core
-  (:func:`crowd_addon.core.skinning.skin_vertices`) and written with one bulk
+  (:func:`crowd_addon.core.base.skinning.skin_vertices`) and written with one bulk
   ``foreach_set``. The meshes hang on objects
   ``CrowdPose.000000 ...`` of the collection :data:`POSES`, which is not linked to the
   scene (only instanced);
@@ -50,10 +50,10 @@ import numpy as np
 
 import bpy
 
-from ..core.errors import CrowdError
-from ..core.look_at import apply_look, look_angles, turns_of
-from ..core.skinning import skin_vertices
-from ..core.lod import agent_heights, levels_from_pixels, projected_heights, switch_pixels
+from ..core.base.errors import CrowdError
+from ..core.runtime.look_at import apply_look, look_angles, turns_of
+from ..core.base.skinning import skin_vertices
+from ..core.meshes.lod import agent_heights, levels_from_pixels, projected_heights, switch_pixels
 from ..gpu.draw_lists import view_depths
 from .crowd_materials import crowd_material, refresh_all, remove_all as crowd_materials
 
@@ -80,7 +80,7 @@ class RenderStats:
 def agent_lods(crowd, scene, levels) -> np.ndarray:
     """``(N,)`` level of detail of each agent seen through ``scene``'s camera at its
     render resolution, by its projected height in pixels (as the GPU draws it:
-    :mod:`crowd_addon.core.lod`) (every agent's finest level when the scene has no camera);
+    :mod:`crowd_addon.core.meshes.lod`) (every agent's finest level when the scene has no camera);
     ``levels`` (N,): the levels each agent's mesh has."""
     from .cameras import camera_from_object
     from .cameras import scene_size
@@ -318,7 +318,7 @@ AIM_STEP = math.radians(2.0)
 def aim_classes(crowd, step: float = AIM_STEP) -> tuple:
     """``(aim, turns)``: per agent its aim class (0: not turned: no look, or a turn
     that rounds to nothing) and per class the head's turn ``(dyaw, dpitch)``, each a
-    whole number of ``step`` (core/look_at.py's turn of that agent's look, rounded)."""
+    whole number of ``step`` (core/runtime/look_at.py's turn of that agent's look, rounded)."""
     view = crowd.view
     n = view.agent_count
     ids = np.arange(n)

@@ -6,8 +6,8 @@ its armature, and its body (with its LOD meshes when given) that skeleton's
 baked on that character's armature into a clip (:mod:`.bake`) named after the action,
 or ``"<character>/<action>"`` when several characters use the action (each bakes its
 own); node lists are read into plain
-:class:`~crowd_addon.core.controller_graph.NodeSpec` values that core validates and
-builds into controller trees (:func:`crowd_addon.core.controller_graph.build_tree`);
+:class:`~crowd_addon.core.authoring.controller_graph.NodeSpec` values that core validates and
+builds into controller trees (:func:`crowd_addon.core.authoring.controller_graph.build_tree`);
 the streams and uniques of all characters go into the one config, character after
 character; and the agent sources become agents (:mod:`.agents`), each on a stream of
 its character, so an agent's character is its stream's skeleton. Errors are
@@ -23,12 +23,12 @@ from __future__ import annotations
 
 import dataclasses
 
-from ..core.bake_report import WARNING, BakeReport
-from ..core.config import PALETTE_COLUMNS, CrowdConfig
-from ..core.controller_graph import InputSpec, NodeSpec, TransitionSpec, build_tree
-from ..core.errors import CrowdError
-from ..core.levels import CARD
-from ..core.variety import expand
+from ..core.bake.bake_report import WARNING, BakeReport
+from ..core.authoring.config import PALETTE_COLUMNS, CrowdConfig
+from ..core.authoring.controller_graph import InputSpec, NodeSpec, TransitionSpec, build_tree
+from ..core.base.errors import CrowdError
+from ..core.meshes.levels import CARD
+from ..core.variety.timing import expand
 
 __all__ = ["config_from_scene", "config_steps", "scene_fps", "used_actions", "node_specs",
            "bone_collections", "lod_distances", "clip_names", "scene_actions", "look_rig"]
@@ -85,7 +85,7 @@ def clip_names(characters) -> dict:
 # ------------------------------------------------------------------ controller trees
 def node_specs(anim, clips=None) -> tuple:
     """The nodes of one ``CROWD_PG_animation`` as plain
-    :class:`~crowd_addon.core.controller_graph.NodeSpec` values; actions by their clip
+    :class:`~crowd_addon.core.authoring.controller_graph.NodeSpec` values; actions by their clip
     name, ``clips`` (action name -> clip name; default: the action's name)."""
     clips = clips or {}
 
@@ -268,7 +268,7 @@ def config_steps(scene, depsgraph=None, notes=None):
     (``StopIteration.value``). Raises CrowdError on bad input.
 
     Actions are baked at the scene's fps times *Samples per Frame*. The bake report
-    (:class:`~crowd_addon.core.bake_report.BakeReport`, carried as
+    (:class:`~crowd_addon.core.bake.bake_report.BakeReport`, carried as
     ``config.bake_report``) holds the bake's remarks (``BakeResult.notes``: poses
     between frames that miss the action's, frame_set sampling, resampling), the proxy
     meshes' (``ProxyMesh.notes``: vertices that had more than eight bone influences,
@@ -344,11 +344,11 @@ def _names(text) -> list:
 
 
 def look_rig(c, skeleton, forward_axis="NEG_Y"):
-    """Character ``c``'s :class:`~crowd_addon.core.look_at.LookRig` (None when it has no
+    """Character ``c``'s :class:`~crowd_addon.core.runtime.look_at.LookRig` (None when it has no
     look bones), checked against its skeleton; the forward axis is the scene's
     *Forward* setting, the one agents are turned by."""
-    from ..core.look_at import LookChain, LookRig
-    from ..core.placement import FORWARD
+    from ..core.runtime.look_at import LookChain, LookRig
+    from ..core.authoring.placement import FORWARD
     bones = _names(c.look_bones)
     if not bones:
         return None
@@ -403,14 +403,14 @@ def _depsgraph(scene):
 
 def build_crowd(scene, config, skinning="gpu", substeps=1, trust_script=False,
                 ignore_script=False):
-    """The :class:`~crowd_addon.core.crowd.Crowd` of ``config`` (built from ``scene``)
+    """The :class:`~crowd_addon.core.shots.crowd.Crowd` of ``config`` (built from ``scene``)
     with the scene's crowd script run on it: ``(crowd, note)``, ``note`` saying why the
     script did not run ("" when it ran or there is none). The preview and the exports
     build their crowds here, so both run the same script. ``substeps``: samples kept per
     frame (an export's sub-frame samples); ``trust_script``: run the script for this
     call even where it is not trusted; ``ignore_script``: leave it out, trusted or not
     (:func:`.show_data.run_script`)."""
-    from ..core.crowd import Crowd
+    from ..core.shots.crowd import Crowd
     from .show_data import run_script
     crowd = Crowd(config, skinning=skinning, substeps=substeps)
     return crowd, run_script(scene, crowd, trusted=trust_script, ignore=ignore_script)

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.errors import CrowdError
+from ..core.base.errors import CrowdError
 from ..gpu.scene_geometry import DEFAULT_AMBIENT, SceneGeometry, sun_light
 
 __all__ = ["scene_geometry", "scene_light", "crowd_objects", "moving_look_targets",

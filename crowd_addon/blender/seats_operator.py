@@ -1,13 +1,13 @@
-"""*Generate Seats*: a stadium's seats and stands from :mod:`crowd_addon.core.seats`.
+"""*Generate Seats*: a stadium's seats and stands from :mod:`crowd_addon.core.authoring.seats`.
 
-:func:`seat_objects` turns a :class:`~crowd_addon.core.seats.SeatLayout` into two mesh
+:func:`seat_objects` turns a :class:`~crowd_addon.core.authoring.seats.SeatLayout` into two mesh
 objects: "Seats", one vertex per seat with the POINT attributes ``heading`` (FLOAT,
 radians about +Z, facing the pitch centre for a character facing -Y) and ``section``,
 ``tier``, ``row``, ``seat``, ``team`` (INT) and the vertex groups "home" and "away";
 "Stands", the terraces and benches with the materials "concrete", "home" and "away".
 An object of that name already there keeps its place, transform and the agent
 sources that use it and gets the new mesh. The operator (Crowd tab > Agents) fills a
-:class:`~crowd_addon.core.seats.SeatSpec` from its properties and calls it.
+:class:`~crowd_addon.core.authoring.seats.SeatSpec` from its properties and calls it.
 """
 
 from __future__ import annotations
@@ -17,8 +17,8 @@ import numpy as np
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, \
     IntProperty, IntVectorProperty, StringProperty
 
-from ..core.errors import CrowdError
-from ..core.seats import AWAY, HOME, SeatSpec, Tier, Tunnel, generate_seats
+from ..core.base.errors import CrowdError
+from ..core.authoring.seats import AWAY, HOME, SeatSpec, Tier, Tunnel, generate_seats
 from .looks import plain_material
 
 __all__ = ["CLASSES", "STAND_COLOURS", "seat_objects", "spec_from_operator"]

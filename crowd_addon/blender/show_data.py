@@ -1,4 +1,4 @@
-"""``scene.crowd.show`` -> a core :class:`~crowd_addon.core.show.Show`.
+"""``scene.crowd.show`` -> a core :class:`~crowd_addon.core.authoring.show.Show`.
 
 Selections are resolved here, once, against the agent sources the crowd was placed
 from (:class:`.agents.PlacedSource`: which agent ids each source made and from which
@@ -16,9 +16,9 @@ import os
 
 import numpy as np
 
-from ..core.errors import CrowdError, ScriptNotTrusted
-from ..core.show import (Action, Cue, Reaction, Show, Sweep, Track, select_fraction,
-                         select_inside, select_value)
+from ..core.base.errors import CrowdError, ScriptNotTrusted
+from ..core.authoring.show import (Action, Cue, Reaction, Show, Sweep, Track, select_fraction,
+                                   select_inside, select_value)
 from .action_data import action_fcurves
 from .agents import _attribute, _group_members
 from .compat import action_slots, assigned_slot
@@ -136,7 +136,7 @@ def look_targets_from_scene(scene) -> dict:
     """``{name: LookTarget}`` of the show's look targets: each object's world position
     at every frame ``frame_start .. frame_end`` (one sample when nothing animates it),
     all targets sampled in one pass over the frames (:func:`object_positions`)."""
-    from ..core.look_at import LookTarget
+    from ..core.runtime.look_at import LookTarget
     items = list(scene.crowd.show.look_targets)
     seen = set()
     for t in items:
@@ -362,7 +362,7 @@ def script_refusal(scene, trusted: bool = False) -> str:
 
 def check_script(scene, trusted: bool = False, ignore: bool = False) -> None:
     """What a command does before it builds a crowd: a scene whose crowd script would
-    not run here is refused with :class:`~crowd_addon.core.errors.ScriptNotTrusted`
+    not run here is refused with :class:`~crowd_addon.core.base.errors.ScriptNotTrusted`
     (the command's exit code 3), since the command would otherwise play a show other
     than the file's; ``ignore`` (``--ignore-scripts``) goes on without the script."""
     reason = "" if ignore else script_refusal(scene, trusted)

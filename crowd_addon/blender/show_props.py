@@ -1,7 +1,7 @@
 """The show as scene data (``scene.crowd.show``): cues, reactions, animated parameters.
 
-What each setting means is the core's (docs/show.md, :mod:`crowd_addon.core.show`);
-:mod:`.show_data` turns these into a core :class:`~crowd_addon.core.show.Show` when the
+What each setting means is the core's (docs/show.md, :mod:`crowd_addon.core.authoring.show`);
+:mod:`.show_data` turns these into a core :class:`~crowd_addon.core.authoring.show.Show` when the
 crowd is built, resolving selections against the agent sources. Parameter values are
 ordinary animatable properties: keyframes and drivers on ``value`` are sampled over
 the scene's frame range.

@@ -59,8 +59,8 @@ from dataclasses import dataclass
 import bpy
 import numpy as np
 
-from ..core.config import CrowdConfig
-from ..core.errors import CrowdError
+from ..core.authoring.config import CrowdConfig
+from ..core.base.errors import CrowdError
 from .looks import plain_material
 
 __all__ = ["STREAMS", "HOME_MIX", "AWAY_MIX", "FAN", "MOCAP", "BEATS", "CUES", "CAMERA",
@@ -141,7 +141,7 @@ class Stadium:
     stadium itself (bowl, pitch) with its sun as the renderers draw them."""
 
     config: CrowdConfig
-    camera: object                  # crowd_addon.core.camera.Camera
+    camera: object                  # crowd_addon.core.base.camera.Camera
     muted: tuple = ()
     scene: object = None            # crowd_addon.gpu.scene_geometry.SceneGeometry
     light: tuple | None = None      # the renderers' light from the scene's sun
@@ -427,7 +427,7 @@ def _wave_speed(scene, frames):
     bowl is so full that a faster front would need more than :data:`WAVE_SLOTS` of the
     crowd's transition slots (a 65,000-seat bowl: the paper's 800 slots carry a wave
     that goes round in about a minute, as a real one does)."""
-    from ..core.show import Sweep, slot_speed
+    from ..core.authoring.show import Sweep, slot_speed
     from .scene_config import scene_fps
 
     fps = scene_fps(scene)

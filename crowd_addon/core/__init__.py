@@ -1,30 +1,32 @@
 """The crowd animation core: pure numpy; imports no bpy, gpu, moderngl or pxr and
 nothing else of this project (docs/architecture.md maps the paper's terms to modules).
 
-Paper terms -> modules: StreamPool, pose history, UniquePool -> :mod:`.pools`; agents
--> :mod:`.agents`; transition slots and their request policy -> :mod:`.transitions`;
-event tags -> :mod:`.events`; controllers -> :mod:`.controllers`; dependency graph ->
-:mod:`.graph`; pose texture -> :mod:`.pose_storage`; skinning -> :mod:`.skinning` and
-:mod:`.skinning_modes`; the runtime facade -> :mod:`.crowd`, read through
-:mod:`.frame_view`; memory model -> :mod:`.budget`.
+Sub-packages, each importing only those before it (tests/test_layering.py):
+:mod:`.base` (errors, bounds, quaternions, poses, skeletons, skinning maths, cameras),
+:mod:`.anim` (clips, controllers, the tree evaluator and dependency graph),
+:mod:`.bake` (actions and armatures as numpy), :mod:`.meshes` (proxies, LODs, bodies),
+:mod:`.runtime` (agents, pools, slots, events, pose texture, skinning modes, look-at),
+:mod:`.variety` (repetition, timing variation), :mod:`.authoring` (configs, files,
+shows, placement, seats), :mod:`.planning` (memory model, variety planner) and
+:mod:`.shots` (the Crowd facade, show runner, snapshots, recordings).
 """
 
-from .agents import STREAM, TRANSITION, UNIQUE, assign_offsets, assign_streams
-from .clip import Clip, ClipBank
-from .config import AnimationDef, CrowdConfig, validate_config
-from .controllers import (Blend2, BlendMask, BlendSpace2D, ClipPlayer, Controller, Layer,
-                          StateMachine, StateTransition, blend_space_weights)
-from .crowd import Crowd, StepReport
-from .frame_view import FrameView
-from .errors import CrowdError
-from .events import EventDispatcher
-from .graph import DependencyGraph, TreeEvaluator
-from .pose import identity_pose, make_pose
-from .pose_storage import PoseStorage, TextureRegion
-from .skeleton import Skeleton
-from .skinning import SkinningPlan, model_matrices, skin_vertices, skinning_matrices
-from .skinning_modes import CpuSkinning, GpuSkinning, SkinningBatch
-from .transitions import TransitionResult
+from .runtime.agents import STREAM, TRANSITION, UNIQUE, assign_offsets, assign_streams
+from .anim.clip import Clip, ClipBank
+from .authoring.config import AnimationDef, CrowdConfig, validate_config
+from .anim.controllers import (Blend2, BlendMask, BlendSpace2D, ClipPlayer, Controller, Layer,
+                               StateMachine, StateTransition, blend_space_weights)
+from .shots.crowd import Crowd, StepReport
+from .runtime.frame_view import FrameView
+from .base.errors import CrowdError
+from .runtime.events import EventDispatcher
+from .anim.graph import DependencyGraph, TreeEvaluator
+from .base.pose import identity_pose, make_pose
+from .runtime.pose_storage import PoseStorage, TextureRegion
+from .base.skeleton import Skeleton
+from .base.skinning import SkinningPlan, model_matrices, skin_vertices, skinning_matrices
+from .runtime.skinning_modes import CpuSkinning, GpuSkinning, SkinningBatch
+from .runtime.transitions import TransitionResult
 
 __all__ = [
     "STREAM", "UNIQUE", "TRANSITION", "assign_offsets", "assign_streams", "Clip", "ClipBank",

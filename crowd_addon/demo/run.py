@@ -8,7 +8,7 @@
    with its show (goal, Mexican wave, hits: scene data, ``scene.crowd.show``) and the
    camera the frames are rendered through, the scene's frame range set to the run;
 3. run the crowd built from that configuration (it runs its show itself: no Python in
-   the loop) and record it (:mod:`crowd_addon.core.recording`), then
+   the loop) and record it (:mod:`crowd_addon.core.shots.recording`), then
 4. export that recording to ``stadium.usdc`` (UsdSkel) in a process of its own (the
    same show, not simulated again; its repetition metric, docs/variety.md, measured
    through the demo's camera) while this process runs the crowd again and renders
@@ -30,8 +30,8 @@ import time
 from importlib import resources
 from pathlib import Path
 
-from ..core.errors import CrowdError
-from ..core.repetition import RepetitionSettings, recording_repetition
+from ..core.base.errors import CrowdError
+from ..core.variety.repetition import RepetitionSettings, recording_repetition
 
 __all__ = ["run_demo", "show_summary", "USD_COUNTS", "SHEET_FRAMES"]
 
@@ -141,7 +141,7 @@ def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
         raise CrowdError(f"--agents must be at least 10, got {agents}")
     if frames < 1:
         raise CrowdError(f"--frames must be at least 1, got {frames}")
-    from ..core.config import USD_LAYOUTS
+    from ..core.authoring.config import USD_LAYOUTS
     if layout not in USD_LAYOUTS:
         raise CrowdError(f"--layout must be one of {', '.join(USD_LAYOUTS)}, got {layout!r}")
     from ..gpu.preview_render import output_dir
@@ -154,7 +154,7 @@ def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
 
     t = time.perf_counter()
     from ..blender.stadium import author_stadium
-    from ..core.config_io import save_config
+    from ..core.authoring.config_io import save_config
     log("authoring the crowd and its show, baking its actions")
     stadium = author_stadium(blend, frames, size,
                              progress=lambda d, n, m: _bar(d + 1, n, "bake"))
@@ -164,8 +164,8 @@ def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
     if stadium.muted:
         log(f"beats after the last of {frames} frames, muted: {', '.join(stadium.muted)}")
 
-    from ..core.crowd import Crowd
-    from ..core.recorder import record
+    from ..core.shots.crowd import Crowd
+    from ..core.shots.recorder import record
     from ..gpu.contact_sheet import ContactSheet
     from ..gpu.png import write_png
     from ..gpu.preview_render import render_preview

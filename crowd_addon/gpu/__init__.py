@@ -12,7 +12,7 @@ picks the backend. :mod:`.camera` frames a crowd and :mod:`.png` writes images.
 Importing this package imports neither moderngl nor bpy.
 """
 
-from ..core.camera import Camera, frame_crowd, frame_points, look_at, perspective
+from ..core.base.camera import Camera, frame_crowd, frame_points, look_at, perspective
 from .png import encode_png, write_png
 
 __all__ = ["Camera", "frame_crowd", "frame_points", "look_at", "perspective", "encode_png",

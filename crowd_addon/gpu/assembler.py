@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..core.errors import CrowdError
+from ..core.base.errors import CrowdError
 from .programs import SHADER_DIR, ProgramSpec
 
 __all__ = ["GLSL_VERSION", "read_sources", "gl_sources", "BlenderShaderInfo",

@@ -7,7 +7,7 @@ backend is imported when a renderer is made.
 
 from __future__ import annotations
 
-from ..core.errors import CrowdError
+from ..core.base.errors import CrowdError
 
 __all__ = ["BACKENDS", "make_renderer"]
 

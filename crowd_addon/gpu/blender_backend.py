@@ -29,13 +29,12 @@ from contextlib import contextmanager, nullcontext
 
 import numpy as np
 
-from ..core.errors import CrowdError
-from ..core.pose_storage import TextureRegion
+from ..core.base.errors import CrowdError
+from ..core.runtime.pose_storage import TextureRegion
 from .blender_gpu import (CROWD_CAPTURE, UPLOAD_INTS, float_texture, program, read_buffer,
                           set_if_used, use_program)
 from .frame_plan import DRAW_SAMPLERS, SKIN_SAMPLERS, TextureSpec
-from .programs import (CROWD_DRAW, ROW_UPLOAD, SCENE_DRAW, SKIN_ROWS, UPLOAD_GROUP,
-                       for_influences)
+from .programs import CROWD_DRAW, ROW_UPLOAD, SCENE_DRAW, SKIN_ROWS, UPLOAD_GROUP, for_influences
 from .renderer import CrowdRenderer
 from .texture_region import stage_rows
 

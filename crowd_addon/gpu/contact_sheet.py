@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.errors import CrowdError
+from ..core.base.errors import CrowdError
 
 __all__ = ["ContactSheet", "sheet_frames"]
 

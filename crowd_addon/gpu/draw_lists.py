@@ -1,11 +1,11 @@
 """Which agents each instanced draw covers: one draw per (body, LOD).
 
 A body is what an agent is drawn with: its character's mesh variant with the props
-it carries (:mod:`crowd_addon.core.bodies`). Agents outside the camera's view (a
+it carries (:mod:`crowd_addon.core.meshes.bodies`). Agents outside the camera's view (a
 bounding sphere per body) are left out. An agent's LOD follows its projected height
-in pixels (:func:`~crowd_addon.core.lod.projected_heights`: its body's height times
+in pixels (:func:`~crowd_addon.core.meshes.lod.projected_heights`: its body's height times
 its scale over its depth times the view's focal length in pixels): LOD ``k`` once it
-is shorter than ``lod_pixels[k - 1]`` (:func:`~crowd_addon.core.lod.switch_pixels`),
+is shorter than ``lod_pixels[k - 1]`` (:func:`~crowd_addon.core.meshes.lod.switch_pixels`),
 clamped to the levels its body has. Zooming in (a longer lens) or a taller viewport
 makes agents taller, so close-ups keep their detail; a small or wide view (or an
 orthographic one, zoomed out) gets the coarse levels sooner; a tall agent keeps its
@@ -21,10 +21,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core.errors import CrowdError
-from ..core.lod import REFERENCE_FOCAL_PX, check_lod_pixels, levels_from_pixels, \
-    projected_heights
-from ..core.pose_storage import TextureRegion
+from ..core.base.errors import CrowdError
+from ..core.meshes.lod import (REFERENCE_FOCAL_PX, check_lod_pixels, levels_from_pixels,
+                               projected_heights)
+from ..core.runtime.pose_storage import TextureRegion
 
 __all__ = ["DrawGroup", "DrawLists", "lod_levels", "frustum_planes",
            "proxy_bounds", "view_distances", "view_depths", "REFERENCE_FOCAL_PX"]

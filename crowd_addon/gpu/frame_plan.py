@@ -1,6 +1,6 @@
 """What a renderer does for a crowd each frame, worked out once for every backend.
 
-A :class:`FramePlan` reads a crowd's :class:`~crowd_addon.core.frame_view.FrameView`
+A :class:`FramePlan` reads a crowd's :class:`~crowd_addon.core.runtime.frame_view.FrameView`
 and turns it into plain data, with no GPU API: the size checks, the textures to make
 at the start (:class:`TextureSpec`), the texture regions to write each frame (which
 texture the pose uploads go to depends on the skinning mode), the agent rows that
@@ -18,9 +18,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core.errors import CrowdError
-from ..core.lod import agent_heights, switch_pixels
-from ..core.pose_storage import TextureRegion
+from ..core.base.errors import CrowdError
+from ..core.meshes.lod import agent_heights, switch_pixels
+from ..core.runtime.pose_storage import TextureRegion
 from .draw_lists import DrawLists, proxy_bounds
 from .instances import InstanceData
 from .look_data import LookData
@@ -127,7 +127,7 @@ class FramePlan:
 
     Parameters
     ----------
-    view : the crowd's :class:`~crowd_addon.core.frame_view.FrameView`.
+    view : the crowd's :class:`~crowd_addon.core.runtime.frame_view.FrameView`.
     max_texture_size : the GPU's largest texture side in texels.
     max_int : integers an int texture write keeps exact (None: any int32); the
         agent count must stay below it.
@@ -277,7 +277,7 @@ class FramePlan:
         body's coarsest level, except those drawn at a far level (a card, or boxes
         per part: far away, a few pixels tall, their shadows would not show, and at
         65k agents they are nearly all of them)."""
-        from ..core.bodies import is_card
+        from ..core.meshes.bodies import is_card
         common = self._draw_uniforms(view_projection, light)
         out = []
         for g in self.lists.groups:

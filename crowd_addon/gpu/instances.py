@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.errors import CrowdError
+from ..core.base.errors import CrowdError
 from .programs import AGENT_TEXELS
 from .texture_region import block_image, block_regions
 
@@ -43,7 +43,7 @@ class InstanceData:
 
     Parameters
     ----------
-    view : the crowd's :class:`~crowd_addon.core.frame_view.FrameView`; the records
+    view : the crowd's :class:`~crowd_addon.core.runtime.frame_view.FrameView`; the records
         are packed from it at once.
     max_texture_size : the GPU's largest texture side in texels.
 

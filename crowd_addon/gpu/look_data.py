@@ -1,4 +1,4 @@
-"""Look-at on the GPU (core/look_at.py, applied in the vertex stage): the data the
+"""Look-at on the GPU (core/runtime/look_at.py, applied in the vertex stage): the data the
 shaders read (``gpu_shaders/look_at.glsl``).
 
 Three textures, none of them written per frame:
@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.errors import CrowdError
+from ..core.base.errors import CrowdError
 from .texture_region import block_image, block_regions
 
 __all__ = ["LookData", "LOOK_TEXELS", "NEVER", "MAX_LOOK_BONES"]

@@ -15,7 +15,7 @@ from contextlib import contextmanager
 
 import numpy as np
 
-from ..core.errors import CrowdError
+from ..core.base.errors import CrowdError
 from .assembler import gl_sources
 from .frame_plan import DRAW_SAMPLERS, SKIN_SAMPLERS, TextureSpec
 from .programs import CROWD_DRAW, SCENE_DRAW, SKIN_ROWS, for_influences

@@ -10,8 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.errors import CrowdError
-from ..core.files import file_mode
+from ..core.base.errors import CrowdError
+from ..core.base.files import file_mode
 
 __all__ = ["encode_png", "write_png"]
 

@@ -20,11 +20,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.crowd import Crowd
-from ..core.errors import CrowdError
-from ..core.repetition import RepetitionSettings, combine, crowd_repetition, measure_frames
+from ..core.shots.crowd import Crowd
+from ..core.base.errors import CrowdError
+from ..core.variety.repetition import RepetitionSettings, combine, crowd_repetition, measure_frames
 from .backends import BACKENDS, make_renderer
-from ..core.camera import frame_crowd
+from ..core.base.camera import frame_crowd
 from .png import write_png
 
 __all__ = ["PreviewResult", "render_preview", "output_dir", "BACKENDS", "MAX_SIZE"]
@@ -45,7 +45,7 @@ class PreviewResult:
     which runs in a thread beside the next frame's drawing, and ``write_beside`` that
     thread's wall time, waits for the GIL included); ``upload_bytes``: pose and instance bytes sent per frame
     (median); ``repetition``: the repetition metric through the camera at the frames'
-    size (:meth:`~crowd_addon.core.repetition.Repetition.as_dict`; None when not
+    size (:meth:`~crowd_addon.core.variety.repetition.Repetition.as_dict`; None when not
     measured).
     """
 

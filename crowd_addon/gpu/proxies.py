@@ -1,6 +1,6 @@
 """Proxy meshes as vertex arrays for the skinning program's inputs.
 
-A core :class:`~crowd_addon.core.mesh.ProxyMesh` becomes one
+A core :class:`~crowd_addon.core.meshes.mesh.ProxyMesh` becomes one
 :class:`ProxyBuffers` per LOD: named attribute arrays matching the ``vertex_in``
 names of :data:`~.programs.CROWD_DRAW` (``pos``, ``nor`` float32 ``(V, 3)``,
 ``bone_idx`` uint16 ``(V, 4)``, ``bone_w`` float32 ``(V, 4)``, ``col`` uint8 ``(V,
@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core.errors import CrowdError
+from ..core.base.errors import CrowdError
 
 __all__ = ["ProxyBuffers", "proxy_buffers", "vertex_colors", "crowd_proxies",
            "copies_per_instance",
@@ -126,7 +126,7 @@ class ProxyBuffers:
 
 def vertex_colors(mesh, palette_materials=()) -> np.ndarray:
     """``(V, 4)`` uint8 of each vertex of a ProxyMesh: RGB its material's base colour
-    (:class:`~crowd_addon.core.mesh.Look` colour; a vertex shared by triangles of
+    (:class:`~crowd_addon.core.meshes.mesh.Look` colour; a vertex shared by triangles of
     several materials takes the last triangle's), white without looks (the agent's
     colour alone then: gpu_shaders/crowd_vertex.glsl); alpha the column of the agent
     palette colouring that material (its place in ``palette_materials``, material
@@ -146,7 +146,7 @@ def vertex_colors(mesh, palette_materials=()) -> np.ndarray:
 
 
 def proxy_buffers(mesh, palette_materials=()) -> ProxyBuffers:
-    """Vertex arrays of a :class:`~crowd_addon.core.mesh.ProxyMesh` (already validated:
+    """Vertex arrays of a :class:`~crowd_addon.core.meshes.mesh.ProxyMesh` (already validated:
     4 or 8 influences a vertex, strongest first, summing to 1); ``palette_materials``
     as :func:`vertex_colors`."""
     idx, w = mesh.bone_indices, mesh.bone_weights
@@ -164,7 +164,7 @@ def proxy_buffers(mesh, palette_materials=()) -> ProxyBuffers:
 
 def crowd_proxies(view) -> list:
     """Per body of ``view.bodies`` (a crowd's ``FrameView``: each mesh variant and set
-    of props in use, :mod:`crowd_addon.core.bodies`), its LOD list of
+    of props in use, :mod:`crowd_addon.core.meshes.bodies`), its LOD list of
     :class:`ProxyBuffers`. A character that agents use but that has no proxy mesh
     (``CrowdConfig.add_mesh``) is an error naming it."""
     out = []

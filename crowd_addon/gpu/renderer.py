@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.pose_storage import TextureRegion
+from ..core.runtime.pose_storage import TextureRegion
 from .frame_plan import Draw, FramePlan, FrameStats, TextureSpec, gl_matrix
 from .shadows import LIT_VIEW, SHADOW_SIZE, sun_view, view_texels
 
@@ -54,7 +54,7 @@ class CrowdRenderer:
 
     Parameters
     ----------
-    view : the crowd's :class:`~crowd_addon.core.frame_view.FrameView` (``crowd.view``);
+    view : the crowd's :class:`~crowd_addon.core.runtime.frame_view.FrameView` (``crowd.view``);
         call :meth:`sync` after each ``crowd.step()``. The renderer consumes the
         crowd's upload regions and skinning batches: one renderer per crowd.
     max_texture_size : the GPU's largest texture side in texels.

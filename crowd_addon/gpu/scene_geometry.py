@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core.errors import CrowdError
+from ..core.base.errors import CrowdError
 
 __all__ = ["SceneGeometry", "sun_light", "DEFAULT_AMBIENT"]
 

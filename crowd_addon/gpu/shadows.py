@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.camera import look_at
+from ..core.base.camera import look_at
 
 __all__ = ["SHADOW_SIZE", "LIT_VIEW", "sun_view", "view_texels"]
 

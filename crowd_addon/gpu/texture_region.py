@@ -3,14 +3,14 @@
 A block-laid texture (``gpu_shaders/block_layout.glsl``) holds logical rows of
 ``row_texels`` texels; row ``r`` starts at texel ``((r // H) * row_texels, r % H)``
 with ``H`` the texture height. Core's pose textures use it
-(:class:`crowd_addon.core.pose_storage.PoseStorage`) and so does the agent texture.
+(:class:`crowd_addon.core.runtime.pose_storage.PoseStorage`) and so does the agent texture.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ..core.pose_storage import TextureRegion
+from ..core.runtime.pose_storage import TextureRegion
 
 __all__ = ["block_regions", "block_image", "stage_rows"]
 

@@ -40,7 +40,7 @@ from __future__ import annotations
 import numpy as np
 from pxr import Gf, Sdf, Vt
 
-from ..core.mesh import tinted
+from ..core.meshes.mesh import tinted
 from .character import palette_primvar
 from .layers import apply_api, attribute, define, relationship
 
@@ -102,7 +102,7 @@ def author_agents(root: Sdf.PrimSpec, shot, names, character_assets, sources,
         nodes it makes of the materials' primvar readers then find).
     tints : per body index, the looks agents' colours tint
         (:func:`~.character.tinted_looks`: ``[(primvar, colour)]``): each agent gets
-        the look's colour tinted by its own (:func:`~crowd_addon.core.mesh.tinted`).
+        the look's colour tinted by its own (:func:`~crowd_addon.core.meshes.mesh.tinted`).
     """
     with Sdf.ChangeBlock():
         parent = define(root, "Agents", "Scope")

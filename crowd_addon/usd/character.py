@@ -43,10 +43,10 @@ import hashlib
 import numpy as np
 from pxr import Gf, Sdf, Tf, Vt
 
-from ..core import pose as sqt
+from ..core.base import pose as sqt
 from . import convert
-from ..core.bodies import merge_meshes
-from ..core.mesh import Look, tint_weight
+from ..core.meshes.bodies import merge_meshes
+from ..core.meshes.mesh import Look, tint_weight
 from .layers import apply_api, attribute, connect, define, new_layer, relationship
 from .naming import joint_paths, unique_identifiers
 
@@ -66,7 +66,7 @@ def character_layer(skeleton, mesh, fmt: str, fps: float, root_name: str, textur
     the full mesh then having ``purpose = "render"``: viewers such as usdview draw the
     proxy, renders the full mesh. ``palette_materials``: the material (look) names
     the agents' palette columns colour, in column order. ``props``: the
-    :class:`~crowd_addon.core.bodies.Prop` s the body carries, each a mesh of its own
+    :class:`~crowd_addon.core.meshes.bodies.Prop` s the body carries, each a mesh of its own
     bound rigidly to its joint; ``variant``: the mesh variant ``mesh`` is (recorded in
     the root's ``customData``). Palette and tinted looks' materials read each agent's
     primvars (:func:`palette_primvar`, :func:`tint_primvar`), with the look's own
@@ -180,7 +180,7 @@ def tinted_looks(looks, palette_materials=()) -> list:
 
 def _is_tinted(look, palette_materials) -> bool:
     """Whether agents' colours tint ``look`` in the export, as the preview's shader
-    does: a tint weight (:func:`~crowd_addon.core.mesh.tint_weight`) above 0, in no
+    does: a tint weight (:func:`~crowd_addon.core.meshes.mesh.tint_weight`) above 0, in no
     palette and without a texture."""
     return (look.name not in palette_materials and not look.texture
             and tint_weight(look.color[:3]) > 0)

@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 from pxr import Vt
 
-from ..core import pose as sqt
+from ..core.base import pose as sqt
 
 __all__ = ["sqt_components", "translations", "rotations", "scales", "matrices", "vec3f",
            "ints", "floats"]

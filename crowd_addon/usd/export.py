@@ -1,7 +1,7 @@
 """Recording -> UsdSkel export (docs/usd_export.md): the entry point.
 
-:func:`export_crowd` writes a :class:`~crowd_addon.core.recording.Recording` (a shot
-simulated once by :func:`crowd_addon.core.recorder.record`; nothing here runs a
+:func:`export_crowd` writes a :class:`~crowd_addon.core.shots.recording.Recording` (a shot
+simulated once by :func:`crowd_addon.core.shots.recorder.record`; nothing here runs a
 crowd) as::
 
     shot.usdc                         layout: offset animations, agents (main layer)
@@ -29,12 +29,12 @@ from dataclasses import dataclass
 import numpy as np
 from pxr import Sdf, Vt
 
-from ..core.bodies import crowd_bodies, prop_names
-from ..core.config import USD_LAYOUTS, validate_config
-from ..core.config_io import config_digest
-from ..core.errors import CrowdError
-from ..core.recording import Recording
-from ..core.repetition import RepetitionSettings, recording_repetition_steps
+from ..core.meshes.bodies import crowd_bodies, prop_names
+from ..core.authoring.config import USD_LAYOUTS, validate_config
+from ..core.authoring.config_io import config_digest
+from ..core.base.errors import CrowdError
+from ..core.shots.recording import Recording
+from ..core.variety.repetition import RepetitionSettings, recording_repetition_steps
 from .agents import (ROOT, agent_names, author_agent_animations, author_agents,
                      author_offset_animations)
 from .animation import author_animation
@@ -90,7 +90,7 @@ class ExportResult:
     look_agents : exported agents that look at something in the shot (each on value
         clips); aim_frames : their looking frames (of blend_frames), each its own pose.
     repetition : the exported agents' repetition metric over the shot
-        (:meth:`~crowd_addon.core.repetition.Repetition.as_dict`; None when not
+        (:meth:`~crowd_addon.core.variety.repetition.Repetition.as_dict`; None when not
         measured).
     """
 
@@ -126,7 +126,7 @@ def export_crowd(recording, path, agents=None, progress=None, layout="instanced"
 
     Parameters
     ----------
-    recording : a :class:`~crowd_addon.core.recording.Recording`.
+    recording : a :class:`~crowd_addon.core.shots.recording.Recording`.
     path : main layer, ``.usdc``/``.usd`` (binary) or ``.usda`` (text).
     agents : None (all) or N, the first N agents (ids ``0 .. N-1``); more than the
         recording has is an error.
@@ -137,9 +137,9 @@ def export_crowd(recording, path, agents=None, progress=None, layout="instanced"
         Blender's USD importer animates them only then; and their colour primvars are
         authored on each of their meshes, where that importer reads them);
         :data:`LAYOUTS`.
-    camera : the :class:`~crowd_addon.core.camera.Camera` the repetition metric is
+    camera : the :class:`~crowd_addon.core.base.camera.Camera` the repetition metric is
         measured from (default: one framing the exported agents).
-    repetition : :class:`~crowd_addon.core.repetition.RepetitionSettings` of the
+    repetition : :class:`~crowd_addon.core.variety.repetition.RepetitionSettings` of the
         metric (stage ``repetition``, one step a frame measured), or None to skip it.
 
     Raises
@@ -169,7 +169,7 @@ def export_steps(recording, path, agents=None, layout="instanced", camera=None,
     checked when it is called (CrowdError). Closed before it is done, it removes its
     temporary files: nothing is written, a previous export is left as it was."""
     if not isinstance(recording, Recording):
-        raise CrowdError(f"export: expected a Recording (crowd_addon.core.recording), got "
+        raise CrowdError(f"export: expected a Recording (crowd_addon.core.shots.recording), got "
                          f"{type(recording).__name__}")
     check_layout(layout)
     ids = _agent_ids(agents, recording.agent_count)
@@ -183,7 +183,7 @@ def export_steps(recording, path, agents=None, layout="instanced", camera=None,
 def _view_projection(rec, ids, camera, settings) -> np.ndarray:
     """The repetition metric's camera: ``camera``'s, or one framing the agents ``ids``
     at the settings' aspect."""
-    from ..core.camera import frame_positions
+    from ..core.base.camera import frame_positions
     if camera is None:
         camera = frame_positions(rec.position[ids], settings.width / settings.height)
     return camera.view_projection
@@ -430,7 +430,7 @@ def _agent_ids(agents, count) -> np.ndarray:
 
 def _bodies(config, agent_skeleton, ids) -> dict:
     """``{body index: Body}`` of the bodies agents ``ids`` use (indices among the
-    bodies of all agents, :func:`~crowd_addon.core.bodies.crowd_bodies`), checked:
+    bodies of all agents, :func:`~crowd_addon.core.meshes.bodies.crowd_bodies`), checked:
     each has a mesh, and the textures its looks name are files."""
     skeleton_names = list(config.skeletons)
     bodies, agent_body = crowd_bodies(config, agent_skeleton)

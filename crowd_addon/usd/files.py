@@ -32,7 +32,7 @@ import tempfile
 
 from pxr import Tf
 
-from ..core.errors import CrowdError
+from ..core.base.errors import CrowdError
 from .references import READERS, versions_in_use
 
 __all__ = ["ExportFiles", "FORMATS", "remove_stale_temporaries"]

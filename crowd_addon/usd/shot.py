@@ -1,4 +1,4 @@
-"""The exported agents of a :class:`~crowd_addon.core.recording.Recording`, as the USD
+"""The exported agents of a :class:`~crowd_addon.core.shots.recording.Recording`, as the USD
 layout needs them (pure numpy, no pxr).
 
 An agent is *static* when it plays one ``(stream, offset)`` for the whole shot: it
@@ -18,8 +18,8 @@ from functools import cached_property
 
 import numpy as np
 
-from ..core.agents import STREAM, TRANSITION, UNIQUE
-from ..core.bodies import body_keys
+from ..core.runtime.agents import STREAM, TRANSITION, UNIQUE
+from ..core.meshes.bodies import body_keys
 
 __all__ = ["Shot", "Pieces", "STREAM", "UNIQUE", "TRANSITION", "AIM"]
 
@@ -58,7 +58,7 @@ class Shot:
     recording : the Recording; first, last, fps, max_offset : its own.
     agents : (n,) int64 ids; agent_skeleton : (n,) int64 skeleton index per agent;
     agent_body : (n,) int64 body index per agent (mesh variant and props,
-    :func:`~crowd_addon.core.bodies.body_keys` of all the recording's agents).
+    :func:`~crowd_addon.core.meshes.bodies.body_keys` of all the recording's agents).
     static : (n,) bool; stream, offset : (n,) int64 of static agents (-1 otherwise).
     looking : (n,) bool, the agent looks at something at some shot frame (never
     static).

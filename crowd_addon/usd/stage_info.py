@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 from pxr import Sdf, Tf
 
-from ..core.errors import CrowdError
+from ..core.base.errors import CrowdError
 
 __all__ = ["StageTiming", "stage_timing"]
 

@@ -39,7 +39,7 @@ from dataclasses import dataclass
 
 from pxr import Sdf, Tf, UsdUtils, Vt
 
-from ..core.errors import CrowdError
+from ..core.base.errors import CrowdError
 from .agents import ROOT
 from .clips import PRIM, manifest_layer
 from .files import ExportFiles

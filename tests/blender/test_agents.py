@@ -20,8 +20,8 @@ import crowd_scene as cs  # noqa: E402
 from mathutils import Matrix, Vector  # noqa: E402
 
 from crowd_addon.blender.agents import agents_from_scene, agents_from_source  # noqa: E402
-from crowd_addon.core.errors import CrowdError  # noqa: E402
-from crowd_addon.core.placement import CharacterStreams  # noqa: E402
+from crowd_addon.core.base.errors import CrowdError  # noqa: E402
+from crowd_addon.core.authoring.placement import CharacterStreams  # noqa: E402
 
 STREAMS = ["idle", "cheer", "sit"]
 

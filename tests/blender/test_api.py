@@ -13,8 +13,8 @@ import pytest
 
 from crowd_addon import api
 from crowd_addon.core import ClipPlayer, Crowd, CrowdConfig, StateMachine, StateTransition
-from crowd_addon.core.errors import CrowdError
-from crowd_addon.core.synthetic import humanoid, periodic_clip
+from crowd_addon.core.base.errors import CrowdError
+from crowd_addon.core.authoring.synthetic import humanoid, periodic_clip
 
 PERIOD, TAU, M = 24, 6.0, 10
 

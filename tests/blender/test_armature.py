@@ -7,9 +7,9 @@ import pytest
 from crowd_addon.blender.armature import (check_skeleton, object_to_armature,
                                           proxy_mesh_from_object, skeleton_from_armature)
 from crowd_addon.blender.bake import bake_actions
-from crowd_addon.core.clip import ClipBank
-from crowd_addon.core.errors import CrowdError
-from crowd_addon.core.skinning import skin_vertices, skinning_matrices
+from crowd_addon.core.anim.clip import ClipBank
+from crowd_addon.core.base.errors import CrowdError
+from crowd_addon.core.base.skinning import skin_vertices, skinning_matrices
 
 CHILD_FIRST = [  # children listed before their parents: the skeleton reorders them
     ("hand", (0.9, 0.6, 1.2), (1.2, 0.5, 1.0), 2.0, "arm", True),

@@ -16,9 +16,9 @@ import pytest
 
 from crowd_addon.blender.bake import bake_actions
 from crowd_addon.core import ClipPlayer, Crowd, CrowdConfig
-from crowd_addon.core.clip import ClipBank
-from crowd_addon.core.errors import CrowdError
-from crowd_addon.core.skinning import model_matrices
+from crowd_addon.core.anim.clip import ClipBank
+from crowd_addon.core.base.errors import CrowdError
+from crowd_addon.core.base.skinning import model_matrices
 
 TOL = 2e-6
 

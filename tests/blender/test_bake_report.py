@@ -27,9 +27,9 @@ from test_many_influences import many_groups  # noqa: E402
 
 from crowd_addon.blender import export, scene_config  # noqa: E402
 from crowd_addon.blender.bake import bake_actions  # noqa: E402
-from crowd_addon.core.bake_report import report_of  # noqa: E402
-from crowd_addon.core.clip import ClipBank  # noqa: E402
-from crowd_addon.core.skinning import model_matrices  # noqa: E402
+from crowd_addon.core.bake.bake_report import report_of  # noqa: E402
+from crowd_addon.core.anim.clip import ClipBank  # noqa: E402
+from crowd_addon.core.base.skinning import model_matrices  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 BVH = "/usr/share/assimp/models/BVH"

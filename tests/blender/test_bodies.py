@@ -20,9 +20,9 @@ sys.path.insert(0, str(Path(__file__).parent))
 import crowd_scene as cs  # noqa: E402
 
 from crowd_addon.blender import preview, render_crowd, scene_config  # noqa: E402
-from crowd_addon.core.crowd import Crowd  # noqa: E402
-from crowd_addon.core.errors import CrowdError  # noqa: E402
-from crowd_addon.core.skinning import skin_vertices  # noqa: E402
+from crowd_addon.core.shots.crowd import Crowd  # noqa: E402
+from crowd_addon.core.base.errors import CrowdError  # noqa: E402
+from crowd_addon.core.base.skinning import skin_vertices  # noqa: E402
 
 extension = cs.extension_fixture()
 

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from crowd_addon.blender.bake import bake_actions
-from crowd_addon.core.clip import ClipBank
-from crowd_addon.core.skinning import model_matrices
+from crowd_addon.core.anim.clip import ClipBank
+from crowd_addon.core.base.skinning import model_matrices
 
 BVH = "/usr/share/assimp/models/BVH/01_01.bvh"
 

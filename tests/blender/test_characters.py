@@ -23,8 +23,8 @@ from crowd_addon.blender import preview, scene_config  # noqa: E402
 from crowd_addon.blender.agents import agents_from_scene  # noqa: E402
 from crowd_addon.blender.props import settings_fingerprint  # noqa: E402
 from crowd_addon.core import Crowd  # noqa: E402
-from crowd_addon.core.errors import CrowdError  # noqa: E402
-from crowd_addon.core.skinning import model_matrices  # noqa: E402
+from crowd_addon.core.base.errors import CrowdError  # noqa: E402
+from crowd_addon.core.base.skinning import model_matrices  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 SEATS = (6, 5)
@@ -241,7 +241,7 @@ def test_user_lod_meshes_replace_the_automatic_levels(two):
         np.testing.assert_allclose(level.positions, co(obj), atol=1e-6)
     # the kid keeps the automatic levels: its light body (84 triangles) is not
     # decimated below MIN_LOD_TRIANGLES
-    from crowd_addon.core.levels import MIN_LOD_TRIANGLES
+    from crowd_addon.core.meshes.levels import MIN_LOD_TRIANGLES
     kid = cfg.meshes["Kid"]
     assert [lv.name for lv in kid[1:3]] == ["KidBody.lod1", "KidBody.lod2"] and len(kid) == 5
     assert kid[0].triangle_count >= kid[1].triangle_count >= kid[2].triangle_count

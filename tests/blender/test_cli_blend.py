@@ -24,7 +24,7 @@ from bpy_extras.object_utils import world_to_camera_view  # noqa: E402
 from mathutils import Vector  # noqa: E402
 
 from crowd_addon.blender.cameras import camera_from_object, find_camera  # noqa: E402
-from crowd_addon.core.errors import CrowdError  # noqa: E402
+from crowd_addon.core.base.errors import CrowdError  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))   # tests/pngs.py
 from pngs import read_png  # noqa: E402
 

@@ -112,7 +112,7 @@ def test_package_and_api_import_without_blender():
         sys.modules["bpy"] = None                      # any 'import bpy' now fails
         import crowd_addon
         from crowd_addon import api
-        from crowd_addon.core.synthetic import humanoid, periodic_clip
+        from crowd_addon.core.authoring.synthetic import humanoid, periodic_clip
         from crowd_addon.core import ClipPlayer, Crowd, CrowdConfig
         sk = humanoid(bones=24)
         cfg = CrowdConfig(max_offset=4)

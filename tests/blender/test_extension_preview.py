@@ -21,8 +21,8 @@ import crowd_addon  # noqa: E402
 from crowd_addon.blender import preview, registration  # noqa: E402
 from crowd_addon.blender.props import settings_fingerprint  # noqa: E402
 from crowd_addon.core import Crowd  # noqa: E402
-from crowd_addon.core.skinning import skin_vertices  # noqa: E402
-from crowd_addon.core.camera import look_at, perspective  # noqa: E402
+from crowd_addon.core.base.skinning import skin_vertices  # noqa: E402
+from crowd_addon.core.base.camera import look_at, perspective  # noqa: E402
 
 
 extension = cs.extension_fixture()
@@ -388,7 +388,7 @@ def test_measure_repetition_sees_through_the_scene_camera(running):
     oracle is Blender's own projection of that camera (``calc_matrix_camera`` at the
     render size, times the inverse world matrix) fed to the metric's definition."""
     from crowd_addon.blender import panels
-    from crowd_addon.core.repetition import RepetitionSettings, frame_repetition
+    from crowd_addon.core.variety.repetition import RepetitionSettings, frame_repetition
     scene, _rig, _walk, pv = running
     assert pv.repetition is None
     cam = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
@@ -422,7 +422,7 @@ def test_plan_variety_and_apply_it(running):
     Apply: the Crowd settings take the plan's M, copies and Spread offsets, and the
     bake that follows builds the plan's streams."""
     from crowd_addon.blender import panels
-    from crowd_addon.core.repetition import RepetitionSettings, crowd_repetition
+    from crowd_addon.core.variety.repetition import RepetitionSettings, crowd_repetition
     scene, _rig, _walk, pv = running
     cam = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
     scene.collection.objects.link(cam)

@@ -1,11 +1,11 @@
-"""The numpy F-curve evaluator (crowd_addon.core.fcurve) against Blender's own
+"""The numpy F-curve evaluator (crowd_addon.core.bake.fcurve) against Blender's own
 ``FCurve.evaluate``: Blender is the oracle, so these tests need bpy."""
 
 import numpy as np
 
 from crowd_addon.blender.action_data import read_action
 from crowd_addon.blender.armature import skeleton_from_armature
-from crowd_addon.core import fcurve
+from crowd_addon.core.bake import fcurve
 
 HANDLE_TYPES = ("FREE", "AUTO_CLAMPED", "AUTO", "VECTOR", "ALIGNED")
 

@@ -2,7 +2,7 @@
 meshes it makes hold what the core seat generator gives, and making them again
 replaces the meshes of the same objects.
 
-Oracles: :func:`crowd_addon.core.seats.generate_seats` for the same spec, and Blender's
+Oracles: :func:`crowd_addon.core.authoring.seats.generate_seats` for the same spec, and Blender's
 own data read back (vertex positions, point attributes, vertex groups, polygons)."""
 
 import os
@@ -16,7 +16,7 @@ bpy = pytest.importorskip("bpy")
 sys.path.insert(0, os.path.dirname(__file__))
 import crowd_scene as cs  # noqa: E402
 
-from crowd_addon.core.seats import SeatSpec, Tier, Tunnel, generate_seats  # noqa: E402
+from crowd_addon.core.authoring.seats import SeatSpec, Tier, Tunnel, generate_seats  # noqa: E402
 
 extension = cs.extension_fixture()
 

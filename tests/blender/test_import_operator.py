@@ -28,7 +28,7 @@ from test_usd_import import (TOLERANCE, core_vertices, imported_agents,  # noqa:
                              world_vertices)
 from usd.conftest import FIRST, LAST, core_truth, make_config, recording  # noqa: E402
 
-from crowd_addon.core.mesh import Look  # noqa: E402
+from crowd_addon.core.meshes.mesh import Look  # noqa: E402
 
 LOOKS = (Look("Shirt", (0.9, 0.9, 0.9, 1.0)), Look("Skin", (0.8, 0.5, 0.3, 1.0)))
 

@@ -22,8 +22,8 @@ import crowd_scene as cs  # noqa: E402
 from crowd_addon.blender import scene_config  # noqa: E402
 from crowd_addon.blender.show_data import object_positions  # noqa: E402
 from crowd_addon.core import Crowd  # noqa: E402
-from crowd_addon.core.errors import CrowdError  # noqa: E402
-from crowd_addon.core.look_at import LookChain, head_direction  # noqa: E402
+from crowd_addon.core.base.errors import CrowdError  # noqa: E402
+from crowd_addon.core.runtime.look_at import LookChain, head_direction  # noqa: E402
 
 extension = cs.extension_fixture()
 

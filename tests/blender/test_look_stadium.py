@@ -22,8 +22,8 @@ import crowd_scene as cs  # noqa: E402
 
 from crowd_addon.blender import stadium  # noqa: E402
 from crowd_addon.core import Crowd  # noqa: E402
-from crowd_addon.core.look_at import LookChain, head_direction  # noqa: E402
-from crowd_addon.core.show import Show  # noqa: E402
+from crowd_addon.core.runtime.look_at import LookChain, head_direction  # noqa: E402
+from crowd_addon.core.authoring.show import Show  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 BUILDER = ROOT / "sample_scenes" / "build_stadium.py"

@@ -19,7 +19,7 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 from usd.conftest import FIRST, LAST  # noqa: E402
 from usd.look_shot import AGENTS, LOOKERS, core_rows, look_config, simulate_looks  # noqa: E402
 
-from crowd_addon.core.skinning import skin_vertices  # noqa: E402
+from crowd_addon.core.base.skinning import skin_vertices  # noqa: E402
 from test_usd_import import import_agents, world_vertices  # noqa: E402
 
 TOLERANCE = 1e-4          # metres
@@ -40,7 +40,7 @@ def angle(a, b):
 @pytest.fixture(scope="module")
 def imported(tmp_path_factory):
     from crowd_addon.core import Crowd
-    from crowd_addon.core.recorder import record
+    from crowd_addon.core.shots.recorder import record
     from crowd_addon.usd import export_crowd
 
     rec = record(Crowd(look_config(), skinning="gpu"), FIRST, LAST, on_frame=simulate_looks)

@@ -143,7 +143,7 @@ def test_blenders_importer_shows_each_agents_colours(dressed, tmp_path, material
     the default base colour): checked there as a control, the attributes still
     arriving, so a change in that importer shows here."""
     from crowd_addon.blender.scene_config import config_from_scene
-    from crowd_addon.core.mesh import tinted
+    from crowd_addon.core.meshes.mesh import tinted
     from crowd_addon.usd.character import palette_primvar, tint_primvar
     scene = dressed[0]
     grey = (0.9, 0.9, 0.9, 1.0)

@@ -18,8 +18,8 @@ import crowd_scene as cs  # noqa: E402
 from crowd_addon.blender import preview  # noqa: E402
 from crowd_addon.blender.armature import object_to_armature, proxy_mesh_from_object  # noqa: E402
 from crowd_addon.blender.bake import bake_actions  # noqa: E402
-from crowd_addon.core.clip import ClipBank  # noqa: E402
-from crowd_addon.core.skinning import skin_vertices, skinning_matrices  # noqa: E402
+from crowd_addon.core.anim.clip import ClipBank  # noqa: E402
+from crowd_addon.core.base.skinning import skin_vertices, skinning_matrices  # noqa: E402
 
 #: ten bones: root, four spine bones, two arms of two and a head, so a vertex can lie in ten groups
 TEN = [("root", (0.0, 0.0, 0.0), (0.0, 0.1, 0.5), 0.2, None, False)] + [

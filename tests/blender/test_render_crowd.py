@@ -21,7 +21,7 @@ from crowd_addon.blender import preview, render_crowd  # noqa: E402
 from crowd_addon.blender.cameras import camera_from_object  # noqa: E402
 from crowd_addon.blender.looks import plain_material, principled  # noqa: E402
 from crowd_addon.core import Crowd  # noqa: E402
-from crowd_addon.core.skinning import skin_vertices  # noqa: E402
+from crowd_addon.core.base.skinning import skin_vertices  # noqa: E402
 from crowd_addon.gpu.backends import make_renderer  # noqa: E402
 
 SIZE = (160, 120)

@@ -1,7 +1,7 @@
 """Render Crowd's looks (issue 34, item 4): a looking agent's head turn rounded to
 aim classes of ``AIM_STEP`` in yaw and pitch, so pose meshes stay shared.
 
-Oracles: core's look stage (``Crowd.agent_rows``, core/look_at.py) for the exact
+Oracles: core's look stage (``Crowd.agent_rows``, core/runtime/look_at.py) for the exact
 turn; the head's forward of the rounded rows within the rounding's bound of it; agents
 without a look drawn exactly as core draws them."""
 
@@ -17,7 +17,7 @@ pytest.importorskip("bpy")
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(__file__)), "gpu"))
 import backend_scenes as scenes  # noqa: E402
 from crowd_addon.blender import render_crowd  # noqa: E402
-from crowd_addon.core.look_at import LookRig, LookTarget, head_direction  # noqa: E402
+from crowd_addon.core.runtime.look_at import LookRig, LookTarget, head_direction  # noqa: E402
 
 
 def looking_crowd():

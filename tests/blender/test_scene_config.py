@@ -19,10 +19,10 @@ import crowd_scene as cs  # noqa: E402
 
 from crowd_addon.blender import preview, scene_config  # noqa: E402
 from crowd_addon.blender.operators import BakeJob  # noqa: E402
-from crowd_addon.core import (Blend2, BlendSpace2D, ClipPlayer, Crowd, CrowdConfig,  # noqa: E402
-                              Layer, StateMachine, StateTransition)
-from crowd_addon.core.errors import CrowdError  # noqa: E402
-from crowd_addon.core.skinning import model_matrices  # noqa: E402
+from crowd_addon.core import (Blend2, BlendSpace2D, ClipPlayer, Crowd, CrowdConfig, Layer,
+                              StateMachine, StateTransition)
+from crowd_addon.core.base.errors import CrowdError  # noqa: E402
+from crowd_addon.core.base.skinning import model_matrices  # noqa: E402
 
 
 extension = cs.extension_fixture()

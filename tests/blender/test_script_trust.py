@@ -18,7 +18,7 @@ import crowd_scene as cs  # noqa: E402
 
 from crowd_addon.blender import preview, scene_config, show_data  # noqa: E402
 from crowd_addon.blender.cli_commands import export_blend  # noqa: E402
-from crowd_addon.core.errors import ScriptNotTrusted  # noqa: E402
+from crowd_addon.core.base.errors import ScriptNotTrusted  # noqa: E402
 
 UNTRUSTED = "did not run: scripts in .blend files are not trusted"
 

@@ -25,8 +25,8 @@ from mathutils import Vector  # noqa: E402
 from crowd_addon.blender import preview, scene_config  # noqa: E402
 from crowd_addon.blender.props import settings_fingerprint  # noqa: E402
 from crowd_addon.core import Crowd  # noqa: E402
-from crowd_addon.core import pose as sqt  # noqa: E402
-from crowd_addon.core.errors import CrowdError  # noqa: E402
+from crowd_addon.core.base import pose as sqt  # noqa: E402
+from crowd_addon.core.base.errors import CrowdError  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 NX, NY = 8, 6

@@ -20,7 +20,7 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 from usd.conftest import (DYNAMIC, FAN_AGENTS, FIRST, KID_AGENTS, LAST, MOVING,  # noqa: E402
                           core_truth, make_config, recording)
 
-from crowd_addon.core.skinning import skin_vertices, skinning_matrices  # noqa: E402
+from crowd_addon.core.base.skinning import skin_vertices, skinning_matrices  # noqa: E402
 
 TOLERANCE = 1e-4          # metres
 N = FAN_AGENTS + KID_AGENTS
@@ -111,7 +111,7 @@ def test_samples_between_frames_import_as_core_between_frames(tmp_path):
     time, across the shot's clip switches. Agents that stand still: a moving agent's
     transform has whole-frame samples, which Blender interpolates (docs/usd_export.md)."""
     from crowd_addon.core import Crowd
-    from crowd_addon.core.recorder import record
+    from crowd_addon.core.shots.recorder import record
     from crowd_addon.usd import export_crowd
     from usd.conftest import core_samples, simulate
 
@@ -153,12 +153,12 @@ def test_instanced_layout_is_what_blender_does_not_animate(exported, truth):
 
 
 def test_variants_and_props_import_as_core_skins_them(tmp_path, truth):
-    """Mesh variants and props (:mod:`crowd_addon.core.bodies`) through Blender's USD
+    """Mesh variants and props (:mod:`crowd_addon.core.meshes.bodies`) through Blender's USD
     importer: each agent imports its own body -- its variant's mesh, and a mesh per
     prop it carries, which Blender moves rigidly with the prop's joint (the constant
     joint binding) -- vertex for vertex where core's skinning puts them."""
-    from crowd_addon.core.bodies import crowd_bodies
-    from crowd_addon.core.synthetic import box_prop, humanoid_mesh
+    from crowd_addon.core.meshes.bodies import crowd_bodies
+    from crowd_addon.core.authoring.synthetic import box_prop, humanoid_mesh
     from crowd_addon.usd import export_crowd
 
     cfg = make_config()

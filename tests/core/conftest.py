@@ -3,8 +3,9 @@
 import numpy as np
 import pytest
 
-from crowd_addon.core import Crowd, CrowdConfig, synthetic
-from crowd_addon.core.controllers import ClipPlayer
+from crowd_addon.core import Crowd, CrowdConfig
+from crowd_addon.core.authoring import synthetic
+from crowd_addon.core.anim.controllers import ClipPlayer
 
 
 @pytest.fixture

@@ -5,7 +5,7 @@ repeated query keys."""
 import numpy as np
 import pytest
 
-from crowd_addon.core.agents import AgentIndex
+from crowd_addon.core.runtime.agents import AgentIndex
 
 
 def brute(keys_of_agents, queries):

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from crowd_addon.core import CrowdError
-from crowd_addon.core.agents import STREAM, TRANSITION, UNIQUE, AgentState
+from crowd_addon.core.runtime.agents import STREAM, TRANSITION, UNIQUE, AgentState
 
 
 def state(n=10):

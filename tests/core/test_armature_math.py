@@ -1,16 +1,16 @@
 """Armature arrays -> skeletons, local transforms, SQT and skin influences
-(crowd_addon.core.armature_math), against matrix products computed here. Blender's
+(crowd_addon.core.bake.armature_math), against matrix products computed here. Blender's
 rest pose and Armature modifier as the oracle: tests/blender/test_armature.py."""
 
 import numpy as np
 import pytest
 
-from crowd_addon.core import pose as sqt
-from crowd_addon.core import quaternion as quat
-from crowd_addon.core.armature_math import (check_hierarchy, relative_to_parent,
-                                            rest_skeleton, sqt_from_matrices,
-                                            vertex_influences)
-from crowd_addon.core.errors import CrowdError
+from crowd_addon.core.base import pose as sqt
+from crowd_addon.core.base import quaternion as quat
+from crowd_addon.core.bake.armature_math import (check_hierarchy, relative_to_parent,
+                                                 rest_skeleton, sqt_from_matrices,
+                                                 vertex_influences)
+from crowd_addon.core.base.errors import CrowdError
 
 # children before their parents, as Blender may list them
 NAMES = ["hand", "arm", "root", "leg"]

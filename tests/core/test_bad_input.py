@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from crowd_addon.core import Blend2, ClipPlayer, Crowd, CrowdConfig, CrowdError
-from crowd_addon.core.synthetic import humanoid, periodic_clip
+from crowd_addon.core.authoring.synthetic import humanoid, periodic_clip
 
 M = 8
 N = 12
@@ -312,7 +312,7 @@ def test_advance_to_a_frame_that_is_not_a_whole_number_is_named(busy, frame, wor
 
 
 def test_advance_to_a_frame_past_the_largest_is_refused_before_stepping(busy):
-    from crowd_addon.core.bounds import MAX_FRAME
+    from crowd_addon.core.base.bounds import MAX_FRAME
     refused(busy, lambda c: c.advance_to(10**30), "advance_to", str(10**30),
             str(MAX_FRAME))
 
@@ -320,7 +320,7 @@ def test_advance_to_a_frame_past_the_largest_is_refused_before_stepping(busy):
 def test_a_run_longer_than_the_bound_is_refused_before_stepping(busy):
     """One call steps at most MAX_RUN_FRAMES frames; the error says the bound, where
     the run would start and how to split it, and changes nothing."""
-    from crowd_addon.core.bounds import MAX_RUN_FRAMES
+    from crowd_addon.core.base.bounds import MAX_RUN_FRAMES
     now = busy.frame
     far = now + MAX_RUN_FRAMES + 1
     msg = refused(busy, lambda c: c.advance_to(far), "advance_to", f"frame {far}",
@@ -329,7 +329,7 @@ def test_a_run_longer_than_the_bound_is_refused_before_stepping(busy):
 
 
 def test_a_run_of_exactly_the_bound_is_not_refused(busy, monkeypatch):
-    from crowd_addon.core.bounds import MAX_RUN_FRAMES
+    from crowd_addon.core.base.bounds import MAX_RUN_FRAMES
     steps = []
 
     def step():                                       # one fake step to the end
@@ -354,8 +354,8 @@ def test_on_event_with_a_bad_name_or_callback_is_named(busy, name, fn, words):
 
 def test_a_recording_longer_than_the_bound_is_refused_before_running():
     """A range whose poses fit in memory but that steps more than MAX_RUN_FRAMES."""
-    from crowd_addon.core.bounds import MAX_RUN_FRAMES
-    from crowd_addon.core.recorder import Recorder
+    from crowd_addon.core.base.bounds import MAX_RUN_FRAMES
+    from crowd_addon.core.shots.recorder import Recorder
     crowd = Crowd(make_config())
     start = crowd.frame
     with pytest.raises(CrowdError, match=f"at most {MAX_RUN_FRAMES:,} frames.*split it"):

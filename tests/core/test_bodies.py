@@ -1,4 +1,4 @@
-"""Mesh variants and props per agent (crowd_addon.core.bodies): the configuration's
+"""Mesh variants and props per agent (crowd_addon.core.meshes.bodies): the configuration's
 checks, the bodies the agents use and their merged meshes, the seeded placement
 draws, the validation, the file round trip and the repetition metric.
 
@@ -14,16 +14,16 @@ import numpy as np
 import pytest
 
 from crowd_addon.core import ClipPlayer, Crowd, CrowdConfig, CrowdError, skin_vertices
-from crowd_addon.core import synthetic as sy
-from crowd_addon.core.bodies import (MAX_PROPS, Prop, body_keys, crowd_bodies, is_card,
-                                     merge_meshes, rigid_mesh)
-from crowd_addon.core.config import validate_config
-from crowd_addon.core.config_io import config_digest, load_config, save_config
-from crowd_addon.core.mesh import ProxyMesh
-from crowd_addon.core.placement import CharacterStreams, PlacementPolicy, place_agents
-from crowd_addon.core.recorder import record
-from crowd_addon.core.repetition import (RepetitionSettings, crowd_repetition,
-                                         recording_repetition)
+from crowd_addon.core.authoring import synthetic as sy
+from crowd_addon.core.meshes.bodies import (MAX_PROPS, Prop, body_keys, crowd_bodies, is_card,
+                                            merge_meshes, rigid_mesh)
+from crowd_addon.core.authoring.config import validate_config
+from crowd_addon.core.authoring.config_io import config_digest, load_config, save_config
+from crowd_addon.core.meshes.mesh import ProxyMesh
+from crowd_addon.core.authoring.placement import CharacterStreams, PlacementPolicy, place_agents
+from crowd_addon.core.shots.recorder import record
+from crowd_addon.core.variety.repetition import (RepetitionSettings, crowd_repetition,
+                                                 recording_repetition)
 
 from .test_repetition import brute_metric, top_view
 
@@ -247,7 +247,7 @@ def test_a_body_merges_its_props_into_every_level():
 
 
 def test_merge_meshes_of_one_part_is_that_part_and_keeps_looks_by_name():
-    from crowd_addon.core.mesh import Look
+    from crowd_addon.core.meshes.mesh import Look
     cfg = props_config()
     body, prop = cfg.meshes["kid"][0], cfg.props["kid"][0].mesh
     assert merge_meshes("x", [body]) is body

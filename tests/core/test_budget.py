@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from crowd_addon.core import budget as b
-from crowd_addon.core.errors import CrowdError
+from crowd_addon.core.planning import budget as b
+from crowd_addon.core.base.errors import CrowdError
 
 MB = 10**6
 MIB = 2**20

@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from crowd_addon.core import pose as sqt
-from crowd_addon.core.clip import Clip, ClipBank
-from crowd_addon.core.errors import CrowdError
-from crowd_addon.core.synthetic import humanoid, periodic_clip
+from crowd_addon.core.base import pose as sqt
+from crowd_addon.core.anim.clip import Clip, ClipBank
+from crowd_addon.core.base.errors import CrowdError
+from crowd_addon.core.authoring.synthetic import humanoid, periodic_clip
 
 ROT, TRANS, SCALE = sqt.ROT, sqt.TRANS, sqt.SCALE
 

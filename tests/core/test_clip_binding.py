@@ -13,11 +13,11 @@ event tags fire when that clip time crosses them.
 import numpy as np
 import pytest
 
-from crowd_addon.core import (Clip, ClipPlayer, Crowd, CrowdConfig, CrowdError, Layer, Skeleton,
-                              StateMachine, StateTransition, validate_config)
-from crowd_addon.core import budget
-from crowd_addon.core import pose as sqt
-from crowd_addon.core.synthetic import humanoid, periodic_clip
+from crowd_addon.core import (Clip, ClipPlayer, Crowd, CrowdConfig, CrowdError, Layer,
+                              Skeleton, StateMachine, StateTransition, validate_config)
+from crowd_addon.core.planning import budget
+from crowd_addon.core.base import pose as sqt
+from crowd_addon.core.authoring.synthetic import humanoid, periodic_clip
 
 SK = humanoid("fan", bones=24)
 B = SK.bone_count

@@ -1,12 +1,12 @@
-"""Clip key times and marker events of a baked action (crowd_addon.core.clip_sampling).
+"""Clip key times and marker events of a baked action (crowd_addon.core.bake.clip_sampling).
 The same through Blender actions: tests/blender/test_bake.py."""
 
 import numpy as np
 import pytest
 
-from crowd_addon.core.clip_sampling import (interpolation_misses, interpolation_note,
-                                            marker_events, sample_times)
-from crowd_addon.core.errors import CrowdError
+from crowd_addon.core.bake.clip_sampling import (interpolation_misses, interpolation_note,
+                                                 marker_events, sample_times)
+from crowd_addon.core.base.errors import CrowdError
 
 
 def test_whole_steps_key_every_step():
@@ -91,10 +91,10 @@ def test_between_key_misses_carried_as_differences_equal_composed_poses():
     """The hierarchy pass (misses carried down as differences, float32) against both
     poses composed as model matrices in float64 and compared: heads and rotations,
     with a misses from 1e-4 to a half turn and an armature scaled 100x."""
-    from crowd_addon.core import pose as sqt
-    from crowd_addon.core.clip_sampling import between_key_misses
-    from crowd_addon.core.skinning import model_matrices
-    from crowd_addon.core.synthetic import humanoid
+    from crowd_addon.core.base import pose as sqt
+    from crowd_addon.core.bake.clip_sampling import between_key_misses
+    from crowd_addon.core.base.skinning import model_matrices
+    from crowd_addon.core.authoring.synthetic import humanoid
 
     sk = humanoid("fan", 82)
     rng = np.random.default_rng(3)

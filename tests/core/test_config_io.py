@@ -11,11 +11,12 @@ import numpy as np
 import pytest
 
 from crowd_addon.core import (Blend2, BlendMask, BlendSpace2D, ClipPlayer, Controller, Crowd,
-                              CrowdConfig, CrowdError, Layer, StateMachine, StateTransition,
-                              synthetic)
-from crowd_addon.core import config_io
-from crowd_addon.core.config_io import load_config, register_kind, save_config, unregister_kind
-from crowd_addon.core.show import Action, Cue, Reaction, Show, Sweep, Track
+                              CrowdConfig, CrowdError, Layer, StateMachine, StateTransition)
+from crowd_addon.core.authoring import synthetic
+from crowd_addon.core.authoring import config_io
+from crowd_addon.core.authoring.config_io import (load_config, register_kind, save_config,
+                                                  unregister_kind)
+from crowd_addon.core.authoring.show import Action, Cue, Reaction, Show, Sweep, Track
 
 DOCS = Path(__file__).resolve().parents[2] / "docs" / "config_format.md"
 ARM = ("upperarm.L", "forearm.L", "hand.L")
@@ -163,7 +164,7 @@ def test_round_trip_keeps_float32_quaternions_bit_for_bit(tmp_path):
     """Unit float32 rotations are not renormalised (which would move some values by an
     ulp), so rebuilding and loading keep the stored bits."""
     from crowd_addon.core import Clip, Skeleton, identity_pose
-    from crowd_addon.core.quaternion import normalize
+    from crowd_addon.core.base.quaternion import normalize
     rng = np.random.default_rng(3)
     bind = identity_pose(200).astype(np.float64)
     bind[:, 3:7] = normalize(rng.normal(size=(200, 4)))
@@ -585,7 +586,7 @@ def test_overwrite_keeps_file_mode(saved):
 
 def test_controllers_nested_too_deep_are_named(saved):
     """Regression: 400 nested controllers raised a RecursionError."""
-    from crowd_addon.core.config import MAX_TREE_DEPTH
+    from crowd_addon.core.authoring.config import MAX_TREE_DEPTH
 
     def nest(m):
         leaf = m["streams"][0]["root"]
@@ -599,7 +600,7 @@ def test_controllers_nested_too_deep_are_named(saved):
 
 
 def test_a_deep_tree_built_in_python_is_named():
-    from crowd_addon.core.config import MAX_TREE_DEPTH
+    from crowd_addon.core.authoring.config import MAX_TREE_DEPTH
     cfg = make_config()
     root = cfg.streams[0].root
     for _ in range(MAX_TREE_DEPTH + 1):

@@ -4,11 +4,11 @@ of the automatic vertex-clustering levels, optionally followed by the far card."
 import numpy as np
 import pytest
 
-from crowd_addon.core import synthetic
-from crowd_addon.core.config import CrowdConfig
-from crowd_addon.core.errors import CrowdError
-from crowd_addon.core.levels import CARD, card_lod, parts_lod
-from crowd_addon.core.mesh import ProxyMesh
+from crowd_addon.core.authoring import synthetic
+from crowd_addon.core.authoring.config import CrowdConfig
+from crowd_addon.core.base.errors import CrowdError
+from crowd_addon.core.meshes.levels import CARD, card_lod, parts_lod
+from crowd_addon.core.meshes.mesh import ProxyMesh
 
 
 @pytest.fixture

@@ -1,4 +1,4 @@
-"""Node lists -> controller trees (crowd_addon.core.controller_graph): what each node
+"""Node lists -> controller trees (crowd_addon.core.authoring.controller_graph): what each node
 kind builds, the time origin, and the errors that name the animation, node and input
 at fault. (The scene side, Blender properties -> node specs, is in
 tests/blender/test_scene_config.py.)"""
@@ -6,13 +6,12 @@ tests/blender/test_scene_config.py.)"""
 import numpy as np
 import pytest
 
-from crowd_addon.core import pose as sqt
-from crowd_addon.core.controller_graph import (NODE_KINDS, InputSpec, NodeSpec,
-                                               TransitionSpec, build_tree)
-from crowd_addon.core.controllers import (Blend2, BlendSpace2D, ClipPlayer, Layer,
-                                          StateMachine)
-from crowd_addon.core.errors import CrowdError
-from crowd_addon.core.skeleton import Skeleton
+from crowd_addon.core.base import pose as sqt
+from crowd_addon.core.authoring.controller_graph import (NODE_KINDS, InputSpec, NodeSpec,
+                                                         TransitionSpec, build_tree)
+from crowd_addon.core.anim.controllers import Blend2, BlendSpace2D, ClipPlayer, Layer, StateMachine
+from crowd_addon.core.base.errors import CrowdError
+from crowd_addon.core.base.skeleton import Skeleton
 
 BONES = ("root", "spine", "arm.L", "arm.R")
 SKELETON = Skeleton.from_parent_names("Rig", BONES, [None, "root", "spine", "spine"],

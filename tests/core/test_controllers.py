@@ -4,14 +4,15 @@ import numpy as np
 import pytest
 from types import SimpleNamespace
 
-from crowd_addon.core import pose as sqt
-from crowd_addon.core import quaternion as quat
-from crowd_addon.core.clip import Clip, ClipBank
-from crowd_addon.core.controllers import (Blend2, BlendMask, BlendSpace2D, ClipPlayer, Layer,
-                                          StateMachine, StateTransition, blend_space_weights)
-from crowd_addon.core.errors import CrowdError
-from crowd_addon.core.graph import TreeEvaluator
-from crowd_addon.core.synthetic import humanoid, periodic_clip
+from crowd_addon.core.base import pose as sqt
+from crowd_addon.core.base import quaternion as quat
+from crowd_addon.core.anim.clip import Clip, ClipBank
+from crowd_addon.core.anim.controllers import (Blend2, BlendMask, BlendSpace2D, ClipPlayer,
+                                               Layer, StateMachine, StateTransition,
+                                               blend_space_weights)
+from crowd_addon.core.base.errors import CrowdError
+from crowd_addon.core.anim.graph import TreeEvaluator
+from crowd_addon.core.authoring.synthetic import humanoid, periodic_clip
 
 ROT, TRANS = sqt.ROT, sqt.TRANS
 SK = humanoid()                 # 82 bones: head, arms and legs

@@ -11,11 +11,12 @@ import json
 import numpy as np
 import pytest
 
-from crowd_addon.core import ClipPlayer, CrowdConfig, CrowdError, synthetic
-from crowd_addon.core.config_io import load_config, save_config
-from crowd_addon.core.levels import build_lods, card_lod
-from crowd_addon.core.mesh import ProxyMesh
-from crowd_addon.core.skinning import skin_vertices, skinning_matrices
+from crowd_addon.core import ClipPlayer, CrowdConfig, CrowdError
+from crowd_addon.core.authoring import synthetic
+from crowd_addon.core.authoring.config_io import load_config, save_config
+from crowd_addon.core.meshes.levels import build_lods, card_lod
+from crowd_addon.core.meshes.mesh import ProxyMesh
+from crowd_addon.core.base.skinning import skin_vertices, skinning_matrices
 
 QUAD = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], np.float32)
 QUAD_TRI = np.array([[0, 1, 2], [0, 2, 3]])

@@ -12,7 +12,7 @@ from collections import defaultdict
 import numpy as np
 
 from crowd_addon.core import TRANSITION, UNIQUE, ClipPlayer, Crowd, CrowdConfig
-from crowd_addon.core.synthetic import humanoid, periodic_clip
+from crowd_addon.core.authoring.synthetic import humanoid, periodic_clip
 
 M = 10
 N = 24
@@ -321,7 +321,7 @@ def test_stream_events_are_the_head_crossings_of_the_last_m_frames():
 def test_a_callback_that_always_raises_costs_bounded_memory_and_log(caplog):
     """Regression: every error was kept with its traceback (207 MB after 3,000 frames)
     and logged. Now the newest few are kept, the rest counted per callback."""
-    from crowd_addon.core.events import KEPT_ERRORS, LOGGED_ERRORS, EventDispatcher
+    from crowd_addon.core.runtime.events import KEPT_ERRORS, LOGGED_ERRORS, EventDispatcher
     d = EventDispatcher("test")
 
     def boom(name, frame, ids):

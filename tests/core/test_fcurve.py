@@ -1,12 +1,12 @@
-"""The numpy F-curve evaluator (crowd_addon.core.fcurve) on hand-made curves with
+"""The numpy F-curve evaluator (crowd_addon.core.bake.fcurve) on hand-made curves with
 known values. Its agreement with Blender's own ``FCurve.evaluate`` on random curves is
 tested in tests/blender/test_fcurve_eval.py (Blender is the oracle there)."""
 
 import numpy as np
 import pytest
 
-from crowd_addon.core import fcurve
-from crowd_addon.core.errors import CrowdError
+from crowd_addon.core.bake import fcurve
+from crowd_addon.core.base.errors import CrowdError
 
 
 def pack(curves, handles=False):

@@ -3,8 +3,8 @@ the command fails, and folders that were there are never touched."""
 
 import pytest
 
-from crowd_addon.core.errors import CrowdError
-from crowd_addon.core.files import folders_made
+from crowd_addon.core.base.errors import CrowdError
+from crowd_addon.core.base.files import folders_made
 
 
 def test_the_folders_stay_when_the_block_succeeds(tmp_path):

@@ -9,10 +9,11 @@ must reproduce the CPU crowd's pose texture rows, and everything an agent shows
 import numpy as np
 import pytest
 
-from crowd_addon.core import CrowdConfig, Crowd, CrowdError, synthetic
-from crowd_addon.core import pose as sqt
-from crowd_addon.core.agents import TRANSITION
-from crowd_addon.core.pose_storage import LOCAL_IDENTITY
+from crowd_addon.core import CrowdConfig, Crowd, CrowdError
+from crowd_addon.core.authoring import synthetic
+from crowd_addon.core.base import pose as sqt
+from crowd_addon.core.runtime.agents import TRANSITION
+from crowd_addon.core.runtime.pose_storage import LOCAL_IDENTITY
 
 
 def make_config():

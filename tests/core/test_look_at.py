@@ -1,4 +1,4 @@
-"""Look-at (core/look_at.py): the head turned toward a point on top of a shared pose.
+"""Look-at (core/runtime/look_at.py): the head turned toward a point on top of a shared pose.
 
 Oracles: geometry. The head's forward after the turn (the skinned rows' rotation of
 the character's forward) against the direction from the head's pivot to the target,
@@ -12,11 +12,11 @@ import math
 import numpy as np
 import pytest
 
-from crowd_addon.core import synthetic as sy
-from crowd_addon.core.errors import CrowdError
-from crowd_addon.core.look_at import (LookChain, LookRig, LookTarget, agent_lags, apply_look,
-                                      head_direction, look_turns)
-from crowd_addon.core.skinning import skinning_matrices
+from crowd_addon.core.authoring import synthetic as sy
+from crowd_addon.core.base.errors import CrowdError
+from crowd_addon.core.runtime.look_at import (LookChain, LookRig, LookTarget, agent_lags,
+                                              apply_look, head_direction, look_turns)
+from crowd_addon.core.base.skinning import skinning_matrices
 
 SK = sy.humanoid("fan", bones=24)
 RIG = LookRig(("neck", "head"), (0.4, 0.6), yaw_limit=math.radians(70),
@@ -151,7 +151,7 @@ def test_bad_look_settings_are_named(make, match):
 
 # ----------------------------------------------------------------- in a crowd
 from crowd_addon.core import ClipPlayer, Crowd, CrowdConfig  # noqa: E402
-from crowd_addon.core.show import Action, Cue, Show  # noqa: E402
+from crowd_addon.core.authoring.show import Action, Cue, Show  # noqa: E402
 
 M = 8
 
@@ -274,7 +274,7 @@ def test_bad_look_configurations_are_named(change, match):
 def test_looks_survive_the_config_file(tmp_path):
     import json
 
-    from crowd_addon.core.config_io import config_digest, load_config, save_config
+    from crowd_addon.core.authoring.config_io import config_digest, load_config, save_config
     show = Show((Cue("watch", 10, Action("look", "ball", duration=6, hold=20)),))
     cfg = crowd_config(show)
     cfg.look_lag, cfg.look_max_lag = "seeded", 5

@@ -8,9 +8,9 @@ Oracle: a crowd run again with the same simulation, read through ``agent_rows``.
 import numpy as np
 
 from crowd_addon.core import Crowd
-from crowd_addon.core.recorder import record
-from crowd_addon.core.show import Action, Cue, Show
-from crowd_addon.core.skinning import skinning_matrices
+from crowd_addon.core.shots.recorder import record
+from crowd_addon.core.authoring.show import Action, Cue, Show
+from crowd_addon.core.base.skinning import skinning_matrices
 from .test_look_at import SK, crowd_config
 
 FIRST, LAST = 4, 40

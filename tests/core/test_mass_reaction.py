@@ -1,4 +1,4 @@
-"""Mass reactions the paper's way (core/show.py, a cue with a switch ``trigger``).
+"""Mass reactions the paper's way (core/authoring/show.py, a cue with a switch ``trigger``).
 
 A cue whose agents play streams with a state machine that takes its trigger sets the
 trigger on those streams instead of sending the agents through transition slots: each
@@ -11,9 +11,10 @@ import numpy as np
 import pytest
 
 from crowd_addon.core import (ClipPlayer, Crowd, CrowdConfig, CrowdError, StateMachine,
-                              StateTransition, synthetic)
-from crowd_addon.core.agents import STREAM, TRANSITION
-from crowd_addon.core.show import Action, Cue, Show, Sweep, slot_speed
+                              StateTransition)
+from crowd_addon.core.authoring import synthetic
+from crowd_addon.core.runtime.agents import STREAM, TRANSITION
+from crowd_addon.core.authoring.show import Action, Cue, Show, Sweep, slot_speed
 
 M, CUE, HOLD = 12, 20, 30
 
@@ -192,7 +193,7 @@ def test_a_switch_cannot_be_spread_or_swept():
 
 
 def test_the_switch_settings_survive_the_config_file(tmp_path):
-    from crowd_addon.core.config_io import load_config, save_config
+    from crowd_addon.core.authoring.config_io import load_config, save_config
     cfg = make_config(Show((goal(np.arange(24), hold=HOLD, release="calm"),
                             Cue("plain", CUE, Action("stream", "cheer", 4)))))
     save_config(cfg, tmp_path / "c.json")

@@ -3,10 +3,11 @@
 import numpy as np
 import pytest
 
-from crowd_addon.core import CrowdConfig, CrowdError, synthetic
-from crowd_addon.core.levels import CARD, build_lods, card_lod
-from crowd_addon.core.mesh import ProxyMesh, vertex_normals
-from crowd_addon.core.skinning import skin_vertices, skinning_matrices
+from crowd_addon.core import CrowdConfig, CrowdError
+from crowd_addon.core.authoring import synthetic
+from crowd_addon.core.meshes.levels import CARD, build_lods, card_lod
+from crowd_addon.core.meshes.mesh import ProxyMesh, vertex_normals
+from crowd_addon.core.base.skinning import skin_vertices, skinning_matrices
 
 QUAD = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], np.float32)
 QUAD_TRI = np.array([[0, 1, 2], [0, 2, 3]])
@@ -181,7 +182,7 @@ def _tube_arm(rings=13, sides=8):
     a shoulder bone 1 to a forearm bone 2 that pivots at its middle, its rings blending
     from one bone to the other over the middle fifth, capped at both ends; and the
     skeleton with the forearm bent 90 degrees as a second pose."""
-    from crowd_addon.core.skeleton import Skeleton
+    from crowd_addon.core.base.skeleton import Skeleton
     bind = np.zeros((3, 10))
     bind[:, :4] = 1.0
     bind[2, 7:] = (0.0, 0.0, 0.4)
@@ -214,7 +215,7 @@ def test_decimated_levels_of_a_tube_limb_pass_the_check_and_keep_the_elbow():
     thin them without straying 3 px at 90 px, so both decimated levels were refused and
     the 65k stadium drew its 30-90 px fans with the full mesh. Half-edge collapses take
     the straight stretches' rings first and keep the elbow's blended rings."""
-    from crowd_addon.core.lod_check import departure, fit_levels
+    from crowd_addon.core.meshes.lod_check import departure, fit_levels
 
     sk, mesh, poses = _tube_arm()
     levels, notes = fit_levels(mesh, (0.25, 0.06), sk, poses, (90.0, 45.0))
@@ -238,7 +239,7 @@ def test_automatic_lods_never_decimate_below_a_body(bones, sides, rings):
     """A light body is not crushed (a 72-triangle body once became a 4-triangle
     tetrahedron): decimated levels keep MIN_LOD_TRIANGLES, and a body already that
     light keeps its own triangles; only the explicit card is smaller."""
-    from crowd_addon.core.levels import MIN_LOD_TRIANGLES
+    from crowd_addon.core.meshes.levels import MIN_LOD_TRIANGLES
 
     m = synthetic.humanoid_mesh(synthetic.humanoid("s", bones), sides=sides, rings=rings)
     lods = build_lods(m, (0.25, 0.06, CARD))
@@ -254,7 +255,7 @@ def test_automatic_lods_never_decimate_below_a_body(bones, sides, rings):
 def _two_part_body():
     """A 'torso' box on bone 1 with an 'arm' box on bone 2 touching it at z = 1.0..1.4,
     each face split 3 x 3, and the skeleton: bone 2 pivots at (0.25, 0, 1.4)."""
-    from crowd_addon.core.skeleton import Skeleton
+    from crowd_addon.core.base.skeleton import Skeleton
     bind = np.zeros((3, 10))
     bind[:, :4] = 1.0
     bind[1, 7:] = (0, 0, 0.0)
@@ -291,7 +292,7 @@ def _kept_and_torn(mesh):
     """A decimated level of :func:`_two_part_body` and the same level torn: the arm's
     lower vertices bound to the torso (as a decimation across parts would), so they
     hang where they were while the arm is raised."""
-    from crowd_addon.core.simplify import simplify
+    from crowd_addon.core.meshes.simplify import simplify
 
     kept = simplify(mesh, mesh.triangle_count // 3, name="body.kept")
     idx = kept.bone_indices.copy()
@@ -304,8 +305,8 @@ def _kept_and_torn(mesh):
 def test_the_lod_check_refuses_a_level_that_tears_and_keeps_one_that_does_not(monkeypatch):
     from dataclasses import replace
 
-    from crowd_addon.core import levels as levels_module
-    from crowd_addon.core.lod_check import departure, fit_levels
+    from crowd_addon.core.meshes import levels as levels_module
+    from crowd_addon.core.meshes.lod_check import departure, fit_levels
 
     sk, mesh, poses = _two_part_body()
     kept, torn = _kept_and_torn(mesh)
@@ -329,7 +330,7 @@ def test_the_lod_check_refuses_a_level_that_tears_and_keeps_one_that_does_not(mo
 def test_a_config_keeps_the_levels_it_is_given():
     """``add_mesh`` keeps levels an artist made as made (commit 2797fbb: the silhouette
     check judges the automatic levels only), even one the check would refuse."""
-    from crowd_addon.core.clip import Clip
+    from crowd_addon.core.anim.clip import Clip
 
     sk, mesh, poses = _two_part_body()
     kept, torn = _kept_and_torn(mesh)
@@ -343,8 +344,8 @@ def test_a_config_keeps_the_levels_it_is_given():
 
 
 def test_the_card_per_body_part_follows_each_part():
-    from crowd_addon.core.levels import parts_lod
-    from crowd_addon.core.skinning import skin_vertices, skinning_matrices
+    from crowd_addon.core.meshes.levels import parts_lod
+    from crowd_addon.core.base.skinning import skin_vertices, skinning_matrices
 
     sk, mesh, poses = _two_part_body()
     card = parts_lod(mesh)
@@ -356,8 +357,8 @@ def test_the_card_per_body_part_follows_each_part():
 
 
 def test_the_far_level_is_a_closed_box_per_part_lit_like_a_round_part():
-    from crowd_addon.core.lod_check import clip_poses, departure
-    from crowd_addon.core.levels import parts_lod
+    from crowd_addon.core.meshes.lod_check import clip_poses, departure
+    from crowd_addon.core.meshes.levels import parts_lod
 
     sk = synthetic.humanoid("fan", bones=24)
     mesh = synthetic.humanoid_mesh(sk)
@@ -389,8 +390,8 @@ def test_the_joined_far_level_has_fewer_boxes_and_passes_where_it_is_drawn(monke
     its forearm), kept only where it passes the check at its switch size: the tube
     arm's two parts joined into one box pass while it hangs straight, not once the
     elbow bends (the box cannot bend): then the level keeps a box per part."""
-    from crowd_addon.core import lod_check
-    from crowd_addon.core.levels import parts_lod
+    from crowd_addon.core.meshes import lod_check
+    from crowd_addon.core.meshes.levels import parts_lod
 
     sk, mesh, poses = _tube_arm()
     assert parts_lod(mesh).triangle_count == 24                      # a box per part
@@ -412,7 +413,7 @@ def test_a_flat_part_keeps_its_length_when_decimated():
     for nothing, and the arms were shortened (that scene's levels strayed 24 px and were
     refused). A fold (a triangle of no area beside an edge, or normals turned back)
     now charges leaving its line."""
-    from crowd_addon.core.simplify import simplify
+    from crowd_addon.core.meshes.simplify import simplify
 
     cube = np.array([(x, y, z) for x in (-1, 1) for y in (-1, 1) for z in (0, 1)], float)
     quads = ((0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4),

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from crowd_addon.core import CrowdConfig, CrowdError
-from crowd_addon.core.config_io import load_config, save_config
-from crowd_addon.core.levels import build_lods, card_lod
-from crowd_addon.core.mesh import Look, ProxyMesh
-from crowd_addon.core.synthetic import humanoid, humanoid_mesh
+from crowd_addon.core.authoring.config_io import load_config, save_config
+from crowd_addon.core.meshes.levels import build_lods, card_lod
+from crowd_addon.core.meshes.mesh import Look, ProxyMesh
+from crowd_addon.core.authoring.synthetic import humanoid, humanoid_mesh
 
 SHIRT = Look("shirt", (0.8, 0.1, 0.1, 1.0))
 SKIN = Look("skin", (0.9, 0.7, 0.6, 1.0), texture="//textures/skin.png")

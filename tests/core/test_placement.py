@@ -1,14 +1,14 @@
-"""Agent placement policy on plain arrays (crowd_addon.core.placement): seeded offsets,
+"""Agent placement policy on plain arrays (crowd_addon.core.authoring.placement): seeded offsets,
 characters and streams, colours, headings, per-point values. (Reading the points and
 attributes from Blender geometry is tested in tests/blender/test_agents.py.)"""
 
 import numpy as np
 import pytest
 
-from crowd_addon.core.errors import CrowdError
-from crowd_addon.core.placement import (CHARACTER_SEED, SOURCE_SEED, AgentSet,
-                                        CharacterStreams, PlacementPolicy, place_agents,
-                                        z_angle)
+from crowd_addon.core.base.errors import CrowdError
+from crowd_addon.core.authoring.placement import (CHARACTER_SEED, SOURCE_SEED, AgentSet,
+                                                  CharacterStreams, PlacementPolicy,
+                                                  place_agents, z_angle)
 
 STREAMS = ["idle", "cheer", "sit"]
 #: two characters: a fan with three streams and a kid with two
@@ -206,8 +206,8 @@ def test_each_kind_of_draw_has_a_random_stream_of_its_own():
     """Speed streams, palette colours, mesh variants and props are drawn from separate
     seeds: over 4,000 agents no two of them are correlated (a draw sharing another's
     seed and method would repeat it: correlation 1)."""
-    from crowd_addon.core.placement import Palette
-    from crowd_addon.core.variety import Timing
+    from crowd_addon.core.authoring.placement import Palette
+    from crowd_addon.core.variety.timing import Timing
     colours = tuple((i / 8, 0.5, 0.5) for i in range(8))
     cast = (CharacterStreams(
         "fan", ("idle",), (1.0,), timings=(Timing(0.6, 1.4, 8),),

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from crowd_addon.core import pose as sqt
-from crowd_addon.core import quaternion as quat
+from crowd_addon.core.base import pose as sqt
+from crowd_addon.core.base import quaternion as quat
 
 ROT, TRANS, SCALE = sqt.ROT, sqt.TRANS, sqt.SCALE
 

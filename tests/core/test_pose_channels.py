@@ -1,4 +1,4 @@
-"""Pose channels -> local SQT (crowd_addon.core.pose_channels), checked against
+"""Pose channels -> local SQT (crowd_addon.core.bake.pose_channels), checked against
 independent matrix math: a bone's local matrix is its rest matrix (relative to the
 parent) times ``T(location) @ R(rotation by mode) @ S(scale)``. The same code against
 Blender's own pose evaluation is tests/blender/test_bake.py."""
@@ -6,11 +6,11 @@ Blender's own pose evaluation is tests/blender/test_bake.py."""
 import numpy as np
 import pytest
 
-from crowd_addon.core import fcurve
-from crowd_addon.core import quaternion as quat
-from crowd_addon.core.pose import pose_to_matrices
-from crowd_addon.core.pose_channels import (CHANNEL_WIDTH, CHANNELS, RigChannels,
-                                            basis_rotation, channel_targets, local_sqt)
+from crowd_addon.core.bake import fcurve
+from crowd_addon.core.base import quaternion as quat
+from crowd_addon.core.base.pose import pose_to_matrices
+from crowd_addon.core.bake.pose_channels import (CHANNEL_WIDTH, CHANNELS, RigChannels,
+                                                 basis_rotation, channel_targets, local_sqt)
 
 MODES = ("QUATERNION", "AXIS_ANGLE", "XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX")
 

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from crowd_addon.core import quaternion as quat
+from crowd_addon.core.base import quaternion as quat
 
 RNG_SEED = 1234
 

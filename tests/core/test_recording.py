@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from crowd_addon.core import ClipPlayer, Crowd, CrowdConfig, CrowdError
-from crowd_addon.core.agents import STREAM, TRANSITION, UNIQUE
-from crowd_addon.core.recorder import Recorder, record
-from crowd_addon.core.synthetic import humanoid, periodic_clip
+from crowd_addon.core.runtime.agents import STREAM, TRANSITION, UNIQUE
+from crowd_addon.core.shots.recorder import Recorder, record
+from crowd_addon.core.authoring.synthetic import humanoid, periodic_clip
 
 FIRST, LAST = 3, 24          # start frame 0: frames 1..3 run before the shot
 N = 30
@@ -268,7 +268,7 @@ def test_every_agent_reported_changed_still_records_only_changes():
 def test_a_far_first_frame_or_a_huge_range_is_refused_before_running(two_streams):
     """Regression: a first frame two billion frames after the start simulated for
     days, and a 100-million-frame range asked for hundreds of GiB."""
-    from crowd_addon.core.recorder import MAX_PREROLL
+    from crowd_addon.core.shots.recorder import MAX_PREROLL
     crowd = two_streams(2)
     start = crowd.view.config.start_frame
     with pytest.raises(CrowdError, match="2,000,000,000 frames after the crowd's start"):

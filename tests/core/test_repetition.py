@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 
 from crowd_addon.core import Crowd, CrowdError
-from crowd_addon.core.agents import STREAM, TRANSITION, UNIQUE
-from crowd_addon.core.recorder import Recorder
-from crowd_addon.core.repetition import (RepetitionSettings, crowd_repetition,
-                                         frame_repetition, measure_frames,
-                                         nearest_neighbours, recording_repetition,
-                                         screen_points)
+from crowd_addon.core.runtime.agents import STREAM, TRANSITION, UNIQUE
+from crowd_addon.core.shots.recorder import Recorder
+from crowd_addon.core.variety.repetition import (RepetitionSettings, crowd_repetition,
+                                                 frame_repetition, measure_frames,
+                                                 nearest_neighbours, recording_repetition,
+                                                 screen_points)
 
 from .test_recording import config as recording_config
 from .test_recording import simulate
@@ -251,10 +251,9 @@ def test_offsets_a_loop_apart_look_alike():
     offset distance is taken around the loop (``stream_periods``): loops of equal
     period blended repeat, loops of different periods, a clip that holds its last
     key, or a state machine do not; a stream's speed divides its period."""
-    from crowd_addon.core import (Blend2, ClipPlayer, CrowdConfig, StateMachine,
-                                  StateTransition)
-    from crowd_addon.core.repetition import stream_periods
-    from crowd_addon.core.synthetic import humanoid, periodic_clip
+    from crowd_addon.core import Blend2, ClipPlayer, CrowdConfig, StateMachine, StateTransition
+    from crowd_addon.core.variety.repetition import stream_periods
+    from crowd_addon.core.authoring.synthetic import humanoid, periodic_clip
     sk = humanoid("fan", 8)
     cfg = CrowdConfig(max_offset=60, fps=30.0)
     cfg.add_skeleton(sk)
@@ -292,7 +291,7 @@ def test_offsets_a_loop_apart_look_alike():
 def test_palette_colours_count_as_colour():
     """Two neighbours on one stream in step look alike until their palette colours
     (a shirt) differ; agents without palettes compare by their colour alone."""
-    from crowd_addon.core.repetition import colors_shown
+    from crowd_addon.core.variety.repetition import colors_shown
     pos = np.array([[0.0, 0, 0], [1.0, 0, 0]])
     same = (np.zeros(2, np.int8), np.zeros(2, int), np.zeros(2, int), np.zeros(2))
     pal = np.full((2, 4, 3), -1.0)

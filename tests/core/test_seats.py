@@ -10,9 +10,10 @@ import math
 import numpy as np
 import pytest
 
-from crowd_addon.core.errors import CrowdError
-from crowd_addon.core.seats import (AWAY, AWAY_BENCH, CONCRETE, HOME, HOME_BENCH, SeatSpec,
-                                    Tier, Tunnel, generate_seats, plan_ring)
+from crowd_addon.core.base.errors import CrowdError
+from crowd_addon.core.authoring.seats import (AWAY, AWAY_BENCH, CONCRETE, HOME, HOME_BENCH,
+                                              SeatSpec, Tier, Tunnel, generate_seats,
+                                              plan_ring)
 
 TWO_TIERS = (Tier(rows=12), Tier(rows=10, riser=0.5, setback=-2.4, lift=4.0))
 TUNNELS = (Tunnel(90.0, width=6.0, rows=5), Tunnel(-90.0, width=4.0, rows=3))

@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 
-from crowd_addon.core import pose as sqt
-from crowd_addon.core import quaternion as quat
-from crowd_addon.core.errors import CrowdError
-from crowd_addon.core.skeleton import Skeleton, local_to_model
-from crowd_addon.core.synthetic import humanoid
+from crowd_addon.core.base import pose as sqt
+from crowd_addon.core.base import quaternion as quat
+from crowd_addon.core.base.errors import CrowdError
+from crowd_addon.core.base.skeleton import Skeleton, local_to_model
+from crowd_addon.core.authoring.synthetic import humanoid
 
 
 def bind(n, seed=0):

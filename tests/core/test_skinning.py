@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from crowd_addon.core import Skeleton, SkinningPlan, skin_vertices, skinning_matrices
-from crowd_addon.core import pose as sqt
-from crowd_addon.core.synthetic import humanoid
+from crowd_addon.core.base import pose as sqt
+from crowd_addon.core.authoring.synthetic import humanoid
 
 # several roots (0, 4, 9); depth is not sorted by index
 PARENTS = [-1, 0, 1, 2, -1, 4, 0, 6, 3, -1, 9, 5, 1, 8, 11]

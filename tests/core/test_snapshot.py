@@ -1,4 +1,4 @@
-"""Exact snapshots (core/snapshot.py): simulate to frame F, snapshot, restore into a
+"""Exact snapshots (core/shots/snapshot.py): simulate to frame F, snapshot, restore into a
 fresh crowd (or the same one, or through a file) and continue. The oracle is the
 uninterrupted run: every later frame's local poses (and, on the CPU, skinning rows)
 equal it bit for bit, and so do the events and the show's counts."""
@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from crowd_addon.core import Crowd, CrowdError
-from crowd_addon.core.agents import TRANSITION
-from crowd_addon.core.config_io import save_config
-from crowd_addon.core.show import Action, Cue, Reaction, Show, Sweep, Track
-from crowd_addon.core.snapshot import HEADER, load_snapshot
+from crowd_addon.core.runtime.agents import TRANSITION
+from crowd_addon.core.authoring.config_io import save_config
+from crowd_addon.core.authoring.show import Action, Cue, Reaction, Show, Sweep, Track
+from crowd_addon.core.shots.snapshot import HEADER, load_snapshot
 
 from .test_recording import config as recording_config
 from .test_recording import simulate
@@ -169,7 +169,7 @@ def test_a_snapshot_file_restores_in_another_process(tmp_path):
     import sys
     cfg_path = tmp_path / "crowd.json"
     save_config(make_config(show(), slots=6), cfg_path)
-    from crowd_addon.core.config_io import load_config
+    from crowd_addon.core.authoring.config_io import load_config
     crowd = Crowd(load_config(cfg_path))
     play(crowd, 15)
     crowd.snapshot().save(tmp_path / "at15.npz")
@@ -177,8 +177,8 @@ def test_a_snapshot_file_restores_in_another_process(tmp_path):
     script = (
         "import json, sys, numpy as np\n"
         "from crowd_addon.core import Crowd\n"
-        "from crowd_addon.core.config_io import load_config\n"
-        "from crowd_addon.core.snapshot import load_snapshot\n"
+        "from crowd_addon.core.authoring.config_io import load_config\n"
+        "from crowd_addon.core.shots.snapshot import load_snapshot\n"
         "c = Crowd(load_config(sys.argv[1]))\n"
         "c.restore(load_snapshot(sys.argv[2]))\n"
         "out = []\n"
@@ -581,7 +581,7 @@ def test_crowd_snapshot_over_too_many_frames_is_refused_before_it_steps(tmp_path
     assert main(["snapshot", "--config", str(config), "--frames", "1-2000000000",
                  "--every", "1000000000", "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    from crowd_addon.core.bounds import MAX_RUN_FRAMES
+    from crowd_addon.core.base.bounds import MAX_RUN_FRAMES
     assert err[-1].startswith("crowd snapshot: error: snapshots: ")
     assert f"{MAX_RUN_FRAMES:,}" in err[-1] and "2000000000" in err[-1]
     assert f"--frames 1-{1 + MAX_RUN_FRAMES}" in err[-1]              # how to split

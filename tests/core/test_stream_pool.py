@@ -9,8 +9,8 @@ import pytest
 
 from crowd_addon.core import (STREAM, UNIQUE, Blend2, ClipPlayer, Crowd, CrowdConfig,
                               SkinningPlan, skinning_matrices)
-from crowd_addon.core import pose as sqt
-from crowd_addon.core.synthetic import humanoid, periodic_clip
+from crowd_addon.core.base import pose as sqt
+from crowd_addon.core.authoring.synthetic import humanoid, periodic_clip
 
 M = 9
 

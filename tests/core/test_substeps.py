@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from crowd_addon.core import Crowd, CrowdError
-from crowd_addon.core.agents import TRANSITION, UNIQUE
-from crowd_addon.core.recorder import Recorder
-from crowd_addon.core.synthetic import paper_config
+from crowd_addon.core.runtime.agents import TRANSITION, UNIQUE
+from crowd_addon.core.shots.recorder import Recorder
+from crowd_addon.core.authoring.synthetic import paper_config
 
 from .test_recording import FIRST, LAST, config, jump_reaction, simulate
 

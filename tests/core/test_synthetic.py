@@ -1,7 +1,7 @@
 """The synthetic paper configuration the benchmarks share."""
 
-from crowd_addon.core import (Blend2, BlendSpace2D, ClipPlayer, Crowd, Layer, StateMachine,
-                              synthetic)
+from crowd_addon.core import Blend2, BlendSpace2D, ClipPlayer, Crowd, Layer, StateMachine
+from crowd_addon.core.authoring import synthetic
 
 
 def test_paper_config_has_the_papers_sizes_and_every_tree_kind():

@@ -5,9 +5,10 @@ before anything changes."""
 import numpy as np
 import pytest
 
-from crowd_addon.core import Crowd, CrowdConfig, CrowdError, synthetic
-from crowd_addon.core.agents import STREAM, TRANSITION
-from crowd_addon.core.controllers import ClipPlayer
+from crowd_addon.core import Crowd, CrowdConfig, CrowdError
+from crowd_addon.core.authoring import synthetic
+from crowd_addon.core.runtime.agents import STREAM, TRANSITION
+from crowd_addon.core.anim.controllers import ClipPlayer
 
 
 def test_queue_is_first_in_first_out_when_a_slot_frees_between_steps(two_streams):

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from crowd_addon.core import STREAM, TRANSITION, UNIQUE, ClipPlayer, Crowd, CrowdConfig
-from crowd_addon.core import pose as sqt
-from crowd_addon.core.synthetic import humanoid, periodic_clip
+from crowd_addon.core.base import pose as sqt
+from crowd_addon.core.authoring.synthetic import humanoid, periodic_clip
 
 M = 8
 
@@ -284,3 +284,27 @@ def test_agent_rows_index_layout():
     assert crowd.agents.kind[2] == UNIQUE and idx[2] == M * S + 1
     assert crowd.agents.kind[0] == TRANSITION
     np.testing.assert_array_equal(crowd.agent_rows([0, 2]), st.rows[idx[[0, 2]]])
+
+
+def test_dependency_graph_runs_each_task_once_after_what_it_follows():
+    from crowd_addon.core.anim.graph import DependencyGraph
+    ran, g = [], DependencyGraph()
+    g.add("a", lambda: ran.append("a"))
+    g.add("c", lambda: ran.append("c"), after=["a"])
+    g.add("b", lambda: ran.append("b"))
+    g.add("d", lambda: ran.append("d"), after=["c", "b"])
+    assert g.waves() == [["a", "b"], ["c"], ["d"]]
+    g.run()
+    g.run()
+    assert ran == ["a", "b", "c", "d"] * 2
+    with pytest.raises(ValueError, match="unknown tasks"):
+        g.add("e", lambda: None, after=["later"])
+
+
+def test_the_crowd_steps_through_its_dependency_graph(monkeypatch):
+    crowd, _ = build()
+    seen = []
+    task = crowd.graph.tasks["roots.store"]
+    monkeypatch.setitem(crowd.graph.tasks, "roots.store", lambda: (seen.append(1), task()))
+    crowd.step()
+    assert seen == [1]

@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 
 from crowd_addon.core import ClipPlayer, Crowd, CrowdConfig, CrowdError
-from crowd_addon.core.config import AnimationDef, validate_config
-from crowd_addon.core.config_io import config_digest, load_config, save_config
-from crowd_addon.core.placement import CharacterStreams, PlacementPolicy, place_agents
-from crowd_addon.core.synthetic import humanoid, periodic_clip
-from crowd_addon.core.variety import Timing, choose_variants, expand
+from crowd_addon.core.authoring.config import AnimationDef, validate_config
+from crowd_addon.core.authoring.config_io import config_digest, load_config, save_config
+from crowd_addon.core.authoring.placement import CharacterStreams, PlacementPolicy, place_agents
+from crowd_addon.core.authoring.synthetic import humanoid, periodic_clip
+from crowd_addon.core.variety.timing import Timing, choose_variants, expand
 
 SK = humanoid("fan", 12)
 
@@ -182,9 +182,9 @@ def test_spread_offsets_keep_neighbours_on_one_stream_out_of_step():
     """Seats on a grid, three streams: uniform offsets leave neighbours in step, the
     Spread mode none (within M / 17 frames), and the repetition metric of a top view
     drops accordingly; seeded."""
-    from crowd_addon.core.repetition import RepetitionSettings, frame_repetition
-    from crowd_addon.core.repetition import nearest_neighbours
-    from crowd_addon.core.variety import spread_offsets
+    from crowd_addon.core.variety.repetition import RepetitionSettings, frame_repetition
+    from crowd_addon.core.variety.repetition import nearest_neighbours
+    from crowd_addon.core.variety.timing import spread_offsets
     rng = np.random.default_rng(0)
     n, m = 4000, 60
     pos = np.zeros((n, 3))
@@ -214,5 +214,5 @@ def test_placement_spread_mode():
     pos = np.random.default_rng(1).uniform(0, 30, (500, 3))
     got = place_agents("src", pos, np.zeros(500), PlacementPolicy(offset_mode="SPREAD"),
                        characters=chars, max_offset=30, seed=2)
-    from crowd_addon.core.variety import spread_offsets
+    from crowd_addon.core.variety.timing import spread_offsets
     np.testing.assert_array_equal(got.offsets, spread_offsets(pos, got.streams, 30, 3))

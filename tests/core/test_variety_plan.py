@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 
 from crowd_addon.core import ClipPlayer, CrowdConfig, CrowdError
-from crowd_addon.core.agents import STREAM, UNIQUE
-from crowd_addon.core.budget import plan as budget_plan
-from crowd_addon.core.repetition import RepetitionSettings, frame_repetition
-from crowd_addon.core.synthetic import humanoid, periodic_clip
-from crowd_addon.core.variety import Timing, expand
-from crowd_addon.core.variety_plan import (_assign, plan_input, plan_variety)
+from crowd_addon.core.runtime.agents import STREAM, UNIQUE
+from crowd_addon.core.planning.budget import plan as budget_plan
+from crowd_addon.core.variety.repetition import RepetitionSettings, frame_repetition
+from crowd_addon.core.authoring.synthetic import humanoid, periodic_clip
+from crowd_addon.core.variety.timing import Timing, expand
+from crowd_addon.core.planning.variety_plan import _assign, plan_input, plan_variety
 
 N, SIDE = 3000, 60
 TOP = np.diag([1 / 40, 1 / 40, -0.001, 1.0])

@@ -97,8 +97,8 @@ CLAP_ORACLE = r"""
 import json, sys
 import numpy as np
 from crowd_addon.core import Crowd
-from crowd_addon.core.config_io import load_config
-from crowd_addon.core.show import Show
+from crowd_addon.core.authoring.config_io import load_config
+from crowd_addon.core.authoring.show import Show
 cfg = load_config(sys.argv[1])
 assert cfg.show.cues                     # the configuration holds the show ...
 cfg.show = Show()                        # ... which moves the clappers: without it
@@ -221,8 +221,8 @@ def test_the_demo_show_continues_exactly_from_a_snapshot(demo, slots):
     frame's poses and events equal the uninterrupted run's, bit for bit. With 6 slots
     instead of its 800 the same show also queues, and a snapshot is taken mid-queue."""
     from crowd_addon.core import Crowd
-    from crowd_addon.core.agents import TRANSITION
-    from crowd_addon.core.config_io import load_config
+    from crowd_addon.core.runtime.agents import TRANSITION
+    from crowd_addon.core.authoring.config_io import load_config
     out, _ = demo
     config = load_config(out / "stadium_crowd.json")
     if slots is not None:

@@ -13,10 +13,10 @@ pxr = pytest.importorskip("pxr")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "usd"))
 from conftest import make_config  # noqa: E402
 
-from crowd_addon.core.crowd import Crowd  # noqa: E402
-from crowd_addon.core.errors import CrowdError  # noqa: E402
-from crowd_addon.core.recorder import record  # noqa: E402
-from crowd_addon.core.repetition import RepetitionSettings  # noqa: E402
+from crowd_addon.core.shots.crowd import Crowd  # noqa: E402
+from crowd_addon.core.base.errors import CrowdError  # noqa: E402
+from crowd_addon.core.shots.recorder import record  # noqa: E402
+from crowd_addon.core.variety.repetition import RepetitionSettings  # noqa: E402
 from crowd_addon.demo.run import _UsdExport  # noqa: E402
 
 

@@ -14,7 +14,7 @@ import pytest
 from dask.distributed import LocalCluster  # a missing Dask fails the run, never skips
 
 from crowd_addon.cli import main
-from crowd_addon.core.config_io import save_config
+from crowd_addon.core.authoring.config_io import save_config
 from crowd_addon.farm import chunk_folder, chunk_ranges
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))       # tests/: the usd tests

@@ -11,7 +11,7 @@ import pytest
 from dask.distributed import LocalCluster  # noqa: F401 - a missing Dask fails the run
 
 from crowd_addon.cli import main
-from crowd_addon.core.config_io import save_config
+from crowd_addon.core.authoring.config_io import save_config
 from crowd_addon.farm import chunk_folder
 
 from .test_dask_export import show_config

@@ -14,7 +14,7 @@ import os
 
 import numpy as np
 
-from crowd_addon.core.camera import frame_crowd
+from crowd_addon.core.base.camera import frame_crowd
 
 
 def _load_conftest():
@@ -107,7 +107,7 @@ def looks(make):
     ``Crowd.agent_rows`` (the looks applied on the CPU), and the look bytes each sync
     sends (only when a look starts or stops)."""
     import math
-    from crowd_addon.core.look_at import LookRig, LookTarget
+    from crowd_addon.core.runtime.look_at import LookRig, LookTarget
     cfg = c.make_config(M=8, agents=20)
     cfg.look_rigs["fan"] = LookRig(("neck", "head"), (0.4, 0.6),
                                    yaw_limit=math.radians(70), pitch_limit=math.radians(35))

@@ -19,7 +19,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path[:0] = [HERE, os.path.dirname(os.path.dirname(HERE))]
 
 import backend_scenes as scenes  # noqa: E402
-from crowd_addon.core.camera import frame_crowd  # noqa: E402
+from crowd_addon.core.base.camera import frame_crowd  # noqa: E402
 
 #: Exit status when Blender cannot get a GPU context here (the tests skip).
 NO_GPU = 3

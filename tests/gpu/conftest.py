@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from crowd_addon.core import ClipPlayer, Crowd, CrowdConfig, skin_vertices
-from crowd_addon.core import synthetic as sy
-from crowd_addon.core.mesh import ProxyMesh
+from crowd_addon.core.authoring import synthetic as sy
+from crowd_addon.core.meshes.mesh import ProxyMesh
 
 moderngl = pytest.importorskip("moderngl", reason="moderngl (crowd_addon[gpu]) not installed")
 

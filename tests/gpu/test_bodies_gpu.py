@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from crowd_addon.core import CrowdError
-from crowd_addon.core import synthetic as sy
-from crowd_addon.core.bodies import is_card
-from crowd_addon.core.camera import frame_crowd
+from crowd_addon.core.authoring import synthetic as sy
+from crowd_addon.core.meshes.bodies import is_card
+from crowd_addon.core.base.camera import frame_crowd
 
 SIZE = (200, 150)
 FAR = (1e3, 2e3, 3e3)           # every agent at LOD 0 in the images

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from crowd_addon.core.errors import CrowdError
+from crowd_addon.core.base.errors import CrowdError
 from crowd_addon.gpu.contact_sheet import ContactSheet, sheet_frames
 
 

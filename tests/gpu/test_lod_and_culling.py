@@ -4,7 +4,7 @@ culling, and the draw calls."""
 
 import numpy as np
 
-from crowd_addon.core.camera import Camera, frame_crowd
+from crowd_addon.core.base.camera import Camera, frame_crowd
 from crowd_addon.gpu.draw_lists import REFERENCE_FOCAL_PX, lod_levels, view_distances
 
 

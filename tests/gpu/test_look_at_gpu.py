@@ -1,14 +1,14 @@
 """Look-at on the GPU (gpu_shaders/look_at.glsl): the vertex stage turns the heads of
 looking agents from their look state, pose row and the frame alone; read back, their
 vertices equal core's CPU skinning of ``Crowd.agent_rows`` (the CPU reference of the
-look stage, core/look_at.py) to 1e-5 of the scene's size."""
+look stage, core/runtime/look_at.py) to 1e-5 of the scene's size."""
 
 import math
 
 import numpy as np
 import pytest
 
-from crowd_addon.core.look_at import LookRig, LookTarget
+from crowd_addon.core.runtime.look_at import LookRig, LookTarget
 
 TOL = 1e-5
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from crowd_addon.core import CrowdError
-from crowd_addon.core.camera import Camera, frame_crowd, look_at, perspective
+from crowd_addon.core.base.camera import Camera, frame_crowd, look_at, perspective
 from crowd_addon.gpu.png import write_png
 
 

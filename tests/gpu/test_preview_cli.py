@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from crowd_addon.cli import main
-from crowd_addon.core.config_io import save_config
+from crowd_addon.core.authoring.config_io import save_config
 
 imageio_ffmpeg = pytest.importorskip("imageio_ffmpeg")
 
@@ -71,9 +71,9 @@ def test_the_repetition_metric_of_the_frames_shown(config_path, tmp_path, capsys
     """``--neighbours 3 --repetition-frames 3``: measured through the preview's camera
     at the frames' size on the frames shown; the oracle is the crowd stepped alone and
     measured at the same frames through the same camera."""
-    from crowd_addon.core.config_io import load_config
-    from crowd_addon.core.repetition import RepetitionSettings, crowd_repetition
-    from crowd_addon.core.camera import frame_crowd
+    from crowd_addon.core.authoring.config_io import load_config
+    from crowd_addon.core.variety.repetition import RepetitionSettings, crowd_repetition
+    from crowd_addon.core.base.camera import frame_crowd
     code, out, err = run(capsys, "--config", config_path, "--out", tmp_path / "r",
                          "--frames", 7, "--width", 96, "--height", 64, "--neighbours", 3,
                          "--repetition-frames", 3, "--json")
@@ -205,7 +205,7 @@ def test_blender_backend_renders_the_same_frames(config_path, tmp_path, capsys):
 def test_start_shows_that_frame_of_the_shot(h, tmp_path, capsys):
     """``--start F`` draws frame F as a run from the start shows it: a cue before F
     (agents sent to another stream, some still blending at F) has happened."""
-    from crowd_addon.core.show import Action, Cue, Show
+    from crowd_addon.core.authoring.show import Action, Cue, Show
     cfg = h.make_config(M=8, agents=16, spacing=0.9, NT=16)
     first = cfg.start_frame
     cfg.show = Show((Cue("go", first + 2, Action("stream", "s1", duration=6, offset=0),

@@ -5,7 +5,7 @@ texture that must not, and the attached-context path."""
 import numpy as np
 import pytest
 
-from crowd_addon.core.camera import frame_crowd
+from crowd_addon.core.base.camera import frame_crowd
 
 SIZE = (200, 150)
 
@@ -44,7 +44,7 @@ def test_render_matches_cpu_skinning_and_a_wrong_offset_shows(gl, h, renderer):
 def test_materials_colour_the_body_and_the_agent_tints_its_grey_parts(gl, h, renderer):
     from dataclasses import replace
 
-    from crowd_addon.core.mesh import Look
+    from crowd_addon.core.meshes.mesh import Look
     far = (1e3, 2e3, 3e3)
     cfg = h.make_config(M=8, agents=15, spacing=0.9, lod_distances=far)
     body = cfg.meshes["fan"][0]
@@ -153,7 +153,7 @@ def test_the_own_image_is_srgb_encoded(gl, h, renderer):
 @pytest.mark.parametrize("bad", [(0.0, 0.0, 0.0), (np.nan, 1.0, 1.0)])
 def test_camera_rejects_degenerate_input(bad):
     from crowd_addon.core import CrowdError
-    from crowd_addon.core.camera import Camera
+    from crowd_addon.core.base.camera import Camera
     with pytest.raises(CrowdError, match="camera"):
         Camera(bad, (0.0, 0.0, 0.0)).view_projection
 
@@ -164,8 +164,8 @@ def test_palettes_colour_their_material_per_agent(gl, h, renderer):
     colours are where the agents are: above each agent's feet, its own shirt colour."""
     from dataclasses import replace
 
-    from crowd_addon.core.mesh import Look
-    from crowd_addon.core.camera import Camera
+    from crowd_addon.core.meshes.mesh import Look
+    from crowd_addon.core.base.camera import Camera
     far = (1e3, 2e3, 3e3)
     cfg = h.make_config(M=8, agents=15, spacing=2.5, lod_distances=far)  # apart from above
     body = cfg.meshes["fan"][0]

@@ -11,7 +11,7 @@ shorter skeleton; a small max texture size wraps the rows.
 import numpy as np
 
 from crowd_addon.core import ClipPlayer, Crowd, CrowdConfig
-from crowd_addon.core import synthetic as sy
+from crowd_addon.core.authoring import synthetic as sy
 
 
 def config():

@@ -4,7 +4,7 @@ two-sided), docs/gpu.md "Anti-aliasing" (issue 36, item 5)."""
 
 import numpy as np
 
-from crowd_addon.core.camera import frame_crowd
+from crowd_addon.core.base.camera import frame_crowd
 from crowd_addon.gpu.proxies import ProxyBuffers
 
 SIZE = (120, 90)
@@ -78,7 +78,7 @@ def test_culling_back_faces_changes_no_pixel(h, renderer):
 def test_the_look_stage_runs_only_for_the_agents_that_look(h, renderer):
     import math
 
-    from crowd_addon.core.look_at import LookRig, LookTarget
+    from crowd_addon.core.runtime.look_at import LookRig, LookTarget
     cfg = h.make_config(M=8, agents=24)
     cfg.look_rigs["fan"] = LookRig(("neck", "head"), (0.4, 0.6),
                                    yaw_limit=math.radians(70), pitch_limit=math.radians(35))

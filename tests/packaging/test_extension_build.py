@@ -87,7 +87,7 @@ def test_wheels_folder_builds_without_network(extension_zip, tmp_path, monkeypat
     import shutil
     import zipfile
 
-    from crowd_addon.core.errors import CrowdError
+    from crowd_addon.core.base.errors import CrowdError
 
     cache = os.path.join(packaging.REPO_ROOT, "build", "wheels")   # filled by extension_zip
     local = tmp_path / "wheels"

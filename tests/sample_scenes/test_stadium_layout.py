@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from crowd_addon.core.errors import CrowdError
+from crowd_addon.core.base.errors import CrowdError
 
 _PATH = Path(__file__).resolve().parents[2] / "sample_scenes" / "stadium_layout.py"
 

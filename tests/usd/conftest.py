@@ -15,10 +15,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from crowd_addon.core import (Blend2, ClipPlayer, Crowd, CrowdConfig, StateMachine,
-                              StateTransition)
-from crowd_addon.core.recorder import record
-from crowd_addon.core.synthetic import humanoid, humanoid_mesh, periodic_clip
+from crowd_addon.core import Blend2, ClipPlayer, Crowd, CrowdConfig, StateMachine, StateTransition
+from crowd_addon.core.shots.recorder import record
+from crowd_addon.core.authoring.synthetic import humanoid, humanoid_mesh, periodic_clip
 
 FIRST, LAST = 2, 16        # start_frame is 0: frames 1 and 2 run before the shot
 FAN_AGENTS, KID_AGENTS = 40, 6

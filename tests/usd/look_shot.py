@@ -9,7 +9,7 @@ import math
 import numpy as np
 
 from crowd_addon.core import Crowd
-from crowd_addon.core.look_at import LookChain, LookRig, LookTarget, head_direction
+from crowd_addon.core.runtime.look_at import LookChain, LookRig, LookTarget, head_direction
 
 from .conftest import FIRST, LAST, make_config, simulate
 

@@ -6,8 +6,8 @@ import os
 import pytest
 
 from crowd_addon.core import Crowd
-from crowd_addon.core.errors import CrowdError
-from crowd_addon.core.recorder import record
+from crowd_addon.core.base.errors import CrowdError
+from crowd_addon.core.shots.recorder import record
 from crowd_addon.usd import check_export, export_crowd, export_steps
 from crowd_addon.usd import files as files_module
 

@@ -13,9 +13,9 @@ import pytest
 from pxr import Usd, UsdGeom, UsdSkel
 
 from crowd_addon.core import Crowd
-from crowd_addon.core.placement import CharacterStreams, PlacementPolicy, place_agents
-from crowd_addon.core.skinning import skin_vertices, skinning_matrices
-from crowd_addon.core.synthetic import box_prop, humanoid_mesh
+from crowd_addon.core.authoring.placement import CharacterStreams, PlacementPolicy, place_agents
+from crowd_addon.core.base.skinning import skin_vertices, skinning_matrices
+from crowd_addon.core.authoring.synthetic import box_prop, humanoid_mesh
 from crowd_addon.usd import export_crowd
 
 from .conftest import FIRST, LAST, make_config, recording, simulate

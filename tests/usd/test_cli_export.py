@@ -11,7 +11,7 @@ import pytest
 from pxr import Gf, Usd, UsdSkel
 
 from crowd_addon.cli import main
-from crowd_addon.core.config_io import save_config
+from crowd_addon.core.authoring.config_io import save_config
 
 from .conftest import FAN_AGENTS, KID_AGENTS, make_config
 

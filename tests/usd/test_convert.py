@@ -4,8 +4,8 @@ layout), pinned against Gf's own math, and the names USD needs."""
 import numpy as np
 from pxr import Gf, Sdf, Usd, UsdSkel, Vt
 
-from crowd_addon.core import pose as sqt
-from crowd_addon.core import quaternion as quat
+from crowd_addon.core.base import pose as sqt
+from crowd_addon.core.base import quaternion as quat
 from crowd_addon.usd import convert
 from crowd_addon.usd.naming import joint_paths, unique_identifiers
 

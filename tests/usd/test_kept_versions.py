@@ -15,7 +15,7 @@ import numpy as np
 from pxr import Sdf, UsdUtils
 
 from crowd_addon.core import Crowd
-from crowd_addon.core.recorder import record
+from crowd_addon.core.shots.recorder import record
 from crowd_addon.usd import export_crowd
 from crowd_addon.usd.stitch import stitch
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from pxr import Sdf, Usd, UsdGeom, UsdSkel, UsdValidation
 
-from crowd_addon.core.agents import STREAM
+from crowd_addon.core.runtime.agents import STREAM
 
 from .conftest import DYNAMIC, FIRST, FAN_AGENTS, KID_AGENTS, LAST, MOVING, make_config
 

@@ -14,8 +14,8 @@ import pytest
 from pxr import Usd, UsdSkel
 
 from crowd_addon.core import Crowd
-from crowd_addon.core.look_at import head_direction
-from crowd_addon.core.recorder import record
+from crowd_addon.core.runtime.look_at import head_direction
+from crowd_addon.core.shots.recorder import record
 
 from .conftest import FIRST, LAST, make_config, simulate
 from .look_shot import AGENTS, LOOKERS, QUIET, chains, core_heads, look_config, simulate_looks

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from pxr import Sdf, Usd, UsdGeom, UsdShade
 
-from crowd_addon.core.mesh import Look, ProxyMesh
+from crowd_addon.core.meshes.mesh import Look, ProxyMesh
 
 from .conftest import make_config, recording
 from .test_layout import usdchecker
@@ -128,7 +128,7 @@ def test_the_lightest_lod_is_the_characters_proxy(tmp_path):
     core skins that LOD."""
     from pxr import UsdSkel
 
-    from crowd_addon.core.skinning import skin_vertices, skinning_matrices
+    from crowd_addon.core.base.skinning import skin_vertices, skinning_matrices
     from crowd_addon.usd import export_crowd
 
     from .conftest import FIRST, core_truth

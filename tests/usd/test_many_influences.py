@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 from pxr import Gf, Usd, UsdSkel, Vt
 
-from crowd_addon.core import synthetic
-from crowd_addon.core.mesh import ProxyMesh
-from crowd_addon.core.skinning import skin_vertices, skinning_matrices
+from crowd_addon.core.authoring import synthetic
+from crowd_addon.core.meshes.mesh import ProxyMesh
+from crowd_addon.core.base.skinning import skin_vertices, skinning_matrices
 from crowd_addon.usd.character import character_layer
 
 

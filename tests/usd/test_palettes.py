@@ -10,7 +10,7 @@ import pytest
 from pxr import Usd, UsdGeom, UsdShade
 
 from crowd_addon.core import Crowd
-from crowd_addon.core.mesh import Look, tint_weight, tinted
+from crowd_addon.core.meshes.mesh import Look, tint_weight, tinted
 from crowd_addon.gpu.instances import InstanceData, pack_colors
 from crowd_addon.usd import export_crowd
 from crowd_addon.usd.character import tint_primvar

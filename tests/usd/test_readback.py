@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from pxr import Usd, UsdGeom, UsdSkel
 
-from crowd_addon.core import pose as sqt
-from crowd_addon.core.skinning import model_matrices, skin_vertices, skinning_matrices
+from crowd_addon.core.base import pose as sqt
+from crowd_addon.core.base.skinning import model_matrices, skin_vertices, skinning_matrices
 
 from .conftest import DYNAMIC, FIRST, LAST, MOVING, make_config
 

@@ -11,9 +11,9 @@ from pxr import Usd
 
 from crowd_addon.cli import main
 from crowd_addon.core import Crowd
-from crowd_addon.core.config_io import save_config
-from crowd_addon.core.repetition import RepetitionSettings, crowd_repetition
-from crowd_addon.core.camera import Camera
+from crowd_addon.core.authoring.config_io import save_config
+from crowd_addon.core.variety.repetition import RepetitionSettings, crowd_repetition
+from crowd_addon.core.base.camera import Camera
 from crowd_addon.usd import export_crowd
 
 from .conftest import FIRST, LAST, make_config, recording, simulate

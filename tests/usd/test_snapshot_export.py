@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from crowd_addon.cli import main
-from crowd_addon.core.config_io import save_config
-from crowd_addon.core.show import Action, Cue, Show, Sweep
+from crowd_addon.core.authoring.config_io import save_config
+from crowd_addon.core.authoring.show import Action, Cue, Show, Sweep
 
 from .conftest import FAN_AGENTS, make_config
 

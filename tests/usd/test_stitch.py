@@ -11,7 +11,7 @@ from pxr import Usd, UsdGeom, UsdSkel
 
 from crowd_addon.cli import main
 from crowd_addon.core import Crowd, CrowdError
-from crowd_addon.core.recorder import record
+from crowd_addon.core.shots.recorder import record
 from crowd_addon.usd import export_crowd
 from crowd_addon.usd.stitch import stitch
 

@@ -11,9 +11,9 @@ import pytest
 from pxr import Sdf, Usd, UsdSkel
 
 from crowd_addon.core import Crowd
-from crowd_addon.core import pose as sqt
-from crowd_addon.core.recorder import record
-from crowd_addon.core.skinning import skin_vertices, skinning_matrices
+from crowd_addon.core.base import pose as sqt
+from crowd_addon.core.shots.recorder import record
+from crowd_addon.core.base.skinning import skin_vertices, skinning_matrices
 
 from .conftest import FAN_AGENTS, FIRST, KID_AGENTS, LAST, core_samples, make_config, simulate
 from .test_layout import usdchecker
