@@ -109,8 +109,9 @@ def blend_exporter(folder):
     from build_stadium import build_stadium
 
     from crowd_addon import register
-    from crowd_addon.blender.export import export_scene
-    from crowd_addon.blender.stadium import add_stand_camera, setup_crowd, setup_show
+    from crowd_addon.blender.scene_export import export_scene
+    from crowd_addon.blender.stadium import add_stand_camera, setup_show
+    from crowd_addon.blender.stadium_cast import setup_crowd
     stadium = os.path.join(folder, "stadium.blend")
     with contextlib.redirect_stdout(io.StringIO()):
         build_stadium(stadium, seats=120, log=None)

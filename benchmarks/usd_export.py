@@ -63,11 +63,11 @@ def build(agents: int, streams: int = STREAMS) -> CrowdConfig:
 
 
 def reactions(share: float, seed: int = 7):
-    """``on_frame``: at each REACT_AT frame ``share`` of the agents blend to another
+    """``before_step``: at each REACT_AT frame ``share`` of the agents blend to another
     stream over 30 frames; state machines get ``goal`` and later ``calm``."""
     rng = np.random.default_rng(seed)
 
-    def on_frame(crowd, frame):
+    def before_step(crowd, frame):
         rel = frame - FIRST
         n, streams = crowd.view.agent_count, len(crowd.view.stream_names)
         if rel in REACT_AT and share > 0:
@@ -76,25 +76,25 @@ def reactions(share: float, seed: int = 7):
         if rel in (100, 200):
             for s in range(3, streams, 4):
                 crowd.set_trigger(s, "goal" if rel == 100 else "calm")
-    return on_frame
+    return before_step
 
 
 def every_agent_once(agents: int, frames: int, seed: int = 11):
-    """``on_frame``: every agent blends once to another stream over
+    """``before_step``: every agent blends once to another stream over
     :data:`HEAVY_BLEND` frames, at a random frame of the shot."""
     rng = np.random.default_rng(seed)
     when = rng.integers(0, frames, agents)
     order = np.argsort(when, kind="stable")
     starts = np.searchsorted(when[order], np.arange(frames + 1))
 
-    def on_frame(crowd, frame):
+    def before_step(crowd, frame):
         rel = frame - FIRST
         if 0 <= rel < frames and starts[rel] < starts[rel + 1]:
             who = np.sort(order[starts[rel]:starts[rel + 1]])
             now = crowd.view.agents.ref[who]
             crowd.transition_to_streamed(who, (now + 1 + rng.integers(0, STREAMS - 1, who.size))
                                          % STREAMS, HEAVY_BLEND)
-    return on_frame
+    return before_step
 
 
 def run_case(case: str, agents: int, frames: int, react: float, directory: str) -> dict:
@@ -119,11 +119,11 @@ def run_export(case: str, agents: int, frames: int, react: float, directory: str
     cfg = build(agents)
     if case == "transition_heavy":
         cfg.transition_slots = HEAVY_SLOTS
-        on_frame = every_agent_once(agents, frames)
+        before_step = every_agent_once(agents, frames)
     else:
-        on_frame = reactions(react)
+        before_step = reactions(react)
     t = time.perf_counter()
-    shot = record(Crowd(cfg, skinning="gpu"), FIRST, FIRST + frames - 1, on_frame=on_frame)
+    shot = record(Crowd(cfg, skinning="gpu"), FIRST, FIRST + frames - 1, before_step=before_step)
     r = export_crowd(shot, os.path.join(directory, "shot.usdc"))
     seconds = time.perf_counter() - t
     stream_bytes = sum(v for k, v in r.files.items() if "/streams/" in k)

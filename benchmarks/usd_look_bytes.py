@@ -40,7 +40,7 @@ from crowd_addon.usd import export_crowd  # noqa: E402
 def export(args, looks: bool, directory: str) -> dict:
     cfg = build(args.agents, args.streams)
     react = reactions(0.005)
-    on_frame = react
+    before_step = react
     if looks:
         t = np.arange(args.frames + 20)
         cfg.look_rigs = {"fan": LookRig(("neck", "head"), (0.4, 0.6),
@@ -50,13 +50,13 @@ def export(args, looks: bool, directory: str) -> dict:
         step = max(1, round(1 / args.share))
         who = np.arange(0, args.agents, step)
 
-        def on_frame(crowd, frame):
+        def before_step(crowd, frame):
             react(crowd, frame)
             if frame == FIRST + args.at:
                 crowd.look_at(who, "ball", blend=8, hold=args.hold)
     t0 = time.perf_counter()
     rec = record(Crowd(cfg, skinning="gpu"), FIRST, FIRST + args.frames - 1,
-                 on_frame=on_frame)
+                 before_step=before_step)
     r = export_crowd(rec, os.path.join(directory, "shot.usdc"), repetition=None)
     return {"bytes": r.bytes, "seconds": time.perf_counter() - t0,
             "clip_agents": r.clip_agents, "bank_frames": r.blend_frames,

@@ -34,6 +34,7 @@ import numpy as np
 
 from .core.base.errors import CrowdError
 from .core.runtime.events import EventDispatcher
+from .core.shots.driver import FrameDriver
 
 __all__ = ["CrowdHandle", "wrap", "scene_crowd", "on_event", "off", "transition_to_streamed",
            "transition_to_unique", "set_trigger", "set_parameter", "detach_all"]
@@ -115,14 +116,14 @@ class CrowdHandle:
         if frame < crowd.frame or crowd.jump_snapshot(frame) is not None:
             self._mute_before = frame
         try:
-            crowd.advance_to(frame)
+            FrameDriver(crowd).seek(frame)
         finally:
             self._mute_before = None
         return crowd.frame
 
     def step(self):
         """Advance one frame (headless use); returns the core ``StepReport``."""
-        return self._need().step()
+        return FrameDriver(self._need()).step()
 
     @property
     def frame(self) -> int:

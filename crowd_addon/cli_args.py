@@ -15,7 +15,7 @@ from .core.authoring.config import MAX_SUBSTEPS, USD_LAYOUTS
 __all__ = ["int_at_least", "positive_float", "frame_range", "frame_number", "path_arg",
            "progress_printer", "add_shot_arguments", "add_trust_argument", "parse_command"]
 
-#: The largest frame number in magnitude, as in configuration files (config_io.MAX_INT).
+#: The largest frame number in magnitude, as in configuration files (codec.MAX_INT).
 MAX_FRAME = 2**31 - 1
 
 

@@ -46,7 +46,8 @@ import mocap  # noqa: E402
 import stadium_layout as layout  # noqa: E402
 from crowd_addon.blender.looks import plain_material  # noqa: E402
 from crowd_addon.blender.seats_operator import seat_objects  # noqa: E402
-from crowd_addon.core.authoring.seats import HOME, AWAY, plan_ring  # noqa: E402
+from crowd_addon.core.authoring.seat_spec import HOME, AWAY  # noqa: E402
+from crowd_addon.core.authoring.seats import plan_ring  # noqa: E402
 from crowd_addon.core.base.errors import CrowdError  # noqa: E402
 from crowd_addon.gpu.renderer import BACKGROUND  # noqa: E402
 

@@ -20,7 +20,8 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from crowd_addon.core.authoring.seats import HOME, AWAY, SeatSpec, Tier, Tunnel, generate_seats
+from crowd_addon.core.authoring.seat_spec import HOME, AWAY, SeatSpec, Tier, Tunnel
+from crowd_addon.core.authoring.seats import generate_seats
 
 __all__ = ["SPEC", "HOME", "AWAY", "PAPER_SEATS", "layout_seats"]
 

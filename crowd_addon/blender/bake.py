@@ -28,7 +28,7 @@ the skeleton: where a bone's head misses by more than 1e-3 scene units or its
 rotation by more than 1e-3 rad (a fast motion, or a bone turning the long way round,
 such as an Euler curve from 179 to -179 degrees, which Blender plays as a full turn)
 the notes name the action, bones, frames and sizes and the samples per frame that
-follow it (:func:`crowd_addon.core.bake.clip_sampling.between_keys_note`).
+follow it (:func:`crowd_addon.core.bake.between_keys.between_keys_note`).
 
 Notes are :class:`crowd_addon.core.bake.bake_report.Note` strings: the between-frame
 misses are warnings (kind ``"between_frames"``); frame_set sampling and resampling
@@ -44,7 +44,8 @@ import numpy as np
 from ..core.bake.armature_math import relative_to_parent, sqt_from_matrices
 from ..core.anim.clip import Clip
 from ..core.bake.bake_report import INFO, WARNING, Note
-from ..core.bake.clip_sampling import MAX_SAMPLES_PER_FRAME, between_keys_note
+from ..core.bake.between_keys import between_keys_note
+from ..core.bake.clip_sampling import MAX_SAMPLES_PER_FRAME
 from ..core.base.errors import CrowdError
 from ..core.bake.pose_channels import CHANNEL_WIDTH, CHANNELS, RigChannels, local_sqt
 from ..core.base.skeleton import Skeleton

@@ -1,10 +1,11 @@
 """Command-line runs of a Blender scene: ``crowd export --blend``, ``crowd preview
 --blend`` and ``blender -c crowd``.
 
-- the headless ``crowd`` program (:mod:`crowd_addon.cli`) imports this module only
-  for ``crowd export --blend SCENE_BLEND ...`` and ``crowd preview --blend ...`` and
+- the headless ``crowd`` program (:mod:`crowd_addon.commands`, :mod:`crowd_addon.farm`)
+  imports this module only for ``crowd export --blend SCENE_BLEND ...`` and
+  ``crowd preview --blend ...`` and
   calls :func:`export_blend` (the scene's Crowd settings baked as the panel does and
-  written by :func:`.export.export_scene`) or :func:`preview_blend` (baked with
+  written by :func:`.scene_export.export_scene`) or :func:`preview_blend` (baked with
   :func:`.scene_config.config_from_scene`, rendered through a scene camera), which
   open the file (the ``bpy`` module) and register the extension when needed. The
   scene's frame range and camera are the defaults; Blender's own log lines go to
@@ -118,8 +119,8 @@ def scene_frames(scene, frames=None) -> tuple:
 
 def _check_script(scene, trust_scripts: bool, ignore_scripts: bool) -> None:
     """A scene whose crowd script would not run here stops the command
-    (:func:`.show_data.check_script`: ScriptNotTrusted, exit code 3)."""
-    from .show_data import check_script
+    (:func:`.crowd_script.check_script`: ScriptNotTrusted, exit code 3)."""
+    from .crowd_script import check_script
     check_script(scene, trust_scripts, ignore_scripts)
 
 
@@ -159,7 +160,7 @@ def export_blend(out: str, frames: tuple | None = None, *, blend: str | None = N
 
     ``out``, ``agents``, ``layout``, ``substeps``, ``snapshots``, ``repetition``,
     ``progress(stage, done, total)`` and ``on_bake(done, total, message)`` are those of
-    :func:`.export.export_scene`; ``frames`` (first, last)
+    :func:`.scene_export.export_scene`; ``frames`` (first, last)
     defaults to the scene's frame range. The folder of ``out`` is created when
     missing, and removed again when the export fails. Blender's own output goes to
     stderr (:func:`blender_output_to_stderr`). Returns ``(config, result)``: the baked
@@ -175,7 +176,7 @@ def export_blend(out: str, frames: tuple | None = None, *, blend: str | None = N
     with blender_output_to_stderr():        # from the import of bpy on (5.2 logs then)
         from ..core.base.files import folders_made
         from ..gpu.preview_render import writable_dir
-        from .export import export_scene
+        from .scene_export import export_scene
         found = open_scene(blend, scene)
         _check_script(found, trust_scripts, ignore_scripts)
         folder = writable_dir(os.path.dirname(os.path.abspath(out)))
@@ -272,13 +273,13 @@ def snapshot_blend(out: str, frames: tuple | None = None, *, every: int,
                    ignore_scripts: bool = False, strict: bool = False):
     """Write snapshots of a .blend's scene crowd (:func:`open_scene`, baked as the
     exports bake it, with its crowd script) into the folder ``out``:
-    :func:`crowd_addon.core.shots.snapshot.write_snapshots` over ``frames`` (default: the
+    :func:`crowd_addon.core.shots.snapshot_store.write_snapshots` over ``frames`` (default: the
     scene's frame range) every ``every`` frames; ``trust_scripts`` and
     ``ignore_scripts`` as :func:`export_blend`; ``strict``: the bake report's warnings
     stop it before any snapshot (:func:`report_bake`). Returns ``(config, files
     written)``."""
     with blender_output_to_stderr():
-        from ..core.shots.snapshot import SnapshotFolder, write_snapshots
+        from ..core.shots.snapshot_store import SnapshotFolder, write_snapshots
         from .scene_config import build_crowd, config_from_scene
         found = open_scene(blend, scene)
         _check_script(found, trust_scripts, ignore_scripts)

@@ -18,12 +18,12 @@ again. When a character's armature or an action the crowd was built from is
 deleted the preview pauses with a message instead of failing; undo that restores
 them resumes it. Nothing here keeps Blender data between calls, only names, so undo and file
 loads never leave dangling references; after a load the previews marked in the file
-(``scene.crowd.preview_enabled``) are rebuilt, or stopped with the reason.
+(``scene.crowd.preview_enabled``) are rebuilt, or stopped with the reason. The
+previewed crowd's repetition metric and variety plan are :mod:`.preview_variety`'s.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import time
 from dataclasses import dataclass
@@ -41,11 +41,9 @@ from .props import settings_fingerprint
 
 log = logging.getLogger("crowd_addon.preview")
 
-__all__ = ["Preview", "start", "stop", "stop_all", "get", "check", "last_error", "draw_scene",
-           "measure_repetition", "plan_variety", "apply_plan",
-           "draw_handle", "on_frame_change", "on_depsgraph_update", "on_undo",
-           "render_crowd_changed",
-           "on_load_pre", "on_load_post"]
+__all__ = ["Preview", "start", "stop", "stop_all", "get", "running", "check", "last_error",
+           "draw_scene", "draw_handle", "on_frame_change", "on_depsgraph_update", "on_undo",
+           "render_crowd_changed", "on_load_pre", "on_load_post"]
 
 
 @dataclass
@@ -97,6 +95,15 @@ _DRAW = {"handle": None}
 def get(scene):
     """The scene's :class:`Preview` or None."""
     return _PREVIEWS.get(scene.name)
+
+
+def running(scene):
+    """The scene's :class:`Preview`, or a CrowdError when none runs (what measures
+    its crowd needs one)."""
+    pv = _PREVIEWS.get(scene.name)
+    if pv is None:
+        raise CrowdError("the preview is not running: start it to measure its crowd")
+    return pv
 
 
 def last_error(scene) -> str:
@@ -317,7 +324,7 @@ def on_undo(*_):
 
 @bpy.app.handlers.persistent
 def on_load_pre(*_):
-    from .show_data import forget_trusted_scripts
+    from .crowd_script import forget_trusted_scripts
     stop_all()
     _ERRORS.clear()
     forget_trusted_scripts(unsaved_only=True)     # an unsaved file's trust ends with it
@@ -382,83 +389,6 @@ def draw_scene(scene, view_matrix, projection_matrix) -> bool:
         return False
     pv.draw_ms = (time.perf_counter() - t0) * 1e3
     return True
-
-
-def _metric_view(scene, region_data, region):
-    """``(view_projection, settings, what it is seen through)`` of the repetition
-    metric: the scene camera at the render size (:func:`.cameras.metric_view`), or
-    the viewport ``region_data``/``region`` when the scene has no camera the renderer
-    can draw."""
-    from ..core.variety.repetition import RepetitionSettings
-    from .cameras import metric_view
-    settings = RepetitionSettings(k=scene.crowd.repetition_neighbours)
-    camera, settings = metric_view(scene, settings)
-    if camera is not None:
-        return camera.view_projection, settings, f"scene camera {scene.camera.name!r}"
-    if region_data is not None and region is not None:
-        vp = np.array(region_data.window_matrix, np.float64) @ np.array(
-            region_data.view_matrix, np.float64)
-        return vp, dataclasses.replace(settings, width=max(region.width, 1),
-                                       height=max(region.height, 1)), "the viewport"
-    raise CrowdError("the scene has no camera: measure from a 3D viewport's sidebar")
-
-
-def _running(scene):
-    pv = _PREVIEWS.get(scene.name)
-    if pv is None:
-        raise CrowdError("the preview is not running: start it to measure its crowd")
-    return pv
-
-
-def measure_repetition(scene, region_data=None, region=None):
-    """Measure the previewed crowd's repetition metric at its frame (docs/variety.md)
-    through the scene camera or the viewport (:func:`_metric_view`); kept in
-    :attr:`Preview.repetition` for the panel."""
-    from ..core.variety.repetition import crowd_repetition
-    pv = _running(scene)
-    vp, settings, seen = _metric_view(scene, region_data, region)
-    pv.repetition = crowd_repetition(pv.crowd.view, vp, settings=settings)
-    pv.repetition_seen = seen
-    return pv.repetition
-
-
-def plan_variety(scene, region_data=None, region=None, progress=None):
-    """Run the variety planner (:mod:`crowd_addon.core.planning.variety_plan`) on the previewed
-    crowd's configuration, seen as :func:`measure_repetition` sees it, within the
-    settings' *Budget* and *Max Streams* (and *Motion Only*: motion compared alone);
-    kept in :attr:`Preview.plan`.
-    ``progress(done, total)`` after each candidate."""
-    from ..core.planning.variety_plan import plan_input
-    from ..core.planning.variety_plan import plan_variety as plan
-    pv = _running(scene)
-    vp, settings, seen = _metric_view(scene, region_data, region)
-    s = scene.crowd
-    settings = dataclasses.replace(settings, appearance=not s.plan_motion_only)
-    pv.plan = plan(plan_input(pv.crowd.config), vp, s.plan_budget_mb * 1e6, settings,
-                   s.plan_max_streams, progress=progress)
-    pv.repetition_seen = seen
-    return pv.plan
-
-
-def apply_plan(scene):
-    """Author the previewed plan in the scene: its M, each stream's copies and (for a
-    Spread plan) Spread offsets on every agent source drawing offsets at random. Takes
-    effect at the next bake."""
-    pv = _running(scene)
-    if pv.plan is None:
-        raise CrowdError("no plan to apply: Plan Variety first")
-    p, s = pv.plan.planned, scene.crowd
-    copies = dict(zip(pv.plan.templates, p.template_copies))
-    s.max_offset = p.max_offset
-    for c in s.characters:
-        for anim in c.streams:
-            if anim.name in copies:
-                anim.copies = copies[anim.name]
-    if p.offset_mode == "SPREAD":
-        for src in s.agent_sources:
-            if src.offset_mode in ("UNIFORM", "NORMAL"):
-                src.offset_mode = "SPREAD"
-    return p
 
 
 def _draw_callback():

@@ -4,10 +4,10 @@ A stream (or unique animation) is a controller tree written as a flat list of na
 nodes; a node's inputs name other nodes of the same animation, and the root is the
 node named by ``root`` (default: the first node); core validates and builds it
 (:mod:`crowd_addon.core.authoring.controller_graph`). Node kinds mirror the core controllers
-(``crowd_addon.core.anim.controllers``): an action clip, a 2-way blend, a
-layer (override or additive, masked by bone names or a bone collection), a 2-D
-blend space (inputs placed at (x, y) points) and a state machine (inputs are its
-states; transitions fire on triggers and parameter conditions with a fade).
+(``crowd_addon.core.anim.controllers``, ``.blends`` and ``.state_machine``): an action
+clip, a 2-way blend, a layer (override or additive, masked by bone names or a bone
+collection), a 2-D blend space (inputs placed at (x, y) points) and a state machine
+(inputs are its states; transitions fire on triggers and parameter conditions with a fade).
 
 A scene has a list of characters (``scene.crowd.characters``): each an armature, the
 body mesh skinned to it, optional LOD meshes, and its own streams and unique

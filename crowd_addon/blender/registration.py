@@ -15,13 +15,14 @@ from __future__ import annotations
 import bpy
 
 from .. import api
-from . import (cli_commands, export, import_usd, operators, panels, prefs, preview, props,
-               seats_operator, show_panels)
+from . import (cli_commands, export, import_usd, list_operators, operators, panels, prefs,
+               preview, props, seats_operator, show_panels)
 
 __all__ = ["CLASSES", "HANDLERS", "MENUS", "register", "unregister", "leftovers"]
 
-CLASSES = (props.CLASSES + operators.CLASSES + seats_operator.CLASSES + export.CLASSES
-           + import_usd.CLASSES + panels.CLASSES + show_panels.CLASSES + prefs.CLASSES)
+CLASSES = (props.CLASSES + operators.CLASSES + list_operators.CLASSES + seats_operator.CLASSES
+           + export.CLASSES + import_usd.CLASSES + panels.CLASSES + show_panels.CLASSES
+           + prefs.CLASSES)
 MENUS = export.MENUS + import_usd.MENUS    # (menu type name, draw function)
 HANDLERS = (("load_pre", preview.on_load_pre), ("load_post", preview.on_load_post),
             ("frame_change_post", preview.on_frame_change),

@@ -12,7 +12,8 @@ the streams and uniques of all characters go into the one config, character afte
 character; and the agent sources become agents (:mod:`.agents`), each on a stream of
 its character, so an agent's character is its stream's skeleton. Errors are
 :class:`CrowdError` messages that name the character, stream, node, action or object
-at fault; nothing in the scene changes.
+at fault; nothing in the scene changes. A character's meshes and palettes are read by
+:mod:`.character_meshes`.
 
 :func:`config_steps` does the work as a generator, one action per step, so a modal
 operator can report progress and cancel between steps; :func:`config_from_scene` runs
@@ -24,17 +25,14 @@ from __future__ import annotations
 import dataclasses
 
 from ..core.bake.bake_report import WARNING, BakeReport
-from ..core.authoring.config import PALETTE_COLUMNS, CrowdConfig
+from ..core.authoring.config import CrowdConfig
 from ..core.authoring.controller_graph import InputSpec, NodeSpec, TransitionSpec, build_tree
 from ..core.base.errors import CrowdError
-from ..core.meshes.levels import CARD
 from ..core.variety.timing import expand
+from .character_meshes import add_mesh, add_palettes
 
 __all__ = ["config_from_scene", "config_steps", "scene_fps", "used_actions", "node_specs",
            "bone_collections", "lod_distances", "clip_names", "scene_actions", "look_rig"]
-
-#: LOD levels the settings give distances for (*LOD 1 From*, *LOD 2 From*)
-MESH_LODS = 2
 
 
 def scene_fps(scene) -> float:
@@ -199,68 +197,6 @@ def _trees(scene, c, skeleton, clips) -> dict:
     return {pool: [(a.name, tree(pool, a)) for a in anims] for pool, anims in _pools(c)}
 
 
-def _lod_levels(c, skeleton, cards, notes) -> tuple:
-    """The ``lods`` argument of ``CrowdConfig.add_mesh`` for character ``c``: its LOD
-    meshes (one serves both levels), then the card when on, or the automatic ratios,
-    then the two far levels when on;
-    the meshes' remarks (``ProxyMesh.notes``) go to the list ``notes``."""
-    from .armature import proxy_mesh_from_object
-    card = (CARD,) if cards else ()
-    if len(c.lods) == 0:
-        return (0.25, 0.06) + card * 2         # the far level, then with parts joined
-    what = f"character {c.name!r}"
-    if len(c.lods) > MESH_LODS:
-        raise CrowdError(f"{what}: {len(c.lods)} LOD meshes; there are {MESH_LODS} levels "
-                         "(LOD 1 From, LOD 2 From)")
-    meshes = []
-    for k, lod in enumerate(c.lods, start=1):
-        if lod.object is None:
-            raise CrowdError(f"{what}: LOD {k} has no mesh")
-        try:
-            meshes.append(proxy_mesh_from_object(lod.object, c.armature, skeleton))
-        except CrowdError as e:
-            raise CrowdError(f"{what}: LOD {k}: {e}") from None
-        for note in meshes[-1].notes:
-            if note not in notes:           # the body's mesh may serve as a LOD too
-                notes.append(note)
-    meshes += meshes[-1:] * (MESH_LODS - len(meshes))
-    return tuple(meshes) + card
-
-
-def _add_mesh(cfg, c, skeleton, cards, notes):
-    from .armature import prop_from_object, proxy_mesh_from_object
-    if c.body is None:
-        if len(c.lods) or len(c.variants) or len(c.props):
-            raise CrowdError(f"character {c.name!r}: LOD meshes, mesh variants and props "
-                             "need a body")
-        return
-    try:
-        body = proxy_mesh_from_object(c.body, c.armature, skeleton)
-    except CrowdError as e:
-        raise CrowdError(f"character {c.name!r}: body: {e}") from None
-    notes.extend(body.notes)            # e.g. vertices with more than eight bones
-    cfg.add_mesh(body, lods=_lod_levels(c, skeleton, cards, notes))
-    auto = (0.25, 0.06) + ((CARD, CARD) if cards else ())
-    for k, v in enumerate(c.variants, start=1):
-        what = f"character {c.name!r}: mesh variant {k}"
-        if v.object is None:
-            raise CrowdError(f"{what} has no mesh")
-        try:
-            mesh = proxy_mesh_from_object(v.object, c.armature, skeleton)
-            cfg.add_variant(mesh, lods=auto)
-        except CrowdError as e:
-            raise CrowdError(f"{what}: {e}") from None
-        notes.extend(n for n in mesh.notes if n not in notes)
-    for k, p in enumerate(c.props):
-        what = f"character {c.name!r}: prop {k + 1}"
-        if p.object is None:
-            raise CrowdError(f"{what} has no object")
-        try:
-            cfg.add_prop(prop_from_object(p.object, c.armature, skeleton, p.bone))
-        except CrowdError as e:
-            raise CrowdError(f"{what}: {e}") from None
-
-
 def config_steps(scene, depsgraph=None, notes=None):
     """Generator building the scene's crowd: yields ``(done, total, message)`` before
     each unit of work (one per action a character uses, then one per character for its
@@ -318,8 +254,8 @@ def config_steps(scene, depsgraph=None, notes=None):
     for k, c in enumerate(chars):
         yield len(jobs) + k, total, "reading the proxy mesh" + (
             f" of character {c.name!r}" if several else "")
-        _add_mesh(cfg, c, skeletons[c.name], s.lod_cards, found)
-        _add_palettes(cfg, c)
+        add_mesh(cfg, c, skeletons[c.name], s.lod_cards, found)
+        add_palettes(cfg, c)
     yield total - 1, total, "placing agents"
     dg = depsgraph if depsgraph is not None else _depsgraph(scene)
     agents, placed = agent_mod.agents_from_scene(scene, dg)
@@ -369,27 +305,6 @@ def look_rig(c, skeleton, forward_axis="NEG_Y"):
     return rig
 
 
-def _add_palettes(cfg, c):
-    """The character's palette materials (``CrowdConfig.palette_materials``), each a
-    material of its body, of a mesh variant or of a prop, named once."""
-    if not len(c.palettes):
-        return
-    what = f"character {c.name!r}"
-    if len(c.palettes) > PALETTE_COLUMNS:
-        raise CrowdError(f"{what}: {len(c.palettes)} palettes; at most {PALETTE_COLUMNS}")
-    meshes = [lv[0] for lv in cfg.mesh_variants(c.name)] + \
-        [p.mesh for p in cfg.props.get(c.name, ())]
-    looks = list(dict.fromkeys(k.name for m in meshes for k in m.looks))
-    names = [p.material for p in c.palettes]
-    for name in names:
-        if name not in looks:
-            raise CrowdError(f"{what}: palette material {name!r} is not a material of its "
-                             f"body, mesh variants or props (their materials: {looks})")
-    if len(set(names)) != len(names):
-        raise CrowdError(f"{what}: two palettes for one material ({names})")
-    cfg.palette_materials[c.name] = tuple(names)
-
-
 def _depsgraph(scene):
     """The evaluated depsgraph of ``scene`` (its first view layer unless it is the
     context's scene)."""
@@ -409,9 +324,9 @@ def build_crowd(scene, config, skinning="gpu", substeps=1, trust_script=False,
     build their crowds here, so both run the same script. ``substeps``: samples kept per
     frame (an export's sub-frame samples); ``trust_script``: run the script for this
     call even where it is not trusted; ``ignore_script``: leave it out, trusted or not
-    (:func:`.show_data.run_script`)."""
+    (:func:`.crowd_script.run_script`)."""
     from ..core.shots.crowd import Crowd
-    from .show_data import run_script
+    from .crowd_script import run_script
     crowd = Crowd(config, skinning=skinning, substeps=substeps)
     return crowd, run_script(scene, crowd, trusted=trust_script, ignore=ignore_script)
 

@@ -7,7 +7,7 @@ radians about +Z, facing the pitch centre for a character facing -Y) and ``secti
 "Stands", the terraces and benches with the materials "concrete", "home" and "away".
 An object of that name already there keeps its place, transform and the agent
 sources that use it and gets the new mesh. The operator (Crowd tab > Agents) fills a
-:class:`~crowd_addon.core.authoring.seats.SeatSpec` from its properties and calls it.
+:class:`~crowd_addon.core.authoring.seat_spec.SeatSpec` from its properties and calls it.
 """
 
 from __future__ import annotations
@@ -18,7 +18,8 @@ from bpy.props import BoolProperty, EnumProperty, FloatProperty, FloatVectorProp
     IntProperty, IntVectorProperty, StringProperty
 
 from ..core.base.errors import CrowdError
-from ..core.authoring.seats import AWAY, HOME, SeatSpec, Tier, Tunnel, generate_seats
+from ..core.authoring.seat_spec import AWAY, HOME, SeatSpec, Tier, Tunnel
+from ..core.authoring.seats import generate_seats
 from .looks import plain_material
 
 __all__ = ["CLASSES", "STAND_COLOURS", "seat_objects", "spec_from_operator"]

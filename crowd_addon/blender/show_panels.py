@@ -7,7 +7,7 @@ shows its frame, what it does and, while the preview runs, how many agents it se
 
 import bpy
 
-from . import preview, show_data
+from . import crowd_script, preview
 from .panels import _list, _Panel
 
 __all__ = ["CLASSES"]
@@ -77,7 +77,7 @@ class CROWD_OT_trust_script(bpy.types.Operator):
         if text is None:
             self.report({"ERROR"}, "the scene has no crowd script (Crowd > Show > Script)")
             return {"CANCELLED"}
-        show_data.trust_script(text)
+        crowd_script.trust_script(text)
         if preview.get(context.scene) is not None:
             try:
                 preview.start(context.scene)

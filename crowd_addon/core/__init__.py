@@ -14,9 +14,11 @@ shows, placement, seats), :mod:`.planning` (memory model, variety planner) and
 from .runtime.agents import STREAM, TRANSITION, UNIQUE, assign_offsets, assign_streams
 from .anim.clip import Clip, ClipBank
 from .authoring.config import AnimationDef, CrowdConfig, validate_config
-from .anim.controllers import (Blend2, BlendMask, BlendSpace2D, ClipPlayer, Controller, Layer,
-                               StateMachine, StateTransition, blend_space_weights)
-from .shots.crowd import Crowd, StepReport
+from .anim.blends import Blend2, BlendMask, BlendSpace2D, Layer, blend_space_weights
+from .anim.controllers import ClipPlayer, Controller
+from .anim.state_machine import StateMachine, StateTransition
+from .shots.crowd import Crowd
+from .shots.frame import StepReport
 from .runtime.frame_view import FrameView
 from .base.errors import CrowdError
 from .runtime.events import EventDispatcher

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.base.errors import CrowdError
+from ..core.runtime.pose_storage import block_layout
 from .programs import AGENT_TEXELS
 from .texture_region import block_image, block_regions
 
@@ -58,12 +58,9 @@ class InstanceData:
     def __init__(self, view, max_texture_size: int = 16384):
         n = view.agent_count
         self.count = n
-        self.block_rows = max(1, min(n, int(max_texture_size)))
-        self.blocks = max(1, -(-n // self.block_rows))
-        self.width, self.height = self.blocks * AGENT_TEXELS, self.block_rows
-        if self.width > max_texture_size:
-            raise CrowdError(f"agent texture cannot fit: {n} agents need {self.width} x "
-                             f"{self.height} texels, max texture size is {max_texture_size}")
+        self.block_rows, self.blocks, self.width = block_layout(n, AGENT_TEXELS, max_texture_size,
+                                                                "agent texture")
+        self.height = self.block_rows
         self.records = np.zeros((n, AGENT_TEXELS, 4), np.float32)
         self._cursor = 0
         self.moved = True

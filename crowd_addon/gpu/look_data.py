@@ -26,6 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.base.errors import CrowdError
+from ..core.runtime.pose_storage import block_layout
 from .texture_region import block_image, block_regions
 
 __all__ = ["LookData", "LOOK_TEXELS", "NEVER", "MAX_LOOK_BONES"]
@@ -51,12 +52,8 @@ class LookData:
         n = view.agent_count
         limit = int(max_texture_size)
         self.count = n
-        self.block_rows = max(1, min(n, limit))
-        self.blocks = max(1, -(-n // self.block_rows))
-        self.width, self.height = self.blocks * LOOK_TEXELS, self.block_rows
-        if self.width > limit:
-            raise CrowdError(f"looks texture cannot fit: {n} agents need {self.width} x "
-                             f"{self.height} texels, max texture size is {limit}")
+        self.block_rows, self.blocks, self.width = block_layout(n, LOOK_TEXELS, limit, "looks texture")
+        self.height = self.block_rows
         lags = np.asarray(view.look_lags, np.int64)
         if lags.size and (lags.min() <= -_EXACT or lags.max() >= _EXACT):
             raise CrowdError("look lags must stay below 2**24 frames on the GPU")

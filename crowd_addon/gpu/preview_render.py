@@ -6,7 +6,7 @@ Blender's ``gpu`` module) through a fixed camera that frames the
 whole crowd (:func:`~.camera.frame_crowd`), writes ``frame_<F>.png`` per frame
 (``F`` the crowd frame, at least four digits) and, when asked, ``preview.mp4``
 (H.264 through ``imageio-ffmpeg``, at the crowd's fps). The ``crowd preview``
-command (:mod:`crowd_addon.cli`) is a thin wrapper around it.
+command (:mod:`crowd_addon.commands.preview`) is a thin wrapper around it.
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.shots.crowd import Crowd
+from ..core.shots.driver import FrameDriver
 from ..core.base.errors import CrowdError
 from ..core.variety.repetition import RepetitionSettings, combine, crowd_repetition, measure_frames
 from .backends import BACKENDS, make_renderer
@@ -166,8 +167,9 @@ def render_preview(config, out_dir, frames: int, start: int | None = None,
         raise CrowdError(f"start frame {int(start)} is before the shot's first frame "
                          f"{config.start_frame}")
     crowd = crowd or Crowd(config, skinning="gpu")
+    driver = FrameDriver(crowd, before_step)
     if start is not None:           # frame F of the shot: run through the cues before it
-        crowd.advance_to(int(start))
+        driver.seek(int(start))
     seconds["simulate"] += time.perf_counter() - t0
     options = {} if light is None else {"light": light}
     options["shadows"] = scene is not None if shadows is None else bool(shadows)
@@ -214,9 +216,7 @@ def render_preview(config, out_dir, frames: int, start: int | None = None,
         for i in range(int(frames)):
             t = time.perf_counter()
             if i:
-                if before_step is not None:
-                    before_step(crowd, crowd.frame + 1)
-                crowd.step()
+                driver.step()
             if repetition is not None and crowd.frame in measure:
                 measured.append(crowd_repetition(crowd.view, camera.view_projection,
                                                  settings=repetition))

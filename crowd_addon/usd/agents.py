@@ -65,10 +65,10 @@ def agent_names(ids) -> list:
 def author_offset_animations(root: Sdf.PrimSpec, shot, stream_names, stream_assets) -> dict:
     """One SkelAnimation per ``(stream, offset)`` played by a static agent.
 
-    Returns ``{stream * M + offset: Sdf.Path}``.
+    Returns ``{key: Sdf.Path}`` by the agents' ``(stream, offset)`` key (``Shot.keys``).
     """
     m = shot.max_offset
-    keys = np.unique(shot.stream[shot.static] * m + shot.offset[shot.static])
+    keys = np.unique(shot.keys[shot.static])
     streams = define(root, "Streams", "Scope")
     paths, scope = {}, None
     for key in keys.tolist():

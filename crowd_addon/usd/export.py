@@ -478,7 +478,7 @@ def _stream_layer(rec, shot, s, joints, fmt):
 
 
 def _sources(shot, offsets, own_paths) -> list:
-    keys = shot.stream * shot.max_offset + shot.offset
+    keys = shot.keys
     own = iter(own_paths)
     return [offsets[int(k)] if st else next(own)
             for k, st in zip(keys.tolist(), shot.static.tolist())]

@@ -20,6 +20,7 @@ import numpy as np
 
 from ..core.runtime.agents import STREAM, TRANSITION, UNIQUE
 from ..core.meshes.bodies import body_keys
+from ..core.runtime.pools import stream_key
 
 __all__ = ["Shot", "Pieces", "STREAM", "UNIQUE", "TRANSITION", "AIM"]
 
@@ -90,6 +91,13 @@ class Shot:
     @property
     def frames(self) -> np.ndarray:
         return self.recording.frames
+
+    @property
+    def keys(self) -> np.ndarray:
+        """(n,) int64 each static agent's ``(stream, offset)`` key
+        (:func:`~crowd_addon.core.runtime.pools.stream_key`; meaningless for the
+        others)."""
+        return stream_key(self.stream, self.offset, self.max_offset)
 
     def agent_poses(self, which) -> np.ndarray:
         """``(frames, k, B, 10)`` float32 local poses of agents ``which`` (positions in

@@ -25,7 +25,7 @@ sys.path.insert(0, os.path.dirname(__file__))
 import crowd_scene as cs  # noqa: E402
 from test_many_influences import many_groups  # noqa: E402
 
-from crowd_addon.blender import export, scene_config  # noqa: E402
+from crowd_addon.blender import export, scene_config, scene_export  # noqa: E402
 from crowd_addon.blender.bake import bake_actions  # noqa: E402
 from crowd_addon.core.bake.bake_report import report_of  # noqa: E402
 from crowd_addon.core.anim.clip import ClipBank  # noqa: E402
@@ -136,8 +136,8 @@ def test_the_api_and_the_operators_report_the_same_notes(tmp_path):
         pass
     assert [m for kind, m in op.reports if kind == {"WARNING"}] == list(report.warnings)
     said = []                                                    # Export Crowd USD
-    cfg, result = export.export_scene(scene, str(tmp_path / "a.usdc"), (1, 4),
-                                      on_bake=lambda d, t, m: said.append(m))
+    cfg, result = scene_export.export_scene(scene, str(tmp_path / "a.usdc"), (1, 4),
+                                            on_bake=lambda d, t, m: said.append(m))
     assert [f"warning: {n}" for n in report.warnings] == \
         [m for m in said if m.startswith("warning: ")]
     fake = type("Op", (), {"reports": [], "_made": ()})()
@@ -145,7 +145,7 @@ def test_the_api_and_the_operators_report_the_same_notes(tmp_path):
     export.CROWD_OT_export_usd._finish(fake, result, cfg)
     assert [m for kind, m in fake.reports if kind == {"WARNING"}] == list(report.warnings)
     with pytest.raises(Exception, match="--strict"):
-        export.export_scene(scene, str(tmp_path / "b.usdc"), (1, 4), strict=True)
+        scene_export.export_scene(scene, str(tmp_path / "b.usdc"), (1, 4), strict=True)
     assert not (tmp_path / "b.usdc").exists()
 
 

@@ -24,7 +24,7 @@ from crowd_addon import register
 build_stadium(sys.argv[1], log=None)       # for the Blender that runs (4.2 cannot read 5.0's)
 bpy.ops.wm.open_mainfile(filepath=sys.argv[1])
 register()
-from crowd_addon.blender.stadium import setup_crowd
+from crowd_addon.blender.stadium_cast import setup_crowd
 setup_crowd(bpy.context.scene, hits=2, slots=16)
 bpy.context.preferences.filepaths.save_version = 0
 bpy.ops.wm.save_as_mainfile(filepath=sys.argv[2])

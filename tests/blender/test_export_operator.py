@@ -24,6 +24,7 @@ import crowd_scene as cs  # noqa: E402
 
 import crowd_addon  # noqa: E402
 from crowd_addon.blender import export as crowd_export  # noqa: E402
+from crowd_addon.blender import scene_export  # noqa: E402
 from crowd_addon.blender import panels, preview, registration  # noqa: E402
 
 SEATS = (6, 5)                      # 30 agents, one per seat vertex
@@ -596,11 +597,11 @@ def test_export_scene_drops_the_export_when_a_callback_raises(scene, tmp_path, n
             raise KeyboardInterrupt
 
     with pytest.raises(KeyboardInterrupt):
-        crowd_export.export_scene(scene, path, (1, 12), progress=progress)
+        scene_export.export_scene(scene, path, (1, 12), progress=progress)
     assert listing(tmp_path) == [] and new_threads() == []
     assert [r for r in reports if r[0] == "simulate"][-1] == ("simulate", 11, 11)
     bakes = []
-    config, result = crowd_export.export_scene(
+    config, result = scene_export.export_scene(
         scene, path, (1, 12), on_bake=lambda *a: bakes.append(a))
     # the bake's steps, then its report (the test's random walk misses between frames)
     steps = [b[2] for b in bakes if not b[2].startswith("warning:")]

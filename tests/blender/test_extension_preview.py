@@ -115,8 +115,8 @@ def test_scrubbing_a_long_shot_jumps_from_the_nearest_snapshot(running):
     scene.frame_set(100)
     assert crowd.snapshots.frames == [1, 31, 61, 91]
     steps = []
-    inner = crowd._step
-    crowd._step = lambda: steps.append(1) or inner()
+    inner = crowd.frame_tasks.step
+    crowd.frame_tasks.step = lambda: steps.append(1) or inner()
     for target in (47, 95, 12, 88, 61, 31):
         steps.clear()
         scene.frame_set(target)

@@ -16,7 +16,8 @@ bpy = pytest.importorskip("bpy")
 sys.path.insert(0, os.path.dirname(__file__))
 import crowd_scene as cs  # noqa: E402
 
-from crowd_addon.core.authoring.seats import SeatSpec, Tier, Tunnel, generate_seats  # noqa: E402
+from crowd_addon.core.authoring.seat_spec import SeatSpec, Tier, Tunnel  # noqa: E402
+from crowd_addon.core.authoring.seats import generate_seats  # noqa: E402
 
 extension = cs.extension_fixture()
 

@@ -141,7 +141,7 @@ def test_lag_smoothing_a_still_target_and_the_scene_frame():
     np.testing.assert_allclose(post.positions, [[1.0, -20.0, 2.0]])
     crowd = Crowd(cfg)
     crowd.advance_to(30)
-    lags = crowd._look_lags
+    lags = crowd.look.lags
     assert lags.min() >= 0 and lags.max() <= 5 and np.unique(lags).size > 1
     chain = LookChain(cfg.look_rigs["Kid"], cfg.skeletons["Kid"])
     pivot, fwd = world_heads(crowd, chain)          # each at the smoothed ball, lag late

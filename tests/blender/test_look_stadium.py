@@ -20,7 +20,7 @@ bpy = pytest.importorskip("bpy")
 sys.path.insert(0, os.path.dirname(__file__))
 import crowd_scene as cs  # noqa: E402
 
-from crowd_addon.blender import stadium  # noqa: E402
+from crowd_addon.blender import stadium, stadium_cast  # noqa: E402
 from crowd_addon.core import Crowd  # noqa: E402
 from crowd_addon.core.runtime.look_at import LookChain, head_direction  # noqa: E402
 from crowd_addon.core.authoring.show import Show  # noqa: E402
@@ -99,7 +99,7 @@ def test_the_stadium_has_look_rigs_and_the_ball_goes_into_the_home_goal(built):
     seats = bpy.data.objects["Seats"].data
     pos = np.array([v.co for v in seats.vertices])
     team = np.array([d.value for d in seats.attributes["team"].data])
-    home_side = -np.sign(pos[team == stadium.AWAY, 0].mean())
+    home_side = -np.sign(pos[team == stadium_cast.AWAY, 0].mean())
     half = 0.5 * np.ptp([v[0] for v in bpy.data.objects["Pitch"].bound_box])
     goal = scene.frame_start + 1 + int(stadium.BEATS["goal"] * FRAMES)
     at_goal = ball.positions[goal - ball.first]

@@ -43,7 +43,7 @@ def imported(tmp_path_factory):
     from crowd_addon.core.shots.recorder import record
     from crowd_addon.usd import export_crowd
 
-    rec = record(Crowd(look_config(), skinning="gpu"), FIRST, LAST, on_frame=simulate_looks)
+    rec = record(Crowd(look_config(), skinning="gpu"), FIRST, LAST, before_step=simulate_looks)
     path = export_crowd(rec, tmp_path_factory.mktemp("looks") / "looks.usdc",
                         layout="blender", repetition=None).path
     return import_agents(path)

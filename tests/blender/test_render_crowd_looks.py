@@ -16,7 +16,7 @@ pytest.importorskip("bpy")
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(__file__)), "gpu"))
 import backend_scenes as scenes  # noqa: E402
-from crowd_addon.blender import render_crowd  # noqa: E402
+from crowd_addon.blender import render_pieces  # noqa: E402
 from crowd_addon.core.runtime.look_at import LookRig, LookTarget, head_direction  # noqa: E402
 
 
@@ -37,18 +37,18 @@ def looking_crowd():
 def test_aim_classes_round_the_head_turn_and_leave_the_others_exact():
     crowd = looking_crowd()
     ev = np.arange(crowd.agents.count)
-    aim, turns = render_crowd.aim_classes(crowd)
+    aim, turns = render_pieces.aim_classes(crowd)
     assert (aim[1::2] == 0).all() and (aim[::2] > 0).all()
     # every class is a whole number of steps
-    steps = turns / render_crowd.AIM_STEP
+    steps = turns / render_pieces.AIM_STEP
     np.testing.assert_allclose(steps, np.rint(steps), atol=1e-9)
-    rows = render_crowd._aimed_rows(crowd, ev, aim, turns)
+    rows = render_pieces.aimed_rows(crowd, ev, aim, turns)
     exact = crowd.agent_rows(ev)
     np.testing.assert_array_equal(rows[1::2], exact[1::2])       # not looking: as core
     chain = crowd.view.look_chains[0]
     a, b = head_direction(exact, chain)[1], head_direction(rows, chain)[1]
     err = np.degrees(np.arccos(np.clip((a * b).sum(1), -1, 1)))
-    bound = np.degrees(render_crowd.AIM_STEP) * math.sqrt(2) / 2 + 0.05
+    bound = np.degrees(render_pieces.AIM_STEP) * math.sqrt(2) / 2 + 0.05
     assert 0 < err[::2].max() <= bound                            # rounded, no further
     # agents of one pose row and one class get one pose mesh's rows
     key = crowd.view.agent_rows_index(ev) * turns.shape[0] + aim

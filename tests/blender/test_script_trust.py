@@ -16,7 +16,7 @@ bpy = pytest.importorskip("bpy")
 sys.path.insert(0, os.path.dirname(__file__))
 import crowd_scene as cs  # noqa: E402
 
-from crowd_addon.blender import preview, scene_config, show_data  # noqa: E402
+from crowd_addon.blender import crowd_script, preview, scene_config  # noqa: E402
 from crowd_addon.blender.cli_commands import export_blend  # noqa: E402
 from crowd_addon.core.base.errors import ScriptNotTrusted  # noqa: E402
 
@@ -31,10 +31,10 @@ def auto_run_off():
     prefs = bpy.context.preferences.filepaths
     keep = prefs.use_scripts_auto_execute
     prefs.use_scripts_auto_execute = False
-    show_data.forget_trusted_scripts()
+    crowd_script.forget_trusted_scripts()
     yield
     preview.stop_all()
-    show_data.forget_trusted_scripts()
+    crowd_script.forget_trusted_scripts()
     prefs.use_scripts_auto_execute = keep
 
 

@@ -328,7 +328,7 @@ def _script(scene, body, name="show.py"):
 
 
 def test_the_crowd_script_runs_only_where_scripts_are_trusted(scene):
-    from crowd_addon.blender import show_data
+    from crowd_addon.blender import crowd_script
     _, plain, _ = run_here(scene, 30)
     _script(scene, SCRIPT)
     cfg = scene_config.config_from_scene(scene)
@@ -336,13 +336,13 @@ def test_the_crowd_script_runs_only_where_scripts_are_trusted(scene):
     assert "crowd script 'show.py' did not run: scripts in .blend files are not trusted" \
         in note
     try:
-        show_data.trust_script(scene.crowd.show.script)     # the panel's Trust Script
+        crowd_script.trust_script(scene.crowd.show.script)     # the panel's Trust Script
         crowd, note = scene_config.build_crowd(scene, cfg)
         assert note == ""
         crowd.advance_to(30)
         _, scripted, _ = run_here(scene, 30)
     finally:
-        show_data.forget_trusted_scripts()
+        crowd_script.forget_trusted_scripts()
     assert not np.array_equal(crowd.agent_poses(), plain[30])   # the callback moved them
     assert np.array_equal(crowd.agent_poses(), scripted[30])
 

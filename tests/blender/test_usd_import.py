@@ -117,7 +117,7 @@ def test_samples_between_frames_import_as_core_between_frames(tmp_path):
 
     n = 4
     path = export_crowd(record(Crowd(make_config(), skinning="gpu", substeps=n), FIRST,
-                               LAST, on_frame=simulate), tmp_path / "blur.usdc",
+                               LAST, before_step=simulate), tmp_path / "blur.usdc",
                         layout="blender").path
     truth = {key: {"poses": {0: p}, "position": {0: pos}, "heading": {0: head}}
              for key, (p, pos, head) in core_samples(n).items()}

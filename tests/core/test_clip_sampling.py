@@ -1,11 +1,12 @@
-"""Clip key times and marker events of a baked action (crowd_addon.core.bake.clip_sampling).
+"""Clip key times and marker events of a baked action (crowd_addon.core.bake.clip_sampling)
+and the between-keys check of its keys (crowd_addon.core.bake.between_keys).
 The same through Blender actions: tests/blender/test_bake.py."""
 
 import numpy as np
 import pytest
 
-from crowd_addon.core.bake.clip_sampling import (interpolation_misses, interpolation_note,
-                                                 marker_events, sample_times)
+from crowd_addon.core.bake.between_keys import interpolation_misses, interpolation_note
+from crowd_addon.core.bake.clip_sampling import marker_events, sample_times
 from crowd_addon.core.base.errors import CrowdError
 
 
@@ -92,7 +93,7 @@ def test_between_key_misses_carried_as_differences_equal_composed_poses():
     poses composed as model matrices in float64 and compared: heads and rotations,
     with a misses from 1e-4 to a half turn and an armature scaled 100x."""
     from crowd_addon.core.base import pose as sqt
-    from crowd_addon.core.bake.clip_sampling import between_key_misses
+    from crowd_addon.core.bake.between_keys import between_key_misses
     from crowd_addon.core.base.skinning import model_matrices
     from crowd_addon.core.authoring.synthetic import humanoid
 

@@ -13,9 +13,9 @@ import pytest
 from crowd_addon.core import (Blend2, BlendMask, BlendSpace2D, ClipPlayer, Controller, Crowd,
                               CrowdConfig, CrowdError, Layer, StateMachine, StateTransition)
 from crowd_addon.core.authoring import synthetic
-from crowd_addon.core.authoring import config_io
-from crowd_addon.core.authoring.config_io import (load_config, register_kind, save_config,
-                                                  unregister_kind)
+from crowd_addon.core.authoring import config_codec
+from crowd_addon.core.authoring.codec import register_kind, unregister_kind
+from crowd_addon.core.authoring.config_io import load_config, save_config
 from crowd_addon.core.authoring.show import Action, Cue, Reaction, Show, Sweep, Track
 
 DOCS = Path(__file__).resolve().parents[2] / "docs" / "config_format.md"
@@ -206,7 +206,7 @@ def test_loaded_crowd_animates_identically(saved):
 
 def test_manifest_is_readable_json(saved):
     m = json.loads(saved.read_text())
-    assert m["format"] == config_io.FORMAT and m["version"] == "1.4"
+    assert m["format"] == config_codec.FORMAT and m["version"] == "1.4"
     assert m["arrays"]["uri"] == "crowd.npz"
     assert m["settings"] == {"max_offset": 12, "transition_slots": 4, "fps": 24.0, "seed": 7,
                              "when_full": "cut", "max_texture_size": 2048, "start_frame": 5}
@@ -234,8 +234,8 @@ def test_docs_example_is_a_valid_manifest():
     blocks = re.findall(r"```json\n(.*?)```", text, re.S)
     assert blocks, "docs/config_format.md has no ```json example"
     m = json.loads(blocks[0])
-    assert m["format"] == config_io.FORMAT
-    assert m["version"].split(".")[0] == str(config_io.VERSION[0])
+    assert m["format"] == config_codec.FORMAT
+    assert m["version"].split(".")[0] == str(config_codec.VERSION[0])
 
 
 # --------------------------------------------------------- clips bound by bone name

@@ -9,7 +9,9 @@ import pytest
 from crowd_addon.core.base import pose as sqt
 from crowd_addon.core.authoring.controller_graph import (NODE_KINDS, InputSpec, NodeSpec,
                                                          TransitionSpec, build_tree)
-from crowd_addon.core.anim.controllers import Blend2, BlendSpace2D, ClipPlayer, Layer, StateMachine
+from crowd_addon.core.anim.blends import Blend2, BlendSpace2D, Layer
+from crowd_addon.core.anim.controllers import ClipPlayer
+from crowd_addon.core.anim.state_machine import StateMachine
 from crowd_addon.core.base.errors import CrowdError
 from crowd_addon.core.base.skeleton import Skeleton
 

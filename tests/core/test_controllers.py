@@ -7,9 +7,10 @@ from types import SimpleNamespace
 from crowd_addon.core.base import pose as sqt
 from crowd_addon.core.base import quaternion as quat
 from crowd_addon.core.anim.clip import Clip, ClipBank
-from crowd_addon.core.anim.controllers import (Blend2, BlendMask, BlendSpace2D, ClipPlayer,
-                                               Layer, StateMachine, StateTransition,
-                                               blend_space_weights)
+from crowd_addon.core.anim.blends import (Blend2, BlendMask, BlendSpace2D, Layer,
+                                          blend_space_weights)
+from crowd_addon.core.anim.controllers import ClipPlayer
+from crowd_addon.core.anim.state_machine import StateMachine, StateTransition
 from crowd_addon.core.base.errors import CrowdError
 from crowd_addon.core.anim.graph import TreeEvaluator
 from crowd_addon.core.authoring.synthetic import humanoid, periodic_clip

@@ -49,7 +49,7 @@ def truth():
 
 
 def test_the_recording_rebuilds_the_looked_rows_at_every_frame():
-    rec = record(Crowd(crowd_config(show()), skinning="gpu"), FIRST, LAST, on_frame=simulate)
+    rec = record(Crowd(crowd_config(show()), skinning="gpu"), FIRST, LAST, before_step=simulate)
     want = truth()
     ids = np.arange(16)
     seen = set()

@@ -1,4 +1,4 @@
-"""Mass reactions the paper's way (core/authoring/show.py, a cue with a switch ``trigger``).
+"""Mass reactions the paper's way (core/shots/show_runner.py, a cue with a switch ``trigger``).
 
 A cue whose agents play streams with a state machine that takes its trigger sets the
 trigger on those streams instead of sending the agents through transition slots: each

@@ -264,3 +264,14 @@ def test_rows_with_interleaved_skeletons_and_slots():
     for ag in range(5):
         assert crowd.agents.kind[ag] == 2
         check(crowd.agent_rows([ag])[0], crowd.agent_poses([ag])[0], skels[ag % 2])
+
+
+def test_one_block_layout_for_every_block_laid_texture():
+    from crowd_addon.core.runtime.pose_storage import block_layout
+    assert block_layout(10, 6, 64, "t") == (10, 1, 6)
+    assert block_layout(100, 6, 40, "t") == (40, 3, 18)   # rows wrap into 3 column blocks
+    s = PoseStorage(3, M, 2, 4, bones=2, max_texture_size=24)
+    assert s.blocks == 2 and (s.height, s.blocks, s.width) == block_layout(s.row_count, 6,
+                                                                           24, "t")
+    with pytest.raises(CrowdError, match="agent texture cannot fit: 100 rows"):
+        block_layout(100, 2, 12, "agent texture")      # 9 blocks x 2 > 12

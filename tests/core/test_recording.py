@@ -7,6 +7,7 @@ import pytest
 
 from crowd_addon.core import ClipPlayer, Crowd, CrowdConfig, CrowdError
 from crowd_addon.core.runtime.agents import STREAM, TRANSITION, UNIQUE
+from crowd_addon.core.shots.driver import FrameDriver
 from crowd_addon.core.shots.recorder import Recorder, record
 from crowd_addon.core.authoring.synthetic import humanoid, periodic_clip
 
@@ -74,17 +75,17 @@ def run(skinning="gpu"):
     seen = {"poses": {}, "position": {}, "heading": {}, "kind": {}, "events": []}
     jump_reaction(crowd)
     crowd.on_event("*", lambda n, f, ids: seen["events"].append((n, f, ids.tolist())))
-    recorder = Recorder(crowd, FIRST, LAST, on_frame=simulate)
-    while True:
+    recorder = Recorder(crowd, FIRST, LAST)
+
+    def look(crowd):
         v = crowd.view
         if v.frame >= FIRST:
             seen["poses"][v.frame] = v.agent_poses()
             seen["position"][v.frame] = np.array(v.agents.position)
             seen["heading"][v.frame] = np.array(v.agents.heading)
             seen["kind"][v.frame] = np.array(v.agents.kind)
-        if recorder.finished:
-            break
-        recorder.step()
+    look(crowd)
+    FrameDriver(crowd, simulate, [recorder.capture, look]).run(LAST)
     return crowd, recorder.finish(), seen
 
 
@@ -181,7 +182,7 @@ def test_record_in_one_call_resets_a_crowd_past_the_shot(shot):
     jump_reaction(crowd)
     crowd.advance_to(FIRST + 4)
     reports = []
-    again = record(crowd, FIRST, LAST, on_frame=simulate,
+    again = record(crowd, FIRST, LAST, before_step=simulate,
                    progress=lambda *r: reports.append(r))
     assert reports[-1] == ("simulate", LAST, LAST) and len(reports) == LAST
     for name in ("stream_poses", "unique_poses", "segment_agent", "segment_frame",
@@ -228,9 +229,9 @@ def test_failing_simulation_names_the_frame():
     def broken(crowd, frame):
         if frame == 5:
             crowd.transition_to_streamed([0], "nope", 3)
-    with pytest.raises(CrowdError, match="on_frame callback failed at frame 5: CrowdError: "
+    with pytest.raises(CrowdError, match="before_step callback failed at frame 5: CrowdError: "
                                          "unknown stream 'nope'"):
-        record(Crowd(config(), skinning="gpu"), 2, 8, on_frame=broken)
+        record(Crowd(config(), skinning="gpu"), 2, 8, before_step=broken)
 
 
 def test_lookups_outside_the_shot_and_finish_too_early(shot):
@@ -253,10 +254,10 @@ def test_every_agent_reported_changed_still_records_only_changes():
         crowd.place_agents(np.arange(N), heading=0.01 * frame)
 
     seen = {}
-    recorder = Recorder(crowd, 0, 160, on_frame=turn)
+    recorder = Recorder(crowd, 0, 160)
     cursor = crowd.view.agent_changes(0).cursor
-    while recorder.step():
-        seen[crowd.view.frame] = (crowd.view.agent_poses(), np.array(crowd.view.agents.heading))
+    FrameDriver(crowd, turn, [recorder.capture, lambda c: seen.__setitem__(
+        c.view.frame, (c.view.agent_poses(), np.array(c.view.agents.heading)))]).run(160)
     assert crowd.view.agent_changes(cursor).agents is None     # the log overflowed
     rec = recorder.finish()
     for f in range(1, 161, 7):

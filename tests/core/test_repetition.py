@@ -8,6 +8,7 @@ import pytest
 
 from crowd_addon.core import Crowd, CrowdError
 from crowd_addon.core.runtime.agents import STREAM, TRANSITION, UNIQUE
+from crowd_addon.core.shots.driver import FrameDriver
 from crowd_addon.core.shots.recorder import Recorder
 from crowd_addon.core.variety.repetition import (RepetitionSettings, crowd_repetition,
                                                  frame_repetition, measure_frames,
@@ -200,14 +201,14 @@ def test_a_recording_measures_what_the_running_crowd_showed():
     first, last = 3, 24
     vp = top_view(8.0)
     s = RepetitionSettings(k=3, offset_tolerance=1, color_tolerance=1.0)
-    recorder = Recorder(crowd, first, last, on_frame=simulate)
+    recorder = Recorder(crowd, first, last)
     live = {}
-    while True:
+
+    def measure(crowd):
         if crowd.view.frame >= first:
             live[crowd.view.frame] = crowd_repetition(crowd.view, vp, settings=s)
-        if recorder.finished:
-            break
-        recorder.step()
+    measure(crowd)
+    FrameDriver(crowd, simulate, [recorder.capture, measure]).run(last)
     rec = recorder.finish()
     got = recording_repetition(rec, vp, frames=range(first, last + 1), settings=s)
     assert got.per_frame == tuple(live[f].value for f in range(first, last + 1))

@@ -6,7 +6,7 @@ from collections import OrderedDict
 import numpy as np
 import pytest
 
-from crowd_addon.core.runtime.transitions import RequestQueue
+from crowd_addon.core.runtime.request_queue import RequestQueue
 
 
 def test_fifo_replace_withdraw():

@@ -1,4 +1,4 @@
-"""The seat generator (crowd_addon/core/seats.py): counts, spacing, aisles, tunnels,
+"""The seat generator (crowd_addon/core/authoring/seats.py): counts, spacing, aisles, tunnels,
 headings, the closest seats, attributes, tiers, the stands mesh and bad input.
 
 The checks are geometric and independent of how the generator works inside: rows are
@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from crowd_addon.core.base.errors import CrowdError
-from crowd_addon.core.authoring.seats import (AWAY, AWAY_BENCH, CONCRETE, HOME, HOME_BENCH,
-                                              SeatSpec, Tier, Tunnel, generate_seats,
-                                              plan_ring)
+from crowd_addon.core.authoring.seat_spec import AWAY, HOME, SeatSpec, Tier, Tunnel
+from crowd_addon.core.authoring.seats import generate_seats, plan_ring
+from crowd_addon.core.authoring.stands import AWAY_BENCH, CONCRETE, HOME_BENCH
 
 TWO_TIERS = (Tier(rows=12), Tier(rows=10, riser=0.5, setback=-2.4, lift=4.0))
 TUNNELS = (Tunnel(90.0, width=6.0, rows=5), Tunnel(-90.0, width=4.0, rows=3))

@@ -1,4 +1,5 @@
-"""The show (core/authoring/show.py): cues, reactions and animated parameters run by the crowd.
+"""The show (core/authoring/show.py, run by core/shots/show_runner.py): cues, reactions
+and animated parameters run by the crowd.
 
 Oracle: the same requests made by hand from Python (the API the show uses) at the
 same frames give bit-identical poses; timing rules are checked agent by agent.
@@ -12,9 +13,9 @@ from crowd_addon.core import (Blend2, ClipPlayer, Crowd, CrowdConfig, CrowdError
 from crowd_addon.core.authoring import synthetic
 from crowd_addon.core.runtime.agents import STREAM, TRANSITION, UNIQUE
 from crowd_addon.core.shots.recorder import record
-from crowd_addon.core.authoring.show import (Action, Cue, Reaction, Show, Sweep, Track,
-                                             neighbours, select_fraction, select_inside,
-                                             select_value)
+from crowd_addon.core.authoring.selections import (neighbours, select_fraction, select_inside,
+                                                   select_value)
+from crowd_addon.core.authoring.show import Action, Cue, Reaction, Show, Sweep, Track
 
 M, N, SIDE = 8, 36, 6
 

@@ -303,8 +303,8 @@ def test_saving_where_it_cannot_leaves_nothing(tmp_path):
 def counting(crowd):
     """Count the frames ``crowd`` really simulates."""
     steps = []
-    inner = crowd._step
-    crowd._step = lambda: steps.append(1) or inner()
+    inner = crowd.frame_tasks.step
+    crowd.frame_tasks.step = lambda: steps.append(1) or inner()
     return steps
 
 

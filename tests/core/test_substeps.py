@@ -8,6 +8,7 @@ import pytest
 
 from crowd_addon.core import Crowd, CrowdError
 from crowd_addon.core.runtime.agents import TRANSITION, UNIQUE
+from crowd_addon.core.shots.driver import FrameDriver
 from crowd_addon.core.shots.recorder import Recorder
 from crowd_addon.core.authoring.synthetic import paper_config
 
@@ -72,15 +73,15 @@ def record_with_substeps():
     crowd = Crowd(config(), skinning="gpu", substeps=N)
     jump_reaction(crowd)
     seen = {}
-    recorder = Recorder(crowd, FIRST, LAST, on_frame=simulate)
-    while True:
+    recorder = Recorder(crowd, FIRST, LAST)
+
+    def look(crowd):
         v = crowd.view
         if v.frame >= FIRST:
             for k in range(N):
                 seen[v.frame + k / N] = (v.agent_poses(sub=k), np.array(v.agents.kind))
-        if recorder.finished:
-            break
-        recorder.step()
+    look(crowd)
+    FrameDriver(crowd, simulate, [recorder.capture, look]).run(LAST)
     return recorder.finish(), seen
 
 

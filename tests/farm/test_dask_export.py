@@ -1,4 +1,4 @@
-"""``crowd export --workers N`` on a Dask cluster (crowd_addon/farm.py): a shot exported
+"""``crowd export --workers N`` on a Dask cluster (crowd_addon/farm/): a shot exported
 in four chunks by a ``LocalCluster`` of two worker processes, then stitched, reads back
 as the single-process export of the whole range (pxr UsdSkel joint and agent
 transforms of every agent at every frame, to 1e-6) with the same events in its
@@ -15,7 +15,7 @@ from dask.distributed import LocalCluster  # a missing Dask fails the run, never
 
 from crowd_addon.cli import main
 from crowd_addon.core.authoring.config_io import save_config
-from crowd_addon.farm import chunk_folder, chunk_ranges
+from crowd_addon.farm.chunks import chunk_folder, chunk_ranges
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))       # tests/: the usd tests
 from usd.test_snapshot_export import show_config  # noqa: E402
@@ -183,7 +183,7 @@ from crowd_addon import register
 build_stadium(sys.argv[1], log=None)
 bpy.ops.wm.open_mainfile(filepath=sys.argv[1])
 register()
-from crowd_addon.blender.stadium import setup_crowd
+from crowd_addon.blender.stadium_cast import setup_crowd
 setup_crowd(bpy.context.scene, hits=2, slots=16)
 bpy.ops.wm.save_as_mainfile(filepath=sys.argv[2])
 """
@@ -270,7 +270,7 @@ def test_a_failed_run_says_truthfully_whether_the_earlier_stage_is_as_it_was(sho
     is in place and unchanged."""
     import shutil
 
-    from crowd_addon.farm import _as_it_was, _stage_state
+    from crowd_addon.farm.cluster import _as_it_was, _stage_state
     tmp, _, whole = shot
     shutil.copytree(whole.parent, tmp_path / "w")
     out = tmp_path / "w" / "shot.usdc"

@@ -12,7 +12,7 @@ from dask.distributed import LocalCluster  # noqa: F401 - a missing Dask fails t
 
 from crowd_addon.cli import main
 from crowd_addon.core.authoring.config_io import save_config
-from crowd_addon.farm import chunk_folder
+from crowd_addon.farm.chunks import chunk_folder
 
 from .test_dask_export import show_config
 

@@ -29,7 +29,7 @@ def extension_zip(tmp_path_factory):
 def test_zip_carries_sources_shaders_and_wheels_for_every_platform(extension_zip):
     names = zipfile.ZipFile(extension_zip).namelist()
     assert "blender_manifest.toml" in names and "__init__.py" in names
-    assert "crowd_addon/core/crowd.py" in names
+    assert "crowd_addon/core/shots/crowd.py" in names
     assert not any(n.startswith(("tests/", "benchmarks/", ".venv/")) for n in names)
     wheels = [n for n in names if n.startswith("wheels/")]
     for py in ("cp311", "cp313"):

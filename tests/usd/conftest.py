@@ -59,7 +59,7 @@ def make_config() -> CrowdConfig:
 
 
 def simulate(crowd, frame):
-    """The shot's simulation: on_frame(crowd, frame) before the step into ``frame``."""
+    """The shot's simulation: before_step(crowd, frame) before the step into ``frame``."""
     if frame == 1:
         crowd.transition_to_streamed([9], "idle", 1, offset=2)     # done before FIRST
     if frame == FIRST:
@@ -134,9 +134,9 @@ def core_samples(substeps):
     return out
 
 
-def recording(config=None, frames=(FIRST, LAST), on_frame=simulate):
+def recording(config=None, frames=(FIRST, LAST), before_step=simulate):
     """The shot recorded (a crowd that skins nothing, as exports use)."""
-    return record(Crowd(config or make_config(), skinning="gpu"), *frames, on_frame=on_frame)
+    return record(Crowd(config or make_config(), skinning="gpu"), *frames, before_step=before_step)
 
 
 @pytest.fixture(scope="module")

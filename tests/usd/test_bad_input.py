@@ -16,9 +16,9 @@ from .conftest import FIRST, make_config, recording, simulate
 FRAMES = (FIRST, 6)
 
 
-def export(path, agents=None, config=None, frames=FRAMES, on_frame=None):
+def export(path, agents=None, config=None, frames=FRAMES, before_step=None):
     """Record ``config`` (default the conftest's) over ``frames`` and export it."""
-    return export_crowd(recording(config, frames, on_frame), path, agents=agents)
+    return export_crowd(recording(config, frames, before_step), path, agents=agents)
 
 
 def snapshot(directory):
@@ -121,9 +121,9 @@ def test_failing_simulation_writes_nothing(previous):
         if frame == 5:
             crowd.transition_to_streamed([0], "no such stream", 3)
 
-    with pytest.raises(CrowdError, match="on_frame callback failed at frame 5: .*"
+    with pytest.raises(CrowdError, match="before_step callback failed at frame 5: .*"
                                          "unknown stream 'no such stream'"):
-        export(path, on_frame=broken)
+        export(path, before_step=broken)
     assert snapshot(path.parent) == before
 
 
@@ -140,7 +140,7 @@ def test_failure_while_writing_layers_writes_nothing(previous, monkeypatch):
 
     monkeypatch.setattr(files_module.ExportFiles, "save", fails_on_third_layer)
     with pytest.raises(CrowdError, match="disk full"):
-        export(path, on_frame=simulate)
+        export(path, before_step=simulate)
     assert len(calls) == 3
     assert snapshot(path.parent) == before
 
@@ -155,7 +155,7 @@ def test_failed_rename_restores_the_previous_export(previous, monkeypatch):
 
     monkeypatch.setattr(files_module.os, "replace", refuse)
     with pytest.raises(CrowdError, match="cannot move the export into place"):
-        export(path, on_frame=simulate)
+        export(path, before_step=simulate)
     assert snapshot(path.parent) == before
 
 
@@ -163,7 +163,7 @@ def test_an_export_cancelled_midway_writes_nothing(previous):
     """Closing export_steps (a cancel) after layers were written leaves no temporary
     folder and the previous export as it was."""
     path, before = previous
-    steps = export_steps(recording(on_frame=simulate), path)
+    steps = export_steps(recording(before_step=simulate), path)
     assert next(steps)[0] == "characters"
     assert [p for p in os.listdir(path.parent) if p.startswith(".shot.usdc.")]
     steps.close()

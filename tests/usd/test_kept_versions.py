@@ -51,7 +51,7 @@ def reexport(chunk, k):
     same bytes as from its snapshot), as a requeued farm job does."""
     a, b = CHUNKS[k]
     return export_crowd(record(Crowd(make_config(), skinning="gpu"), a, b,
-                               on_frame=simulate), chunk)
+                               before_step=simulate), chunk)
 
 
 def test_re_exporting_the_middle_chunk_in_place_keeps_the_stitched_stage_whole(tmp_path):

@@ -29,8 +29,8 @@ def truth():
 def exports(tmp_path_factory):
     from crowd_addon.usd import export_crowd
     d = tmp_path_factory.mktemp("looks")
-    looked = record(Crowd(look_config(), skinning="gpu"), FIRST, LAST, on_frame=simulate_looks)
-    plain = record(Crowd(make_config(), skinning="gpu"), FIRST, LAST, on_frame=simulate)
+    looked = record(Crowd(look_config(), skinning="gpu"), FIRST, LAST, before_step=simulate_looks)
+    plain = record(Crowd(make_config(), skinning="gpu"), FIRST, LAST, before_step=simulate)
     (d / "looks").mkdir()
     (d / "plain").mkdir()
     return (export_crowd(looked, d / "looks" / "shot.usdc", repetition=None),

@@ -32,7 +32,7 @@ def export_chunks(folder, substeps=1, fmt="usdc"):
         simulate(crowd, crowd.frame + 1)
         crowd.step()
     whole = export_crowd(record(Crowd(make_config(), skinning="gpu", substeps=substeps),
-                                FIRST, LAST, on_frame=simulate), folder / f"whole.{fmt}")
+                                FIRST, LAST, before_step=simulate), folder / f"whole.{fmt}")
     paths = []
     for k, (a, b) in enumerate(CHUNKS):
         chunk = Crowd(make_config(), skinning="gpu", substeps=substeps)
@@ -40,7 +40,7 @@ def export_chunks(folder, substeps=1, fmt="usdc"):
             chunk.restore(snaps[a])
         path = folder / "chunks" / f"c{k}" / f"shot.{fmt}"
         path.parent.mkdir(parents=True)
-        export_crowd(record(chunk, a, b, on_frame=simulate), path)
+        export_crowd(record(chunk, a, b, before_step=simulate), path)
         paths.append(path)
     return whole, paths
 

@@ -33,7 +33,7 @@ def exported(tmp_path_factory):
     clips.BANK_FRAMES = 20                   # several banks, split by samples
     try:
         rec = record(Crowd(make_config(), skinning="gpu", substeps=N), FIRST, LAST,
-                     on_frame=simulate)
+                     before_step=simulate)
         result = export_crowd(rec, path)
     finally:
         clips.BANK_FRAMES = banks

@@ -2,8 +2,9 @@
 
 ``CrowdConfig = (skeletons, clips, StreamPool, UniquePool, NT, M, agents, ...)``.
 It is plain data; :func:`validate_config` checks it (``Crowd`` calls it before
-building the runtime).
-:mod:`.config_io` saves and loads it.
+building the runtime). Its builders of bodies (meshes and their LOD levels, mesh
+variants, props) are :mod:`.config_bodies`'s and of agents :mod:`.config_agents`'s
+(mixins it inherits). :mod:`.config_io` saves and loads it.
 """
 
 from __future__ import annotations
@@ -12,18 +13,19 @@ from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
-from ..runtime.agents import assign_offsets, assign_streams, check_offsets
+from ..runtime.agents import check_offsets
 from ..meshes.bodies import MAX_PROPS
 from ..anim.controllers import Controller
 from ..base.errors import CrowdError
 from ..meshes.lod import DEFAULT_LOD_PIXELS
 from .show import Show
 from ..runtime.transitions import WHEN_FULL
+from .config_agents import PALETTE_COLUMNS, AgentsMixin
+from .config_bodies import BodiesMixin
 
-__all__ = ["AnimationDef", "CrowdConfig", "validate_config", "WHEN_FULL", "MAX_TREE_DEPTH",
-           "USD_LAYOUTS", "MAX_SUBSTEPS"]
+__all__ = ["AnimationDef", "CrowdConfig", "validate_config", "MAX_TREE_DEPTH", "USD_LAYOUTS",
+           "MAX_SUBSTEPS"]
 
-#: What a transition request does when every slot is busy: wait, or switch at once.
 #: How a USD export lays its agents out (docs/usd_export.md): ``instanced`` (renderers
 #: share each character's prototype) or ``blender`` (not instanceable, which Blender's
 #: USD importer needs to animate them). Here so that the command line and the panel
@@ -31,9 +33,6 @@ __all__ = ["AnimationDef", "CrowdConfig", "validate_config", "WHEN_FULL", "MAX_T
 USD_LAYOUTS = ("instanced", "blender")
 #: The most samples per frame a crowd keeps for writers (``Crowd(..., substeps=N)``).
 MAX_SUBSTEPS = 16
-#: Palette colours an agent carries (one per palette material of its character, at
-#: most this many: the GPU packs them in one texel).
-PALETTE_COLUMNS = 4
 #: The longest pose history M (frames): offsets travel to the GPU in 16 bits.
 MAX_OFFSET = 65535
 #: The deepest controller tree (levels below the root) a crowd accepts.
@@ -77,8 +76,13 @@ class AnimationDef:
 
 
 @dataclass
-class CrowdConfig:
+class CrowdConfig(BodiesMixin, AgentsMixin):
     """Everything needed to build a crowd.
+
+    Meshes, mesh variants and props are added with the methods of
+    :class:`~.config_bodies.BodiesMixin` (:meth:`add_mesh`, :meth:`add_variant`,
+    :meth:`add_prop`), agents with those of :class:`~.config_agents.AgentsMixin`
+    (:meth:`add_agents`).
 
     Attributes
     ----------
@@ -172,114 +176,6 @@ class CrowdConfig:
         self.clips[clip.name] = clip
         return clip
 
-    def add_mesh(self, mesh, lods=(0.25, 0.06, "card", "card")):
-        """Set ``mesh`` as its skeleton's proxy, with LODs built at ``lods`` triangle
-        ratios and, last, ``"card"`` for each far level (:func:`~.levels.parts_lod`: a box
-        per body part, then with small parts joined; ``()`` for none), or ready
-        :class:`~.mesh.ProxyMesh` levels (of the same skeleton), optionally followed by
-        ``"card"`` (the far level of ``mesh``). LOD ``k`` is drawn once the agent is
-        shorter than ``lod_pixels[k - 1]`` pixels (:mod:`.lod`).
-
-        Every automatic level is checked over the poses of the skeleton's clips added
-        so far at the size it is switched in at (:func:`.lod_check.fit_levels`): each
-        decimated level is the lightest of a few tries whose silhouette strays from the
-        full mesh's by at most ``lod_budget_px`` (1 pixel; ``inf``: no check); a level
-        none of whose tries passes is replaced by the level before it, and a note
-        saying so is added to :attr:`lod_notes` (the bake and the CLI print them).
-        Levels an artist made are kept as made."""
-        levels = self._levels(mesh, lods)
-        self.meshes[mesh.skeleton] = levels
-        return levels
-
-    def add_variant(self, mesh, lods=(0.25, 0.06, "card", "card")):
-        """Add ``mesh`` as a further mesh variant of its skeleton (after the body of
-        :meth:`add_mesh`, which must be set); ``lods`` as for :meth:`add_mesh`. Returns
-        the variant's index."""
-        if not self.meshes.get(mesh.skeleton):
-            raise CrowdError(f"mesh variant {mesh.name!r}: skeleton {mesh.skeleton!r} has no "
-                             "body yet (add_mesh first: it is variant 0)")
-        names = [lv[0].name for lv in self.mesh_variants(mesh.skeleton)]
-        if mesh.name in names:
-            raise CrowdError(f"mesh variant {mesh.name!r}: skeleton {mesh.skeleton!r} has a "
-                             f"variant of that name already ({names})")
-        self.variants.setdefault(mesh.skeleton, []).append(self._levels(mesh, lods))
-        return len(names)
-
-    def mesh_variants(self, skeleton: str) -> list:
-        """The LOD level lists of ``skeleton``'s mesh variants, variant 0 first (empty
-        when it has no mesh)."""
-        first = self.meshes.get(skeleton)
-        return [first, *self.variants.get(skeleton, [])] if first else []
-
-    def add_prop(self, prop):
-        """Add a :class:`~.bodies.Prop` to its skeleton; returns its index (its bit in
-        ``agent_props``)."""
-        if prop.skeleton not in self.skeletons:
-            raise CrowdError(f"prop {prop.name!r}: unknown skeleton {prop.skeleton!r} "
-                             f"(known: {sorted(self.skeletons)})")
-        self._check_mesh(prop.mesh, f"prop {prop.name!r}: ")
-        have = self.props.setdefault(prop.skeleton, [])
-        if prop.name in [p.name for p in have]:
-            raise CrowdError(f"prop {prop.name!r}: skeleton {prop.skeleton!r} has a prop of "
-                             "that name already")
-        if len(have) >= MAX_PROPS:
-            raise CrowdError(f"prop {prop.name!r}: skeleton {prop.skeleton!r} has "
-                             f"{MAX_PROPS} props already, the most a character has")
-        have.append(prop)
-        return len(have) - 1
-
-    def _levels(self, mesh, lods) -> list:
-        from ..meshes.levels import CARD, parts_lod
-        from ..meshes.mesh import ProxyMesh
-        self._check_mesh(mesh)
-        ready = [m for m in lods if isinstance(m, ProxyMesh)]
-        if not ready:
-            return self._fitted(mesh, tuple(lods))
-        else:
-            lods = list(lods)
-            rest = lods[len(ready):]
-            if not all(isinstance(m, ProxyMesh) for m in lods[:len(ready)]) \
-                    or not (rest == [] or (len(rest) == 1 and isinstance(rest[0], str)
-                                           and rest[0] == CARD)):
-                raise CrowdError(f"mesh {mesh.name!r}: LODs are either triangle ratios or "
-                                 f"ready meshes, then optionally {CARD!r} (last), got "
-                                 f"{[getattr(m, 'name', m) for m in lods]}")
-            for k, level in enumerate(ready, start=1):
-                if level.skeleton != mesh.skeleton:
-                    raise CrowdError(f"mesh {mesh.name!r}: LOD {k} {level.name!r} is for "
-                                     f"skeleton {level.skeleton!r}, not {mesh.skeleton!r}")
-                self._check_mesh(level, f"mesh {mesh.name!r}: LOD {k}: ")
-            # levels an artist made are kept as made: the silhouette check judges the
-            # automatic ones
-            return [mesh, *ready] + ([parts_lod(mesh)] if rest else [])
-
-    @property
-    def lod_notes(self) -> list:
-        """What the silhouette check of :meth:`add_mesh` and :meth:`add_variant` refused
-        (one line per level; not saved: loading checks nothing again)."""
-        return self.__dict__.setdefault("_lod_notes", [])
-
-    def _fitted(self, mesh, lods) -> list:
-        """``mesh``'s automatic levels, each the lightest that passes the silhouette check
-        at its switch size (:func:`.lod_check.fit_levels`)."""
-        from ..meshes.lod import switch_pixels
-        from ..meshes.lod_check import clip_poses, fit_levels
-        sk = self.skeletons[mesh.skeleton]
-        levels, notes = fit_levels(mesh, lods, sk, clip_poses(sk, self.clips.values()),
-                                   switch_pixels(self), float(self.lod_budget_px))
-        self.lod_notes.extend(f"mesh {mesh.name!r}: {n}" for n in notes)
-        return levels
-
-    def _check_mesh(self, mesh, what=""):
-        if mesh.skeleton not in self.skeletons:
-            raise CrowdError(f"{what}mesh {mesh.name!r}: unknown skeleton {mesh.skeleton!r} "
-                             f"(known: {sorted(self.skeletons)})")
-        bones = self.skeletons[mesh.skeleton].bone_count
-        if int(mesh.bone_indices.max()) >= bones:
-            raise CrowdError(f"{what}mesh {mesh.name!r}: uses bone "
-                             f"{int(mesh.bone_indices.max())} but skeleton {mesh.skeleton!r} "
-                             f"has {bones} bones")
-
     def add_stream(self, name, skeleton, root, speed=1.0, phase=0.0, template=""):
         self.streams.append(AnimationDef(str(name), str(skeleton), root, speed, phase,
                                          str(template)))
@@ -295,108 +191,6 @@ class CrowdConfig:
         empty = CrowdConfig()
         return replace(self, **{f.name: getattr(empty, f.name) for f in fields(self)
                                 if f.name.startswith("agent_")})
-
-    @property
-    def agent_count(self) -> int:
-        return int(self.agent_offset.shape[0])
-
-    @property
-    def palette(self) -> np.ndarray:
-        """(N, 4, 3) float32 palette colours per agent: :attr:`agent_palette`, or -1
-        (none) when it is empty."""
-        p = np.asarray(self.agent_palette, np.float32).reshape(-1, PALETTE_COLUMNS, 3)
-        return p if p.shape[0] else np.full((self.agent_count, PALETTE_COLUMNS, 3), -1.0,
-                                            np.float32)
-
-    @property
-    def variant_ids(self) -> np.ndarray:
-        """(N,) int16 mesh variant per agent: :attr:`agent_variant`, or zeros."""
-        v = np.asarray(self.agent_variant, np.int16).reshape(-1)
-        return v if v.size else np.zeros(self.agent_count, np.int16)
-
-    @property
-    def prop_masks(self) -> np.ndarray:
-        """(N,) uint8 props per agent (a bit each): :attr:`agent_props`, or zeros."""
-        m = np.asarray(self.agent_props, np.uint8).reshape(-1)
-        return m if m.size else np.zeros(self.agent_count, np.uint8)
-
-    @property
-    def scales(self) -> np.ndarray:
-        """(N,) float32 scale per agent: :attr:`agent_scale`, or ones when it is empty."""
-        s = np.asarray(self.agent_scale, np.float32).reshape(-1)
-        return s if s.size else np.ones(self.agent_count, np.float32)
-
-    def add_agents(self, count, streams=None, stream_weights=None, offsets="uniform",
-                   offset_mean=None, offset_std=None, positions=None, headings=None,
-                   colors=None, seed=None, scales=None, palette=None, variants=None,
-                   props=None):
-        """Append ``count`` streamed agents.
-
-        ``streams``: None (all streams, drawn with ``stream_weights``), an int, a
-        name, or an array of stream indices per agent. ``offsets``: ``"uniform"``,
-        ``"normal"`` or an array. ``variants``: each agent's mesh variant, ``props``
-        the props it carries (a bit per prop of its character; :mod:`.bodies`); None:
-        variant 0 and no props. Returns the new agents' ids.
-        """
-        seed = self.seed + self.agent_count if seed is None else seed
-        names = [s.name for s in self.streams]
-        if streams is None:
-            st = assign_streams(count, len(self.streams), stream_weights, seed)
-        elif isinstance(streams, (str, int, np.integer)):
-            idx = names.index(streams) if isinstance(streams, str) and streams in names \
-                else streams
-            if isinstance(idx, str) or not 0 <= int(idx) < len(names):
-                raise CrowdError(f"agents: unknown stream {streams!r}")
-            st = np.full(count, int(idx), np.int32)
-        else:
-            st = np.asarray(streams, np.int32)
-            if st.shape != (count,):
-                raise CrowdError(f"agents: {st.shape} streams for {count} agents")
-        if isinstance(offsets, str):
-            off = assign_offsets(count, self.max_offset, offsets, seed + 1, offset_mean,
-                                 offset_std)
-        else:
-            off = assign_offsets(count, self.max_offset, "given", offsets=offsets)
-        pos = np.zeros((count, 3), np.float32) if positions is None else \
-            np.asarray(positions, np.float32).reshape(count, 3)
-        head = np.zeros(count, np.float32) if headings is None else \
-            np.asarray(headings, np.float32).reshape(count)
-        if colors is None:
-            col = np.random.default_rng(seed + 2).uniform(0.35, 1.0, (count, 3))
-        else:
-            col = np.asarray(colors, np.float32).reshape(count, 3)
-        first = self.agent_count
-        if scales is not None or np.asarray(self.agent_scale).size:
-            old = self.scales
-            new = np.ones(count, np.float32) if scales is None else \
-                np.asarray(scales, np.float32).reshape(count)
-            self.agent_scale = np.concatenate([old, new]).astype(np.float32)
-        for name, given, dtype in (("agent_variant", variants, np.int16),
-                                   ("agent_props", props, np.uint8)):
-            if given is not None or np.asarray(getattr(self, name)).size:
-                old = self.variant_ids if name == "agent_variant" else self.prop_masks
-                arr = np.zeros(count, np.int64) if given is None else \
-                    np.asarray(given).reshape(count)
-                top = np.iinfo(dtype).max
-                if arr.size and not (np.issubdtype(arr.dtype, np.integer)
-                                     and 0 <= arr.min() and arr.max() <= top):
-                    raise CrowdError(f"agents: {name[6:]} must be integers in 0..{top}, got "
-                                     f"{arr.dtype} {arr.min()}..{arr.max()}")
-                new = arr.astype(dtype)
-                setattr(self, name, np.concatenate([old, new]).astype(dtype))
-        if palette is not None or np.asarray(self.agent_palette).size:
-            old = self.palette
-            new = np.full((count, PALETTE_COLUMNS, 3), -1.0, np.float32) if palette is None \
-                else np.asarray(palette, np.float32).reshape(count, PALETTE_COLUMNS, 3)
-            self.agent_palette = np.concatenate([old, new]).astype(np.float32)
-        self.agent_stream = np.concatenate([self.agent_stream, st]).astype(np.int32)
-        self.agent_unique = np.concatenate([self.agent_unique,
-                                            np.full(count, -1, np.int32)]).astype(np.int32)
-        self.agent_offset = np.concatenate([self.agent_offset, off]).astype(np.int32)
-        self.agent_position = np.concatenate([self.agent_position, pos]).astype(np.float32)
-        self.agent_heading = np.concatenate([self.agent_heading, head]).astype(np.float32)
-        self.agent_color = np.concatenate([self.agent_color, col]).astype(np.float32)
-        return np.arange(first, first + count)
 
 
 class _ClipLookup:

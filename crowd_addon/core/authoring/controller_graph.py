@@ -13,8 +13,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..anim.controllers import (Blend2, BlendSpace2D, ClipPlayer, Layer, StateMachine,
-                                StateTransition)
+from ..anim.blends import Blend2, BlendSpace2D, Layer
+from ..anim.controllers import ClipPlayer
+from ..anim.state_machine import StateMachine, StateTransition
 from ..base.errors import CrowdError
 from ..base.skeleton import Skeleton
 

@@ -195,8 +195,9 @@ def paper_stream_tree(s: int):
     """Stream ``s`` of :func:`paper_config`: a clip or a small controller tree, cycling
     through plain clip, 2-way blend, additive wave layer, 2-D blend space and state
     machine (triggers ``goal`` / ``calm``)."""
-    from ..anim.controllers import (Blend2, BlendSpace2D, ClipPlayer, Layer, StateMachine,
-                                    StateTransition)
+    from ..anim.blends import Blend2, BlendSpace2D, Layer
+    from ..anim.controllers import ClipPlayer
+    from ..anim.state_machine import StateMachine, StateTransition
     c = lambda k: ClipPlayer(f"clip{(s + k) % 12}")  # noqa: E731
     kind = s % 5
     if kind == 0:

@@ -3,7 +3,7 @@
 A frame number is a whole number of magnitude at most :data:`MAX_FRAME` (as in
 configuration files and snapshots), and one run steps at most :data:`MAX_RUN_FRAMES`
 frames: one :meth:`Crowd.advance_to <.crowd.Crowd.advance_to>` call, one snapshot pass
-(``crowd snapshot``, :func:`.snapshot.write_snapshots`), one recording
+(``crowd snapshot``, :func:`.snapshot_store.write_snapshots`), one recording
 (:func:`.recorder.record`). A longer run is refused before its first step, with the
 bound and how to split it: into runs of at most that many frames, each going on from
 where the last one stopped (a crowd stepped on, or the last one's snapshot).

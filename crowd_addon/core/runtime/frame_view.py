@@ -118,7 +118,7 @@ class FrameView:
     # ------------------------------------------------------------------- looks
     @property
     def looks(self):
-        """The agents' looks (:class:`~.look_at.AgentLooks`: per agent ``target``,
+        """The agents' looks (:class:`~.looks.AgentLooks`: per agent ``target``,
         ``start``, ``blend``, ``stop``; read-only). They change only when a look starts
         or stops; ``looks.version`` counts those changes."""
         return self._crowd.looks
@@ -127,17 +127,17 @@ class FrameView:
     def look_targets(self) -> tuple:
         """The look targets (:class:`~.look_at.LookTarget`, immutable), in the order
         ``looks.target`` indexes them; ``target.smoothed()`` is the path agents read."""
-        return tuple(self._crowd._look_targets)
+        return self._crowd.look.targets
 
     @property
     def look_chains(self) -> tuple:
         """Per skeleton its :class:`~.look_at.LookChain` (None: no look rig)."""
-        return tuple(self._crowd._look_chains)
+        return self._crowd.look.chains
 
     @property
     def look_lags(self) -> np.ndarray:
         """(N,) int64 frames each agent reads its look target late (a copy)."""
-        return np.array(self._crowd._look_lags, np.int64)
+        return np.array(self._crowd.look.lags, np.int64)
 
     # -------------------------------------------------------------------- poses
     @property

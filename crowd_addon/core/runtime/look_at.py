@@ -29,7 +29,8 @@ Each agent sees the target late and smoothed, so a stand does not snap as one: t
 target's path is smoothed once (:meth:`LookTarget.smoothed`, an exponential moving
 average with time constant ``smoothing`` frames) and agent ``i`` reads it at
 ``F - lag_i`` (:func:`agent_lags`: by default its animation offset, which already
-spreads a stand's timing over M frames, or a seeded delay).
+spreads a stand's timing over M frames, or a seeded delay). Who looks at what, and
+the stage a crowd runs, are in :mod:`.looks`.
 """
 
 from __future__ import annotations
@@ -43,8 +44,8 @@ import numpy as np
 from ..base.errors import CrowdError
 from ..base.skeleton import Skeleton
 
-__all__ = ["LookRig", "LookTarget", "LookChain", "AgentLooks", "agent_lags", "look_turns",
-           "look_angles", "turns_of", "apply_look", "head_direction"]
+__all__ = ["LookRig", "LookTarget", "LookChain", "agent_lags", "look_turns", "look_angles",
+           "turns_of", "apply_look", "head_direction"]
 
 _Z = np.array([0.0, 0.0, 1.0])
 
@@ -323,79 +324,3 @@ def apply_look(rows, chain: LookChain, turns, only=None) -> np.ndarray:
         new[..., 3] = np.einsum("njab,njb->nja", a[..., :3], s[..., 3]) + a[..., 3]
         out[:, bones] = new
     return out
-
-
-_NEVER = np.iinfo(np.int64).max // 4
-
-
-class AgentLooks:
-    """Who looks at what: per agent the look target (an index into the crowd's look
-    targets, -1 none), the frame the look starts, its blend length (frames) and the
-    frame it starts to end (:data:`_NEVER`: it stays). The weight at frame ``F`` ramps
-    up over ``blend`` frames from ``start`` and down over ``blend`` frames from
-    ``stop`` (:meth:`weights`), so a look costs nothing per frame on the CPU: only
-    these four numbers change, when a look is started or stopped. ``version`` counts
-    those changes (:meth:`look`, :meth:`look_away`, :meth:`reset`, :meth:`set_state`),
-    so a reader (the recorder) compares the arrays only after one."""
-
-    STATE = ("target", "start", "blend", "stop")
-
-    def __init__(self, agents: int):
-        self.target = np.full(agents, -1, np.int64)
-        self.start = np.zeros(agents, np.int64)
-        self.blend = np.zeros(agents, np.float64)
-        self.stop = np.full(agents, _NEVER, np.int64)
-        self.version = 0
-
-    def reset(self):
-        self.version += 1
-        self.target[:] = -1
-        self.start[:] = 0
-        self.blend[:] = 0.0
-        self.stop[:] = _NEVER
-
-    def look(self, ids, target: int, frame: int, blend: float, hold: int = 0):
-        """``ids`` look at target ``target`` from ``frame``, blending in over ``blend``
-        frames; with ``hold > 0`` they start to look away ``hold`` frames later."""
-        self.version += 1
-        self.target[ids] = int(target)
-        self.start[ids] = int(frame)
-        self.blend[ids] = float(blend)
-        self.stop[ids] = int(frame) + int(hold) if hold else _NEVER
-
-    def look_away(self, ids, frame: int, blend: float):
-        """``ids`` stop looking, blending out over ``blend`` frames from ``frame``
-        (from the weight they have then)."""
-        self.version += 1
-        ids = np.asarray(ids, np.int64)
-        ids = ids[self.target[ids] >= 0]
-        w = self.weights(frame, ids)
-        # a ramp down over ``blend`` frames that passes ``w`` at ``frame`` (the ramp up
-        # moved back so it is over)
-        blend = float(blend)
-        self.blend[ids] = blend
-        self.start[ids] = np.minimum(self.start[ids], frame - int(math.ceil(blend)))
-        self.stop[ids] = frame - np.round((1.0 - w) * blend).astype(np.int64)
-
-    def weights(self, frame: int, ids) -> np.ndarray:
-        """(n,) 0..1: how far ``ids`` look at their target at ``frame`` (0 without
-        one)."""
-        ids = np.asarray(ids, np.int64)
-        b = self.blend[ids]
-        up = np.where(b > 0, (frame - self.start[ids]) / np.maximum(b, 1e-12),
-                      (frame >= self.start[ids]).astype(np.float64))
-        down = np.where(b > 0, (frame - self.stop[ids]) / np.maximum(b, 1e-12),
-                        (frame >= self.stop[ids]).astype(np.float64))
-        w = np.clip(up, 0.0, 1.0) * (1.0 - np.clip(down, 0.0, 1.0))
-        return np.where(self.target[ids] >= 0, w, 0.0)
-
-    def state(self) -> dict:
-        return {k: getattr(self, k) for k in self.STATE}
-
-    def set_state(self, state: dict, targets: int):
-        self.version += 1
-        for k in self.STATE:
-            getattr(self, k)[...] = state[k]
-        if not (((self.target >= -1) & (self.target < targets)).all()
-                and (self.blend >= 0).all() and np.isfinite(self.blend).all()):
-            raise ValueError("the agents' looks name a look target that does not exist")

@@ -17,7 +17,7 @@ from ..base import pose as sqt
 from .agents import check_offsets
 from ..base.errors import CrowdError
 
-__all__ = ["StreamPool", "UniquePool", "resolve_index"]
+__all__ = ["StreamPool", "UniquePool", "resolve_index", "stream_key"]
 
 
 def resolve_index(names, target, what: str) -> int:
@@ -30,6 +30,14 @@ def resolve_index(names, target, what: str) -> int:
             and 0 <= int(target) < len(names):
         return int(target)
     raise CrowdError(f"unknown {what} index {target!r} ({len(names)} {what}s)")
+
+
+def stream_key(stream, offset, max_offset):
+    """The key of agents playing ``(stream, offset)``: ``stream * M + offset``, unique
+    per pair (``divmod(key, M)`` gives them back); a unique's key is past every
+    stream's (:meth:`UniquePool.key`). The agent index, event delivery and the USD
+    export's offset animations share it."""
+    return stream * max_offset + offset
 
 
 class StreamPool:
@@ -64,8 +72,8 @@ class StreamPool:
         return self.slice(frame, offset) * self.count + stream
 
     def key(self, stream, offset):
-        """Index key of agents playing ``(stream, offset)``: ``stream * M + offset``."""
-        return stream * self.max_offset + offset
+        """Index key of agents playing ``(stream, offset)`` (:func:`stream_key`)."""
+        return stream_key(stream, offset, self.max_offset)
 
     @property
     def key_count(self) -> int:
@@ -115,6 +123,9 @@ class StreamPool:
                 for k in ("log_stream", "log_name", "log_frame")]
         if len({a.size for a in logs}) != 1:
             raise ValueError("the event log's arrays differ in length")
+        if not (((logs[0] >= 0) & (logs[0] < self.count)).all()
+                and ((logs[1] >= 0) & (logs[1] < len(self._tag_names))).all()):
+            raise ValueError("the event log names a stream or tag that does not exist")
         self.history[...] = state["history"]
         self._log_stream, self._log_name, self._log_frame = logs
 

@@ -25,7 +25,8 @@ import numpy as np
 
 from ..base.errors import CrowdError
 
-__all__ = ["PoseStorage", "PoseLayout", "TextureRegion", "LOCAL_IDENTITY", "LOCAL_FLOATS"]
+__all__ = ["PoseStorage", "PoseLayout", "TextureRegion", "LOCAL_IDENTITY", "LOCAL_FLOATS",
+           "block_layout"]
 
 #: A local-pose texture keeps a bone's SQT in the first ten of its twelve texel floats.
 LOCAL_FLOATS = 10
@@ -54,6 +55,26 @@ class TextureRegion:
     @property
     def nbytes(self) -> int:
         return int(self.data.nbytes)
+
+
+def block_layout(rows: int, row_texels: int, max_texture_size: int, what: str) -> tuple:
+    """``(height, blocks, width)`` of ``rows`` logical rows of ``row_texels`` texels
+    laid out in column blocks: row ``r`` starts at texel ``((r // height) *
+    row_texels, r % height)`` (``block_layout.glsl``). The pose textures, the agent
+    texture and the looks texture all use it; CrowdError names ``what`` cannot fit
+    in ``max_texture_size``."""
+    limit = int(max_texture_size)
+    if row_texels > limit:
+        raise CrowdError(f"{what} cannot fit: a row of {row_texels} texels, max texture "
+                         f"size is {limit}")
+    height = max(1, min(rows, limit))
+    blocks = max(1, -(-rows // height))
+    width = blocks * row_texels
+    if width > limit:
+        raise CrowdError(f"{what} cannot fit: {rows} rows of {row_texels} texels need "
+                         f"{blocks} column blocks ({width} x {height} texels), max "
+                         f"texture size is {limit}")
+    return height, blocks, width
 
 
 @dataclass(frozen=True)
@@ -110,18 +131,9 @@ class PoseStorage:
         self.max_texture_size = int(max_texture_size)
         n = self.M * self.S + self.U + self.NT
         self.row_count = n
-        if self.row_texels > self.max_texture_size:
-            raise CrowdError(f"pose texture cannot fit: a row of {self.bones} bones needs "
-                             f"{self.row_texels} texels, max texture size is "
-                             f"{self.max_texture_size}")
-        self.height = max(1, min(n, self.max_texture_size))
-        self.blocks = max(1, -(-n // self.height))
-        self.width = self.blocks * self.row_texels
-        if self.width > self.max_texture_size:
-            raise CrowdError(f"pose texture cannot fit: {n} rows of {self.row_texels} texels "
-                             f"need {self.blocks} column blocks ({self.width} texels wide), "
-                             f"max texture size is {self.max_texture_size}; lower M, streams "
-                             "or transition slots")
+        self.height, self.blocks, self.width = block_layout(
+            n, self.row_texels, self.max_texture_size,
+            f"pose texture ({self.bones} bones a row; lower M, streams or transition slots)")
         self.rows = np.zeros((n, self.bones, 3, 4), np.float32)
         if fill is None:
             self.rows[:, :, 0, 0] = self.rows[:, :, 1, 1] = self.rows[:, :, 2, 2] = 1

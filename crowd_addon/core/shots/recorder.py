@@ -1,7 +1,9 @@
 """Running a crowd over a shot into a :class:`~.recording.Recording`, once.
 
-:func:`record`, or a :class:`Recorder` stepped one frame at a time (a modal timer), runs
-a :class:`~.crowd.Crowd` over ``first .. last`` reading only ``crowd.view``: see
+:func:`record` runs a :class:`~.crowd.Crowd` over ``first .. last`` with a
+:class:`~.driver.FrameDriver` whose consumer is a :class:`Recorder` (a caller that
+steps one frame at a time, a modal timer, drives its own FrameDriver with the
+recorder's :meth:`~Recorder.capture`). The recorder reads only ``crowd.view``: see
 :mod:`.recording` for what is kept. Before anything runs, shots are refused that would
 simulate more than :data:`MAX_PREROLL` frames before their first frame, step more than
 :data:`~.bounds.MAX_RUN_FRAMES` frames in all, or whose poses would take more than
@@ -18,32 +20,29 @@ import numpy as np
 from ..base import pose as sqt
 from ..runtime.agents import STREAM, TRANSITION
 from ..base.errors import CrowdError
+from .driver import FrameDriver
 from .recording import TARGET_FIELDS, Recording
 
 __all__ = ["Recorder", "record", "MAX_PREROLL", "MAX_BYTES"]
 
 
 class Recorder:
-    """Records ``crowd`` over ``first .. last`` one frame at a time.
+    """Records ``crowd`` over ``first .. last``: give it each frame the crowd reaches
+    (:meth:`capture`, a :class:`~.driver.FrameDriver` consumer).
 
-    A crowd past ``first`` is reset to its start first. :meth:`step` runs
-    ``on_frame(crowd, frame)`` (the simulation: requests, triggers, parameters, agent
-    moves; from the crowd's frame on, before the shot too), steps and records; a crowd
-    stepped by someone else (a preview renderer) is recorded by :meth:`capture` after
-    each of its steps. :meth:`finish` returns the :class:`Recording`. Events fired
-    before the recorder was made (those of ``first`` if the crowd is there) are not
-    recorded. ``done``/``total``: steps (``total = last -`` the crowd's frame then).
+    A crowd past ``first`` is reset to its start first. :meth:`finish` returns the
+    :class:`Recording`. Events fired before the recorder was made (those of ``first``
+    if the crowd is there) are not recorded.
     """
 
-    def __init__(self, crowd, first, last, on_frame=None):
+    def __init__(self, crowd, first, last):
         t = time.perf_counter()
         view = crowd.view
         self.first, self.last = _check_frames(first, last, view.config.start_frame)
         _check_cost(view, self.first, self.last)
-        self.crowd, self.on_frame = crowd, on_frame
+        self.crowd = crowd
         if view.frame > self.first:
             crowd.reset()
-        self.done, self.total = 0, self.last - view.frame
         self._recorded = None                      # the last frame recorded
         self._events = []
         self._handle = crowd.on_event("*", self._on_event)
@@ -54,29 +53,12 @@ class Recorder:
     def finished(self) -> bool:
         return self._recorded == self.last
 
-    def step(self) -> bool:
-        """Advance the crowd one frame and record it; returns whether frames remain.
-        An exception in ``on_frame`` is raised as a CrowdError naming the frame."""
-        if self.finished:
-            raise CrowdError(f"record: frames {self.first}-{self.last} are recorded")
-        t = time.perf_counter()
-        frame = self.crowd.view.frame + 1
-        if self.on_frame is not None:
-            try:
-                self.on_frame(self.crowd, frame)
-            except Exception as e:  # noqa: BLE001 - reported with its frame
-                raise CrowdError(f"on_frame callback failed at frame {frame}: "
-                                 f"{type(e).__name__}: {e}") from e
-        self.crowd.step()
-        self.done += 1
-        self._seconds += time.perf_counter() - t
-        self.capture()                           # counts its own time
-        return not self.finished
-
-    def capture(self):
+    def capture(self, crowd=None):
         """Record the crowd's current frame: nothing before ``first`` or for a frame
         already recorded; a skipped frame, a crowd gone back or past ``last`` is an
-        error."""
+        error. (``crowd``: the crowd a FrameDriver hands over, this recorder's.)"""
+        if crowd is not None and crowd is not self.crowd:
+            raise CrowdError("record: given another crowd's frame")
         f = self.crowd.view.frame
         if f < self.first or f == self._recorded:
             return
@@ -98,7 +80,9 @@ class Recorder:
             self.crowd.events.off(self._handle)
             self._handle = None
 
-    def finish(self) -> Recording:
+    def finish(self, stepped: float = 0.0) -> Recording:
+        """The Recording (``stepped``: seconds the crowd's steps took, counted in its
+        ``seconds`` with the recorder's own)."""
         if not self.finished:
             raise CrowdError(f"record: frame {self.last} is not recorded yet (at "
                              f"{self._recorded})")
@@ -123,7 +107,7 @@ class Recorder:
             move_heading=mv[3], events=tuple(self._events),
             **self._look_fields(v),
             stream_events=tuple(self._stream_events.columns(order_by=2)),
-            seconds=self._seconds)
+            seconds=self._seconds + float(stepped))
 
     # ---------------------------------------------------------------- recording
     def _on_event(self, name, frame, agents):
@@ -273,16 +257,16 @@ class _Rows:
         return [c[order] for c in cols]
 
 
-def record(crowd, first, last, on_frame=None, progress=None) -> Recording:
-    """Record ``crowd`` over ``first .. last`` in one call (:class:`Recorder` stepped to
-    the end); ``progress("simulate", done, total)`` after each step."""
-    recorder = Recorder(crowd, first, last, on_frame)
+def record(crowd, first, last, before_step=None, progress=None) -> Recording:
+    """Record ``crowd`` over ``first .. last`` in one call: a FrameDriver with
+    ``before_step(crowd, frame)`` (the simulation) and the :class:`Recorder`;
+    ``progress("simulate", done, total)`` after each step."""
+    recorder = Recorder(crowd, first, last)
     try:
-        while not recorder.finished:
-            recorder.step()
-            if progress is not None:
-                progress("simulate", recorder.done, recorder.total)
-        return recorder.finish()
+        driver = FrameDriver(crowd, before_step, [recorder.capture])
+        driver.run(recorder.last, None if progress is None else
+                   (lambda done, total: progress("simulate", done, total)))
+        return recorder.finish(driver.seconds)
     finally:
         recorder.close()
 

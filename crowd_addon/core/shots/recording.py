@@ -231,8 +231,8 @@ class Recording:
 
     def look_state(self, frame, agent) -> tuple:
         """``(target, start, blend, stop)`` (n,) of each ``(frame[i], agent[i])`` pair:
-        the agent's look then (:class:`~.look_at.AgentLooks`; target -1: none)."""
-        from ..runtime.look_at import AgentLooks
+        the agent's look then (:class:`~.looks.AgentLooks`; target -1: none)."""
+        from ..runtime.looks import AgentLooks
         frame, agent = np.asarray(frame, np.int64), np.asarray(agent, np.int64)
         looks = AgentLooks(frame.size)
         if self.has_looks:
@@ -244,7 +244,7 @@ class Recording:
 
     def look_weights(self, frame, agent) -> np.ndarray:
         """(n,) float64 0..1: how far each ``(frame[i], agent[i])`` looked at its
-        target (core's :meth:`~.look_at.AgentLooks.weights`)."""
+        target (core's :meth:`~.looks.AgentLooks.weights`)."""
         frame = np.asarray(frame, np.int64)
         return self.look_state(frame, agent).weights(frame, np.arange(frame.size))
 
@@ -262,19 +262,11 @@ class Recording:
     def look_targets_model(self, frame, agent, looks=None) -> np.ndarray:
         """(n, 3) where each ``(frame[i], agent[i])`` saw its look target, in the
         agent's model space (core's ``Crowd.look_targets_model``)."""
+        from ..runtime.looks import model_space, seen_targets
         looks = self.look_state(frame, agent) if looks is None else looks
-        out = np.zeros((frame.size, 3))
-        lag = self.look_lags[agent]
-        for t, target in enumerate(self.look_targets):
-            m = looks.target == t
-            if m.any():
-                out[m] = target.at(frame[m] - lag[m])
+        seen = seen_targets(self.look_targets, looks.target, frame - self.look_lags[agent])
         pos, head = self.pair_transforms(frame, agent)
-        d = out - pos
-        h = -head.astype(np.float64)
-        c, s = np.cos(h), np.sin(h)
-        local = np.stack([c * d[:, 0] - s * d[:, 1], s * d[:, 0] + c * d[:, 1], d[:, 2]], 1)
-        return local / self.scales[agent, None]
+        return model_space(seen, pos, head, self.scales[agent])
 
     def agent_rows(self, frames, agents=None) -> np.ndarray:
         """Skinning rows ``agents`` were drawn with at ``frames`` (whole frames), looks
@@ -288,8 +280,8 @@ class Recording:
     def pair_rows(self, frame, agent) -> np.ndarray:
         """``(n, B, 3, 4)`` float32 skinning rows of ``(frame[i], agent[i])`` pairs,
         looks applied."""
-        from ..runtime.look_at import apply_look, look_turns
         from ..base.skinning import skinning_matrices
+        from ..runtime.looks import turn_rows
         poses = self.pair_poses(frame, agent)
         rows = np.zeros(poses.shape[:2] + (3, 4), np.float32)
         skeletons = list(self.config.skeletons.values())
@@ -297,16 +289,9 @@ class Recording:
         for k in np.unique(skel).tolist():
             m, sk = skel == k, skeletons[k]
             rows[m, :sk.bone_count] = skinning_matrices(poses[m], sk)[:, :, :3, :]
-        looks = self.look_state(frame, agent)
-        w = looks.weights(frame, np.arange(frame.size))
-        for k, chain in enumerate(self.look_chains):
-            pick = np.flatnonzero((w > 0) & (skel == k))
-            if chain is None or not pick.size:
-                continue
-            targets = self.look_targets_model(frame[pick], agent[pick])
-            turns = look_turns(rows[pick], chain, targets, w[pick])
-            rows[pick] = apply_look(rows[pick], chain, turns).astype(np.float32)
-        return rows
+        w = self.look_weights(frame, agent)
+        return turn_rows(rows, skel, w, self.look_chains,
+                         lambda pick: self.look_targets_model(frame[pick], agent[pick]))
 
     def looked_pair_poses(self, frame, agent, sub=None) -> np.ndarray:
         """:meth:`pair_poses` with each pair's look turned into its local pose: the

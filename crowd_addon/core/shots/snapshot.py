@@ -22,7 +22,9 @@ frame, the small values (counts, parameters, triggers) and the name, dtype, shap
 SHA-256 digest of every array, all checked on load: every header field and count
 against its bounds, every array against its digest, so a damaged file is refused with
 its name. Files are written through a temporary name and renamed, so a failed write
-leaves no partial file.
+leaves no partial file. A crowd's state is taken, checked and restored by
+:mod:`.crowd_state`; snapshots are kept for scrubbing and chunks by
+:mod:`.snapshot_store`.
 """
 
 from __future__ import annotations
@@ -38,12 +40,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..base.bounds import MAX_RUN_FRAMES, check_run, whole_frame
 from ..base.errors import CrowdError
 from ..base.files import file_mode
 
-__all__ = ["Snapshot", "SnapshotCache", "SnapshotFolder", "FORMAT", "VERSION",
-           "load_snapshot", "write_snapshots", "ShotSnapshots"]
+__all__ = ["Snapshot", "FORMAT", "VERSION", "load_snapshot", "flatten_state", "value_kind",
+           "check_values"]
 
 FORMAT = "crowd-snapshot"
 #: 2: each array's SHA-256 in the header (version 1 files, without it, are refused)
@@ -54,7 +55,7 @@ HEADER = "snapshot.json"
 MAX_COUNT = 2**53
 
 
-def _flatten(state, prefix="", arrays=None, values=None):
+def flatten_state(state, prefix="", arrays=None, values=None):
     """A nested state as ``(arrays, values)``: ``{"a.b.c": array}`` and
     ``{"a.b.d": plain value}`` (dots join the keys)."""
     arrays = {} if arrays is None else arrays
@@ -62,7 +63,7 @@ def _flatten(state, prefix="", arrays=None, values=None):
     for k, v in state.items():
         name = f"{prefix}{k}"
         if isinstance(v, dict) and v and not _is_value_dict(name):
-            _flatten(v, name + ".", arrays, values)
+            flatten_state(v, name + ".", arrays, values)
         elif isinstance(v, np.ndarray):
             arrays[name] = v
         else:
@@ -87,7 +88,7 @@ def _nested(arrays, values) -> dict:
     return out
 
 
-def _kind(v) -> str:
+def value_kind(v) -> str:
     if v is None or isinstance(v, (bool, int, float, str)):
         return "scalar"
     return type(v).__name__
@@ -346,240 +347,3 @@ def check_values(values: dict, frame: int, what: str) -> None:
     if "crowd.origin" in values and "crowd.frame" in values and \
             values["crowd.origin"] > values["crowd.frame"]:
         bad("crowd.origin", f"a frame at or before the crowd's frame {frame}")
-
-
-def take(crowd) -> Snapshot:
-    """A :class:`Snapshot` of ``crowd`` now (copies)."""
-    arrays, values = _flatten(crowd._state())
-    return Snapshot(int(crowd.frame), crowd.config_digest, int(crowd.substeps),
-                    {k: np.array(a, copy=True) for k, a in arrays.items()},
-                    json.loads(json.dumps(values)))
-
-
-def check(crowd, snap: Snapshot, what: str = "snapshot") -> None:
-    """Raise CrowdError (naming what differs) unless ``snap`` fits ``crowd``: same
-    configuration digest and samples per frame, and the same state arrays (names,
-    dtypes, shapes) and values (names, kinds). Changes nothing."""
-    if snap.config_digest != crowd.config_digest:
-        raise CrowdError(f"{what} of frame {snap.frame} was taken of another crowd "
-                         f"configuration (digest {snap.config_digest[:12]}, this crowd's "
-                         f"{crowd.config_digest[:12]})")
-    if snap.substeps != crowd.substeps:
-        raise CrowdError(f"{what} of frame {snap.frame} keeps {snap.substeps} samples a "
-                         f"frame, this crowd {crowd.substeps}")
-    from ..base.bounds import MAX_FRAME
-    if isinstance(snap.frame, bool) or not isinstance(snap.frame, int) or \
-            abs(snap.frame) > MAX_FRAME:
-        raise CrowdError(f"{what}: its frame {snap.frame!r} is not a frame number (a whole "
-                         f"number of magnitude at most {MAX_FRAME})")
-    check_values(snap.values, snap.frame, what)
-    arrays, values = _flatten(crowd._state())
-    for name in sorted(set(arrays) | set(snap.arrays)):
-        a, b = arrays.get(name), snap.arrays.get(name)
-        if a is None or b is None:
-            raise CrowdError(f"{what}: state array {name!r} is "
-                             f"{'missing' if b is None else 'unknown to this crowd'}")
-        # the queue's line and the show's due lists vary in length
-        if a.dtype != b.dtype or (a.shape != b.shape and not _varies(name)) \
-                or a.ndim != b.ndim:
-            raise CrowdError(f"{what}: state array {name!r} is {b.dtype} {b.shape}, "
-                             f"this crowd's is {a.dtype} {a.shape}")
-    for name, b in snap.arrays.items():
-        if b.dtype.kind == "f" and not name.endswith(_NAN_ALLOWED) and \
-                not np.isfinite(b).all():
-            raise CrowdError(f"{what}: state array {name!r} holds values that are not "
-                             "finite")
-    for name in sorted(set(values) | set(snap.values)):
-        if name not in values or name not in snap.values:
-            raise CrowdError(f"{what}: state value {name!r} is "
-                             f"{'missing' if name not in snap.values else 'unknown'}")
-        if _kind(snap.values[name]) != _kind(values[name]):
-            raise CrowdError(f"{what}: state value {name!r} is a "
-                             f"{_kind(snap.values[name])}, expected a {_kind(values[name])}")
-
-
-#: float state arrays where NaN means something (a clip player's "no last time", a
-#: state machine's "not entered yet")
-_NAN_ALLOWED = (".prev", ".entered")
-
-
-def _varies(name) -> bool:
-    return name.endswith(("queue.line", ".ids", ".counts", ".frame", ".duration",
-                          ".reaction", "log_stream", "log_name", "log_frame",
-                          "releases.cue", "releases.stream"))
-
-
-class SnapshotCache:
-    """Snapshots of one crowd's run every :attr:`every` frames, within ``max_bytes``:
-    what lets a crowd jump to any frame by stepping at most ``every - 1`` frames from
-    the nearest one (:meth:`Crowd.advance_to <.crowd.Crowd.advance_to>`).
-
-    Frames ``origin + k * every`` are kept as the crowd steps past them. When the next
-    one would pass ``max_bytes``, :attr:`every` doubles and the snapshots off the new
-    grid are dropped, so a long shot always fits and the farthest a jump re-simulates
-    grows with it. :attr:`requested` is the spacing asked for; :attr:`fits` is False
-    when not even one snapshot fits in ``max_bytes`` (then none is kept).
-    """
-
-    def __init__(self, every: int = 30, max_bytes: int = 2 << 30):
-        if isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 1:
-            raise CrowdError(f"snapshots: every must be a whole number of frames >= 1, "
-                             f"got {every!r}")
-        if isinstance(max_bytes, bool) or not isinstance(max_bytes, (int, np.integer)) \
-                or max_bytes < 0:
-            raise CrowdError(f"snapshots: the memory cap must be bytes >= 0, got "
-                             f"{max_bytes!r}")
-        self.requested = self.every = int(every)
-        self.max_bytes = int(max_bytes)
-        self.fits = True
-        self._snaps = {}
-
-    def __len__(self) -> int:
-        return len(self._snaps)
-
-    @property
-    def frames(self) -> list:
-        return sorted(self._snaps)
-
-    @property
-    def nbytes(self) -> int:
-        return sum(s.nbytes for s in self._snaps.values())
-
-    def wants(self, frame: int, origin: int) -> bool:
-        """Whether the crowd at ``frame`` (of a run started at ``origin``) is one to keep."""
-        return (frame - origin) % self.every == 0 and frame not in self._snaps and self.fits
-
-    def add(self, snap: Snapshot, origin: int):
-        """Keep ``snap`` (taken where :meth:`wants` said so), thinning to stay in the cap."""
-        if snap.nbytes > self.max_bytes:
-            self.fits = False
-            return
-        self._snaps[snap.frame] = snap
-        while self.nbytes > self.max_bytes:
-            self.every *= 2
-            self._snaps = {f: s for f, s in self._snaps.items()
-                           if (f - origin) % self.every == 0}
-
-    def nearest(self, frame: int) -> Snapshot | None:
-        """The kept snapshot at ``frame`` or the latest before it (None if none)."""
-        before = [f for f in self._snaps if f <= frame]
-        return self._snaps[max(before)] if before else None
-
-    def drop_after(self, frame: int):
-        """Forget the snapshots past ``frame`` (the run changed there)."""
-        self._snaps = {f: s for f, s in self._snaps.items() if f <= frame}
-
-    def clear(self):
-        self._snaps = {}
-        self.fits = True
-
-
-class SnapshotFolder:
-    """A folder of snapshot files, one per (crowd configuration, samples per frame,
-    frame): ``snap_<digest[:16]>_s<substeps>_f<frame>.npz``, so several shots may
-    share one folder. What ``crowd snapshot`` writes and ``crowd export --snapshots``
-    starts from (docs/snapshots.md)."""
-
-    def __init__(self, path, create: bool = False):
-        self.path = os.fspath(path)
-        if create:
-            try:
-                os.makedirs(self.path, exist_ok=True)
-            except OSError as e:
-                raise CrowdError(f"{self.path}: cannot create the snapshot folder: {e}") \
-                    from None
-        if not os.path.isdir(self.path):
-            raise CrowdError(f"{self.path}: no such snapshot folder")
-
-    @staticmethod
-    def _stem(crowd) -> str:
-        return f"snap_{crowd.config_digest[:16]}_s{crowd.substeps}_f"
-
-    def file(self, crowd, frame: int) -> str:
-        """The file of ``crowd``'s snapshot at ``frame``."""
-        return os.path.join(self.path, f"{self._stem(crowd)}{int(frame)}.npz")
-
-    def frames(self, crowd) -> list:
-        """Frames of the snapshots of ``crowd``'s configuration here, ascending."""
-        stem, out = self._stem(crowd), []
-        for name in os.listdir(self.path):
-            if name.startswith(stem) and name.endswith(".npz"):
-                try:
-                    out.append(int(name[len(stem):-4]))
-                except ValueError:
-                    continue
-        return sorted(out)
-
-    def save(self, crowd) -> str:
-        """Write ``crowd``'s snapshot now; returns the file."""
-        path = self.file(crowd, crowd.frame)
-        crowd.snapshot().save(path)
-        return path
-
-    def start(self, crowd, first: int):
-        """Restore into ``crowd`` the latest snapshot of it here before ``first`` (at
-        frame ``first - 1`` or earlier) when that is ahead of the crowd; returns its
-        frame, or None when there is none (the crowd is left as it was)."""
-        usable = [f for f in self.frames(crowd) if crowd.frame < f < first]
-        if not usable:
-            return None
-        crowd.restore(load_snapshot(self.file(crowd, usable[-1])))
-        return usable[-1]
-
-
-def write_snapshots(crowd, folder: SnapshotFolder, first: int, last: int, every: int,
-                    progress=None) -> list:
-    """Step ``crowd`` to ``last`` (from the latest snapshot in ``folder`` before
-    ``first`` when there is one) and write a snapshot at ``first - 1`` and every
-    ``every`` frames after it (the frame before each ``every``-frame chunk of
-    ``first .. last``; none before the start frame, where a chunk needs none) and at
-    ``last``. Returns the files written.
-    ``progress(done, total)`` after each step. A pass that would step more than
-    :data:`~.bounds.MAX_RUN_FRAMES` frames is refused before its first step."""
-    if isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 1:
-        raise CrowdError(f"snapshots: every must be a whole number of frames >= 1, "
-                         f"got {every!r}")
-    first, last = whole_frame(first, "snapshots"), whole_frame(last, "snapshots")
-    if first > last:
-        raise CrowdError(f"snapshots: frames {first}-{last}: the first is after the last")
-    folder.start(crowd, first)
-    end = crowd.frame + MAX_RUN_FRAMES
-    check_run("snapshots", crowd.frame, last,              # before the first step
-              f"write them in passes of at most {MAX_RUN_FRAMES:,} frames into the same "
-              f"folder, each going on from the last snapshot there (crowd snapshot "
-              f"--frames {min(first, end)}-{end}, then --frames {end + 1}-{end + MAX_RUN_FRAMES}, "
-              "and so on)")
-    start = crowd.config.start_frame              # a new crowd is there already
-    wanted = {f for f in range(first - 1, last + 1, every) if f > start} | {last}
-    written, total = [], last - crowd.frame
-    if crowd.frame in wanted:
-        written.append(folder.save(crowd))
-    while crowd.frame < last:
-        crowd.step()
-        if crowd.frame in wanted:
-            written.append(folder.save(crowd))
-        if progress is not None:
-            progress(total - (last - crowd.frame), total)
-    return written
-
-
-class ShotSnapshots:
-    """An export's use of a snapshot folder: the crowd starts from the latest snapshot
-    of it there before the shot's first frame (:attr:`started_from`, None when there
-    is none), and leaves one at the shot's last frame for the next chunk: taken by
-    :meth:`recorded` once the shot is simulated, written by :meth:`keep` once the
-    export succeeded."""
-
-    def __init__(self, path, crowd, first: int):
-        self.folder = SnapshotFolder(path, create=True)
-        self.crowd = crowd
-        self.started_from = self.folder.start(crowd, first)
-        self._snap = None
-
-    def recorded(self):
-        self._snap = self.crowd.snapshot()
-
-    def keep(self) -> str:
-        path = self.folder.file(self.crowd, self._snap.frame)
-        self._snap.save(path)
-        return path

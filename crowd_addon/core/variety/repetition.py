@@ -314,7 +314,8 @@ def stream_periods(config) -> np.ndarray:
     one period (the clip's length at the player's speed) and no state machine (whose
     states change with triggers and parameters) is in it; at the stream's speed the
     period is that over the speed."""
-    from ..anim.controllers import ClipPlayer, StateMachine
+    from ..anim.controllers import ClipPlayer
+    from ..anim.state_machine import StateMachine
     out = np.full(len(config.streams), np.inf)
     for s, d in enumerate(config.streams):
         stack, periods, ok = [d.root], set(), True
