@@ -150,7 +150,8 @@ def export_throughput(agents: int, frames: int) -> dict:
 
     from crowd_addon.core.authoring.config_io import save_config
     from crowd_addon.core.authoring.synthetic import humanoid_mesh
-    from crowd_addon.farm.chunks import ShotSource, export_chunk
+    from crowd_addon.farm.chunks import export_chunk
+    from crowd_addon.shot_source import ShotSource
     from crowd_addon.farm.cluster import farm_export
     cfg = show_config(agents, frames)
     cfg.add_mesh(humanoid_mesh(cfg.skeletons["fan"]), lods=())

@@ -288,7 +288,7 @@ class CROWD_OT_export_usd(bpy.types.Operator, ExportHelper):
 def _make_folder(folder) -> tuple:
     """Create ``folder`` and its missing parents (checked first to be creatable and
     writable: CrowdError naming it); returns the folders made, deepest first."""
-    from ..gpu.preview_render import writable_dir
+    from ..core.base.files import writable_dir
     writable_dir(folder)
     made, probe = [], folder
     while not os.path.exists(probe) and os.path.dirname(probe) != probe:

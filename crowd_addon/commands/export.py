@@ -60,7 +60,8 @@ def _run_export(args) -> int:
     import json
 
     from ..core.variety.repetition import describe
-    from ..farm.chunks import ShotSource, export_chunk
+    from ..farm.chunks import export_chunk
+    from ..shot_source import ShotSource
     source = ShotSource(config=args.config, blend=args.blend, scene=args.scene,
                         trust_scripts=args.trust_scripts, agents=args.agents,
                         layout=args.layout, substeps=args.substeps,
@@ -106,16 +107,10 @@ def _run_farm_export(args, source, progress) -> int:
     if args.snapshots is not None:
         raise CrowdError("--workers keeps its snapshots beside its chunks "
                          "(<out stem>.chunks/snapshots); leave out --snapshots")
-    frames = args.frames
-    if source.config is not None:
-        if frames is None:
-            raise CrowdError("--workers and --scheduler need --frames FIRST-LAST with "
-                             "--config (a .blend gives its scene's frame range)")
-    else:       # opened here once: the scene's frames, its script checked before any task
-        from ..blender.cli_commands import blend_shot
-        frames = blend_shot(frames, blend=source.blend, scene=source.scene,
-                            trust_scripts=source.trust_scripts,
-                            ignore_scripts=source.ignore_scripts)
+    # opened here once: the shot's frames (a .blend's scene range), its crowd script
+    # checked before any task (nothing is baked or built here)
+    with source.quietly():
+        frames = source.open(args.frames).frames
     result = farm_export(source, args.out, frames, workers=args.workers or 2,
                          scheduler=args.scheduler, chunk_frames=args.chunk_frames,
                          progress=progress)
@@ -209,7 +204,7 @@ def _run_stitch(args) -> int:
     import json
 
     from ..core.base.files import folders_made
-    from ..gpu.preview_render import writable_dir
+    from ..core.base.files import writable_dir
     from ..usd.stitch import stitch
     folder = writable_dir(os.path.dirname(os.path.abspath(args.out)))
     with folders_made(folder):                  # as crowd export: gone again on failure
@@ -264,7 +259,8 @@ def _run_snapshot(args) -> int:
     import json
     import time
 
-    from ..farm.chunks import ShotSource, write_shot_snapshots
+    from ..farm.chunks import write_shot_snapshots
+    from ..shot_source import ShotSource
     t = time.perf_counter()
     progress = progress_printer("crowd snapshot")
     source = ShotSource(config=args.config, blend=args.blend, scene=args.scene,

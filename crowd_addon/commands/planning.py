@@ -14,7 +14,6 @@ import sys
 
 from ..cli_args import (add_repetition_arguments, add_trust_argument, int_at_least, path_arg,
                         positive_float, progress_printer)
-from ..core.base.errors import CrowdError
 
 __all__ = ["add_budget", "add_plan"]
 
@@ -176,20 +175,16 @@ def _run_plan(args) -> int:
 
     settings = RepetitionSettings(k=args.neighbours, appearance=not args.motion_only)
     printer = progress_printer("crowd plan")
-    camera = None
-    if args.blend:
-        from ..blender.cli_commands import plan_blend
-        config, camera, settings = plan_blend(
-            blend=args.blend, scene=args.scene, settings=settings,
-            trust_scripts=args.trust_scripts, ignore_scripts=args.ignore_scripts,
-            strict=args.strict,
-            on_bake=lambda done, total, message: print(f"crowd plan: {message}",
-                                                       file=sys.stderr, flush=True))
-    else:
-        from ..core.authoring.config_io import load_config
-        if args.scene is not None:
-            raise CrowdError("--scene needs --blend (a configuration has no scenes)")
-        config = load_config(args.config)
+    from ..shot_source import ShotSource
+    source = ShotSource(config=args.config, blend=args.blend, scene=args.scene,
+                        trust_scripts=args.trust_scripts, ignore_scripts=args.ignore_scripts,
+                        strict=args.strict)
+    with source.quietly():      # no crowd is built here, so no crowd script runs
+        shot = source.open(on_bake=lambda done, total, message: print(
+            f"crowd plan: {message}", file=sys.stderr, flush=True),
+            frames_needed=False, crowd_needed=False)
+        config = shot.config
+        camera, settings = shot.metric_view(settings)
     size = {k: v for k, v in (("width", args.width), ("height", args.height)) if v}
     settings = dataclasses.replace(settings, **size)
     if camera is None:

@@ -93,35 +93,40 @@ def _run_preview(args) -> int:
             shown[0] = done * 10 // total
             print(f"crowd preview: frame {done}/{total}", file=sys.stderr, flush=True)
 
-    size = (args.width, args.height)
-    if args.blend:                  # the scene's Crowd settings, baked as the panel does
-        from ..blender.cli_commands import preview_blend
-        config, r, camera = preview_blend(
-            args.out, args.frames, blend=args.blend, scene=args.scene, start=args.start,
-            camera=args.camera, size=size, mp4=args.mp4, backend=args.backend,
-            samples=args.samples, shadows=args.shadows, trust_scripts=args.trust_scripts,
-            ignore_scripts=args.ignore_scripts, strict=args.strict,
-            progress=progress, repetition=repetition_settings(args), lod=args.lod == "on",
-            on_bake=lambda done, total, message: print(
-                f"crowd preview: {message}", file=sys.stderr, flush=True))
-    else:
-        from ..core.authoring.config_io import load_config
-        for option in ("scene", "camera"):
-            if getattr(args, option) is not None:
-                raise CrowdError(f"--{option} needs --blend (a configuration has no "
-                                 f"{option}s)")
-        if args.frames is None:
-            raise CrowdError("--frames N is required with --config (a .blend gives its "
-                             "scene's frame range)")
-        config, camera = load_config(args.config), None
-        size = (args.width or 960, args.height or 540)
+    from ..core.base.files import writable_dir
+    from ..shot_source import ShotSource
+    source = ShotSource(config=args.config, blend=args.blend, scene=args.scene,
+                        trust_scripts=args.trust_scripts, ignore_scripts=args.ignore_scripts,
+                        strict=args.strict)
+    with source.quietly():
+        shot = source.open(on_bake=lambda done, total, message: print(
+            f"crowd preview: {message}", file=sys.stderr, flush=True), frames_needed=False)
+        if shot.scene is None:
+            if args.camera is not None:
+                raise CrowdError("--camera needs --blend (a configuration has no cameras)")
+            if args.frames is None:
+                raise CrowdError("--frames N is required with --config (a .blend gives its "
+                                 "scene's frame range)")
+            first, frames, view, camera = args.start, args.frames, None, None
+            size = (args.width or 960, args.height or 540)
+        else:                   # the scene's frames, size and camera, through its camera
+            from ..blender.blend_shot import preview_view
+            first, frames, size, view, camera = preview_view(
+                shot, args.start, args.frames, (args.width, args.height), args.camera)
+        writable_dir(args.out)                          # checked before the bake
         if args.backend == "blender":       # bpy runs in background mode: wake its GPU
             from ..blender.headless_gpu import init_headless_gpu
             init_headless_gpu()
-        r = render_preview(config, args.out, args.frames, start=args.start, size=size,
-                           mp4=args.mp4, backend=args.backend, progress=progress,
+        config, crowd = shot.config, shot.crowd()
+        if shot.scene is None:
+            around = {}
+        else:                   # drawn in the scene's own geometry, lit by its sun
+            from ..blender.blend_shot import preview_scene
+            around = dict(preview_scene(shot), shadows=args.shadows)
+        r = render_preview(crowd, args.out, frames, start=first, size=size, mp4=args.mp4,
+                           backend=args.backend, progress=progress, camera=view,
                            samples=args.samples, repetition=repetition_settings(args),
-                           lod=args.lod == "on")
+                           lod=args.lod == "on", **around)
     s = r.seconds
     if args.json:
         print(json.dumps({

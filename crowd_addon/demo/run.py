@@ -144,7 +144,7 @@ def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
     from ..core.authoring.config import USD_LAYOUTS
     if layout not in USD_LAYOUTS:
         raise CrowdError(f"--layout must be one of {', '.join(USD_LAYOUTS)}, got {layout!r}")
-    from ..gpu.preview_render import output_dir
+    from ..core.base.files import output_dir
     out = output_dir(out_dir)
     t0 = time.perf_counter()
     seconds = {}

@@ -1,6 +1,6 @@
-"""A shot's chunked export in one process: where its crowd comes from
-(:class:`ShotSource`), its chunks (:func:`chunk_ranges`, beside the output in
-:func:`chunk_folder`) and the two steps a process runs for it: the snapshot pass
+"""A shot's chunked export in one process (its crowd from a
+:class:`~crowd_addon.shot_source.ShotSource`): its chunks (:func:`chunk_ranges`,
+beside the output in :func:`chunk_folder`) and the two steps a process runs for it: the snapshot pass
 (:func:`write_shot_snapshots`, ``crowd snapshot``) and one chunk's export
 (:func:`export_chunk`, ``crowd export``). What a Dask worker runs too (:mod:`.tasks`).
 """
@@ -8,42 +8,13 @@
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
 
 from ..core.base.errors import CrowdError
 from ..core.variety.repetition import RepetitionSettings
+from ..shot_source import ShotSource
 
-__all__ = ["ShotSource", "chunk_ranges", "chunk_folder", "chunk_path", "write_shot_snapshots",
+__all__ = ["chunk_ranges", "chunk_folder", "chunk_path", "write_shot_snapshots",
            "export_chunk"]
-
-
-@dataclass(frozen=True)
-class ShotSource:
-    """Where a shot's crowd comes from and how it is exported: a configuration file
-    (``config``) or a .blend (``blend``, its ``scene``, ``trust_scripts``; neither: the
-    .blend open in Blender), with the export's ``agents``, ``layout`` and ``substeps``
-    (as ``crowd export``). ``trust_scripts`` is passed to each of the shot's tasks and
-    holds for that task only: a worker that ran a trusted shot trusts nothing after it.
-    A .blend whose crowd script would not run stops the shot (ScriptNotTrusted) unless
-    ``ignore_scripts``: then every task leaves the script out. ``strict``: a .blend whose
-    bake report has warnings stops the shot (``--strict``, BakeWarnings) before
-    anything is written."""
-
-    config: str | None = None
-    blend: str | None = None
-    scene: str | None = None
-    trust_scripts: bool = False
-    agents: int | None = None
-    layout: str = "instanced"
-    substeps: int = 1
-    ignore_scripts: bool = False
-    strict: bool = False
-
-    def __post_init__(self):
-        if self.config is not None and self.blend is not None:
-            raise CrowdError("a shot comes from one --config or one --blend, not both")
-        if self.trust_scripts and self.ignore_scripts:
-            raise CrowdError("a shot trusts its crowd script or ignores it, not both")
 
 
 def chunk_ranges(first: int, last: int, size: int) -> list:
@@ -72,22 +43,9 @@ def write_shot_snapshots(source: ShotSource, folder, frames, every, progress=Non
     runs, and a worker for a shot's snapshot pass. ``frames`` None: a .blend's scene
     range (a configuration needs them); ``on_bake(done, total, message)``: the .blend's
     bake steps."""
-    if source.config is not None:
-        from ..core.authoring.config_io import load_config
-        from ..core.shots.crowd import Crowd
-        from ..core.shots.snapshot_store import SnapshotFolder, write_snapshots
-        if frames is None:
-            raise CrowdError("--frames FIRST-LAST is required with --config (a .blend "
-                             "gives its scene's frame range)")
-        folder = SnapshotFolder(folder, create=True)
-        crowd = Crowd(load_config(source.config), skinning="gpu", substeps=source.substeps)
-        return write_snapshots(crowd, folder, *frames, every, progress)
-    from ..blender.cli_commands import snapshot_blend
-    return snapshot_blend(folder, frames, every=every, blend=source.blend,
-                          scene=source.scene, substeps=source.substeps,
-                          trust_scripts=source.trust_scripts,
-                          ignore_scripts=source.ignore_scripts, progress=progress,
-                          on_bake=on_bake, strict=source.strict)[1]
+    from ..usd.shot_export import snapshot_shot
+    with source.quietly():
+        return snapshot_shot(source.open(frames, on_bake), folder, every, progress)
 
 
 def export_chunk(source: ShotSource, frames, out, snapshots=None, progress=None,
@@ -100,39 +58,8 @@ def export_chunk(source: ShotSource, frames, out, snapshots=None, progress=None,
     None: a .blend's scene range (a configuration needs them); ``on_bake(done, total,
     message)``: the .blend's bake steps; ``repetition``: the repetition metric's
     settings (None: not measured)."""
-    if source.config is not None:
-        import dataclasses
-
-        from ..core.authoring.config_io import load_config
-        from ..core.shots.crowd import Crowd
-        from ..core.base.files import folders_made
-        from ..core.shots.recorder import record
-        from ..core.shots.snapshot_store import ShotSnapshots
-        from ..gpu.preview_render import writable_dir
-        from ..usd import check_export, export_crowd
-        if frames is None:
-            raise CrowdError("--frames FIRST-LAST is required with --config (a .blend "
-                             "gives its scene's frame range)")
-        config = load_config(source.config)
-        crowd = Crowd(config, skinning="gpu",          # checks the agents' references
-                      substeps=source.substeps)
-        folder = writable_dir(os.path.dirname(os.path.abspath(out)))
-        with folders_made(folder):                      # gone again if the export fails
-            check_export(config, out, source.agents, source.layout)    # before simulating
-            snaps = ShotSnapshots(snapshots, crowd, frames[0]) if snapshots else None
-            shot = record(crowd, *frames, progress=progress)
-            if snaps is not None:
-                snaps.recorded()
-            result = export_crowd(shot, out, agents=source.agents, progress=progress,
-                                  layout=source.layout, repetition=repetition)
-            if snaps is not None:
-                result = dataclasses.replace(result, started_from=snaps.started_from,
-                                             snapshot=snaps.keep())
-        return config, result
-    from ..blender.cli_commands import export_blend
-    return export_blend(out, frames, blend=source.blend, scene=source.scene,
-                        agents=source.agents, layout=source.layout,
-                        substeps=source.substeps, snapshots=snapshots,
-                        trust_scripts=source.trust_scripts,
-                        ignore_scripts=source.ignore_scripts, progress=progress,
-                        on_bake=on_bake, repetition=repetition, strict=source.strict)
+    from ..usd.shot_export import export_shot
+    with source.quietly():
+        shot = source.open(frames, on_bake)
+        return export_shot(shot, out, agents=source.agents, layout=source.layout,
+                           snapshots=snapshots, progress=progress, repetition=repetition)

@@ -17,7 +17,8 @@ import time
 from dataclasses import dataclass, field
 
 from ..core.base.errors import CrowdError, ScriptNotTrusted
-from .chunks import ShotSource, chunk_folder, chunk_path, chunk_ranges
+from ..shot_source import ShotSource
+from .chunks import chunk_folder, chunk_path, chunk_ranges
 from .tasks import log_line, run_chunk, run_snapshots, run_stitch
 
 __all__ = ["FarmShot", "FarmResult", "farm_export", "farm_export_shots", "summary"]

@@ -9,7 +9,7 @@ import json
 import os
 
 from ..core.base.errors import CrowdError
-from .chunks import ShotSource
+from ..shot_source import ShotSource
 from .cluster import FarmShot
 
 __all__ = ["load_shot_list"]

@@ -23,12 +23,13 @@ import numpy as np
 from ..core.shots.crowd import Crowd
 from ..core.shots.driver import FrameDriver
 from ..core.base.errors import CrowdError
+from ..core.base.files import output_dir, writable_dir
 from ..core.variety.repetition import RepetitionSettings, combine, crowd_repetition, measure_frames
 from .backends import BACKENDS, make_renderer
 from ..core.base.camera import frame_crowd
 from .png import write_png
 
-__all__ = ["PreviewResult", "render_preview", "output_dir", "BACKENDS", "MAX_SIZE"]
+__all__ = ["PreviewResult", "render_preview", "BACKENDS", "MAX_SIZE"]
 
 #: Largest image side accepted, in pixels (the usual GL_MAX_TEXTURE_SIZE).
 MAX_SIZE = 16384
@@ -81,36 +82,6 @@ def _check(config, out_dir, frames, size, mp4, backend) -> Path:
     return writable_dir(out_dir)
 
 
-def writable_dir(path) -> Path:
-    """``path`` checked to be a folder that exists and is writable, or one that can be
-    created (its nearest existing ancestor is a writable folder); nothing is created.
-    A CrowdError names the folder otherwise."""
-    out = Path(path)
-    probe = out
-    try:
-        while not probe.exists() and probe.parent != probe:
-            probe = probe.parent
-    except OSError as e:                       # a name too long for the file system
-        raise CrowdError(f"output folder {str(out)[:80]}...: {e.strerror}") from None
-    if not probe.is_dir():
-        raise CrowdError(f"output folder {out}: cannot create it ({probe} is not a folder)")
-    if not os.access(probe, os.W_OK):
-        raise CrowdError(f"output folder {out}: "
-                         + ("not writable" if probe == out else f"{probe} is not writable"))
-    return out
-
-
-def output_dir(path) -> Path:
-    """``path`` as a folder that exists and is writable (created if missing), or a
-    CrowdError naming it."""
-    out = writable_dir(path)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise CrowdError(f"output folder {out}: cannot create it ({e.strerror})") from None
-    return out
-
-
 def _missing_folders(path: Path) -> list:
     """The folders of ``path`` that do not exist yet, deepest first."""
     missing = []
@@ -159,7 +130,7 @@ def render_preview(config, out_dir, frames: int, start: int | None = None,
     with its full mesh (``--lod off``, the judge of the levels)."""
     w, h = (int(v) for v in size)
     crowd = config if isinstance(config, Crowd) else None
-    config = crowd.config if crowd is not None else config
+    config = crowd.view.config if crowd is not None else config
     out = _check(config, out_dir, int(frames), (w, h), mp4, backend)
     t0 = time.perf_counter()
     seconds = dict.fromkeys(("simulate", "sync", "render", "write"), 0.0)
@@ -181,13 +152,13 @@ def render_preview(config, out_dir, frames: int, start: int | None = None,
     camera = camera or frame_crowd(crowd, aspect=w / h)
     if repetition is not None:
         repetition = dataclasses.replace(repetition, width=w, height=h)
-        measure = set(measure_frames(crowd.frame, crowd.frame + int(frames) - 1,
+        measure = set(measure_frames(crowd.view.frame, crowd.view.frame + int(frames) - 1,
                                      repetition.frames))
         measured = []
     mp4_path = out / "preview.mp4" if mp4 else None
     partial = out / ".preview.partial.mp4"
     made = _missing_folders(out)
-    pngs, uploads, first, writer, done = [], [], crowd.frame, None, False
+    pngs, uploads, first, writer, done = [], [], crowd.view.frame, None, False
     # a frame's PNG, MP4 frame and on_image run in a thread while the next frame is
     # simulated and drawn (zlib, file and pipe writes release the GIL): one frame in
     # flight, in order. The run waited ~0.06 s a frame for them, now ~0.02-0.04 (65k
@@ -217,7 +188,7 @@ def render_preview(config, out_dir, frames: int, start: int | None = None,
             t = time.perf_counter()
             if i:
                 driver.step()
-            if repetition is not None and crowd.frame in measure:
+            if repetition is not None and crowd.view.frame in measure:
                 measured.append(crowd_repetition(crowd.view, camera.view_projection,
                                                  settings=repetition))
             t1 = time.perf_counter()
@@ -228,7 +199,7 @@ def render_preview(config, out_dir, frames: int, start: int | None = None,
             t3 = time.perf_counter()
             if pending is not None:
                 collect()
-            pending = pool.submit(encode, crowd.frame, image)
+            pending = pool.submit(encode, crowd.view.frame, image)
             t4 = time.perf_counter()
             for k, dt in zip(("simulate", "sync", "render", "write"),
                              (t1 - t, t2 - t1, t3 - t2, t4 - t3)):
@@ -272,7 +243,7 @@ def render_preview(config, out_dir, frames: int, start: int | None = None,
                 except OSError:
                     break
     seconds["total"] = time.perf_counter() - t0
-    return PreviewResult((first, crowd.frame), pngs, None if mp4_path is None else
-                         str(mp4_path), (w, h), crowd.agents.count, backend, device,
+    return PreviewResult((first, crowd.view.frame), pngs, None if mp4_path is None else
+                         str(mp4_path), (w, h), crowd.view.agent_count, backend, device,
                          int(np.median(uploads)), seconds,
                          None if repetition is None else combine(measured).as_dict())

@@ -17,12 +17,18 @@ sys.path.insert(0, os.path.dirname(__file__))
 import crowd_scene as cs  # noqa: E402
 
 from crowd_addon.blender import crowd_script, preview, scene_config  # noqa: E402
-from crowd_addon.blender.cli_commands import export_blend  # noqa: E402
 from crowd_addon.core.base.errors import ScriptNotTrusted  # noqa: E402
+from crowd_addon.farm.chunks import export_chunk, write_shot_snapshots  # noqa: E402
+from crowd_addon.shot_source import ShotSource  # noqa: E402
 
 UNTRUSTED = "did not run: scripts in .blend files are not trusted"
 
 extension = cs.extension_fixture()
+
+
+def export_blend(out, frames, on_bake=None, **source):
+    """``crowd export --blend``'s path: the shot opened by ShotSource, exported."""
+    return export_chunk(ShotSource(**source), frames, out, on_bake=on_bake)
 
 
 @pytest.fixture(autouse=True)
@@ -137,18 +143,19 @@ def test_auto_run_python_scripts_still_runs_every_file_s_script(tmp_path):
 
 
 def test_every_command_refuses_an_untrusted_script_with_exit_code_3(tmp_path, capsys):
-    """Issue 35, item 6: ``preview_blend`` and ``snapshot_blend`` (``crowd preview`` and
-    ``crowd snapshot``) refuse before anything is baked, rendered or written, and
-    Blender's own ``-c crowd export`` (:func:`crowd_command`, on the open file) exits
-    3 with the reason; ``--ignore-scripts`` goes on without the script."""
-    from crowd_addon.blender.cli_commands import crowd_command, preview_blend, snapshot_blend
+    """Issue 35, item 6: ``crowd preview`` and ``crowd snapshot`` refuse before anything
+    is baked, rendered or written, and Blender's own ``-c crowd export``
+    (:func:`crowd_command`, on the open file) exits 3 with the reason;
+    ``--ignore-scripts`` goes on without the script."""
+    from crowd_addon.blender.cli_commands import crowd_command
+    from crowd_addon.cli import main
     b = cs.scripted_blend(tmp_path / "other.blend", tmp_path, "other")
-    for run in (lambda: preview_blend(str(tmp_path / "frames"), 2,
-                                      blend=str(tmp_path / "other.blend")),
-                lambda: snapshot_blend(str(tmp_path / "snaps"), (1, 4), every=2,
-                                       blend=str(tmp_path / "other.blend"))):
-        with pytest.raises(ScriptNotTrusted, match=UNTRUSTED):
-            run()
+    blend = str(tmp_path / "other.blend")
+    assert main(["preview", "--blend", blend, "--out", str(tmp_path / "frames"),
+                 "--frames", "2"]) == 3
+    assert UNTRUSTED in capsys.readouterr().err
+    with pytest.raises(ScriptNotTrusted, match=UNTRUSTED):
+        write_shot_snapshots(ShotSource(blend=blend), str(tmp_path / "snaps"), (1, 4), 2)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["other.blend"] and ran(b) == []
     out = str(tmp_path / "cli" / "s.usdc")
     assert crowd_command(["export", "--out", out, "--frames", "1-4"]) == 3

@@ -166,7 +166,7 @@ def test_farm_options_are_checked(shot, capsys):
     tmp, config, _ = shot
     base = ["export", "--config", str(config), "--out", str(tmp / "x.usdc")]
     assert main(base + ["--workers", "2"]) == 2
-    assert "--workers and --scheduler need --frames" in capsys.readouterr().err
+    assert "--frames FIRST-LAST is required with --config" in capsys.readouterr().err
     assert main(base + ["--frames", "1-4", "--workers", "2", "--snapshots",
                         str(tmp)]) == 2
     assert "leave out --snapshots" in capsys.readouterr().err

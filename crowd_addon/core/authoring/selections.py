@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..base.errors import CrowdError
-from .show import finite
+from ..base.bounds import finite
 
 __all__ = ["select_inside", "select_value", "select_fraction", "neighbours", "neighbour_grid"]
 

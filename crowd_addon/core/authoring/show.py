@@ -31,22 +31,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..base.bounds import finite
 from ..base.errors import CrowdError
 
 __all__ = ["Action", "Sweep", "Cue", "Reaction", "Track", "Show", "ACTION_KINDS", "slot_speed"]
 
 ACTION_KINDS = ("stream", "unique", "trigger", "parameter", "look")
 LOOK = "look"                   # a look cue's target kind (targets: crowd.look_target_names)
-
-
-def finite(value, what) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise CrowdError(f"{what} must be a number, got {value!r}") from None
-    if not np.isfinite(v):
-        raise CrowdError(f"{what} must be finite, got {value!r}")
-    return v
 
 
 def _whole(value, what, low=None) -> int:

@@ -11,11 +11,12 @@ where the last one stopped (a crowd stepped on, or the last one's snapshot).
 
 from __future__ import annotations
 
+import math
 from numbers import Integral, Real
 
 from .errors import CrowdError
 
-__all__ = ["MAX_FRAME", "MAX_RUN_FRAMES", "whole_frame", "check_run"]
+__all__ = ["MAX_FRAME", "MAX_RUN_FRAMES", "whole_frame", "check_run", "finite"]
 
 #: The largest frame number in magnitude.
 MAX_FRAME = 2**31 - 1
@@ -48,3 +49,14 @@ def check_run(what: str, start: int, end: int, split: str) -> None:
                          f"{start}, where the run starts; a single run steps at most "
                          f"{MAX_RUN_FRAMES:,} frames (MAX_RUN_FRAMES, "
                          f"crowd_addon.core.base.bounds): split it: {split}")
+
+
+def finite(value, what) -> float:
+    """``value`` as a finite float, or a CrowdError naming ``what``."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise CrowdError(f"{what} must be a number, got {value!r}") from None
+    if not math.isfinite(v):
+        raise CrowdError(f"{what} must be finite, got {value!r}")
+    return v

@@ -101,12 +101,13 @@ def frame_points(lo, hi, aspect=16 / 9, fov_y=np.radians(40.0), azimuth=np.radia
 
 def frame_crowd(crowd, **kwargs) -> Camera:
     """:func:`frame_points` around every agent's bind-pose proxy (or a 2 m box per agent
-    when the crowd has no proxies)."""
-    pos = np.asarray(crowd.agents.position, np.float64)
-    meshes = [body.levels[0] for body in crowd.view.bodies if body.levels]
+    when the crowd has no proxies); read through ``crowd.view``."""
+    view = crowd.view
+    pos = np.asarray(view.agents.position, np.float64)
+    meshes = [body.levels[0] for body in view.bodies if body.levels]
     if meshes:
         ext = np.concatenate([m.extent for m in meshes]).astype(np.float64) * float(
-            crowd.agents.scale.max(initial=1.0))
+            view.agents.scale.max(initial=1.0))
         reach = np.abs(ext).max(0)
         reach[:2] = np.linalg.norm(np.abs(ext[:, :2]).max(0))   # any heading about +Z
     else:

@@ -1,6 +1,8 @@
 """Files written through a temporary name and a rename get the permissions a plain
 ``open(path, "w")`` would give them (``tempfile.mkstemp`` makes them 0600); an output
-folder a command creates is gone again when the command fails."""
+folder a command creates is gone again when the command fails; output folders are
+checked (:func:`writable_dir`) before any work and made (:func:`output_dir`) with a
+CrowdError naming what is wrong."""
 
 from __future__ import annotations
 
@@ -10,7 +12,7 @@ from pathlib import Path
 
 from .errors import CrowdError
 
-__all__ = ["file_mode", "folders_made"]
+__all__ = ["file_mode", "folders_made", "writable_dir", "output_dir"]
 
 
 def file_mode(target) -> int:
@@ -54,3 +56,33 @@ def folders_made(folder):
     except BaseException:
         remove()
         raise
+
+
+def writable_dir(path) -> Path:
+    """``path`` checked to be a folder that exists and is writable, or one that can be
+    created (its nearest existing ancestor is a writable folder); nothing is created.
+    A CrowdError names the folder otherwise."""
+    out = Path(path)
+    probe = out
+    try:
+        while not probe.exists() and probe.parent != probe:
+            probe = probe.parent
+    except OSError as e:                       # a name too long for the file system
+        raise CrowdError(f"output folder {str(out)[:80]}...: {e.strerror}") from None
+    if not probe.is_dir():
+        raise CrowdError(f"output folder {out}: cannot create it ({probe} is not a folder)")
+    if not os.access(probe, os.W_OK):
+        raise CrowdError(f"output folder {out}: "
+                         + ("not writable" if probe == out else f"{probe} is not writable"))
+    return out
+
+
+def output_dir(path) -> Path:
+    """``path`` as a folder that exists and is writable (created if missing), or a
+    CrowdError naming it."""
+    out = writable_dir(path)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise CrowdError(f"output folder {out}: cannot create it ({e.strerror})") from None
+    return out

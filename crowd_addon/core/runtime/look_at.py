@@ -41,6 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..base.bounds import finite
 from ..base.errors import CrowdError
 from ..base.skeleton import Skeleton
 
@@ -48,16 +49,6 @@ __all__ = ["LookRig", "LookTarget", "LookChain", "agent_lags", "look_turns", "lo
            "turns_of", "apply_look", "head_direction"]
 
 _Z = np.array([0.0, 0.0, 1.0])
-
-
-def _finite(value, what) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise CrowdError(f"{what} must be a number, got {value!r}") from None
-    if not math.isfinite(v):
-        raise CrowdError(f"{what} must be finite, got {value!r}")
-    return v
 
 
 @dataclass(frozen=True)
@@ -85,17 +76,17 @@ class LookRig:
             raise CrowdError(f"look rig: bones must be distinct bone names, got {self.bones!r}")
         object.__setattr__(self, "bones", bones)
         shares = tuple(self.shares) or tuple(1.0 / len(bones) for _ in bones)
-        shares = tuple(_finite(s, "look rig: share") for s in shares)
+        shares = tuple(finite(s, "look rig: share") for s in shares)
         if len(shares) != len(bones) or min(shares) < 0 or abs(sum(shares) - 1.0) > 1e-6:
             raise CrowdError(f"look rig: shares must be one per bone, >= 0, summing to 1, "
                              f"got {self.shares!r} for bones {bones}")
         object.__setattr__(self, "shares", shares)
         for key, top in (("yaw_limit", math.pi), ("pitch_limit", math.pi / 2)):
-            v = _finite(getattr(self, key), f"look rig: {key}")
+            v = finite(getattr(self, key), f"look rig: {key}")
             if not 0 <= v <= top:
                 raise CrowdError(f"look rig: {key} must be in 0..{top:.4f} radians, got {v:g}")
             object.__setattr__(self, key, v)
-        f = np.asarray([_finite(v, "look rig: forward") for v in
+        f = np.asarray([finite(v, "look rig: forward") for v in
                         np.asarray(self.forward, dtype=object).reshape(-1)], np.float64)
         if f.shape != (3,) or abs(f[2]) > 1e-6 or np.hypot(f[0], f[1]) < 1e-6:
             raise CrowdError(f"look rig: forward must be a horizontal 3-vector, got "
@@ -118,7 +109,7 @@ class LookTarget:
         what = f"look target {self.name!r}"
         if not str(self.name).strip():
             raise CrowdError("look target: the name must not be empty")
-        first = _finite(self.first, f"{what}: first")
+        first = finite(self.first, f"{what}: first")
         if first != int(first):
             raise CrowdError(f"{what}: first must be a whole frame, got {self.first!r}")
         object.__setattr__(self, "first", int(first))
@@ -131,7 +122,7 @@ class LookTarget:
         p = p.copy()
         p.flags.writeable = False
         object.__setattr__(self, "positions", p)
-        s = _finite(self.smoothing, f"{what}: smoothing")
+        s = finite(self.smoothing, f"{what}: smoothing")
         if s < 0:
             raise CrowdError(f"{what}: smoothing must be >= 0 frames, got {s:g}")
         object.__setattr__(self, "smoothing", s)
