@@ -109,7 +109,12 @@ class _ListOperator:
     pool: EnumProperty(items=(("STREAMS", "Streams", ""), ("UNIQUES", "Uniques", "")))
 
     def _target(self, context):
-        owner = _owner(context.scene.crowd, self.collection, self.pool)
+        """``(owner, items, index property)``, or None after reporting why not."""
+        try:
+            owner = _owner(context.scene.crowd, self.collection, self.pool)
+        except CrowdError as e:
+            self.report({"ERROR"}, str(e))
+            return None
         return owner, getattr(owner, self.collection), _INDEX[self.collection]
 
 
@@ -123,11 +128,10 @@ class CROWD_OT_item_add(_ListOperator, bpy.types.Operator):
     kind: EnumProperty(name="Kind", items=NODE_KINDS, default="CLIP")
 
     def execute(self, context):
-        try:
-            owner, items, index = self._target(context)
-        except CrowdError as e:
-            self.report({"ERROR"}, str(e))
+        target = self._target(context)
+        if target is None:
             return {"CANCELLED"}
+        owner, items, index = target
         s = context.scene.crowd
         item = items.add()
         if self.collection == "characters":
@@ -179,11 +183,10 @@ class CROWD_OT_item_remove(_ListOperator, bpy.types.Operator):
     bl_options = {"REGISTER", "UNDO"}
 
     def execute(self, context):
-        try:
-            owner, items, index = self._target(context)
-        except CrowdError as e:
-            self.report({"ERROR"}, str(e))
+        target = self._target(context)
+        if target is None:
             return {"CANCELLED"}
+        owner, items, index = target
         i = getattr(owner, index)
         if not 0 <= i < len(items):
             self.report({"ERROR"}, f"nothing selected in {self.collection}")
@@ -203,11 +206,10 @@ class CROWD_OT_item_move(_ListOperator, bpy.types.Operator):
     step: IntProperty(default=-1)
 
     def execute(self, context):
-        try:
-            owner, items, index = self._target(context)
-        except CrowdError as e:
-            self.report({"ERROR"}, str(e))
+        target = self._target(context)
+        if target is None:
             return {"CANCELLED"}
+        owner, items, index = target
         i = getattr(owner, index)
         j = i + self.step
         if not (0 <= i < len(items) and 0 <= j < len(items)):

@@ -115,3 +115,15 @@ def test_vertex_influences_pack_memberships_per_vertex():
     idx, wt = vertex_influences(np.zeros(2, np.int64), np.zeros(0), np.zeros(0),
                                 np.array([-1]))
     assert idx.shape == wt.shape == (2, 1) and not wt.any()
+
+
+def test_affine_inverse_equals_lapack_on_rest_and_scaled_matrices():
+    from crowd_addon.core.base.skeleton import affine_inverse
+    rng = np.random.default_rng(3)
+    m = np.zeros((64, 4, 4))
+    m[:, :3, :3] = rng.normal(size=(64, 3, 3))
+    m[:, :3, 3] = rng.normal(size=(64, 3)) * 5
+    m[:, 3, 3] = 1
+    np.testing.assert_allclose(affine_inverse(m), np.linalg.inv(m), rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(affine_inverse(m[:2].reshape(2, 1, 4, 4))[:, 0],
+                               np.linalg.inv(m[:2]), rtol=1e-9, atol=1e-9)

@@ -16,7 +16,7 @@ import numpy as np
 from ..base import pose as sqt
 from ..base import quaternion as quat
 from ..base.errors import CrowdError
-from ..base.skeleton import Skeleton
+from ..base.skeleton import Skeleton, affine_inverse
 
 __all__ = ["relative_to_parent", "rest_skeleton", "check_hierarchy", "sqt_from_matrices",
            "vertex_influences"]
@@ -59,7 +59,7 @@ def rest_skeleton(name: str, bone_names, parent_names, matrix_local: np.ndarray)
     """
     index = {n: i for i, n in enumerate(bone_names)}
     parents = np.array([-1 if p is None else index[p] for p in parent_names], np.int64)
-    inverse = np.linalg.inv(matrix_local)
+    inverse = affine_inverse(matrix_local)
     rel = relative_to_parent(matrix_local, parents, inverse)
     rot = quat.from_matrix(rel[:, :3, :3])
     bind = sqt.identity_pose(len(bone_names)).astype(np.float64)

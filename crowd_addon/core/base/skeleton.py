@@ -10,7 +10,7 @@ from . import pose as sqt
 from .errors import CrowdError
 from .quaternion import normalize_if_needed
 
-__all__ = ["Skeleton", "local_to_model"]
+__all__ = ["Skeleton", "local_to_model", "affine_inverse"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -77,7 +77,7 @@ class Skeleton:
         model = local_to_model(sqt.pose_to_matrices(bind)[None], self)[0]
         object.__setattr__(self, "bind_model", model)
         if self.inverse_bind is None:
-            inv = np.linalg.inv(model)
+            inv = affine_inverse(model)
         else:
             inv = np.asarray(self.inverse_bind, dtype=np.float64)
             if inv.shape != (len(names), 4, 4) or not np.isfinite(inv).all():
@@ -206,4 +206,23 @@ def _validated_pose(values, bones, what, names=None) -> np.ndarray:
                          f"{names[b] if names else b!r}")
     out = np.asarray(values).astype(np.float32)
     out[:, sqt.ROT] = normalize_if_needed(p[:, sqt.ROT])
+    return out
+
+
+def affine_inverse(m: np.ndarray) -> np.ndarray:
+    """Inverses of affine 4x4 matrices ``(..., 4, 4)`` (last row ``0 0 0 1``): the 3x3
+    part by its adjugate (rows ``c1 x c2``, ``c2 x c0``, ``c0 x c1`` of its columns over
+    the determinant), the translation undone by it. Whole-array numpy, no LAPACK call
+    (``np.linalg.inv`` wakes the BLAS threads: milliseconds for a handful of bones on a
+    busy machine)."""
+    m = np.asarray(m, np.float64)
+    a = m[..., :3, :3]
+    c0, c1, c2 = a[..., :, 0], a[..., :, 1], a[..., :, 2]
+    rows = np.stack([np.cross(c1, c2), np.cross(c2, c0), np.cross(c0, c1)], axis=-2)
+    det = np.einsum("...i,...i->...", c0, rows[..., 0, :])
+    inv3 = rows / det[..., None, None]
+    out = np.zeros(m.shape, np.float64)
+    out[..., :3, :3] = inv3
+    out[..., :3, 3] = -np.einsum("...ij,...j->...i", inv3, m[..., :3, 3])
+    out[..., 3, 3] = 1.0
     return out

@@ -12,6 +12,7 @@ import numpy as np
 
 from ..base.bounds import MAX_RUN_FRAMES, check_run, whole_frame
 from ..base.errors import CrowdError
+from .driver import FrameDriver
 from .snapshot import Snapshot, load_snapshot
 
 __all__ = ["SnapshotCache", "SnapshotFolder", "write_snapshots", "ShotSnapshots"]
@@ -159,15 +160,13 @@ def write_snapshots(crowd, folder: SnapshotFolder, first: int, last: int, every:
               "and so on)")
     start = crowd.config.start_frame              # a new crowd is there already
     wanted = {f for f in range(first - 1, last + 1, every) if f > start} | {last}
-    written, total = [], last - crowd.frame
-    if crowd.frame in wanted:
-        written.append(folder.save(crowd))
-    while crowd.frame < last:
-        crowd.step()
+    written = []
+
+    def keep(crowd):                                # a FrameDriver's consumer
         if crowd.frame in wanted:
             written.append(folder.save(crowd))
-        if progress is not None:
-            progress(total - (last - crowd.frame), total)
+    keep(crowd)
+    FrameDriver(crowd, consumers=[keep]).run(last, progress)
     return written
 
 
