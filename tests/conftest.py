@@ -34,7 +34,7 @@ import pytest
 
 TESTS = Path(__file__).resolve().parent
 #: The pure-core tier (``pytest -m fast``): folders and files under tests/.
-FAST = ("core", "test_layering.py")
+FAST = ("core", "test_layering.py", "test_one_loop.py", "test_architecture_doc.py")
 #: The environment switch that turns skips into failures.
 REQUIRE_ALL = "CROWD_REQUIRE_ALL"
 #: The only skips allowed under CROWD_REQUIRE_ALL: node id -> the skip's reason.
