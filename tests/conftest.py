@@ -1,8 +1,8 @@
 """Suite-wide pytest hooks: the ``fast`` tier, ``CROWD_REQUIRE_ALL``, summaries and the
 exit.
 
-Tiers (docs/testing.md). ``tests/core/`` and ``tests/test_layering.py`` need numpy
-only; they are marked ``fast`` here by path, so ``pytest -m fast`` runs that tier alone
+Tiers (docs/testing.md). ``tests/core/`` and the structural tests (``FAST``) need
+numpy only; they are marked ``fast`` here by path, so ``pytest -m fast`` runs that tier alone
 (and, for that exact expression, does not even import the other test modules, which
 load bpy, moderngl and pxr). Everything else needs Blender's ``bpy`` module, headless
 EGL (moderngl) or ``pxr``, and skips where one is missing.
