@@ -34,7 +34,8 @@ from ..core.runtime.pose_storage import TextureRegion
 from .blender_gpu import (CROWD_CAPTURE, UPLOAD_INTS, float_texture, program, read_buffer,
                           set_if_used, use_program)
 from .frame_plan import DRAW_SAMPLERS, SKIN_SAMPLERS, TextureSpec
-from .programs import CROWD_DRAW, ROW_UPLOAD, SCENE_DRAW, SKIN_ROWS, UPLOAD_GROUP, for_influences
+from .programs import (CROWD_DRAW, LOOK_TURNS, ROW_UPLOAD, SCENE_DRAW, SKIN_ROWS, UPLOAD_GROUP,
+                       for_influences)
 from .renderer import CrowdRenderer
 from .texture_region import stage_rows
 
@@ -174,6 +175,15 @@ class BlenderGPURenderer(CrowdRenderer):
         shader.image("pose_img", self.textures["pose"])
         self.gpu.compute.dispatch(shader, work.groups, 1, 1)
         return work.image.nbytes
+
+    def _turn_looks(self, uniforms, groups):
+        shader = program(self.gpu, LOOK_TURNS)
+        use_program(self.gpu, shader)
+        self._set_uniforms(shader, LOOK_TURNS, uniforms)
+        for _, _, name in LOOK_TURNS.samplers:
+            set_if_used(shader.uniform_sampler, name, self.textures[DRAW_SAMPLERS[name]])
+        shader.image("look_turn_img", self.textures["look_turns"])
+        self.gpu.compute.dispatch(shader, groups, 1, 1)
 
     def _owns_image(self) -> bool:
         return self.framebuffer is not None

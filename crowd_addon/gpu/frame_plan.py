@@ -31,11 +31,11 @@ from .skeleton_data import batch_image, fill_batch, skeleton_image
 __all__ = ["FramePlan", "FrameStats", "TextureSpec", "SkinningWork", "Draw", "Capture",
            "DRAW_SAMPLERS", "SKIN_SAMPLERS", "gl_matrix"]
 
-#: Sampler of the draw program -> name of the texture it reads.
+#: Sampler of the draw and look-turns programs -> name of the texture it reads.
 DRAW_SAMPLERS = {"pose_tex": "pose", "agent_tex": "agents", "agent_list_tex": "lists",
                  "shadow_tex": "shadow", "shadow_view_tex": "shadow_view",
                  "look_tex": "looks", "look_target_tex": "look_targets",
-                 "look_chain_tex": "look_chains"}
+                 "look_chain_tex": "look_chains", "look_turn_tex": "look_turns"}
 #: Sampler of the skinning-rows program -> name of the texture it reads (``batch``: the
 #: batch texture the backend keeps or makes for :class:`SkinningWork`).
 SKIN_SAMPLERS = {"local_tex": "local", "skeleton_tex": "skeletons", "batch_tex": "batch"}
@@ -192,7 +192,8 @@ class FramePlan:
                   TextureSpec("look_targets", looks.targets_image.shape[1::-1], "RGBA32F",
                               looks.targets_image),
                   TextureSpec("look_chains", looks.chains_image.shape[1::-1], "RGBA32F",
-                              looks.chains_image)]
+                              looks.chains_image),
+                  TextureSpec("look_turns", looks.turns_size, "RGBA32F")]
         return specs
 
     def meshes(self) -> dict:
@@ -230,6 +231,14 @@ class FramePlan:
         """Looks texture regions of the agents whose look state changed since the last
         take (nothing unless ``looks.version`` moved)."""
         return self.looks.update(self.view, max_regions)
+
+    def look_turns(self) -> dict | None:
+        """The uniforms of the look turns pass (:data:`~.programs.LOOK_TURNS`) for the
+        current frame, or None when no agent looks then (nothing to work out)."""
+        if not self.looks.active(self.view.frame):
+            return None
+        return {"u_pose_layout": self.pose_layout, "u_pose_regions": self.pose_regions(),
+                "u_draw": (0, 0, 0, 0), "u_looks": (self.view.agent_count, 0, 0, 0)}
 
     def take_skinning(self) -> SkinningWork | None:
         """The skinning-rows pass for the rows pending in core (GPU skinning), or None

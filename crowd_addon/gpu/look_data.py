@@ -1,7 +1,11 @@
-"""Look-at on the GPU (core/runtime/look_at.py, applied in the vertex stage): the data the
-shaders read (``gpu_shaders/look_at.glsl``).
+"""Look-at on the GPU (core/runtime/look_at.py): the data the shaders read
+(``gpu_shaders/looks.glsl``). Each frame a compute pass works out every looking
+agent's turns once (``look_turns_comp.glsl``, :data:`~.programs.LOOK_TURNS`) into the
+``look_turns`` texture (:data:`~.programs.LOOK_TURN_TEXELS` texels per agent,
+block-laid: per chain depth the rows ``[R | t]`` of its turn), and the draws' vertex
+stage applies them (``look_at.glsl``).
 
-Three textures, none of them written per frame:
+Three textures the CPU writes, none of them per frame:
 
 * ``looks`` (RGBA32F, two texels per agent, block-laid like the agent texture):
   ``(target, start, blend, stop)`` -- the agent's :class:`~..core.look_at.AgentLooks`
@@ -27,6 +31,7 @@ import numpy as np
 
 from ..core.base.errors import CrowdError
 from ..core.runtime.pose_storage import block_layout
+from .programs import LOOK_TURN_TEXELS
 from .texture_region import block_image, block_regions
 
 __all__ = ["LookData", "LOOK_TEXELS", "NEVER", "MAX_LOOK_BONES"]
@@ -35,7 +40,7 @@ __all__ = ["LookData", "LOOK_TEXELS", "NEVER", "MAX_LOOK_BONES"]
 LOOK_TEXELS = 2
 #: ``stop`` of a look that stays (float32, beyond any frame)
 NEVER = 1.0e30
-#: the longest look chain the shader turns (gpu_shaders/look_at.glsl, LOOK_BONES)
+#: the longest look chain the shader turns (gpu_shaders/looks.glsl, LOOK_BONES)
 MAX_LOOK_BONES = 8
 _EXACT = 2 ** 24                    # integers a float32 holds exactly
 _STAYS = 2 ** 60                    # AgentLooks' stop of a look that stays is beyond
@@ -45,15 +50,19 @@ class LookData:
     """The look textures of a crowd (module doc) and their changes.
 
     ``records`` (N, 2, 4) float32; ``block_rows``, ``blocks``, ``width``, ``height``
-    of the looks texture; ``targets_image``, ``chains_image`` (H, W, 4) float32.
+    of the looks texture; ``targets_image``, ``chains_image`` (H, W, 4) float32;
+    ``turns_size`` (width, height) of the look turns texture the GPU writes.
     """
 
     def __init__(self, view, max_texture_size: int = 16384):
         n = view.agent_count
         limit = int(max_texture_size)
         self.count = n
-        self.block_rows, self.blocks, self.width = block_layout(n, LOOK_TEXELS, limit, "looks texture")
+        self.block_rows, self.blocks, self.width = block_layout(n, LOOK_TEXELS, limit,
+                                                                "looks texture")
         self.height = self.block_rows
+        rows, _, width = block_layout(n, LOOK_TURN_TEXELS, limit, "look turns texture")
+        self.turns_size = (width, rows)
         lags = np.asarray(view.look_lags, np.int64)
         if lags.size and (lags.min() <= -_EXACT or lags.max() >= _EXACT):
             raise CrowdError("look lags must stay below 2**24 frames on the GPU")

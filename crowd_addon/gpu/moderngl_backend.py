@@ -18,7 +18,7 @@ import numpy as np
 from ..core.base.errors import CrowdError
 from .assembler import gl_sources
 from .frame_plan import DRAW_SAMPLERS, SKIN_SAMPLERS, TextureSpec
-from .programs import CROWD_DRAW, SCENE_DRAW, SKIN_ROWS, for_influences
+from .programs import CROWD_DRAW, LOOK_TURNS, SCENE_DRAW, SKIN_ROWS, for_influences
 from .renderer import CrowdRenderer
 
 __all__ = ["ModernGLRenderer", "GL_VERSION"]
@@ -202,6 +202,15 @@ class ModernGLRenderer(CrowdRenderer):
         prog.run(work.groups)
         self.ctx.memory_barrier()
         return sent
+
+    def _turn_looks(self, uniforms, groups):
+        prog = self._program(LOOK_TURNS, {})
+        _set_uniforms(prog, uniforms)
+        for slot, _, name in LOOK_TURNS.samplers:
+            self.textures[DRAW_SAMPLERS[name]].use(slot)
+        self.textures["look_turns"].bind_to_image(0, read=False, write=True)
+        prog.run(groups)
+        self.ctx.memory_barrier()
 
     def _owns_image(self) -> bool:
         return True

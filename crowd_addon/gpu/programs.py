@@ -15,8 +15,8 @@ from functools import lru_cache
 from importlib import resources
 
 __all__ = ["SHADER_DIR", "Interface", "ProgramSpec", "CROWD_DRAW", "SCENE_DRAW", "SKIN_ROWS",
-           "ROW_UPLOAD", "AGENT_TEXELS", "SKIN_GROUP", "UPLOAD_GROUP", "WIDE_INPUTS",
-           "for_influences"]
+           "ROW_UPLOAD", "LOOK_TURNS", "AGENT_TEXELS", "LOOK_TURN_TEXELS", "SKIN_GROUP",
+           "UPLOAD_GROUP", "LOOK_GROUP", "WIDE_INPUTS", "for_influences"]
 
 #: gpu_shaders/ (importlib.resources): the resource package beside crowd_addon, at the
 #: top of the repository, of a wheel and of the Blender extension (there it is
@@ -29,6 +29,11 @@ AGENT_TEXELS = 3
 SKIN_GROUP = 64
 #: Texels per compute work group (along a row) of the row upload shader.
 UPLOAD_GROUP = 64
+#: RGBA32F texels per agent in the look turns texture: three ([R | t] rows) per chain
+#: depth, for up to eight chain bones (gpu_shaders/looks.glsl, LOOK_TURN_TEXELS).
+LOOK_TURN_TEXELS = 24
+#: Agents per compute work group of the look turns shader.
+LOOK_GROUP = 64
 
 
 @dataclass(frozen=True)
@@ -78,7 +83,8 @@ class ProgramSpec:
 CROWD_DRAW = ProgramSpec(
     name="crowd_draw",
     vertex=("block_layout.glsl", "pose_layout.glsl", "pose_rows.glsl", "agents.glsl",
-            "skinning.glsl", "look_at.glsl", "crowd_vertex.glsl", "crowd_vert.glsl"),
+            "skinning.glsl", "looks.glsl", "look_at.glsl", "crowd_vertex.glsl",
+            "crowd_vert.glsl"),
     fragment=("crowd_frag.glsl",),
     vertex_in=((0, "VEC3", "pos"), (1, "VEC3", "nor"), (2, "UVEC4", "bone_idx"),
                (3, "VEC4", "bone_w"), (6, "VEC4", "col")),
@@ -91,7 +97,7 @@ CROWD_DRAW = ProgramSpec(
     samplers=((0, "FLOAT_2D", "pose_tex"), (1, "FLOAT_2D", "agent_tex"),
               (2, "INT_2D", "agent_list_tex"), (3, "FLOAT_2D", "shadow_tex"),
               (4, "FLOAT_2D", "shadow_view_tex"), (5, "FLOAT_2D", "look_tex"),
-              (6, "FLOAT_2D", "look_target_tex"), (7, "FLOAT_2D", "look_chain_tex")),
+              (6, "FLOAT_2D", "look_turn_tex"), (7, "FLOAT_2D", "look_chain_tex")),
     fragment_out=((0, "VEC4", "frag_color"),),
     defines=("INFLUENCES", "SHADOWS", "ENCODE_SRGB"),
 )
@@ -151,4 +157,20 @@ ROW_UPLOAD = ProgramSpec(
     samplers=((0, "FLOAT_2D", "staging_tex"), (1, "INT_2D", "row_index_tex")),
     images=((0, "RGBA32F", "FLOAT_2D", "dest_img", ("WRITE",)),),
     local_group_size=(UPLOAD_GROUP, 1),
+)
+
+#: The look's turns of every looking agent, once a frame, for the draws' vertex stage
+#: (gpu_shaders/look_turns_comp.glsl): the chain's head direction, clamped yaw and
+#: pitch and shared turn per agent, not per vertex.
+LOOK_TURNS = ProgramSpec(
+    name="look_turns",
+    compute=("block_layout.glsl", "pose_layout.glsl", "pose_rows.glsl", "agents.glsl",
+             "looks.glsl", "look_turns.glsl", "look_turns_comp.glsl"),
+    push_constants=(("IVEC4", "u_pose_layout"), ("IVEC4", "u_pose_regions"),
+                    ("IVEC4", "u_draw"), ("IVEC4", "u_looks")),
+    samplers=((0, "FLOAT_2D", "pose_tex"), (1, "FLOAT_2D", "agent_tex"),
+              (2, "INT_2D", "agent_list_tex"), (5, "FLOAT_2D", "look_tex"),
+              (6, "FLOAT_2D", "look_target_tex"), (7, "FLOAT_2D", "look_chain_tex")),
+    images=((0, "RGBA32F", "FLOAT_2D", "look_turn_img", ("WRITE",)),),
+    local_group_size=(LOOK_GROUP,),
 )

@@ -10,6 +10,8 @@ A backend (:mod:`.moderngl_backend`, :mod:`.blender_backend`) subclasses
 * ``_create_mesh(buffers, copies)`` -- the GPU form of one proxy level;
 * ``_skin(work)`` -- the skinning-rows compute pass (:class:`~.frame_plan.SkinningWork`);
   returns the batch bytes sent;
+* ``_turn_looks(uniforms, groups)`` -- the look turns compute pass
+  (:data:`~.programs.LOOK_TURNS`, into the ``look_turns`` texture);
 * ``_bind_target(target, clear)`` -- a context manager: bind and clear a draw
   target, set the draw state, yield the viewport's height in pixels, restore;
 * ``_draw(mesh, draw)`` -- one instanced call (:class:`~.frame_plan.Draw`);
@@ -40,6 +42,7 @@ import numpy as np
 
 from ..core.runtime.pose_storage import TextureRegion
 from .frame_plan import Draw, FramePlan, FrameStats, TextureSpec, gl_matrix
+from .programs import LOOK_GROUP
 from .shadows import LIT_VIEW, SHADOW_SIZE, sun_view, view_texels
 
 __all__ = ["CrowdRenderer", "BACKGROUND"]
@@ -119,6 +122,7 @@ class CrowdRenderer:
         work = self.plan.take_skinning()          # GPU skinning: fill the pose texture
         if work is not None:
             self._skin(work)
+        self._looks_turned()
 
     # -------------------------------------------------------------------- frame
     def sync(self) -> FrameStats:
@@ -141,8 +145,16 @@ class CrowdRenderer:
         work = plan.take_skinning()
         if work is not None:
             s.batch_bytes, s.skinned_rows = self._skin(work), work.count
+        self._looks_turned()
         self.stats = s
         return s
+
+    def _looks_turned(self):
+        """The look turns pass of the current frame, when some agent looks: each
+        looking agent's turns worked out once, after its pose rows are in place."""
+        uniforms = self.plan.look_turns()
+        if uniforms is not None:
+            self._turn_looks(uniforms, -(-self.view.agent_count // LOOK_GROUP))
 
     def set_scene(self, geometry) -> None:
         """Draw ``geometry`` (a :class:`~.scene_geometry.SceneGeometry`, or None for no
@@ -298,6 +310,9 @@ class CrowdRenderer:
         raise NotImplementedError
 
     def _write_rows(self, texture, block_rows, regions) -> int:
+        raise NotImplementedError
+
+    def _turn_looks(self, uniforms, groups):
         raise NotImplementedError
 
     def _write_ints(self, texture, region) -> int:
