@@ -29,8 +29,9 @@ that deep in a 540-pixel image); LODs off: the full mesh for every agent. Prints
   demo's 5,436), interleaved; the extra time over the crowd alone (target <= 25%),
   and with the sun's shadows on as well;
 * ``look_at_overhead``: 65,000 agents with LODs all looking at a target circling
-  above the crowd (neck and head turned in the vertex stage) over none looking, same
-  crowd and renderer, interleaved (target <= 1.10; ``--look-only`` prints just it);
+  above the crowd (necks and heads turned by the look turns pass and the vertex stage)
+  over none looking, same crowd and renderer, interleaved (target <= 1.10;
+  ``--look-only`` prints just it);
 * with the ``bpy`` module, the Render Crowd path (``crowd_addon.blender.render_crowd``:
   pose meshes skinned on the CPU and written into Blender meshes for F12) at 2,000 and
   65,000 agents through the camera above: the first sync (meshes made) and the
