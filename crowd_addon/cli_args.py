@@ -1,6 +1,6 @@
 """Argument converters and progress printing shared by the two command lines: the
-headless ``crowd`` program (:mod:`crowd_addon.cli`) and Blender's ``-c crowd``
-command (:mod:`crowd_addon.blender.cli_commands`). It imports nothing of this project
+headless ``crowd`` program (:mod:`crowd_addon.cli` and its :mod:`crowd_addon.commands`)
+and Blender's ``-c crowd`` command (:mod:`crowd_addon.blender.cli_commands`). It imports nothing of this project
 but core's vocabulary (``USD_LAYOUTS``), so both may use it without a cycle."""
 
 from __future__ import annotations

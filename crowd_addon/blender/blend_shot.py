@@ -10,12 +10,11 @@ repetition metric is measured through. Blender's own log lines go to stderr
 
 from __future__ import annotations
 
-import contextlib
 import os
-import sys
 from functools import cached_property
 
 from ..core.base.errors import CrowdError
+from .c_output import fd_redirected
 
 __all__ = ["BlendShot", "open_scene", "blender_output_to_stderr", "preview_view",
            "preview_scene"]
@@ -135,31 +134,9 @@ def preview_scene(shot) -> dict:
     return {"scene": scene_geometry(shot.scene), "light": scene_light(shot.scene)}
 
 
-@contextlib.contextmanager
 def blender_output_to_stderr():
-    """For the ``with`` block, whatever is written to the process's standard output
-    (Blender's own log lines such as ``Read blend: ...``, which its C code writes
-    there) goes to standard error, so a command's stdout holds only its summary
-    (``--json``: one JSON object)."""
-    sys.stdout.flush()
-    try:
-        saved = os.dup(1)
-    except OSError:                             # no standard output at all
-        yield
-        return
-    try:
-        os.dup2(2, 1)
-        yield
-    finally:
-        sys.stdout.flush()
-        _flush_c_stdio()
-        os.dup2(saved, 1)
-        os.close(saved)
-
-
-def _flush_c_stdio():
-    try:
-        import ctypes
-        ctypes.CDLL(None).fflush(None)
-    except (OSError, AttributeError, TypeError):     # no C library to flush (Windows)
-        pass
+    """A context: whatever is written to the process's standard output (Blender's own
+    log lines such as ``Read blend: ...``, which its C code writes there) goes to
+    standard error, so a command's stdout holds only its summary (``--json``: one JSON
+    object)."""
+    return fd_redirected(1, 2)

@@ -11,7 +11,6 @@ then draws. Those lines are kept off the console; any other output goes through.
 from __future__ import annotations
 
 import contextlib
-import os
 import re
 import sys
 import tempfile
@@ -19,6 +18,7 @@ import tempfile
 import bpy
 
 from ..core.base.errors import CrowdError
+from .c_output import fd_redirected
 
 __all__ = ["init_headless_gpu"]
 
@@ -59,21 +59,11 @@ def _without_egl_mismatches():
     """For the ``with`` block, the process's stderr (file descriptor 2, where Blender's
     C code writes) goes to a temporary file; afterwards every line of it but
     :data:`_EGL_MISMATCH` goes on to the real stderr."""
-    sys.stderr.flush()
-    try:
-        saved = os.dup(2)
-    except OSError:                             # no standard error at all
-        yield
-        return
     with tempfile.TemporaryFile() as caught:
-        os.dup2(caught.fileno(), 2)
         try:
-            yield
+            with fd_redirected(2, caught.fileno()):
+                yield
         finally:
-            sys.stderr.flush()
-            _flush_c_stdio()
-            os.dup2(saved, 2)
-            os.close(saved)
             caught.seek(0)
             kept = [line for line in caught.read().decode("utf-8", "replace")
                     .splitlines(keepends=True) if not _EGL_MISMATCH.match(line)]
@@ -81,10 +71,3 @@ def _without_egl_mismatches():
                 sys.stderr.write("".join(kept))
                 sys.stderr.flush()
 
-
-def _flush_c_stdio():
-    try:
-        import ctypes
-        ctypes.CDLL(None).fflush(None)
-    except (OSError, AttributeError, TypeError):     # no C library to flush (Windows)
-        pass
