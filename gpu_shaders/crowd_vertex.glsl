@@ -48,8 +48,8 @@ void crowd_vertex(int agent_id)
   vec4 look = look_texel(agent_id, 0);
   float weight = look_weight(look);
   if (weight > 0.0) {
-    skin_vertex_looking(agent_id, row, bone_idx, bone_w, bones2, weights2, pos, nor, p,
-                        n);
+    skin_vertex_looking(agent_id, row, look_depth, bone_idx, bone_w, bones2, weights2, pos,
+                        nor, p, n);
   }
   else {
     skin_vertex(row, bone_idx, bone_w, bones2, weights2, pos, nor, p, n);

@@ -1,21 +1,10 @@
 /* Look-at in the vertex stage (crowd_addon/core/runtime/looks.py turn_rows on the GPU):
- * a vertex of an agent whose weight is 0 pays one texel fetch; of a looking agent, one
- * depth fetch per influence, and for each influence on or below the chain the turn
- * its depth takes, read from look_turn_tex (three texels: look_turns_comp.glsl worked
- * it out once for the agent this frame). Needs looks.glsl and skinning.glsl before it.
+ * a vertex of an agent whose weight is 0 pays one texel fetch; of a looking agent, a
+ * vertex off the chain (its look_depth 0) skins as any other, and one on or below it
+ * reads, per influence the look turns, that depth's turn from look_turn_tex (three
+ * texels: look_turns_comp.glsl worked it out once for the agent this frame). Needs
+ * looks.glsl and skinning.glsl before it.
  */
-
-/* Chain depth of each of four bones (0 past INFLUENCES or off the chain). */
-ivec4 look_depths(int skeleton, int column, uvec4 bones, int first)
-{
-  ivec4 depth = ivec4(0);
-  for (int i = 0; i < 4; i++) {
-    if (first + i < INFLUENCES) {
-      depth[i] = int(texelFetch(look_chain_tex, ivec2(column + int(bones[i]), skeleton), 0).x);
-    }
-  }
-  return depth;
-}
 
 /* Rows [R | t] of the turn of chain depth `depth` (1..K) of agent `agent_id`. */
 void look_turn(int agent_id, int depth, out vec4 t0, out vec4 t1, out vec4 t2)
@@ -48,23 +37,14 @@ void look_blend_bone(int agent_id, ivec2 origin, uint bone, float w, int depth,
   r2 += w * a2;
 }
 
-/* skin_vertex with the agent's look applied (Crowd.agent_rows). */
-void skin_vertex_looking(int agent_id, int row, uvec4 bones, vec4 weights, uvec4 bones2,
-                         vec4 weights2, vec3 position, vec3 normal,
+/* skin_vertex with the agent's look applied (Crowd.agent_rows): `depths`, the vertex's
+ * look_depth, holds each influence's chain depth in four bits (0: the look leaves
+ * it), so a vertex off the chain skins as any other. */
+void skin_vertex_looking(int agent_id, int row, uint depths, uvec4 bones, vec4 weights,
+                         uvec4 bones2, vec4 weights2, vec3 position, vec3 normal,
                          out vec3 skinned_position, out vec3 skinned_normal)
 {
-  int skeleton = int(look_texel(agent_id, 1).y);
-  vec4 header = texelFetch(look_chain_tex, ivec2(0, skeleton), 0);
-  int column = int(header.w);
-  ivec4 depth = int(header.x) > 0 ? look_depths(skeleton, column, bones, 0) : ivec4(0);
-  ivec4 depth2 = ivec4(0);
-#if INFLUENCES > 4
-  if (int(header.x) > 0) {
-    depth2 = look_depths(skeleton, column, bones2, 4);
-  }
-#endif
-  ivec4 deepest4 = max(depth, depth2);
-  if (max(max(deepest4.x, deepest4.y), max(deepest4.z, deepest4.w)) == 0) {
+  if (depths == 0u) {
     skin_vertex(row, bones, weights, bones2, weights2, position, normal, skinned_position,
                 skinned_normal);
     return;
@@ -72,11 +52,13 @@ void skin_vertex_looking(int agent_id, int row, uvec4 bones, vec4 weights, uvec4
   ivec2 origin = pose_row_origin(row);
   vec4 r0 = vec4(0.0), r1 = vec4(0.0), r2 = vec4(0.0);
   for (int i = 0; i < min(INFLUENCES, 4); i++) {
-    look_blend_bone(agent_id, origin, bones[i], weights[i], depth[i], r0, r1, r2);
+    int depth = int((depths >> uint(4 * i)) & 15u);
+    look_blend_bone(agent_id, origin, bones[i], weights[i], depth, r0, r1, r2);
   }
 #if INFLUENCES > 4
   for (int i = 0; i < INFLUENCES - 4; i++) {
-    look_blend_bone(agent_id, origin, bones2[i], weights2[i], depth2[i], r0, r1, r2);
+    int depth = int((depths >> uint(4 * (i + 4))) & 15u);
+    look_blend_bone(agent_id, origin, bones2[i], weights2[i], depth, r0, r1, r2);
   }
 #endif
   vec4 p = vec4(position, 1.0);

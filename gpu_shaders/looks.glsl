@@ -2,9 +2,8 @@
  * and weight, and a bone's skinning rows. Data:
  *   look_tex: two texels per agent, block-laid like agent_tex:
  *     (target, start, blend, stop) and (lag, skeleton, 0, 0)
- *   look_chain_tex: a row per skeleton: (K, yaw limit, pitch limit, depth column),
- *     (forward x, y, 0, 0), per chain bone k (bind pivot xyz, share) and (bone, 0, 0, 0),
- *     from the depth column per bone its chain depth
+ *   look_chain_tex: a row per skeleton: (K, yaw limit, pitch limit, 0),
+ *     (forward x, y, 0, 0), per chain bone k (bind pivot xyz, share) and (bone, 0, 0, 0)
  *   look_turn_img / look_turn_tex: LOOK_TURN_TEXELS texels per agent, block-laid: per
  *     chain depth k + 1 the rows [R | t] of the turn that moves a bone at that depth
  *     (look_turns_comp.glsl writes them, look_at.glsl reads them)

@@ -53,6 +53,8 @@ def _vertex_buffer(gpu, buffers):
             fmt.attr_add(id=name, comp_type="U16", len=4, fetch_mode="INT")
         elif kind == "4f1":
             fmt.attr_add(id=name, comp_type="U8", len=4, fetch_mode="INT_TO_FLOAT_UNIT")
+        elif kind == "u4":
+            fmt.attr_add(id=name, comp_type="U32", len=1, fetch_mode="INT")
         else:
             fmt.attr_add(id=name, comp_type="F32", len=int(kind[0]), fetch_mode="FLOAT")
     vbo = gpu.types.GPUVertBuf(fmt, buffers.vertex_count)

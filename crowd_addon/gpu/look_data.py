@@ -15,10 +15,10 @@ Three textures the CPU writes, none of them per frame:
 * ``look_targets``: the look targets' smoothed paths, known for the whole shot,
   uploaded once: row 0 holds per target ``(first frame, frames, rows, first row)``,
   then each target's frames ``W`` a row from its first row on (``W`` the width).
-* ``look_chains``: a row per skeleton: texel 0 ``(K, yaw limit, pitch limit,
-  depth column)``, texel 1 ``(forward x, y, 0, 0)``, texels ``2 + 2k`` ``(bind pivot
-  xyz, share)`` and ``3 + 2k`` ``(bone, 0, 0, 0)`` of chain bone ``k``, then from the
-  depth column a texel per bone whose x is its chain depth (0: the look leaves it).
+* ``look_chains``: a row per skeleton: texel 0 ``(K, yaw limit, pitch limit, 0)``,
+  texel 1 ``(forward x, y, 0, 0)``, texels ``2 + 2k`` ``(bind pivot xyz, share)`` and
+  ``3 + 2k`` ``(bone, 0, 0, 0)`` of chain bone ``k``. Which influences of a vertex the
+  look turns rides on the vertex itself (``look_depth``, :func:`.proxies.look_depths`).
 
 The frame goes in ``u_pose_regions.w`` (:meth:`~.frame_plan.FramePlan.pose_regions`),
 so a frame uploads nothing for the looks: each agent's weight and where it sees its
@@ -74,7 +74,7 @@ class LookData:
         #: frames [first, end) within which some agent's look may weigh above 0
         self._window = (0.0, 0.0)
         self.targets_image = _targets_image(view.look_targets, limit)
-        self.chains_image = _chains_image(view.look_chains, view.layout.bones, limit)
+        self.chains_image = _chains_image(view.look_chains, limit)
         self.update(view)
 
     def active(self, frame) -> bool:
@@ -148,20 +148,18 @@ def _targets_image(targets, limit: int) -> np.ndarray:
     return img
 
 
-def _chains_image(chains, bones: int, limit: int) -> np.ndarray:
+def _chains_image(chains, limit: int) -> np.ndarray:
     """A row per skeleton (module doc); K = 0 for a skeleton without a look rig."""
     k_max = max((c.index.size for c in chains if c is not None), default=0)
     if k_max > MAX_LOOK_BONES:
         raise CrowdError(f"a look chain of {k_max} bones: the GPU turns at most "
                          f"{MAX_LOOK_BONES}")
-    base = 2 + 2 * k_max
-    width = base + bones
+    width = 2 + 2 * k_max
     if width > limit or len(chains) > limit:
         raise CrowdError(f"look chains texture {width} x {len(chains)} exceeds the max "
                          f"texture size {limit}")
     img = np.zeros((max(1, len(chains)), width, 4), np.float32)
     for s, c in enumerate(chains):
-        img[s, 0, 3] = base
         if c is None:
             continue
         k = c.index.size
@@ -170,5 +168,4 @@ def _chains_image(chains, bones: int, limit: int) -> np.ndarray:
         for i in range(k):
             img[s, 2 + 2 * i] = (*c.pivots[i], c.shares[i])
             img[s, 3 + 2 * i, 0] = c.index[i]
-        img[s, base:base + c.depth.size, 0] = c.depth
     return img

@@ -87,7 +87,7 @@ CROWD_DRAW = ProgramSpec(
             "crowd_vert.glsl"),
     fragment=("crowd_frag.glsl",),
     vertex_in=((0, "VEC3", "pos"), (1, "VEC3", "nor"), (2, "UVEC4", "bone_idx"),
-               (3, "VEC4", "bone_w"), (6, "VEC4", "col")),
+               (3, "VEC4", "bone_w"), (6, "VEC4", "col"), (7, "UINT", "look_depth")),
     interfaces=(Interface("crowd_iface", (("smooth", "VEC3", "v_world"),
                                           ("smooth", "VEC3", "v_normal"),
                                           ("flat", "VEC3", "v_color"))),),
@@ -97,7 +97,7 @@ CROWD_DRAW = ProgramSpec(
     samplers=((0, "FLOAT_2D", "pose_tex"), (1, "FLOAT_2D", "agent_tex"),
               (2, "INT_2D", "agent_list_tex"), (3, "FLOAT_2D", "shadow_tex"),
               (4, "FLOAT_2D", "shadow_view_tex"), (5, "FLOAT_2D", "look_tex"),
-              (6, "FLOAT_2D", "look_turn_tex"), (7, "FLOAT_2D", "look_chain_tex")),
+              (6, "FLOAT_2D", "look_turn_tex")),
     fragment_out=((0, "VEC4", "frag_color"),),
     defines=("INFLUENCES", "SHADOWS", "ENCODE_SRGB"),
 )

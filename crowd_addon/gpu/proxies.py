@@ -6,11 +6,12 @@ names of :data:`~.programs.CROWD_DRAW` (``pos``, ``nor`` float32 ``(V, 3)``,
 ``bone_idx`` uint16 ``(V, 4)``, ``bone_w`` float32 ``(V, 4)``, ``col`` uint8 ``(V,
 4)``: the base colour of the vertex's material, and in alpha the agent palette
 column that colours that material (255: none; the form Blender's
-``GPUVertBuf.attr_fill`` takes), an interleaved copy for moderngl, and uint32
-triangle indices. A mesh stored eight influences wide (some vertex has five to
+``GPUVertBuf.attr_fill`` takes), ``look_depth`` uint32 ``(V,)``: its influences'
+look chain depths, packed (:func:`look_depths`), an interleaved copy for moderngl,
+and uint32 triangle indices. A mesh stored eight influences wide (some vertex has five to
 eight bones) adds ``bone_idx2``/``bone_w2``, influences 5..8, declared by the
 program only then (:func:`~.programs.for_influences`); four-wide meshes keep a
-52-byte vertex.
+56-byte vertex.
 """
 
 from __future__ import annotations
@@ -21,17 +22,18 @@ import numpy as np
 
 from ..core.base.errors import CrowdError
 
-__all__ = ["ProxyBuffers", "proxy_buffers", "vertex_colors", "crowd_proxies",
+__all__ = ["ProxyBuffers", "proxy_buffers", "vertex_colors", "crowd_proxies", "look_depths",
            "copies_per_instance",
            "INTERLEAVED_FORMAT", "WIDE_FORMAT"]
 
 #: (attribute, moderngl format, bytes) of :meth:`ProxyBuffers.interleaved`, in order:
-#: meshes of up to four influences a vertex (52 bytes a vertex) ...
+#: meshes of up to four influences a vertex (56 bytes a vertex) ...
 INTERLEAVED_FORMAT = (("pos", "3f", 12), ("nor", "3f", 12), ("bone_idx", "4u2", 8),
-                      ("bone_w", "4f", 16), ("col", "4f1", 4))
-#: ... and of five to eight (influences 5..8 after them: 76 bytes a vertex).
+                      ("bone_w", "4f", 16), ("col", "4f1", 4), ("look_depth", "u4", 4))
+#: ... and of five to eight (influences 5..8 after them: 80 bytes a vertex).
 WIDE_FORMAT = INTERLEAVED_FORMAT + (("bone_idx2", "4u2", 8), ("bone_w2", "4f", 16))
-_NUMPY = {"3f": ("<f4", 3), "4u2": ("<u2", 4), "4f": ("<f4", 4), "4f1": ("u1", 4)}
+_NUMPY = {"3f": ("<f4", (3,)), "4u2": ("<u2", (4,)), "4f": ("<f4", (4,)),
+          "4f1": ("u1", (4,)), "u4": ("<u4", ())}
 
 
 def copies_per_instance(vertex_count: int, target: int = 1024, limit: int = 64) -> int:
@@ -108,14 +110,14 @@ class ProxyBuffers:
     def batched(self, copies: int) -> "ProxyBuffers":
         """``copies`` back-to-back copies of this mesh in one set of arrays (copy ``k``'s
         vertices at ``k * V``), for drawing several agents per instance."""
-        attrs = {k: np.ascontiguousarray(np.tile(v, (copies, 1)))
+        attrs = {k: np.ascontiguousarray(np.tile(v, (copies,) + (1,) * (v.ndim - 1)))
                  for k, v in self.attributes.items()}
         offsets = (np.arange(copies, dtype=np.int64) * self.vertex_count)[:, None]
         indices = (self.indices[None].astype(np.int64) + offsets).astype(np.uint32).reshape(-1)
         return ProxyBuffers(self.name, attrs, indices)
 
     def interleaved(self) -> np.ndarray:
-        """(V,) structured array in :attr:`format` order (52 bytes a vertex, 76 with
+        """(V,) structured array in :attr:`format` order (56 bytes a vertex, 80 with
         eight influences)."""
         fmt = self.format
         out = np.empty(self.vertex_count, np.dtype([(n, *_NUMPY[f]) for n, f, _ in fmt]))
@@ -145,16 +147,38 @@ def vertex_colors(mesh, palette_materials=()) -> np.ndarray:
     return out
 
 
-def proxy_buffers(mesh, palette_materials=()) -> ProxyBuffers:
+def look_depths(bone_indices, depth=None) -> np.ndarray:
+    """``(V,)`` uint32: each influence's look chain depth packed four bits apiece
+    (influence ``i`` in bits ``4i .. 4i + 3``; ``depth``: the chain depth of each bone
+    of the skeleton, :attr:`~crowd_addon.core.runtime.look_at.LookChain.depth`, None:
+    no look rig), so the vertex stage knows without a texel fetch which influences a
+    look turns (``gpu_shaders/look_at.glsl``); 0 for a vertex the look leaves."""
+    idx = np.asarray(bone_indices, np.int64)
+    out = np.zeros(idx.shape[0], np.uint32)
+    if depth is None:
+        return out
+    depth = np.asarray(depth, np.int64)
+    if depth.max(initial=0) > 15:
+        raise CrowdError(f"a look chain {int(depth.max())} bones deep: the GPU packs at "
+                         "most 15")
+    d = np.where(idx < depth.size, depth[np.minimum(idx, depth.size - 1)], 0)
+    for i in range(d.shape[1]):
+        out |= (d[:, i].astype(np.uint32) << np.uint32(4 * i))
+    return out
+
+
+def proxy_buffers(mesh, palette_materials=(), depth=None) -> ProxyBuffers:
     """Vertex arrays of a :class:`~crowd_addon.core.meshes.mesh.ProxyMesh` (already validated:
     4 or 8 influences a vertex, strongest first, summing to 1); ``palette_materials``
-    as :func:`vertex_colors`."""
+    as :func:`vertex_colors`; ``depth`` its skeleton's look chain depth per bone
+    (:func:`look_depths`; None: no look rig)."""
     idx, w = mesh.bone_indices, mesh.bone_weights
     attrs = {"pos": np.ascontiguousarray(mesh.positions, np.float32),
              "nor": np.ascontiguousarray(mesh.normals, np.float32),
              "bone_idx": np.ascontiguousarray(idx[:, :4], np.uint16),
              "bone_w": np.ascontiguousarray(w[:, :4], np.float32),
-             "col": vertex_colors(mesh, palette_materials)}
+             "col": vertex_colors(mesh, palette_materials),
+             "look_depth": look_depths(idx, depth)}
     if idx.shape[1] > 4:
         attrs["bone_idx2"] = np.ascontiguousarray(idx[:, 4:8], np.uint16)
         attrs["bone_w2"] = np.ascontiguousarray(w[:, 4:8], np.float32)
@@ -178,5 +202,7 @@ def crowd_proxies(view) -> list:
                 raise CrowdError(f"mesh {m.name!r}: uses bone {int(m.bone_indices.max())} but "
                                  f"skeleton {sk.name!r} has {sk.bone_count} bones")
         palette = view.config.palette_materials.get(sk.name, ())
-        out.append([proxy_buffers(m, palette) for m in body.levels])
+        chain = view.look_chains[body.skeleton]
+        depth = None if chain is None else chain.depth
+        out.append([proxy_buffers(m, palette, depth) for m in body.levels])
     return out

@@ -26,10 +26,22 @@ def test_vertex_format_grows_only_past_four_influences(h):
     from crowd_addon.gpu.proxies import proxy_buffers
     four = proxy_buffers(h.make_config().meshes["fan"][0])
     six = proxy_buffers(h.make_config(influences=6).meshes["fan"][0])
-    assert sorted(four.attributes) == ["bone_idx", "bone_w", "col", "nor", "pos"]
-    assert four.interleaved().itemsize == 52 and four.influences == 2
+    assert sorted(four.attributes) == ["bone_idx", "bone_w", "col", "look_depth", "nor", "pos"]
+    assert four.interleaved().itemsize == 56 and four.influences == 2
     assert sorted(six.attributes) == ["bone_idx", "bone_idx2", "bone_w", "bone_w2", "col",
-                                      "nor", "pos"]
-    assert six.interleaved().itemsize == 76 and six.influences == 6
+                                      "look_depth", "nor", "pos"]
+    assert six.interleaved().itemsize == 80 and six.influences == 6
     np.testing.assert_array_equal(six.batched(3).attributes["bone_w2"][: six.vertex_count],
                                   six.attributes["bone_w2"])
+
+
+def test_look_depths_pack_each_influences_chain_depth_in_four_bits():
+    from crowd_addon.gpu.proxies import look_depths
+    depth = np.array([0, 0, 1, 2, 2, 0])          # bones 2-4 on or below a two-bone chain
+    idx = np.array([[0, 1, 0, 0], [2, 0, 0, 0], [4, 3, 1, 0], [5, 5, 5, 5]])
+    got = look_depths(idx, depth)
+    assert got.dtype == np.uint32
+    assert got.tolist() == [0, 1, 2 | (2 << 4), 0]
+    assert look_depths(idx, None).tolist() == [0, 0, 0, 0]
+    wide = np.array([[0, 0, 0, 0, 0, 0, 0, 3]])
+    assert look_depths(wide, depth).tolist() == [2 << 28]
