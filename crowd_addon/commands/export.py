@@ -3,8 +3,9 @@ UsdSkel, docs/usd_export.md; with ``--workers`` or ``--scheduler`` in chunks on 
 cluster), ``crowd snapshot`` (exact snapshots of a shot for chunked exports), ``crowd
 stitch`` (chunk exports joined into one stage) and ``crowd farm`` (a shot list exported
 in chunks on one Dask cluster; all three docs/snapshots.md): their subparsers and
-handlers, on :mod:`crowd_addon.farm` and :mod:`crowd_addon.usd`. A .blend's frame range
-is read through :mod:`crowd_addon.blender.cli_commands`, imported only for ``--blend``.
+handlers, on :mod:`crowd_addon.farm` and :mod:`crowd_addon.usd`. Every shot comes from
+:mod:`crowd_addon.shot_source` (a .blend's through :mod:`crowd_addon.blender`, imported
+only for ``--blend``).
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 offset, docs/performance_budget.md) and ``crowd plan`` (the M, copies and offsets that
 repeat least within a memory budget, docs/variety.md): their subparsers and handlers, on
 :mod:`crowd_addon.core.planning` (``plan --blend`` reads the .blend through
-:mod:`crowd_addon.blender.cli_commands`, imported only then).
+:mod:`crowd_addon.shot_source`, which imports :mod:`crowd_addon.blender` only then).
 
 Units: sizes in bytes; ``--budget-mb`` is in MB of 10**6 bytes, or MiB (2**20 bytes)
 with ``--mib``.

@@ -1,7 +1,7 @@
 """``crowd preview``: a crowd rendered headless to PNG frames and an MP4
 (docs/preview.md), its subparser and handler, on :mod:`crowd_addon.gpu.preview_render`;
-``--blend`` (a .blend baked and seen through its camera) goes through
-:mod:`crowd_addon.blender.cli_commands`, imported only then.
+the shot from :mod:`crowd_addon.shot_source` (``--blend``: a .blend baked and seen
+through its camera, :mod:`crowd_addon.blender.blend_shot`, imported only then).
 """
 
 from __future__ import annotations
