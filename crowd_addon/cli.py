@@ -18,8 +18,9 @@ beside the others that call the same code (:mod:`~crowd_addon.commands.planning`
 builds the parser and runs one. Heavy modules are imported inside the handlers so
 ``crowd --help`` stays fast. What needs Blender (``export --blend`` and
 ``preview --blend``: open a .blend, register the extension, take its frame range and
-camera) goes through :mod:`crowd_addon.shot_source` to :mod:`crowd_addon.blender.blend_shot`,
-imported only for them; that package never imports this module (inside Blender, ``blender -c crowd export`` is its
+camera) goes through :mod:`crowd_addon.shot_source` to
+:mod:`crowd_addon.blender.blend_shot`, imported only for them; that package never
+imports this module (inside Blender, ``blender -c crowd export`` is its
 own command). Exit codes: 0 success, 2 bad input (usage
 errors and :class:`~crowd_addon.core.base.errors.CrowdError`, reported on stderr as
 ``crowd <command>: error: <message>``), 3 a .blend's crowd script that is not trusted
