@@ -10,7 +10,8 @@ here: ``character`` (0 fan, 1 mocap: 2 % of the home seats), ``stream`` (among t
 character's streams: home seats ``idle_a`` / ``idle_c`` / ``clap``, away seats
 ``idle_b``), ``hit`` (``k`` on the seat of the k-th fan the ball hits, 0 elsewhere),
 ``in_view`` (1 on the seats of the stand the camera looks at) and ``team_colour``
-(home red, away blue, varied per seat); the source scales the fans 0.93 .. 1.07
+(:func:`team_colours`: home red, away blue, each shirt a little lighter or darker, one
+fan in five in clothes of their own); the source scales the fans 0.93 .. 1.07
 (heights vary), and each fan draws a skin tone and trousers from
 the fan's palettes (:data:`FAN_PALETTES`, docs/variety.md), a body (a third of the
 fans wear the broader ``FanBodyBroad``, made from ``FanBody``) and props: a flag in
@@ -256,6 +257,28 @@ def camera_stand(pos, teams):
     return near & (teams == HOME)
 
 
+#: the teams' shirt colours (linear) and the share of fans in their own clothes instead,
+#: drawn from OWN_CLOTHES. Saturated on purpose: a shirt mixed toward grey reads as skin
+#: at a few pixels a fan, and 65,000 such fans as one pink slope.
+TEAM_SHIRTS = {HOME: (0.70, 0.03, 0.03), AWAY: (0.03, 0.10, 0.62)}
+OWN_SHARE = 0.2
+OWN_CLOTHES = ((0.04, 0.04, 0.05), (0.75, 0.75, 0.72), (0.18, 0.18, 0.20), (0.05, 0.07, 0.16))
+
+
+def team_colours(teams, seed):
+    """(n, 4) float32 RGBA: each seat's colour (its shirt; flags and caps take it too)
+    from its team (:data:`TEAM_SHIRTS`), 0.75 .. 1.15 times as bright per seat, and
+    for :data:`OWN_SHARE` of the seats one of :data:`OWN_CLOTHES`."""
+    rng = np.random.default_rng(seed)
+    n = teams.size
+    colour = np.ones((n, 4), np.float32)
+    colour[:, :3] = np.where((teams == HOME)[:, None], TEAM_SHIRTS[HOME], TEAM_SHIRTS[AWAY])
+    colour[:, :3] *= 0.75 + 0.4 * rng.random((n, 1))
+    own = rng.random(n) < OWN_SHARE
+    colour[own, :3] = np.asarray(OWN_CLOTHES)[rng.integers(0, len(OWN_CLOTHES), own.sum())]
+    return colour
+
+
 def _seat_casting(seats, teams, pos, seed, hits):
     """Per seat: character (0 fan, 1 mocap), stream index among its character's
     streams, which hit it takes (1..hits, 0 none) and a team colour, written as the
@@ -284,11 +307,7 @@ def _seat_casting(seats, teams, pos, seed, hits):
     chosen = np.random.default_rng(seed + 2).choice(pool, size=min(hits, pool.size),
                                                     replace=False)
     hit[chosen] = np.arange(1, chosen.size + 1)
-    # team colours, varied per seat
-    team = np.where((teams == HOME)[:, None], (0.85, 0.18, 0.15), (0.2, 0.35, 0.85))
-    vary = 0.8 + 0.5 * (np.random.default_rng(seed + 3).random((n, 3)) - 0.8)
-    colour = np.ones((n, 4), np.float32)
-    colour[:, :3] = 0.6 * team + 0.4 * vary
+    colour = team_colours(teams, seed + 3)
     _seat_attribute(me, "character", character)
     _seat_attribute(me, "stream", stream)
     _seat_attribute(me, "hit", hit)

@@ -79,6 +79,22 @@ def test_frames_are_not_blank_and_change(demo):
         assert (out / "frames" / "preview.mp4").stat().st_size > 1000
 
 
+def test_the_fans_wear_their_teams_colours_not_a_shade_of_skin(demo):
+    """A shirt mixed toward grey reads as skin a few pixels tall, and a stand of such
+    fans as one pink slope: most fans wear their team's saturated colour (home red,
+    away blue), one in five clothes of their own."""
+    from crowd_addon.core.authoring.config_io import load_config
+    out, _ = demo
+    colour = np.asarray(load_config(out / "stadium_crowd.json").agent_color, float)
+    high, low = colour.max(1), colour.min(1)
+    saturation = (high - low) / np.maximum(high, 1e-6)
+    team = saturation > 0.9
+    assert 0.7 < team.mean() < 0.9
+    red, blue = colour[:, 0] > colour[:, 2], colour[:, 2] > colour[:, 0]
+    assert (team & red).sum() > (team & blue).sum() > 0   # the away end is the smaller
+    assert np.all(saturation[~team] < 0.8)                # the rest: dark, grey or white
+
+
 def test_usd_opens_with_one_agent_per_seat(demo):
     from pxr import Usd, UsdSkel
     out, _ = demo
