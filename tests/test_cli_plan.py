@@ -34,6 +34,7 @@ def test_plan_prints_the_candidates_the_proposal_and_plots_them(crowd_json, tmp_
     assert result["repetition_planned"] < result["repetition_default"]
     assert result["planned"]["bytes"] <= 4e6 and result["planned"]["streams"] <= 12
     assert result["plot"] == str(png) and result["k"] == 6
+    assert result["sub_key_bytes"] == 0 and "resampled" not in err     # no speed streams
     assert lines[0].split() == ["M", "copies", "offsets", "streams", "memory", "MB",
                                 "repetition"]
     assert sum(line.endswith(" *") for line in lines) == 1
@@ -45,6 +46,22 @@ def test_plan_prints_the_candidates_the_proposal_and_plots_them(crowd_json, tmp_
     red = (img[..., 0] > 180) & (img[..., 1] < 60) & (img[..., 2] < 90)   # the star
     assert red.sum() > 50
     assert len(np.unique(img.reshape(-1, img.shape[-1]), axis=0)) > 50
+
+
+def test_plan_prints_the_memory_of_the_speed_streams_resampled_keys(tmp_path, capsys):
+    """Streams at another speed than 1 sample clips resampled at sub-frames
+    (core.anim.sub_keys): ``crowd plan`` says how much CPU memory that takes, the
+    bytes the crowd itself allocates."""
+    from crowd_addon.core import Crowd
+    from crowd_addon.core.variety.timing import Timing
+    cfg = config(Timing(0.8, 1.2, 2, 3))
+    save_config(cfg, tmp_path / "speeds.json")
+    assert main(["plan", "--config", str(tmp_path / "speeds.json"), "--no-plot",
+                 "--json"]) == 0
+    out, err = capsys.readouterr()
+    made = Crowd(cfg, skinning="gpu").bank.sub_keys.nbytes
+    assert json.loads(out)["sub_key_bytes"] == made > 0
+    assert f"resampled at 1/8 frame, {made / 1e6:,.1f} MB of CPU memory" in err
 
 
 def test_no_plot_and_options(crowd_json, tmp_path, capsys, monkeypatch):

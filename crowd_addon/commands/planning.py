@@ -171,6 +171,7 @@ def _run_plan(args) -> int:
     from ..core.variety.repetition import RepetitionSettings
     from ..core.planning.variety_plan import plan_input, plan_variety
     from ..core.base.camera import frame_positions
+    from ..core.anim.sub_keys import SUB_KEYS, sub_key_bytes
     from ..plan_report import plot, summary_lines, table
 
     settings = RepetitionSettings(k=args.neighbours, appearance=not args.motion_only)
@@ -196,8 +197,12 @@ def _run_plan(args) -> int:
     text = sys.stderr if args.json else sys.stdout     # --json: stdout is the JSON alone
     print(table(result), file=text)
     print("\n".join(summary_lines(result)), file=text)
+    sub_bytes = sub_key_bytes(config)
+    if sub_bytes:
+        print(f"  speed streams: their clips resampled at 1/{SUB_KEYS} frame, "
+              f"{sub_bytes / 1e6:,.1f} MB of CPU memory (not in the GPU budget)", file=text)
     if written:
         print(f"  plot: {written}", file=text)
     if args.json:
-        print(json.dumps({**result.as_dict(), "plot": written}))
+        print(json.dumps({**result.as_dict(), "plot": written, "sub_key_bytes": sub_bytes}))
     return 0

@@ -15,6 +15,7 @@ from crowd_addon.core import ClipPlayer, Crowd, CrowdConfig, CrowdError
 from crowd_addon.core.authoring.config import AnimationDef, validate_config
 from crowd_addon.core.authoring.config_io import config_digest, load_config, save_config
 from crowd_addon.core.authoring.placement import CharacterStreams, PlacementPolicy, place_agents
+from crowd_addon.core.anim.sub_keys import SUB_KEYS, on_grid, sub_key_bytes
 from crowd_addon.core.authoring.synthetic import humanoid, periodic_clip
 from crowd_addon.core.variety.timing import Timing, choose_variants, expand
 
@@ -30,22 +31,47 @@ def one_stream(speed=1.0, phase=0.0, player=None, m=4, substeps=1):
     return Crowd(cfg, substeps=substeps)
 
 
-@pytest.mark.parametrize("speed,phase", [(1.37, 4.5), (0.6, -3.0), (2.0, 0.0)])
+@pytest.mark.parametrize("speed,phase", [(1.25, 4.5), (0.75, -3.0), (2.0, 0.0)])
 def test_a_stream_at_a_speed_and_phase_plays_its_tree_so(speed, phase):
     """Root time ``phase + speed * F``: the same as a clip player started at ``phase``
-    playing at ``speed``, pose for pose and tag for tag, sub-frame samples too."""
-    a = one_stream(speed, phase, substeps=3)
-    b = one_stream(player=ClipPlayer("c", speed=speed, start=phase), substeps=3)
+    playing at ``speed``, pose for pose and tag for tag, sub-frame samples too (speeds
+    and phases whose times, half frames included, are on the 1/8-frame grid, so the
+    grid changes none)."""
+    a = one_stream(speed, phase, substeps=2)
+    b = one_stream(player=ClipPlayer("c", speed=speed, start=phase), substeps=2)
     heard = [[], []]
     for crowd, log in zip((a, b), heard):
         crowd.on_event("tap", lambda n, f, ids, log=log: log.append((f, ids.tolist())))
     for _ in range(40):
         a.step()
         b.step()
-        for k in range(3):
+        for k in range(2):
             np.testing.assert_array_equal(a.view.agent_poses(sub=k),
                                           b.view.agent_poses(sub=k))
     assert heard[0] == heard[1] and len(heard[0]) >= 3
+
+
+@pytest.mark.parametrize("speed,phase", [(1.37, 4.3), (0.6, -3.0), (0.925, 0.0)])
+def test_a_stream_at_a_speed_moves_on_the_sub_frame_grid_of_its_resampled_clip(speed,
+                                                                              phase):
+    """A stream at another speed than 1 plays its clip at ``phase + speed * t`` rounded
+    to the nearest 1/8 frame, sub-frame samples too: each pose is the clip's own
+    interpolation at that time, bit for bit, and comes from keys resampled once at
+    every 1/8 frame (one gather a frame, no interpolation)."""
+    a = one_stream(speed, phase, substeps=3)
+    clip = a.config.clips["c"]
+    sub = a.bank.sub_keys
+    assert sub is not None and sub.nbytes == (39 * SUB_KEYS + 1) * SK.bone_count * 40
+    assert sub_key_bytes(a.config) == sub.nbytes
+    for _ in range(40):
+        a.step()
+        for k in range(3):
+            exact = phase + speed * (a.frame + k / 3)
+            t = on_grid(exact)
+            assert abs(t - exact) <= 1 / (2 * SUB_KEYS) and (t * SUB_KEYS).is_integer()
+            np.testing.assert_array_equal(a.view.agent_poses(sub=k)[0], clip.sample(t))
+    plain = one_stream()
+    assert plain.bank.sub_keys is None          # speed 1: no resampled keys, no grid
 
 
 def test_speed_and_phase_round_trip_and_defaults_hash_as_before(tmp_path):

@@ -194,23 +194,6 @@ def _first(names, most=5) -> str:
     return f"{list(names[:most])}" + (f" (and {more} more)" if more > 0 else "")
 
 
-def _key_deltas(keys, start, frames) -> np.ndarray:
-    """Per key of the packed ``keys``, the key after it in its clip (the last key: itself),
-    its rotation negated where it points away from this key's, minus this key: the
-    shortest-arc nlerp of :func:`.pose.blend2` toward the next key is ``key + f *
-    delta`` (normalised), without the sign test and the subtraction (the same float32
-    operations, done once)."""
-    nxt = np.empty_like(keys)
-    nxt[:-1] = keys[1:]
-    nxt[-1] = keys[-1]
-    last = start + frames - 1
-    nxt[last] = keys[last]
-    rot = slice(3, 7)
-    away = sqt.dot_rotations(keys, nxt) < 0            # the test blend2 makes
-    nxt[..., rot] = np.where(away[..., None], -nxt[..., rot], nxt[..., rot])
-    return np.subtract(nxt, keys, out=nxt)
-
-
 class ClipBank:
     """All clips of a crowd packed for vectorised sampling.
 
@@ -248,6 +231,7 @@ class ClipBank:
             self._names.setdefault(c.name, i)
         self._entries = [(i, None) for i in range(len(clips))]
         self._remapped = {}
+        self.sub_keys = None           # .sub_keys.SubKeys: see :meth:`resample`
         for name, skeleton in uses:
             self._add(self.index(name), skeleton)
         self._pack()
@@ -278,7 +262,9 @@ class ClipBank:
             keys[s:s + c.frame_count, :c.bone_count] = c.keys if order is None \
                 else c.keys[:, order]
         self.keys = keys
-        self.key_deltas = _key_deltas(keys, self.start, frames)
+        self.key_deltas = sqt.next_key_deltas(keys, self.start, frames)
+        if getattr(self, "sub_keys", None) is not None:
+            self.sub_keys.grow(len(entries))
         self.loop = np.array([c.loop for c in of], bool)
         self.period = np.maximum(frames - 1, 1).astype(np.float64)
         self.rate = np.array([1.0 if self.fps is None else c.fps / self.fps for c in of],
@@ -317,6 +303,12 @@ class ClipBank:
             self._pack()
         return e
 
+    def resample(self, entries):
+        """Resample ``entries`` at sub-frames (:mod:`.sub_keys`) for streams whose time
+        moves on its grid; replaces any earlier resampling."""
+        from .sub_keys import SubKeys
+        self.sub_keys = SubKeys(self, entries) if len(entries) else None
+
     def local_time(self, clip_ids: np.ndarray, t: np.ndarray) -> np.ndarray:
         """Clip-local time in ``[0, F - 1]`` (wrapped when looping, else clamped)."""
         period = self.period[clip_ids]
@@ -337,6 +329,12 @@ class ClipBank:
         """
         clip_ids = np.asarray(clip_ids, np.int64)
         u = self.local_time(clip_ids, np.asarray(t, np.float64))
+        if self.sub_keys is not None:        # speed streams' clips: keys on a sub-frame grid
+            return self.sub_keys.sample(self, clip_ids, u, out)
+        return self.interpolate(clip_ids, u, out)
+
+    def interpolate(self, clip_ids, u, out=None):
+        """:meth:`sample` at clip-local times ``u`` (:meth:`local_time`)."""
         i0 = np.floor(u).astype(np.int64)
         last = self.frames[clip_ids] - 1
         i0 = np.minimum(i0, last)

@@ -146,6 +146,15 @@ class TreeEvaluator:
                             if tr.trigger is not None)
         self._root_triggers = tuple(frozenset(t) for t in taken)
 
+
+    def clip_entries(self, roots) -> list:
+        """The clip bank entries the clip players of the trees ``roots`` (root indices)
+        play, sorted."""
+        from .controllers import ClipPlayer
+        roots = {int(r) for r in roots}
+        return sorted({int(e) for b in self.batches if isinstance(b, ClipPlayer.Batch)
+                       for e, r in zip(b.clip_ids, b.roots) if int(r) in roots})
+
     def batches_for_roots(self, roots) -> list:
         """The batches whose nodes belong to any of the given roots."""
         roots = set(int(r) for r in roots)

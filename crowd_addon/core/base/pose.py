@@ -18,7 +18,7 @@ from . import quaternion as quat
 __all__ = [
     "WIDTH", "SCALE", "ROT", "TRANS", "identity_pose", "make_pose", "blend2",
     "blend_weighted", "additive_delta", "apply_additive", "pose_to_matrices", "records",
-    "from_records",
+    "from_records", "next_key_deltas",
 ]
 
 WIDTH = 10
@@ -216,3 +216,21 @@ def pose_to_matrices(pose: np.ndarray) -> np.ndarray:
     m[..., :3, 3] = p[..., TRANS]
     m[..., 3, 3] = 1
     return m
+
+
+def next_key_deltas(keys, start, frames) -> np.ndarray:
+    """Per key of packed clip ``keys`` (clips of ``frames`` keys from rows ``start``,
+    the clip bank's layout), the key after it in its clip (the last key: itself),
+    its rotation negated where it points away from this key's, minus this key: the
+    shortest-arc nlerp of :func:`blend2` toward the next key is ``key + f *
+    delta`` (normalised), without the sign test and the subtraction (the same float32
+    operations, done once)."""
+    nxt = np.empty_like(keys)
+    nxt[:-1] = keys[1:]
+    nxt[-1] = keys[-1]
+    last = start + frames - 1
+    nxt[last] = keys[last]
+    rot = slice(3, 7)
+    away = dot_rotations(keys, nxt) < 0            # the test blend2 makes
+    nxt[..., rot] = np.where(away[..., None], -nxt[..., rot], nxt[..., rot])
+    return np.subtract(nxt, keys, out=nxt)

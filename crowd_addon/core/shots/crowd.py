@@ -119,6 +119,8 @@ class Crowd:
         self.skinning.bind(self)
         self.frame_tasks = Frame(self, [d.speed for d in cfg.streams],
                                  [d.phase for d in cfg.streams])
+        # streams at another speed than 1 move on a sub-frame grid (.anim.sub_keys)
+        self.bank.resample(self.evaluator.clip_entries(self.frame_tasks.gridded))
         self.graph = self.frame_tasks.graph
         self.look = LookStage(cfg, skel_names, self.skeletons)       # look-at (.looks)
         self.looks, self.look_target_names = self.look.looks, self.look.target_names

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..anim.graph import DependencyGraph
+from ..anim.sub_keys import on_grid
 from ..runtime.events import deliver
 
 __all__ = ["Frame", "StepReport"]
@@ -39,6 +40,9 @@ class Frame:
         self.crowd = crowd
         self.speed = np.asarray(stream_speed, np.float64)
         self.phase = np.asarray(stream_phase, np.float64)
+        #: the streams at another speed than 1, whose times move on the sub-frame grid
+        #: their clips are resampled at (:mod:`~..anim.sub_keys`)
+        self.gridded = np.flatnonzero(self.speed != 1.0)
         self.finished = 0
         self.graph = self._build()
 
@@ -100,10 +104,12 @@ class Frame:
 
     def root_times(self, frame, sub=0.0):
         """Root times at ``frame + sub``: a stream's ``phase + speed * t``
-        (:class:`~.config.AnimationDef`), a unique's own clock."""
+        (:class:`~.config.AnimationDef`; on the sub-frame grid for a speed other than
+        1), a unique's own clock."""
         t = float(frame) + sub
-        return np.concatenate([self.phase + self.speed * t,
-                               self.crowd.uniques.times(frame) + sub])
+        streams = self.phase + self.speed * t
+        streams[self.gridded] = on_grid(streams[self.gridded])
+        return np.concatenate([streams, self.crowd.uniques.times(frame) + sub])
 
     def store_roots(self):
         c = self.crowd
