@@ -415,6 +415,7 @@ def render_crowd_cost(agents, size, rng, count=3) -> dict | None:
         render_crowd.remove(scene)
     return {"first_ms": first_ms, "ms": statistics.median(times), "poses": stats.poses,
             "first_poses": first.poses, "vertices": stats.vertices,
+            "skinned": stats.skinned,
             "one_mesh_ms": one_mesh_ms}
 
 
@@ -447,6 +448,22 @@ def report_looks(backend, size, rounds, rng) -> dict:
     return lk
 
 
+def report_render_crowd(size, quick, rng) -> dict:
+    rc = {}
+    for agents in (2_000, 65_000):
+        res = render_crowd_cost(agents, size, rng, 2 if quick else 3)
+        if res is None:
+            print("  Render Crowd: needs the bpy module, not measured")
+            break
+        rc[agents] = res
+        print(f"  Render Crowd at {agents:,} agents: {res['ms']:,.0f} ms a frame for "
+              f"{res['poses']:,} pose meshes, {res['skinned']:,} of them skinned again "
+              f"({res['vertices']:,} vertices); first frame {res['first_ms']:,.0f} ms "
+              f"(meshes made); one mesh of every agent instead, all as the coarsest "
+              f"level: {res['one_mesh_ms']:,.0f} ms", flush=True)
+    return rc
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true",
@@ -459,6 +476,8 @@ def main(argv=None):
                          "default 1000,10000,65000")
     ap.add_argument("--look-only", action="store_true",
                     help="only the look-at overhead at 65,000 agents")
+    ap.add_argument("--render-crowd-only", action="store_true",
+                    help="only Render Crowd's frame at 2,000 and 65,000 agents (bpy)")
     args = ap.parse_args(argv)
     try:
         counts = sorted({int(v) for v in args.agents.split(",") if v.strip()} | {65_000})
@@ -478,6 +497,13 @@ def main(argv=None):
                           "look_at_overhead": round(lk["overhead"], 4),
                           "look_at_ms_65k": round(lk["looking_ms"], 2),
                           "no_look_ms_65k": round(lk["still_ms"], 2)}))
+        return
+    if args.render_crowd_only:
+        rc = report_render_crowd(size, args.quick, rng)
+        print(json.dumps({"render_crowd_ms": {str(a): round(v["ms"], 1)
+                                              for a, v in rc.items()} or None,
+                          "render_crowd_skinned": {str(a): v["skinned"]
+                                                   for a, v in rc.items()} or None}))
         return
     best, device = throughput(backend, size, 3 if args.quick else 5, rng)
     proto, raw, real = best["prototype"] or None, best["draw_only"], best["real_work"]
@@ -506,18 +532,7 @@ def main(argv=None):
           f"target <= +25%); with the sun's shadows {sc['shadows_ms']:.1f} ms "
           f"({sc['shadow_overhead']:+.1%})", flush=True)
     lk = report_looks(backend, size, 2 if args.quick else 4, rng)
-    rc = {}
-    for agents in (2_000, 65_000):
-        res = render_crowd_cost(agents, size, rng, 2 if args.quick else 3)
-        if res is None:
-            print("  Render Crowd: needs the bpy module, not measured")
-            break
-        rc[agents] = res
-        print(f"  Render Crowd at {agents:,} agents: {res['ms']:,.0f} ms a frame for "
-              f"{res['poses']:,} pose meshes ({res['vertices']:,} skinned vertices); first "
-              f"frame {res['first_ms']:,.0f} ms (meshes made); one mesh of every agent "
-              f"instead, all as the coarsest level: {res['one_mesh_ms']:,.0f} ms",
-              flush=True)
+    rc = report_render_crowd(size, args.quick, rng)
     print(json.dumps({
         "backend": backend, "device": device, "size": list(size),
         "prototype_vertices_per_s": proto, "draw_only_vertices_per_s": raw,

@@ -36,8 +36,13 @@ of ordinary Blender data, with the paper's sharing kept:
 :func:`sync` brings all of it to the crowd's current frame; the preview calls it
 after every step while the switch is on. The level of detail follows the scene
 camera at the render resolution with the crowd's own LOD distances, as the GPU
-preview would draw through that camera. Cost per frame: skinning the pose meshes in
-use (not the agents) and a ``foreach_set`` each, plus three point attributes.
+preview would draw through that camera. Cost per frame: skinning the pose meshes
+whose pose changed (not the agents) and a ``foreach_set`` each, plus the point
+attributes. A pose mesh keeps its pose (its key) from frame to frame, and the pose
+storage's row versions say which rows were written since it was skinned: in a step
+that is one history slice of each stream (the agents of the other offsets moved on
+to pose meshes already made), the uniques and the transitions; the rest are left as
+they are (``RenderStats.skinned``).
 """
 
 from __future__ import annotations
@@ -53,7 +58,7 @@ import bpy
 from ..core.base.errors import CrowdError
 from ..core.base.skinning import skin_vertices
 from .crowd_materials import crowd_material, refresh_all, remove_all as crowd_materials
-from .render_pieces import agent_pieces, aim_classes, aimed_rows
+from .render_pieces import AIM_BITS, ShownPoses, agent_pieces, aim_codes, aimed_rows
 
 __all__ = ["POINTS", "POSES", "NODE_GROUP", "RenderStats", "sync", "remove"]
 
@@ -67,10 +72,12 @@ _MESH_PREFIX = "CrowdPoseMesh."
 @dataclass
 class RenderStats:
     """What the last :func:`sync` made: ``agents``, ``poses`` (pose meshes in use),
+    ``skinned`` (those skinned again: new to the frame or their pose changed),
     ``vertices`` (skinned vertices written) and ``ms`` (wall time)."""
 
     agents: int = 0
     poses: int = 0
+    skinned: int = 0
     vertices: int = 0
     ms: float = 0.0
 
@@ -212,25 +219,31 @@ class _Existing:
         self.meshes = {m.name: m for m in bpy.data.meshes if m.name.startswith(_MESH_PREFIX)}
         self.objects = {o.name: o for o in bpy.data.objects if o.name.startswith(_POSE_PREFIX)}
         self.linked = set(coll.objects.keys())
-        #: meshes replaced this frame, removed in one batch once every pose object in
+        #: meshes replaced this sync, removed in one batch once every pose object in
         #: use shows its new mesh (removing a mesh removes the objects still using it)
         self.stale = []
 
-    def meshes_for(self, proxy, part: int, lod: int, count: int, palette=()) -> list:
-        """``count`` pose meshes of one (part, LOD) topology, reused frame to frame
-        (``palette``: :func:`_mesh_for`'s)."""
-        out, made = [], _made_from(proxy, palette)
-        for i in range(count):
-            name = f"{_MESH_PREFIX}{part}.{lod}.{i:06d}"
-            mesh = self.meshes.get(name)
-            if mesh is None or mesh.get(_MADE_FROM) != made:
-                if mesh is not None:
-                    mesh.name = f"{name}~"             # frees the name for its successor
-                    self.stale.append(mesh)
-                mesh = self.meshes[name] = _mesh_for(proxy, name, palette)
-                mesh[_MADE_FROM] = made
-            out.append(mesh)
-        return out
+    def mesh(self, j: int, proxy, made: str, palette):
+        """Pose object ``j``'s mesh: the one it has when it was made from ``made``
+        (:func:`_made_from`), else a new one of ``proxy`` (``palette``: :func:`_mesh_for`'s);
+        and whether it is new."""
+        name = f"{_MESH_PREFIX}{j:06d}"
+        mesh = self.meshes.get(name)
+        if mesh is not None and mesh.get(_MADE_FROM) == made:
+            return mesh, False
+        if mesh is not None:
+            mesh.name = f"{name}~"                     # frees the name for its successor
+            self.stale.append(mesh)
+        mesh = self.meshes[name] = _mesh_for(proxy, name, palette)
+        mesh[_MADE_FROM] = made
+        return mesh, True
+
+    def indices(self) -> np.ndarray:
+        """The ``j`` of every pose object in the pose collection whose pose mesh
+        (``CrowdPoseMesh.j``, which :meth:`show` gives it) is there."""
+        cut = len(_POSE_PREFIX)
+        return np.array([int(name[cut:]) for name in self.linked
+                         if f"{_MESH_PREFIX}{name[cut:]}" in self.meshes], np.int64)
 
     def show(self, j: int, mesh) -> None:
         """Pose object ``j`` shows ``mesh`` and is in the pose collection."""
@@ -249,50 +262,84 @@ class _Existing:
             self.linked.add(name)
 
 
+#: Render Crowd's record of what its pose objects show (one set of them in a file)
+_SHOWN = ShownPoses()
+
+
 def sync(scene, crowd) -> RenderStats:
     """Make the render data (see the module docstring) show ``crowd`` at its current
     frame; returns :class:`RenderStats`."""
+    global _SHOWN
     t0 = time.perf_counter()
     agent, part, prop, lod, levels, palettes = agent_pieces(crowd, scene)
     n = agent.size
+    storage = crowd.storage
     rows = np.asarray(crowd.view.agent_rows_index(), np.int64)[agent]
     drawn = np.array([bool(lv) for lv in levels], bool)[part] if n else np.zeros(0, bool)
     # a looking agent's pose meshes are its pose's turned to its aim class
-    aim, turns = aim_classes(crowd)
-    classes = turns.shape[0]
-    key = ((rows * len(levels) + part) * 16 + lod) * classes + aim[agent]
+    code, turn = aim_codes(crowd)
+    key = (((rows * len(levels) + part) * 16 + lod) << AIM_BITS) + code[agent]
     keys, first, pose_of_piece = np.unique(np.where(drawn, key, -1), return_index=True,
                                            return_inverse=True)
     real = keys >= 0
-    stats = RenderStats(agents=int(drawn[prop < 0].sum()))
-    # pose objects 0..P-1 in key order; a piece without a mesh is not instanced
-    poses = int(real.sum())
     offset = int((~real).sum())                 # the -1 key sorts first
-    pose_index = np.where(drawn, pose_of_piece.reshape(-1) - offset, 0).astype(np.int32)
+    keys, first = keys[real], first[real]
+    if _SHOWN.storage is not storage:           # another crowd: nothing shown is kept
+        _SHOWN = ShownPoses(storage)
+    j, kept = _SHOWN.place(keys)
+    row = rows[first]
+    version = storage.version[row]
+    was = np.zeros(keys.size, np.int64)
+    was[kept] = _SHOWN.version[j[kept]]
+    redo = ~kept | (was != version) | (row >= storage.slot_base)
+    stats = RenderStats(agents=int(drawn[prop < 0].sum()), poses=int(keys.size))
     refresh_all()                               # material edits reach the next frame
     coll = _poses_collection()
     existing = _Existing(coll)
-    for k in np.unique(part[drawn]):
-        for level in np.unique(lod[drawn & (part == k)]):
-            base = keys // classes
-            sel = np.flatnonzero(real & (((base // 16) % len(levels)) == k)
-                                 & ((base % 16) == level))
-            pieces = first[sel]
-            proxy = levels[k][int(level)]
-            verts = skin_vertices(proxy.positions, proxy.bone_indices, proxy.bone_weights,
-                                  aimed_rows(crowd, agent[pieces], keys[sel] % classes,
-                                             turns)).astype(np.float32)
-            meshes = existing.meshes_for(proxy, int(k), int(level), pieces.size,
-                                         palettes[k])
-            for j, mesh, co in zip(sel - offset, meshes, verts):
-                mesh.vertices.foreach_set("co", co.ravel())
-                mesh.update()
-                existing.show(int(j), mesh)
-            stats.vertices += verts.shape[0] * verts.shape[1]
-    last = f"{_POSE_PREFIX}{poses:06d}"
+    topo = (keys >> AIM_BITS) % (16 * len(levels))
+    there = existing.indices()
+    for t in np.unique(topo):
+        k, level = divmod(int(t), 16)
+        proxy = levels[k][level]
+        made = _made_from(proxy, palettes[k])
+        sel = np.flatnonzero(topo == t)
+        # a pose object or mesh gone, or made from another level or an older bake
+        lost = ~np.isin(j[sel], there) | (_SHOWN.made.get(int(t)) != made)
+        redo[sel[lost]] = True
+        skin = sel[redo[sel]]
+        if not skin.size:
+            continue
+        meshes = []
+        for i in skin.tolist():
+            mesh, _ = existing.mesh(int(j[i]), proxy, made, palettes[k])
+            existing.show(int(j[i]), mesh)
+            meshes.append(mesh)
+        pieces = first[skin]
+        one = np.zeros(skin.size, np.int64)
+        turned = code[agent[pieces]] > 0
+        one[turned] = 1 + np.arange(int(turned.sum()))
+        verts = skin_vertices(proxy.positions, proxy.bone_indices, proxy.bone_weights,
+                              aimed_rows(crowd, agent[pieces], one,
+                                         np.r_[np.zeros((1, 2)), turn[agent[pieces[turned]]]]))
+        for mesh, co in zip(meshes, verts.astype(np.float32)):
+            mesh.vertices.foreach_set("co", co.ravel())
+            mesh.update()
+        _SHOWN.made[int(t)] = made
+        stats.skinned += int(skin.size)
+        stats.vertices += verts.shape[0] * verts.shape[1]
+    count = int(j.max()) + 1 if j.size else 0
+    shown_key = np.full(count, -1, np.int64)
+    shown_key[j] = keys
+    shown_version = np.zeros(count, np.int64)
+    shown_version[j] = version
+    _SHOWN.key, _SHOWN.version = shown_key, shown_version
+    last = f"{_POSE_PREFIX}{count:06d}"
     for name in [n for n in existing.linked if n >= last]:      # poses no longer in use
         coll.objects.unlink(existing.objects[name] if name in existing.objects
                             else coll.objects[name])
+    pose_index = np.zeros(n, np.int32)
+    piece_real = pose_of_piece.reshape(-1) - offset
+    pose_index[drawn] = j[piece_real[drawn]]
     points = _points_object(scene, n)
     me = points.data
     a = crowd.agents
@@ -317,7 +364,6 @@ def sync(scene, crowd) -> RenderStats:
     me.update()
     if existing.stale:                  # after the unused objects were unlinked above
         bpy.data.batch_remove(existing.stale)
-    stats.poses = poses
     stats.ms = (time.perf_counter() - t0) * 1e3
     return stats
 
@@ -326,6 +372,8 @@ def remove(scene) -> None:
     """Take the render data away: the points object, the pose objects and meshes, the
     crowd's material copies, the collection and the node group (one batch: removing
     thousands of IDs one by one walks Blender's lists each time)."""
+    global _SHOWN
+    _SHOWN = ShownPoses()
     ids = [o for o in bpy.data.objects if o.name == POINTS or o.name.startswith(_POSE_PREFIX)]
     points = bpy.data.objects.get(POINTS)
     if points is not None and points.type == "MESH":

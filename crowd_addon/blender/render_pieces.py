@@ -5,8 +5,11 @@ Each agent is one piece for its mesh variant and one more per prop it carries
 resolution with the crowd's own LOD distances (:func:`agent_lods`), as the GPU
 preview would draw through that camera; a looking agent's head turn is rounded to
 :data:`AIM_STEP` into an aim class (:func:`aim_classes`), so agents of one pose whose
-turns round alike share a pose mesh, whose skinning rows :func:`aimed_rows` gives.
-:mod:`.render_crowd` makes the Blender data of them.
+turns round alike share a pose mesh, whose skinning rows :func:`aimed_rows` gives
+(:func:`aim_codes`: the classes as codes that keep from frame to frame);
+:class:`ShownPoses` keeps which pose object shows which pose, and when its row was
+written, so a frame skins again only what changed. :mod:`.render_crowd` makes the
+Blender data of them.
 """
 
 from __future__ import annotations
@@ -19,7 +22,8 @@ from ..core.meshes.lod import agent_heights, levels_from_pixels, projected_heigh
 from ..core.runtime.look_at import apply_look, look_angles, turns_of
 from ..gpu.draw_lists import view_depths
 
-__all__ = ["AIM_STEP", "agent_lods", "agent_pieces", "aim_classes", "aimed_rows"]
+__all__ = ["AIM_BITS", "AIM_STEP", "ShownPoses", "agent_lods", "agent_pieces", "aim_classes",
+           "aim_codes", "aimed_rows"]
 
 
 def agent_lods(crowd, scene, levels) -> np.ndarray:
@@ -122,3 +126,52 @@ def aimed_rows(crowd, agents, aims, turns) -> np.ndarray:
         rows[m] = apply_look(rows[m], chain, turns_of(rows[m], chain, t[:, 0], t[:, 1])) \
             .astype(rows.dtype)
     return rows
+
+
+class ShownPoses:
+    """What each pose object ``j`` showed after Render Crowd's last sync of
+    ``storage``'s crowd: its ``key`` (a piece key; -1 none) and the pose storage's
+    ``version`` of its row when it was skinned. A sync keeps a key on its pose object
+    and skins again only where the row was written since (the new history slice, the
+    uniques), for a transition slot (blended anew each frame) or a key new to the
+    frame, which takes a pose object left free."""
+
+    def __init__(self, storage=None):
+        self.storage = storage
+        self.key = np.zeros(0, np.int64)
+        self.version = np.zeros(0, np.int64)
+        #: (part * 16 + level) -> the digest of what its meshes were made from
+        self.made = {}
+
+    def place(self, keys: np.ndarray) -> tuple:
+        """``(j, kept)``: the pose object of each of the sorted unique ``keys`` (its
+        last one where it had one, else one left free, else a new one at the end) and
+        whether it had it."""
+        old = self.key
+        order = np.argsort(old, kind="stable")
+        at = np.clip(np.searchsorted(old[order], keys), 0, max(old.size - 1, 0))
+        kept = (old[order][at] == keys) if old.size else np.zeros(keys.size, bool)
+        j = np.full(keys.size, -1, np.int64)
+        j[kept] = order[at[kept]]
+        taken = np.zeros(old.size, bool)
+        taken[j[kept]] = True
+        free = np.flatnonzero(~taken)
+        new = np.flatnonzero(~kept)
+        use = min(free.size, new.size)
+        j[new[:use]] = free[:use]
+        j[new[use:]] = old.size + np.arange(new.size - use)
+        return j, kept
+
+
+#: bits of a piece key below its row, part and level: its aim (:func:`aim_codes`)
+AIM_BITS = 20
+
+
+def aim_codes(crowd) -> tuple:
+    """``(code, turn)``: per agent a code of its aim class that stays the same from frame
+    to frame (0: not turned; else its rounded yaw and pitch steps, each offset by 512)
+    and per agent the turn ``(dyaw, dpitch)`` its class stands for."""
+    aim, turns = aim_classes(crowd)
+    q = np.rint(turns / AIM_STEP).astype(np.int64)
+    code = np.where(aim > 0, ((q[aim, 0] + 512) << 10) + q[aim, 1] + 512, 0)
+    return code, turns[aim]

@@ -125,6 +125,29 @@ def test_instances_are_cores_skinning_with_one_mesh_per_shared_pose(crowd_scene)
     _check_instances(scene, pv.crowd)
 
 
+def test_a_frame_skins_again_only_the_pose_meshes_whose_pose_changed(crowd_scene):
+    """The stream writes one history slice a frame, so of its eight shared poses only
+    the one on that slice is skinned again (the others keep their pose meshes, their
+    agents moved on to them); a transition's pose is skinned every frame it blends, and
+    a jump back re-simulates, writing every row again. The instances stay core's
+    skinning throughout."""
+    scene, pv = crowd_scene
+    for f in (10, 11, 12):
+        scene.frame_set(f)
+        assert (pv.render_stats.poses, pv.render_stats.skinned) == (8, 1)
+        _check_instances(scene, pv.crowd)
+    pv.crowd.transition_to_streamed([4], "walk", 6, offset=3)
+    scene.frame_set(13)
+    assert (pv.render_stats.poses, pv.render_stats.skinned) == (9, 2)   # the slot too
+    _check_instances(scene, pv.crowd)
+    scene.frame_set(14)
+    assert (pv.render_stats.poses, pv.render_stats.skinned) == (9, 2)
+    _check_instances(scene, pv.crowd)
+    scene.frame_set(5)
+    assert pv.render_stats.skinned == pv.render_stats.poses == 8
+    _check_instances(scene, pv.crowd)
+
+
 def test_switching_off_removes_the_render_data(crowd_scene):
     scene, pv = crowd_scene
     scene.crowd.render_crowd = False

@@ -145,6 +145,11 @@ class PoseStorage:
                                  n, self.height, self.blocks, self.width, self.unique_base,
                                  self.slot_base)
         self._dirty = []
+        #: per logical row, the count of marks (:meth:`mark_dirty`) when it was last
+        #: written: a reader that keeps what it made of a row (Render Crowd's pose
+        #: meshes) compares them to know what changed since
+        self.version = np.zeros(n, np.int64)
+        self._marks = 0
 
     @property
     def nbytes(self) -> int:
@@ -180,6 +185,8 @@ class PoseStorage:
         """Mark ``count`` logical rows from ``start`` as changed (to upload)."""
         if count > 0:
             self._dirty.append((int(start), int(count)))
+            self._marks += 1
+            self.version[int(start):int(start) + int(count)] = self._marks
 
     def mark_rows_dirty(self, rows: np.ndarray):
         """Mark arbitrary rows, merged into contiguous runs."""
@@ -189,6 +196,8 @@ class PoseStorage:
         first = np.flatnonzero(np.r_[True, np.diff(rows) != 1])
         counts = np.diff(np.r_[first, rows.size])
         self._dirty.extend(zip(rows[first].tolist(), counts.tolist()))
+        self._marks += 1
+        self.version[rows] = self._marks
 
     def mark(self) -> int:
         """A bookmark for :meth:`bytes_since`."""
