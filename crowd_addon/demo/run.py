@@ -104,12 +104,12 @@ def show_summary(crowd) -> dict:
                      for c in cues]}
 
 
-def _beat_frames(crowd, first: int, last: int) -> list:
-    """The contact sheet's frames: the first, the wave in two places (as it starts at
-    the camera's stand, and just before the goal), the goal's cheer once every fan has
-    followed its stream (M frames after the cue, within its hold), the hits and the
-    last (beats after the run left out), topped up with frames spread over the run to
-    :data:`SHEET_FRAMES`."""
+def _beat_frames(crowd, first: int, last: int) -> dict:
+    """The contact sheet's frames and their captions: the first, the wave in two
+    places (as it starts at the camera's stand, and just before the goal), the goal's
+    cheer once every fan has followed its stream (M frames after the cue, within its
+    hold), the hits and the last (beats after the run left out), topped up with frames
+    spread over the run (no caption) to :data:`SHEET_FRAMES`."""
     from ..blender.stadium import CUES
     from ..gpu.contact_sheet import sheet_frames
 
@@ -120,15 +120,18 @@ def _beat_frames(crowd, first: int, last: int) -> list:
         rippled = min(rippled, max(12, crowd.config.show.cue(goal).action.hold - 6))
     before_goal = at[goal] - at[CUES["wave"]] - 1 if goal in at and CUES["wave"] in at \
         else 24
-    beats = [(CUES["wave"], 8), (CUES["wave"], max(before_goal, 16)), (goal, rippled),
-             (f"{CUES['hit']} 1", 12)]
-    picked = {first, last} | {at[name] + k for name, k in beats
-                              if name in at and first <= at[name] + k <= last}
+    beats = [(CUES["wave"], 8, "the wave"),
+             (CUES["wave"], max(before_goal, 16), "the wave, before the goal"),
+             (goal, rippled, f"goal +{rippled}: the home end up"),
+             (f"{CUES['hit']} 1", 12, "fans hit by the ball")]
+    picked = {first: "start", last: "end"}
+    picked.update({at[name] + k: label for name, k, label in beats
+                   if name in at and first <= at[name] + k <= last})
     for f in sheet_frames(first, last, SHEET_FRAMES):
         if len(picked) >= SHEET_FRAMES:
             break
-        picked.add(f)
-    return sorted(picked)
+        picked.setdefault(f, "")
+    return picked
 
 
 def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
@@ -187,8 +190,8 @@ def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
         crowd = Crowd(cfg, skinning="gpu")      # the same show, run again to be drawn
         # the frames at their own size: at 65,000 fans a fan is ~10 px tall, and halved
         # the goal's standing home end read as a change of texture
-        sheet = ContactSheet(_beat_frames(crowd, crowd.frame, crowd.frame + frames - 1),
-                             scale=1)
+        beats = _beat_frames(crowd, crowd.frame, crowd.frame + frames - 1)
+        sheet = ContactSheet(sorted(beats), scale=1, labels=beats)
         preview = render_preview(crowd, out / "frames", frames, size=size, mp4=mp4,
                                  camera=stadium.camera, scene=stadium.scene,
                                  light=stadium.light, repetition=None,   # measured below
@@ -212,7 +215,8 @@ def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
                "muted_cues": list(stadium.muted),
                "pngs": len(preview.pngs), "mp4": preview.mp4,
                "contact_sheet": str(out / "contact_sheet.png"),
-               "contact_sheet_frames": sorted(sheet.frames)}
+               "contact_sheet_frames": sorted(sheet.frames),
+               "contact_sheet_labels": {str(f): sheet.labels[f] for f in sorted(sheet.frames)}}
 
     t = time.perf_counter()
     if export is not None:

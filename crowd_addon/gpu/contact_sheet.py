@@ -3,7 +3,9 @@ judged at a glance (``crowd demo`` writes ``contact_sheet.png``).
 
 :class:`ContactSheet` keeps a reduced copy of the frames it is offered that fall on
 its chosen frames (evenly spread over the shot) and lays them out in a grid with a
-thin border; nothing but numpy.
+thin border, each cell captioned with its frame and what happens there (the demo's
+beats: "FRAME 107  GOAL +60: EVERY FAN UP") in :mod:`.caption_font`; nothing but
+numpy.
 """
 
 from __future__ import annotations
@@ -11,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.base.errors import CrowdError
+from .caption_font import GLYPH_H, draw_text, text_width
 
 __all__ = ["ContactSheet", "sheet_frames"]
 
@@ -28,13 +31,16 @@ def sheet_frames(first: int, last: int, count: int) -> list:
 class ContactSheet:
     """Collects frames ``frames`` (crowd frame numbers) of ``(H, W, 3)`` uint8 images,
     each reduced by ``scale`` (an integer: box filter) to a cell, ``columns`` cells a
-    row, ``border`` pixels apart."""
+    row, ``border`` pixels apart. ``labels``: frame -> what happens there, captioned
+    on the cell's bottom edge after its frame number."""
 
-    def __init__(self, frames, columns: int = 3, scale: int = 2, border: int = 4):
+    def __init__(self, frames, columns: int = 3, scale: int = 2, border: int = 4,
+                 labels=None):
         if columns < 1 or scale < 1 or border < 0:
             raise CrowdError(f"contact sheet: columns {columns}, scale {scale} and border "
                              f"{border} must be positive")
         self.frames = list(frames)
+        self.labels = dict(labels or {})
         self.columns, self.scale, self.border = int(columns), int(scale), int(border)
         self.cells = {}
 
@@ -58,7 +64,27 @@ class ContactSheet:
         b = self.border
         sheet = np.empty((rows * (ch + b) + b, cols * (cw + b) + b, 3), np.uint8)
         sheet[:] = _BORDER
-        for i, cell in enumerate(cells):
+        texts = {f: f"FRAME {f}" + (f"  {self.labels[f]}" if self.labels.get(f) else "")
+                 for f in self.cells}
+        # one text size for the sheet: font pixels of 1 to 3 image pixels, as large as
+        # the longest caption fits; no captions on cells under four text lines tall
+        longest = max(text_width(t) for t in texts.values())
+        scale = min(3, (cw - 8) // max(longest, 1), ch // (4 * GLYPH_H))
+        for i, (frame, cell) in enumerate(zip(sorted(self.cells), cells)):
             y, x = b + (i // cols) * (ch + b), b + (i % cols) * (cw + b)
             sheet[y:y + ch, x:x + cw] = cell
+            if ch >= 4 * GLYPH_H:
+                _caption(sheet[y:y + ch, x:x + cw], texts[frame], max(scale, 1))
         return sheet
+
+
+def _caption(cell: np.ndarray, text: str, scale: int) -> None:
+    """``text`` on a darkened band along the cell's bottom edge (cut short where it is
+    too wide)."""
+    h, w = cell.shape[:2]
+    pad = 2 * scale
+    while text and text_width(text, scale) > w - 2 * pad:
+        text = text[:-1]
+    band = cell[h - GLYPH_H * scale - 2 * pad:]
+    band[:] = (band * 0.35).astype(np.uint8)
+    draw_text(band, text, pad, pad, scale=scale)

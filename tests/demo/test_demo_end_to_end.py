@@ -223,7 +223,10 @@ def test_contact_sheet_holds_six_frames_of_the_run_and_its_beats(demo):
     hold = round(FRAMES * 90 / 240)
     assert {cue["wave"] + 8, cue["wave"] + max(cue["goal home"] - cue["wave"] - 1, 16),
             cue["goal home"] + min(60, max(12, hold - 6)), cue["hit 1"] + 12} <= set(frames)
-    expected = ContactSheet(frames, scale=1)
+    labels = {int(f): v for f, v in s["contact_sheet_labels"].items()}
+    assert sorted(labels) == frames and labels[frames[0]] == "start"
+    assert labels[cue["goal home"] + min(60, max(12, hold - 6))].startswith("goal +")
+    expected = ContactSheet(frames, scale=1, labels=labels)
     for f in frames:
         expected.offer(f, read_png(out / "frames" / f"frame_{f:04d}.png"))
     assert np.array_equal(sheet, expected.image())
