@@ -308,7 +308,11 @@ def on_depsgraph_update(scene, *_):
 @bpy.app.handlers.persistent
 def on_undo(*_):
     """Undo/redo: drop previews of scenes that are gone, re-check the others (resume
-    when the undo restored what they lost) and keep ``preview_enabled`` truthful."""
+    when the undo restored what they lost) and keep ``preview_enabled`` truthful. The
+    undo may have brought back Render Crowd's pose meshes as they were, so its next
+    sync skins every one again."""
+    from . import render_crowd
+    render_crowd.forget()
     for name in list(_PREVIEWS):
         scene = bpy.data.scenes.get(name)
         if scene is None:

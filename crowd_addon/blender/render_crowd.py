@@ -60,7 +60,7 @@ from ..core.base.skinning import skin_vertices
 from .crowd_materials import crowd_material, refresh_all, remove_all as crowd_materials
 from .render_pieces import AIM_BITS, ShownPoses, agent_pieces, aim_codes, aimed_rows
 
-__all__ = ["POINTS", "POSES", "NODE_GROUP", "RenderStats", "sync", "remove"]
+__all__ = ["POINTS", "POSES", "NODE_GROUP", "RenderStats", "sync", "forget", "remove"]
 
 POINTS = "Crowd Render"
 POSES = "Crowd Poses"
@@ -368,12 +368,18 @@ def sync(scene, crowd) -> RenderStats:
     return stats
 
 
+def forget() -> None:
+    """Let the next :func:`sync` skin every pose mesh again (after an undo, which may
+    have brought the meshes back as they were at another frame)."""
+    global _SHOWN
+    _SHOWN = ShownPoses()
+
+
 def remove(scene) -> None:
     """Take the render data away: the points object, the pose objects and meshes, the
     crowd's material copies, the collection and the node group (one batch: removing
     thousands of IDs one by one walks Blender's lists each time)."""
-    global _SHOWN
-    _SHOWN = ShownPoses()
+    forget()
     ids = [o for o in bpy.data.objects if o.name == POINTS or o.name.startswith(_POSE_PREFIX)]
     points = bpy.data.objects.get(POINTS)
     if points is not None and points.type == "MESH":

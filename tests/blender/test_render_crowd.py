@@ -146,6 +146,14 @@ def test_a_frame_skins_again_only_the_pose_meshes_whose_pose_changed(crowd_scene
     scene.frame_set(5)
     assert pv.render_stats.skinned == pv.render_stats.poses == 8
     _check_instances(scene, pv.crowd)
+    # an undo may bring the pose meshes back as they were: the next frame skins all
+    pose = bpy.data.objects[render_crowd.POINTS].data.attributes["crowd_pose"]
+    mesh = bpy.data.meshes[f"CrowdPoseMesh.{pose.data[0].value:06d}"]
+    mesh.vertices.foreach_set("co", np.zeros(3 * len(mesh.vertices), np.float32))
+    preview.on_undo()
+    scene.frame_set(6)
+    assert pv.render_stats.skinned == pv.render_stats.poses == 8
+    _check_instances(scene, pv.crowd)
 
 
 def test_switching_off_removes_the_render_data(crowd_scene):
