@@ -4,11 +4,9 @@ One :class:`Preview` per scene (by name) holds the core ``Crowd`` built from the
 scene (:mod:`.scene_config`) and, once a viewport has drawn, a renderer in Blender's
 GPU context (``crowd_addon.gpu.backends.make_renderer(view, "viewport")`` chooses):
 
-* OpenGL backend: the moderngl renderer attached to Blender's context, drawing into
-  the framebuffer the viewport has bound;
-* another backend (Metal, Vulkan): the ``gpu``-module renderer;
-* when it cannot be made or draw, nothing is drawn, and :attr:`Preview.draw_error`
-  says why (the panel shows it).
+the moderngl renderer in Blender's OpenGL context (drawing into the framebuffer the
+viewport has bound), the ``gpu``-module renderer on Metal or Vulkan; when it cannot be
+made or draw, :attr:`Preview.draw_error` says why (the panel shows it).
 
 The crowd follows ``scene.frame_current``; it keeps snapshots every few frames within
 the memory cap of the preferences (:mod:`.prefs`), so a jump to any frame (backwards,
@@ -308,11 +306,10 @@ def on_depsgraph_update(scene, *_):
 @bpy.app.handlers.persistent
 def on_undo(*_):
     """Undo/redo: drop previews of scenes that are gone, re-check the others (resume
-    when the undo restored what they lost) and keep ``preview_enabled`` truthful. The
-    undo may have brought back Render Crowd's pose meshes as they were, so its next
-    sync skins every one again."""
-    from . import render_crowd
-    render_crowd.forget()
+    when the undo restored what they lost), keep ``preview_enabled`` truthful, and let
+    Render Crowd skin every pose mesh again (an undo may bring them back as they were)."""
+    from .render_crowd import forget
+    forget()
     for name in list(_PREVIEWS):
         scene = bpy.data.scenes.get(name)
         if scene is None:
