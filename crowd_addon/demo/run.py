@@ -122,7 +122,7 @@ def _beat_frames(crowd, first: int, last: int) -> dict:
         else 24
     beats = [(CUES["wave"], 8, "the wave"),
              (CUES["wave"], max(before_goal, 16), "the wave, before the goal"),
-             (goal, rippled, f"goal +{rippled}: the home end up"),
+             (goal, rippled, f"goal +{rippled}: the home fans up"),
              (f"{CUES['hit']} 1", 12, "fans hit by the ball")]
     picked = {first: "start", last: "end"}
     picked.update({at[name] + k: label for name, k, label in beats

@@ -4,7 +4,7 @@ judged at a glance (``crowd demo`` writes ``contact_sheet.png``).
 :class:`ContactSheet` keeps a reduced copy of the frames it is offered that fall on
 its chosen frames (evenly spread over the shot) and lays them out in a grid with a
 thin border, each cell captioned with its frame and what happens there (the demo's
-beats: "FRAME 107  GOAL +60: EVERY FAN UP") in :mod:`.caption_font`; nothing but
+beats: "FRAME 107  GOAL +60: THE HOME FANS UP") in :mod:`.caption_font`; nothing but
 numpy.
 """
 

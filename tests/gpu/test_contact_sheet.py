@@ -51,7 +51,7 @@ def test_text_is_the_fonts_glyphs_side_by_side_scaled_and_clipped():
 def test_each_cell_is_captioned_with_its_frame_and_beat_on_a_darkened_band():
     frames = (5, 107)
     sheet = ContactSheet(frames, columns=2, scale=1, border=0,
-                         labels={107: "goal +60: the home end up"})
+                         labels={107: "goal +60: the home fans up"})
     for f in frames:
         sheet.offer(f, np.full((60, 480, 3), 200, np.uint8))
     img = sheet.image()
@@ -64,5 +64,5 @@ def test_each_cell_is_captioned_with_its_frame_and_beat_on_a_darkened_band():
     white = [(c[top:] == 255).all(-1) for c in (plain, goal)]
     assert 0 < white[0].sum() < white[1].sum()              # "FRAME 5" < the beat's
     expected = np.zeros((60, 480, 3), np.uint8)
-    draw_text(expected, "FRAME 107  GOAL +60: THE HOME END UP", 4, 60 - 18, scale=2)
+    draw_text(expected, "FRAME 107  GOAL +60: THE HOME FANS UP", 4, 60 - 18, scale=2)
     assert np.array_equal((expected == 255).all(-1), (goal == 255).all(-1))
