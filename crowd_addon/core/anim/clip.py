@@ -263,7 +263,7 @@ class ClipBank:
                 else c.keys[:, order]
         self.keys = keys
         self.key_deltas = sqt.next_key_deltas(keys, self.start, frames)
-        if getattr(self, "sub_keys", None) is not None:
+        if self.sub_keys is not None:
             self.sub_keys.grow(len(entries))
         self.loop = np.array([c.loop for c in of], bool)
         self.period = np.maximum(frames - 1, 1).astype(np.float64)

@@ -146,7 +146,6 @@ class TreeEvaluator:
                             if tr.trigger is not None)
         self._root_triggers = tuple(frozenset(t) for t in taken)
 
-
     def clip_entries(self, roots) -> list:
         """The clip bank entries the clip players of the trees ``roots`` (root indices)
         play, sorted."""

@@ -12,7 +12,7 @@ rate, speed 1 and a start on the grid, in a stream on the grid) takes its pose w
 one gather, like a speed-1 stream at a whole frame. Any other time interpolates as
 before. A grid key is the bank's own interpolation at that time, so both give the same
 floats. Memory: ``(F - 1) x SUB_KEYS + 1`` poses per resampled clip entry of ``F``
-keys (:attr:`SubKeys.nbytes`, printed by ``crowd plan`` and the preview).
+keys (:attr:`SubKeys.nbytes`; ``crowd plan`` prints it).
 """
 
 from __future__ import annotations
