@@ -10,7 +10,11 @@ to another stream.
 Prints, for 2,000 and 65,000 agents (``--agents``): export time (the shot recorded
 once, then written: simulate / author / write), peak memory, bytes, and bytes
 relative to per-agent baked animation (each agent's own SkelAnimation over the
-shot, at this exporter's bytes per animation-frame; target < 5 %). Then the per-agent baseline: Blender's own ``bpy.ops.wm.usd_export`` of N
+shot, at this exporter's bytes per animation-frame; target < 5 %), and the export's
+process CPU (recording and writing) over the CPU of writing the same bytes as raw files
+in the same process (``cpu_over_raw_write``, the 65,000-agent steady case at the top
+level of the JSON and the transition-heavy case's under ``transition_heavy``; target
+<= 8). Then the per-agent baseline: Blender's own ``bpy.ops.wm.usd_export`` of N
 armatures sharing one skinned mesh, each playing its stream's baked action through
 an NLA strip shifted by its offset (run in a child process; scaled per agent-frame),
 and the ratios of time and bytes per agent. Ends with one JSON line.
@@ -122,10 +126,13 @@ def run_export(case: str, agents: int, frames: int, react: float, directory: str
         before_step = every_agent_once(agents, frames)
     else:
         before_step = reactions(react)
-    t = time.perf_counter()
+    t, cpu = time.perf_counter(), time.process_time()
     shot = record(Crowd(cfg, skinning="gpu"), FIRST, FIRST + frames - 1, before_step=before_step)
+    cpu_export = time.process_time()
     r = export_crowd(shot, os.path.join(directory, "shot.usdc"))
     seconds = time.perf_counter() - t
+    cpu_export, cpu = time.process_time() - cpu_export, time.process_time() - cpu
+    raw_cpu = raw_write_cpu(r.files, os.path.join(directory, "raw"))
     stream_bytes = sum(v for k, v in r.files.items() if "/streams/" in k)
     per_anim_frame = stream_bytes / (r.stream_animations * (frames + M - 1))
     per_agent_baked = per_anim_frame * frames * agents
@@ -138,7 +145,28 @@ def run_export(case: str, agents: int, frames: int, react: float, directory: str
             "bytes_per_animation_frame": per_anim_frame,
             "per_agent_baked_bytes": per_agent_baked,
             "bytes_vs_per_agent_baked": r.bytes / per_agent_baked,
-            "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
+            "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+            "cpu_s": cpu, "cpu_export_s": cpu_export, "raw_write_cpu_s": raw_cpu,
+            "cpu_over_raw_write": cpu / raw_cpu}
+
+
+def raw_write_cpu(files: dict, directory: str) -> float:
+    """Process CPU seconds of writing ``files`` (name -> bytes) again as plain files of
+    the same sizes under ``directory`` (the bytes from a buffer made beforehand), then
+    removed: what the export's bytes cost to write with no USD at all."""
+    os.makedirs(directory, exist_ok=True)
+    block = np.random.default_rng(0).integers(0, 256, 1 << 24, np.uint8).tobytes()
+    t = time.process_time()
+    for i, size in enumerate(files.values()):
+        with open(os.path.join(directory, f"{i}.bin"), "wb") as f:
+            left = int(size)
+            while left > 0:
+                n = min(left, len(block))
+                f.write(block[:n] if n < len(block) else block)
+                left -= n
+    cpu = time.process_time() - t
+    shutil.rmtree(directory)
+    return max(cpu, 1e-6)
 
 
 # ---------------------------------------------------------------- Blender baseline
@@ -292,7 +320,9 @@ def main() -> None:
                   f"{r['write_s']:.1f}), {r['bytes'] / 1e6:8.1f} MB, "
                   f"{r['clip_agents']:,} agents on clips ({r['blend_frames']:,} blend frames), "
                   f"{r['offset_animations']:,} offset animations, peak RSS "
-                  f"{r['peak_rss_mb'] / 1e3:.2f} GB; "
+                  f"{r['peak_rss_mb'] / 1e3:.2f} GB; CPU {r['cpu_s']:.1f} s ({r['cpu_export_s']:.1f} "
+                  f"s exporting) against {r['raw_write_cpu_s']:.2f} s to write its bytes as "
+                  f"raw files: {r['cpu_over_raw_write']:.1f}x (target <= 8); "
                   f"{100 * r['bytes_vs_per_agent_baked']:.2f} % of per-agent baked "
                   f"({r['per_agent_baked_bytes'] / 1e9:.1f} GB)", flush=True)
             if not args.keep:
@@ -319,6 +349,7 @@ def main() -> None:
                           "react_share": args.react, "heavy_blend": HEAVY_BLEND,
                           "heavy_slots": HEAVY_SLOTS},
                "exports": exports, "blender_baseline": bb,
+               "cpu_over_raw_write": round(big[0]["cpu_over_raw_write"], 2) if big else None,
                "target_65k_under_60s": bool(big and big[0]["seconds"] < 60),
                "target_bytes_under_5pct": bool(big and big[0]["bytes_vs_per_agent_baked"]
                                                < 0.05)}
@@ -328,7 +359,8 @@ def main() -> None:
             "agents": h["agents"], "frames": h["frames"], "seconds": round(h["seconds"], 2),
             "bytes": h["bytes"], "bytes_vs_per_agent_baked": h["bytes_vs_per_agent_baked"],
             "peak_mb": round(h["peak_rss_mb"], 1), "clip_agents": h["clip_agents"],
-            "blend_frames": h["blend_frames"]}
+            "blend_frames": h["blend_frames"],
+            "cpu_over_raw_write": round(h["cpu_over_raw_write"], 2)}
         print(f"transition heavy: {h['agents']:,} agents each blending once over "
               f"{HEAVY_BLEND} frames: {h['seconds']:.1f} s (target <= 10 s), "
               f"{100 * h['bytes_vs_per_agent_baked']:.2f} % of per-agent baking (target "
