@@ -14,7 +14,9 @@ the show in one process and in chunks on a local Dask cluster of 1 and 2 workers
 export). Prints the figures and ends with one JSON line (``seek_s_from_snapshot``:
 the slowest jump, ``seek_s_median``, ``seek_s_from_start``, ``snapshot_bytes``,
 ``snapshot_ms``, ``restore_ms``, ``export_fps_single``, ``export_fps_1_worker``,
-``export_fps_2_workers``).
+``export_fps_2_workers``; ``chunk_cpu_overhead``: the CPU of all processes of a
+4-chunk export on 2 workers, stitch included, over the single export's CPU, and
+``stitch_share``: the stitch task's CPU over that).
 
     .venv/bin/python benchmarks/scrub.py [--frames 10000] [--every 30] [--quick]
 """
@@ -24,6 +26,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import statistics
 import sys
 import time
@@ -36,6 +39,7 @@ sys.path.insert(0, os.path.dirname(__file__))
 from core_frame import show_config  # noqa: E402
 
 from crowd_addon.core import Crowd  # noqa: E402
+from crowd_addon.core.shots.crowd_state import set_state  # noqa: E402
 
 
 def main(argv=None):
@@ -93,7 +97,7 @@ def main(argv=None):
     restores = []
     for _ in range(5):
         t = time.perf_counter()
-        crowd._set_state(cache.nearest(last).state())
+        set_state(crowd, cache.nearest(last).state())
         restores.append(time.perf_counter() - t)
     restore_ms = statistics.median(restores) * 1e3
 
@@ -125,6 +129,12 @@ def main(argv=None):
           f"({exp['s_1']:.1f} s), 2 workers {exp['fps_2']:.2f} frames/s ({exp['s_2']:.1f} s: "
           f"snapshots {exp['steps_2']['snapshots']:.1f}, chunks {exp['steps_2']['chunks']:.1f}, "
           f"stitch {exp['steps_2']['stitch']:.1f}); this machine has {os.cpu_count()} cores")
+    t4 = exp["cpu_tasks_4"]
+    print(f"  in {exp['chunks_4']} chunks on 2 workers: {exp['cpu_4_chunks']:.1f} s of CPU in "
+          f"all processes against {exp['cpu_single']:.1f} s for the single export: "
+          f"chunk_cpu_overhead {exp['chunk_cpu_overhead']:.2f} (target <= 1.3); tasks: "
+          f"snapshots {t4['snapshots']:.1f} s, chunks {t4['chunks']:.1f} s, stitch "
+          f"{t4['stitch']:.1f} s: stitch_share {exp['stitch_share']:.2f} (target <= 0.1)")
     print(json.dumps({
         "seek_s_from_snapshot": round(worst, 4),
         "seek_s_median": round(statistics.median(seeks), 4),
@@ -138,6 +148,8 @@ def main(argv=None):
         "export_fps_1_worker": round(exp["fps_1"], 3),
         "export_fps_2_workers": round(exp["fps_2"], 3),
         "export_frames": exp["frames"],
+        "chunk_cpu_overhead": round(exp["chunk_cpu_overhead"], 3),
+        "stitch_share": round(exp["stitch_share"], 3),
     }))
 
 
@@ -160,9 +172,10 @@ def export_throughput(agents: int, frames: int) -> dict:
         path = os.path.join(tmp, "crowd.json")
         save_config(cfg, path)
         source, span = ShotSource(config=path), (cfg.start_frame + 1, cfg.start_frame + frames)
-        t = time.perf_counter()
+        t, cpu = time.perf_counter(), time.process_time()
         _, single = export_chunk(source, span, os.path.join(tmp, "single", "shot.usdc"))
         out["s_single"] = time.perf_counter() - t
+        out["cpu_single"] = time.process_time() - cpu
         out["bytes"], out["clip_agents"] = single.bytes, single.clip_agents
         for w in (1, 2):
             t = time.perf_counter()
@@ -171,6 +184,22 @@ def export_throughput(agents: int, frames: int) -> dict:
             out[f"s_{w}"] = time.perf_counter() - t
             out[f"steps_{w}"] = result.seconds
             _same_poses(single.path, result.stitch.path, span)
+        # four chunks on two workers: the CPU of every process (this one, and the
+        # cluster's once it closed and its processes were waited for) over the single
+        # export's, and the stitch's share of it
+        cpu = time.process_time()
+        children = resource.getrusage(resource.RUSAGE_CHILDREN)
+        result = farm_export(source, os.path.join(tmp, "c4", "shot.usdc"), span, workers=2,
+                             chunk_frames=-(-frames // 4))
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        total = time.process_time() - cpu + (after.ru_utime + after.ru_stime) \
+            - (children.ru_utime + children.ru_stime)
+        _same_poses(single.path, result.stitch.path, span)
+        out["chunks_4"] = len(result.chunks)
+        out["cpu_4_chunks"] = total
+        out["cpu_tasks_4"] = result.cpu
+        out["chunk_cpu_overhead"] = total / out["cpu_single"]
+        out["stitch_share"] = result.cpu["stitch"] / total
     for k in ("single", "1", "2"):
         out[f"fps_{k}"] = frames / out[f"s_{k}"]
     return out

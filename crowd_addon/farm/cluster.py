@@ -82,13 +82,15 @@ def _cluster_failed(logs, what, error) -> CrowdError:
 class FarmResult:
     """A chunked export: the stitched stage (``stitch``, a StitchResult), the chunks'
     summaries (``chunks``: path, frames, started_from, seconds, bytes, events), the
-    snapshot pass's files, and seconds per step (``snapshots``, ``chunks``,
-    ``stitch``, ``total``)."""
+    snapshot pass's files, seconds per step (``snapshots``, ``chunks``, ``stitch``,
+    ``total``) and the CPU seconds of the workers' processes per step (``snapshots``,
+    ``chunks``: all of them, ``stitch``)."""
 
     stitch: object
     chunks: list
     snapshots: list
     seconds: dict = field(default_factory=dict)
+    cpu: dict = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -244,16 +246,17 @@ def _collect(plan, t0):
             f"; nothing was stitched ({state}; {attempts})" if whole else
             f"; nothing was stitched, but {state} ({attempts})"))
     try:
-        stitched, stitch_s = plan["stitch"].result()
+        stitched, stitch_s, stitch_cpu = plan["stitch"].result()
     except Exception as e:  # noqa: BLE001 - reported with its shot
         whole, state = _as_it_was(out, plan["before"])
         return CrowdError(where + f"the stitch failed: {type(e).__name__}: {e}; "
                           + (state if whole else f"and {state}"))
-    files, snap_s = plan["snapshots"].result()
+    files, snap_s, snap_cpu = plan["snapshots"].result()
     chunks = [f.result() for f in plan["chunks"]]
     return FarmResult(stitched, chunks, files, {
         "snapshots": snap_s, "chunks": max(c["seconds"]["total"] for c in chunks),
-        "stitch": stitch_s, "total": time.perf_counter() - t0})
+        "stitch": stitch_s, "total": time.perf_counter() - t0},
+        {"snapshots": snap_cpu, "chunks": sum(c["cpu"] for c in chunks), "stitch": stitch_cpu})
 
 
 def _error(future) -> str:
@@ -318,4 +321,5 @@ def summary(result: FarmResult) -> dict:
     s = result.stitch
     return {**dataclasses.asdict(s), "bytes": s.bytes, "chunk_exports": result.chunks,
             "snapshots": result.snapshots,
-            "seconds": {k: round(v, 3) for k, v in result.seconds.items()}}
+            "seconds": {k: round(v, 3) for k, v in result.seconds.items()},
+            "cpu": {k: round(v, 3) for k, v in result.cpu.items()}}

@@ -19,23 +19,25 @@ __all__ = ["run_snapshots", "run_chunk", "run_stitch", "log_line"]
 
 
 def run_snapshots(source, folder, frames, every, log):
-    """A worker's task: the shot's snapshot pass; returns (files, seconds)."""
+    """A worker's task: the shot's snapshot pass; returns (files, seconds, CPU
+    seconds of the worker's process)."""
     _without_blender_scripts()
-    t = time.perf_counter()
+    t, cpu = time.perf_counter(), time.process_time()
     try:
         files = write_shot_snapshots(source, folder, frames, every)
     except BaseException as e:
         log_line(log, f"snapshots: failed on {_where()}: {type(e).__name__}: {e}", e)
         raise
     log_line(log, f"snapshots: done on {_where()} in {time.perf_counter() - t:.1f} s")
-    return files, time.perf_counter() - t
+    return files, time.perf_counter() - t, time.process_time() - cpu
 
 
 def run_chunk(source, frames, out, snapshots, name, log, _after=None):
     """A worker's task: :func:`export_chunk`, each attempt logged in ``log``
-    (``_after``: the snapshot pass's result, which Dask passes once it is done)."""
+    (``_after``: the snapshot pass's result, which Dask passes once it is done); its
+    summary's ``cpu`` is the CPU seconds of the worker's process."""
     _without_blender_scripts()
-    t = time.perf_counter()
+    t, cpu = time.perf_counter(), time.process_time()
     where = _where()
     try:
         os.makedirs(os.path.dirname(out), exist_ok=True)
@@ -47,21 +49,21 @@ def run_chunk(source, frames, out, snapshots, name, log, _after=None):
     log_line(log, f"{name}: done on {where} in {time.perf_counter() - t:.1f} s")
     return {"path": result.path, "frames": list(result.frames),
             "started_from": result.started_from, "seconds": result.seconds,
-            "bytes": result.bytes, "events": result.events}
+            "bytes": result.bytes, "events": result.events, "cpu": time.process_time() - cpu}
 
 
 def run_stitch(out, chunks, log):
     """A worker's task: the chunks (their summaries) stitched; returns (StitchResult,
-    seconds)."""
+    seconds, CPU seconds of the worker's process)."""
     from ..usd.stitch import stitch
-    t = time.perf_counter()
+    t, cpu = time.perf_counter(), time.process_time()
     try:
         result = stitch([c["path"] for c in chunks], out)
     except BaseException as e:
         log_line(log, f"stitch: failed on {_where()}: {type(e).__name__}: {e}", e)
         raise
     log_line(log, f"stitch: done on {_where()} in {time.perf_counter() - t:.1f} s")
-    return result, time.perf_counter() - t
+    return result, time.perf_counter() - t, time.process_time() - cpu
 
 
 _BLENDER_SCRIPTS = re.compile(r"[/\\]bpy[/\\]\d+\.\d+[/\\]scripts([/\\]|$)")
