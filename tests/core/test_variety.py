@@ -242,3 +242,22 @@ def test_placement_spread_mode():
                        characters=chars, max_offset=30, seed=2)
     from crowd_addon.core.variety.timing import spread_offsets
     np.testing.assert_array_equal(got.offsets, spread_offsets(pos, got.streams, 30, 3))
+
+
+def test_resampled_entries_give_the_banks_own_floats_on_and_off_the_grid():
+    """Entries resampled at sub-frames (core.anim.sub_keys) next to entries that are
+    not, sampled together on the grid, off it and at whole frames, with and without an
+    output array: the same floats as the bank interpolating every one."""
+    from crowd_addon.core.anim.clip import ClipBank
+    clips = [periodic_clip(SK, "a", frames=20, seed=1), periodic_clip(SK, "b", frames=30,
+                                                                     seed=2)]
+    bank, plain = ClipBank(clips), ClipBank(clips)
+    bank.resample([0])
+    ids = np.array([0, 1, 0, 1, 0])
+    for t in (np.array([2.125, 3.25, 5.3, 7.0, 44.5]),        # mixed
+              np.array([2.125, 3.0, 5.25, 7.0, 19.875]),      # all on the grid
+              np.array([0.3, 1.7, 2.2, 3.9, 4.1])):           # none
+        want = plain.sample(ids, t)
+        np.testing.assert_array_equal(bank.sample(ids, t), want)
+        out = np.empty_like(want)
+        np.testing.assert_array_equal(bank.sample(ids, t, out=out), want)

@@ -84,6 +84,8 @@ class SubKeys:
             return np.take(self.keys, start + j.astype(np.int64), axis=0, out=out,
                            mode="clip")
         if on.any():
+            if out is None:
+                out = np.empty((clip_ids.size,) + self.keys.shape[1:], np.float32)
             out[on] = self.keys[start[on] + j[on].astype(np.int64)]
             rest = ~on
             out[rest] = bank.interpolate(clip_ids[rest], u[rest])
