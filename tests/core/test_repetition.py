@@ -225,6 +225,42 @@ def test_a_recording_measures_what_the_running_crowd_showed():
         (want[0],)
 
 
+def test_a_recording_searches_neighbours_again_only_when_an_agent_moved(monkeypatch):
+    """The screen neighbours depend on where the agents stand, not on what they play:
+    over 22 frames of the shot whose only move (frame 7) changes a position (the turn
+    at 12 and the move to where it stood at 16 do not), they are searched twice, and
+    the metric is the one searched afresh every frame."""
+    import crowd_addon.core.variety.repetition as rep
+    crowd = Crowd(recording_config(), skinning="gpu")
+    first, last = 3, 24
+    vp = top_view(8.0)
+    s = RepetitionSettings(k=3, offset_tolerance=1, color_tolerance=1.0)
+    recorder = Recorder(crowd, first, last)
+    FrameDriver(crowd, simulate, [recorder.capture]).run(last)
+    rec = recorder.finish()
+    frames = range(first, last + 1)
+    calls, real = [], rep.nearest_neighbours
+    monkeypatch.setattr(rep, "nearest_neighbours", lambda *a: calls.append(1) or real(*a))
+    got = recording_repetition(rec, vp, frames=frames, settings=s)
+    assert len(calls) == 2
+    fresh = [rep.frame_repetition(*_state_at(rec, f), vp, s,
+                                  rep.stream_periods(rec.config))[0] for f in frames]
+    assert got.per_frame == tuple(fresh)
+
+
+def _state_at(rec, f):
+    """What :func:`frame_repetition` takes of a recording at frame ``f``."""
+    import crowd_addon.core.variety.repetition as rep
+    agents = np.arange(rec.agent_count)
+    seg = rep._last_at(rec.segment_agent, rec.segment_frame, agents, f)
+    pos = rec.position.copy()
+    mv = rep._last_at(rec.move_agent, rec.move_frame, agents, f, missing=True)
+    pos[mv >= 0] = rec.move_position[mv[mv >= 0]]
+    look = rep.body_keys(rec.config, rec.agent_skeleton)[1]
+    return (pos, rec.segment_kind[seg], rec.segment_ref[seg], rec.segment_offset[seg],
+            look, rep.colors_shown(rec.color, rec.palettes))
+
+
 @pytest.mark.parametrize("kwargs,message", [
     ({"k": 0}, "k must be an integer >= 1"),
     ({"width": 1.5}, "width must be an integer"),

@@ -34,7 +34,7 @@ from ..meshes.bodies import body_keys
 from ..base.errors import CrowdError
 
 __all__ = ["OFFSET_TOLERANCE", "RepetitionSettings", "Repetition", "nearest_neighbours", "screen_points",
-           "pairs_alike", "frame_repetition", "crowd_repetition", "recording_repetition",
+           "screen_neighbours", "pairs_alike", "frame_repetition", "crowd_repetition", "recording_repetition",
            "recording_repetition_steps", "measure_frames", "describe", "combine",
            "stream_periods", "colors_shown"]
 
@@ -365,14 +365,24 @@ def pairs_alike(i, j, kind, ref, offset, look, color, settings: RepetitionSettin
     return same
 
 
-def frame_repetition(positions, kind, ref, offset, look, color, view_projection,
-                     settings: RepetitionSettings = RepetitionSettings(), period=None):
-    """One frame: ``(share, visible, pairs)``; share is None without a pair. Arrays are
-    per agent: positions (n, 3) metres, kind/ref/offset as ``AgentState``, look (n,)
-    int (body), color (n, 3); ``period`` as :func:`pairs_alike`."""
+def screen_neighbours(positions, view_projection,
+                      settings: RepetitionSettings = RepetitionSettings()) -> tuple:
+    """``(idx, nb)``: the agents in view (ids into ``positions``) and the ``settings.k``
+    nearest of each on screen (indices into ``idx``, -1 none)."""
     xy, vis = screen_points(positions, view_projection, settings.width, settings.height)
     idx = np.flatnonzero(vis)
-    nb = nearest_neighbours(xy[idx], settings.k)
+    return idx, nearest_neighbours(xy[idx], settings.k)
+
+
+def frame_repetition(positions, kind, ref, offset, look, color, view_projection,
+                     settings: RepetitionSettings = RepetitionSettings(), period=None,
+                     neighbours=None):
+    """One frame: ``(share, visible, pairs)``; share is None without a pair. Arrays are
+    per agent: positions (n, 3) metres, kind/ref/offset as ``AgentState``, look (n,)
+    int (body), color (n, 3); ``period`` as :func:`pairs_alike`; ``neighbours``:
+    :func:`screen_neighbours` of these positions when known (agents that did not move)."""
+    idx, nb = screen_neighbours(positions, view_projection, settings) if neighbours is None \
+        else neighbours
     valid = nb >= 0
     pairs = int(valid.sum())
     if not pairs:
@@ -457,7 +467,7 @@ def recording_repetition_steps(rec, view_projection, frames=None, look=None, age
 def _recording_steps(rec, view_projection, frames, look, agents, settings):
     period = stream_periods(rec.config)
     shown = colors_shown(rec.color, rec.palettes)
-    results = []
+    results, seen = [], None            # seen: the last positions and their neighbours
     for f in frames:
         seg = _last_at(rec.segment_agent, rec.segment_frame, agents, f)
         kind, ref, off = rec.segment_kind[seg], rec.segment_ref[seg], rec.segment_offset[seg]
@@ -466,8 +476,10 @@ def _recording_steps(rec, view_projection, frames, look, agents, settings):
             mv = _last_at(rec.move_agent, rec.move_frame, agents, f, missing=True)
             has = mv >= 0
             pos[has] = rec.move_position[mv[has]]
+        if seen is None or not np.array_equal(seen[0], pos):    # nobody moved: the same
+            seen = (pos, screen_neighbours(pos, view_projection, settings))
         results.append(frame_repetition(pos, kind, ref, off, look[agents], shown[agents],
-                                        view_projection, settings, period))
+                                        view_projection, settings, period, seen[1]))
         yield len(results), len(frames)
     return _report(frames, results, settings)
 
