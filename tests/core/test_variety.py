@@ -261,3 +261,18 @@ def test_resampled_entries_give_the_banks_own_floats_on_and_off_the_grid():
         np.testing.assert_array_equal(bank.sample(ids, t), want)
         out = np.empty_like(want)
         np.testing.assert_array_equal(bank.sample(ids, t, out=out), want)
+
+
+def test_resampled_keys_stop_at_their_memory_cap_and_the_rest_interpolate():
+    """Past ``max_bytes`` an entry is not resampled (long clips, many of them): it
+    interpolates at the grid times, the same floats."""
+    from crowd_addon.core.anim.clip import ClipBank
+    from crowd_addon.core.anim.sub_keys import SubKeys
+    clips = [periodic_clip(SK, "a", frames=20, seed=1), periodic_clip(SK, "b", frames=30,
+                                                                     seed=2)]
+    bank, plain = ClipBank(clips), ClipBank(clips)
+    one = (19 * SUB_KEYS + 1) * bank.keys.shape[1] * 40        # entry 0's keys exactly
+    bank.sub_keys = SubKeys(bank, [0, 1], max_bytes=one)
+    assert bank.sub_keys.nbytes == one and bank.sub_keys.start[1] == -1
+    ids, t = np.array([0, 1, 0, 1]), np.array([2.125, 3.25, 7.5, 28.875])
+    np.testing.assert_array_equal(bank.sample(ids, t), plain.sample(ids, t))

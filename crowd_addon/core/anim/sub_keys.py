@@ -12,17 +12,21 @@ rate, speed 1 and a start on the grid, in a stream on the grid) takes its pose w
 one gather, like a speed-1 stream at a whole frame. Any other time interpolates as
 before. A grid key is the bank's own interpolation at that time, so both give the same
 floats. Memory: ``(F - 1) x SUB_KEYS + 1`` poses per resampled clip entry of ``F``
-keys (:attr:`SubKeys.nbytes`; ``crowd plan`` prints it).
+keys, at most :data:`MAX_BYTES` in all (:attr:`SubKeys.nbytes`; ``crowd plan``
+prints it).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["SUB_KEYS", "SubKeys", "on_grid", "sub_key_bytes"]
+__all__ = ["SUB_KEYS", "MAX_BYTES", "SubKeys", "on_grid", "sub_key_bytes"]
 
 #: Grid steps per frame of the time of a stream at a speed other than 1.
 SUB_KEYS = 8
+#: The most bytes of resampled keys a crowd keeps: entries past it (long clips, many
+#: of them) interpolate at the grid times instead, the same floats at a frame's cost.
+MAX_BYTES = 256 << 20
 
 
 def on_grid(times: np.ndarray) -> np.ndarray:
@@ -33,8 +37,9 @@ def on_grid(times: np.ndarray) -> np.ndarray:
 
 def sub_key_bytes(config) -> int:
     """Bytes of the keys a crowd of ``config`` (a CrowdConfig) resamples: each clip
-    that a stream at another speed than 1 plays, in rows of the widest skeleton (one
-    entry per clip: a clip played in two bone orders has two, so this is a floor)."""
+    that a stream at another speed than 1 plays, in rows of the widest skeleton, within
+    :data:`MAX_BYTES` (one entry per clip: a clip played in two bone orders has two,
+    so this is an estimate)."""
     bones = max((s.bone_count for s in config.skeletons.values()), default=0)
     clips, todo = set(), [d.root for d in config.streams if d.speed != 1.0]
     while todo:
@@ -42,19 +47,24 @@ def sub_key_bytes(config) -> int:
         todo.extend(node.children())
         if hasattr(node, "clip"):
             clips.add(node.clip)
-    keys = sum((config.clips[c].frame_count - 1) * SUB_KEYS + 1 for c in clips)
-    return int(keys * bones * 40)          # 10 float32 a bone
+    sizes = np.array([(clip.frame_count - 1) * SUB_KEYS + 1        # in the bank's order
+                      for name, clip in config.clips.items() if name in clips],
+                     np.int64) * bones * 40                  # 10 float32 a bone
+    return int(sizes[np.cumsum(sizes) <= MAX_BYTES].sum())
 
 
 class SubKeys:
     """The entries ``entries`` of ``bank`` (a :class:`~.clip.ClipBank`) resampled at
-    every ``1 / SUB_KEYS`` clip frame of ``0 .. F - 1``: ``keys`` (N, B, 10) float32,
-    entry ``e``'s grid time ``j / SUB_KEYS`` at ``keys[start[e] + j]`` (``start`` -1:
-    not resampled)."""
+    every ``1 / SUB_KEYS`` clip frame of ``0 .. F - 1``, as many of them as fit in
+    ``max_bytes``: ``keys`` (N, B, 10) float32, entry ``e``'s grid time
+    ``j / SUB_KEYS`` at ``keys[start[e] + j]`` (``start`` -1: not resampled)."""
 
-    def __init__(self, bank, entries):
+    def __init__(self, bank, entries, max_bytes: int = MAX_BYTES):
         entries = np.unique(np.asarray(list(entries), np.int64))
         count = (bank.frames[entries] - 1) * SUB_KEYS + 1
+        pose = bank.keys.shape[1] * bank.keys.shape[2] * 4
+        fits = np.cumsum(count) * pose <= max_bytes          # the first ones, in order
+        entries, count = entries[fits], count[fits]
         self.start = np.full(bank.frames.size, -1, np.int64)
         self.start[entries] = np.concatenate([[0], np.cumsum(count)[:-1]]).astype(np.int64)
         ids = np.repeat(entries, count)
