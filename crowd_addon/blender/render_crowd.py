@@ -225,18 +225,17 @@ class _Existing:
 
     def mesh(self, j: int, proxy, made: str, palette):
         """Pose object ``j``'s mesh: the one it has when it was made from ``made``
-        (:func:`_made_from`), else a new one of ``proxy`` (``palette``: :func:`_mesh_for`'s);
-        and whether it is new."""
+        (:func:`_made_from`), else a new one of ``proxy`` (``palette``: :func:`_mesh_for`'s)."""
         name = f"{_MESH_PREFIX}{j:06d}"
         mesh = self.meshes.get(name)
         if mesh is not None and mesh.get(_MADE_FROM) == made:
-            return mesh, False
+            return mesh
         if mesh is not None:
             mesh.name = f"{name}~"                     # frees the name for its successor
             self.stale.append(mesh)
         mesh = self.meshes[name] = _mesh_for(proxy, name, palette)
         mesh[_MADE_FROM] = made
-        return mesh, True
+        return mesh
 
     def indices(self) -> np.ndarray:
         """The ``j`` of every pose object in the pose collection whose pose mesh
@@ -311,7 +310,7 @@ def sync(scene, crowd) -> RenderStats:
             continue
         meshes = []
         for i in skin.tolist():
-            mesh, _ = existing.mesh(int(j[i]), proxy, made, palettes[k])
+            mesh = existing.mesh(int(j[i]), proxy, made, palettes[k])
             existing.show(int(j[i]), mesh)
             meshes.append(mesh)
         pieces = first[skin]

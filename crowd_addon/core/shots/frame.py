@@ -108,7 +108,8 @@ class Frame:
         1), a unique's own clock."""
         t = float(frame) + sub
         streams = self.phase + self.speed * t
-        streams[self.gridded] = on_grid(streams[self.gridded])
+        if self.gridded.size:
+            streams[self.gridded] = on_grid(streams[self.gridded])
         return np.concatenate([streams, self.crowd.uniques.times(frame) + sub])
 
     def store_roots(self):
