@@ -116,6 +116,9 @@ def main(argv=None):
           f"equals the straight run's poses")
     print(f"  frame {last:,} from the start: {from_start:.1f} s "
           f"({from_start / worst:,.0f}x the slowest jump)")
+    quarter = 62_688_894 // 4                 # a quarter of the arrays whole (issue 33)
+    print(f"  one snapshot: {snap_bytes:,} B (target <= {quarter:,}, a quarter of the "
+          f"62,688,894 B the arrays took whole: {'met' if snap_bytes <= quarter else 'NOT met'})")
     print(f"  one snapshot: {snap_bytes / 2**20:.1f} MiB, taken in "
           f"{statistics.median(t_snap) * 1e3:.0f} ms, restored in {restore_ms:.0f} ms; a "
           f"whole {frames:,}-frame shot at K = {args.every} would keep "

@@ -716,7 +716,7 @@ def mutated_snapshot(rng, good: Path, path: Path, notes) -> None:
     else:
         name = rng.choice(sorted(arrays))
         a = arrays[name]
-        op = rng.choice(["dtype", "shape", "nan", "huge", "negative", "missing"])
+        op = rng.choice(["dtype", "shape", "nan", "huge", "negative", "missing", "codec"])
         if op == "dtype":
             arrays[name] = a.astype(rng.choice([np.float64, np.int8, np.bool_, np.float32]))
         elif op == "shape":
@@ -729,6 +729,10 @@ def mutated_snapshot(rng, good: Path, path: Path, notes) -> None:
             arrays[name] = np.full_like(a, -7)
         elif op == "missing":
             del arrays[name]
+        elif op == "codec":                 # the packed form the header gives the array
+            spec = head["arrays"].get(name.split(":")[0])
+            if isinstance(spec, dict):
+                spec["codec"] = rng.choice(["raw", "ints", "rows", "zip", None, 3])
         if name in arrays and op in ("dtype", "shape") and rng.random() < 0.5:
             head["arrays"][name] = {"dtype": arrays[name].dtype.str,
                                     "shape": list(arrays[name].shape)}   # a consistent lie

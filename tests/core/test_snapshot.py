@@ -247,7 +247,7 @@ def broken_files(tmp_path, good):
         return {**arrays, HEADER: np.frombuffer(json.dumps(h).encode(), np.uint8)}
 
     out = [(write("plain.npz", {"x": np.zeros(3)}), "not a crowd snapshot"),
-           (write("v3.npz", with_head(version=3)), "format version 3"),
+           (write("v4.npz", with_head(version=4)), "format version 4"),
            (write("v1.npz", with_head(version=1)), "format version 1 .*write it again"),
            (write("fmt.npz", with_head(format="other")), "not a crowd snapshot"),
            (write("frame.npz", with_head(frame="7")), "'frame' must be a whole number"),
@@ -283,7 +283,9 @@ def test_bad_snapshot_files_are_named_and_change_nothing(tmp_path):
         np.testing.assert_array_equal(a, b)
     # a header that fits the format but not this crowd: named by the restore
     snap = load_snapshot(tmp_path / "good.npz")
-    snap.arrays["slots.start_pose"] = snap.arrays["slots.start_pose"][:, :3]
+    snap = type(snap)(snap.frame, snap.config_digest, snap.substeps,
+                      {**snap.arrays, "slots.start_pose": snap.arrays["slots.start_pose"][:, :3]},
+                      snap.values)
     with pytest.raises(CrowdError, match="state array 'slots.start_pose'"):
         crowd.restore(snap)
     for a, b in zip(before, poses_now(crowd)):
@@ -538,18 +540,20 @@ def test_a_corrupted_array_of_the_right_shape_is_refused_by_its_digest(saved, tm
     """Before the fix a damaged array was caught only when its shape broke."""
     crowd, good = saved
     with np.load(good) as z:
-        history = z["streams.history"].copy()
+        rows = z["streams.history:rows"].copy()         # the history's distinct rows
         kind = z["agents.kind"].copy()
-    history[0, 0, 0, 4] += 0.25
+    assert rows.shape[0] > 1 and rows.shape[1] > 4
+    changed = rows.copy()
+    changed[0, 4] += 0.25
     refused_file(crowd, rewritten(tmp_path, good, "pose.npz",
-                                  **{"streams.history": history}),
+                                  **{"streams.history:rows": changed}),
                  "'streams.history'", "digest", "damaged")
     kind[3] = 1 - kind[3]
     refused_file(crowd, rewritten(tmp_path, good, "kind.npz", **{"agents.kind": kind}),
                  "'agents.kind'", "digest")
     # the bytes of the file itself, in the middle of the pose history's data
     raw = bytearray(good.read_bytes())
-    at = raw.find(history[1].tobytes()[:64])
+    at = raw.find(rows[1].tobytes()[:64])
     assert at > 0
     raw[at + 5] ^= 0x40
     flipped = tmp_path / "flipped.npz"
@@ -562,7 +566,8 @@ def test_the_header_lists_a_digest_of_every_array(saved):
     _, good = saved
     with np.load(good) as z:
         head = json.loads(z[HEADER].tobytes())
-    assert head["version"] == 2
+    assert head["version"] == 3
+    assert head["arrays"]["streams.history"]["codec"] == "rows"
     assert all(len(spec["sha256"]) == 64 for spec in head["arrays"].values())
 
 

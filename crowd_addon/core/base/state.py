@@ -1,8 +1,9 @@
-"""Copying a part's nested state (dicts, lists, arrays and plain values)."""
+"""Copying a part's nested state (dicts, lists, arrays and plain values), and
+setting an array from a state value."""
 
 import numpy as np
 
-__all__ = ["copy_state"]
+__all__ = ["copy_state", "assign"]
 
 
 def copy_state(state):
@@ -14,3 +15,14 @@ def copy_state(state):
     if isinstance(state, list):
         return [copy_state(v) for v in state]
     return state
+
+
+def assign(dest: np.ndarray, value) -> None:
+    """``dest[...] = value``, where ``value`` may be a packed array that unpacks itself
+    into ``dest`` (``unpack_into``: a snapshot's pose history, without a whole copy
+    first)."""
+    into = getattr(value, "unpack_into", None)
+    if into is not None:
+        into(dest)
+    else:
+        dest[...] = value

@@ -16,6 +16,7 @@ import numpy as np
 from ..base import pose as sqt
 from .agents import check_offsets
 from ..base.errors import CrowdError
+from ..base.state import assign
 
 __all__ = ["StreamPool", "UniquePool", "resolve_index", "stream_key"]
 
@@ -126,7 +127,7 @@ class StreamPool:
         if not (((logs[0] >= 0) & (logs[0] < self.count)).all()
                 and ((logs[1] >= 0) & (logs[1] < len(self._tag_names))).all()):
             raise ValueError("the event log names a stream or tag that does not exist")
-        self.history[...] = state["history"]
+        assign(self.history, state["history"])
         self._log_stream, self._log_name, self._log_frame = logs
 
     # ------------------------------------------------------------------ events

@@ -15,6 +15,7 @@ import json
 import numpy as np
 
 from ..base.errors import CrowdError
+from ..base.state import copy_state
 from ..runtime.agents import STREAM, TRANSITION, UNIQUE
 from .snapshot import Snapshot, flatten_state, value_kind, check_values
 
@@ -36,13 +37,23 @@ def crowd_state(crowd) -> dict:
 def set_state(crowd, state: dict) -> None:
     """Set every part from ``state`` (:func:`crowd_state`'s layout); ValueError when
     a value refers to what does not exist (the crowd may then be part set: see
-    :func:`restore`)."""
+    :func:`restore`). The streams go last, after every check, and set themselves
+    whole or not at all: a failed restore never touches the history ring, the
+    largest part, so :func:`restore` keeps no copy of it to roll back to."""
+    _set_parts(crowd, state)
+    _check_refs(crowd)
+    crowd.streams.set_state(state["streams"])
+    crowd._events_fired = 0
+    crowd.skinning.restored()
+
+
+def _set_parts(crowd, state: dict) -> None:
+    """Every part of ``state`` but the streams."""
     c = state["crowd"]
     crowd.frame, crowd._origin = int(c["frame"]), int(c["origin"])
     crowd._steps, crowd._ms_total = int(c["steps"]), float(c["ms_total"])
     crowd.subs.streams[...] = c["sub_streams"]
     crowd.subs.uniques[...] = c["sub_uniques"]
-    crowd.streams.set_state(state["streams"])
     crowd.uniques.set_state(state["uniques"])
     crowd.slots.set_state(state["slots"])
     crowd.agents.set_state(state["agents"])        # after the slots: it regroups by target
@@ -51,9 +62,6 @@ def set_state(crowd, state: dict) -> None:
     crowd.looks.set_state(state["looks"], len(crowd.look.targets))
     if crowd.show is not None:
         crowd.show.set_state(state["show"])
-    _check_refs(crowd)
-    crowd._events_fired = 0
-    crowd.skinning.restored()
 
 
 def _check_refs(crowd) -> None:
@@ -75,9 +83,8 @@ def _check_refs(crowd) -> None:
 def take(crowd) -> Snapshot:
     """A :class:`Snapshot` of ``crowd`` now (copies)."""
     arrays, values = flatten_state(crowd_state(crowd))
-    return Snapshot(int(crowd.frame), crowd.config_digest, int(crowd.substeps),
-                    {k: np.array(a, copy=True) for k, a in arrays.items()},
-                    json.loads(json.dumps(values)))
+    return Snapshot(int(crowd.frame), crowd.config_digest, int(crowd.substeps), arrays,
+                    json.loads(json.dumps(values)))      # packing copies the arrays
 
 
 def check(crowd, snap: Snapshot, what: str = "snapshot") -> None:
@@ -98,8 +105,8 @@ def check(crowd, snap: Snapshot, what: str = "snapshot") -> None:
                          f"number of magnitude at most {MAX_FRAME})")
     check_values(snap.values, snap.frame, what)
     arrays, values = flatten_state(crowd_state(crowd))
-    for name in sorted(set(arrays) | set(snap.arrays)):
-        a, b = arrays.get(name), snap.arrays.get(name)
+    for name in sorted(set(arrays) | set(snap.packed)):
+        a, b = arrays.get(name), snap.packed.get(name)
         if a is None or b is None:
             raise CrowdError(f"{what}: state array {name!r} is "
                              f"{'missing' if b is None else 'unknown to this crowd'}")
@@ -108,9 +115,9 @@ def check(crowd, snap: Snapshot, what: str = "snapshot") -> None:
                 or a.ndim != b.ndim:
             raise CrowdError(f"{what}: state array {name!r} is {b.dtype} {b.shape}, "
                              f"this crowd's is {a.dtype} {a.shape}")
-    for name, b in snap.arrays.items():
+    for name, b in snap.packed.items():
         if b.dtype.kind == "f" and not name.endswith(_NAN_ALLOWED) and \
-                not np.isfinite(b).all():
+                not all(np.isfinite(v).all() for v in b.element_values()):
             raise CrowdError(f"{what}: state array {name!r} holds values that are not "
                              "finite")
     for name in sorted(set(values) | set(snap.values)):
@@ -137,11 +144,14 @@ def restore(crowd, snap: Snapshot) -> None:
     """Set ``crowd`` to ``snap``'s frame and state (``Crowd.restore``): checked first
     (:func:`check`), and rolled back when a value the checks cannot see is wrong."""
     check(crowd, snap)
-    before = take(crowd)                # a value the checks cannot see: roll back
+    # a value the checks cannot see: roll back (the streams are set last, whole or not
+    # at all, so they need no copy)
+    before = copy_state({k: v for k, v in crowd_state(crowd).items() if k != "streams"})
     with crowd.scrub.inside():
         try:
             set_state(crowd, snap.state())
         except Exception as e:  # noqa: BLE001 - any fault of the snapshot's values
-            set_state(crowd, before.state())
+            _set_parts(crowd, before)
+            crowd.skinning.restored()
             raise CrowdError(f"snapshot of frame {snap.frame} cannot be restored: "
                              f"{type(e).__name__}: {e}; the crowd is as it was") from e
