@@ -604,9 +604,11 @@ def _run_main(argv) -> tuple:
 
 
 def error_problem(command, code, err) -> str:
-    """'' when ``err`` ends with one named error line of ``crowd <command>``."""
-    if code != 2:
-        return f"exit code {code!r}, expected 0 or 2"
+    """'' when ``err`` ends with one named error line of ``crowd <command>``: exit code
+    2, or 3 for a crowd script refused as untrusted (README: nothing done; met when
+    the command reads the .blend an earlier test left open, having no --config)."""
+    if code not in (2, 3) or (code == 3 and "not trusted" not in err):
+        return f"exit code {code!r}, expected 0, 2 or 3 (an untrusted script)"
     if "Traceback" in err:
         return "a traceback on stderr"
     lines = [line for line in err.splitlines() if line.strip()]
