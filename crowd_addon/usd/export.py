@@ -484,6 +484,18 @@ def _sources(shot, offsets, own_paths) -> list:
             for k, st in zip(keys.tolist(), shot.static.tolist())]
 
 
+#: what an export records per agent in its settings (:func:`per_agent_settings`)
+PER_AGENT = ("agentStream", "agentOffset", "agentMoves")
+
+
+def per_agent_settings(stream, offset, moves) -> dict:
+    """The per-agent arrays a crowd export records in its settings (``agentStream``,
+    ``agentOffset``: the stream and offset each agent plays the whole shot, -1 where it
+    changes; ``agentMoves``: 1 where it moves), what :func:`stitch` reads."""
+    return {k: Vt.IntArray.FromNumpy(np.ascontiguousarray(v, np.int32))
+            for k, v in zip(PER_AGENT, (stream, offset, np.asarray(moves, np.int32)))}
+
+
 def _settings(rec, shot, layout, measured=None) -> dict:
     cfg = rec.config
     seen = {} if measured is None or measured.value is None else {
@@ -493,4 +505,5 @@ def _settings(rec, shot, layout, measured=None) -> dict:
             "uniques": len(rec.unique_names), "agents": int(shot.agents.size),
             "firstFrame": int(rec.first), "lastFrame": int(rec.last),
             "writer": "crowd_addon.usd", "version": FORMAT_VERSION, "layout": layout,
-            "substeps": int(rec.substeps), "configDigest": config_digest(cfg)}
+            "substeps": int(rec.substeps), "configDigest": config_digest(cfg),
+            **per_agent_settings(shot.stream, shot.offset, shot.moving)}

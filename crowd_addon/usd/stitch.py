@@ -37,11 +37,13 @@ import os
 import time
 from dataclasses import dataclass
 
+import numpy as np
 from pxr import Sdf, Tf, UsdUtils, Vt
 
 from ..core.base.errors import CrowdError
 from .agents import ROOT
 from .clips import PRIM, manifest_layer
+from .export import PER_AGENT as _PER_AGENT, per_agent_settings
 from .files import ExportFiles
 from .layers import attribute, define, new_layer
 from .references import register_reader
@@ -52,6 +54,7 @@ _CHANNELS = ("translations", "rotations", "scales")
 _XFORM = ("xformOp:translate", "xformOp:rotateZ")
 _SAME = ("M", "NT", "fps", "seed", "streams", "uniques", "agents", "layout", "substeps",
          "version", "configDigest")
+_PAIR = 1 << 20                               # (stream, offset) as one int
 _T = Sdf.ValueTypeNames
 
 
@@ -91,7 +94,8 @@ class _Chunk:
         if not isinstance(crowd, dict) or crowd.get("writer") != "crowd_addon.usd":
             raise CrowdError(f"{path}: not a crowd export (no customLayerData crowd written "
                              "by crowd_addon.usd)")
-        missing = [k for k in ("firstFrame", "lastFrame", *_SAME) if k not in crowd]
+        missing = [k for k in ("firstFrame", "lastFrame", *_SAME, *_PER_AGENT)
+                   if k not in crowd]
         if missing:
             raise CrowdError(f"{path}: its crowd settings lack {missing} (exported by an "
                              "older version? export the chunk again)")
@@ -104,6 +108,13 @@ class _Chunk:
             self.own_dir = os.path.dirname(self.own.realPath)
         agents = self.layer.GetPrimAtPath(f"/{ROOT}/Agents")
         self.names = list(agents.nameChildren.keys()) if agents else []
+        #: per agent (in :attr:`names` order) the stream and offset it plays the whole
+        #: chunk (-1: it changes), and whether it moves: what the export recorded
+        self.stream, self.offset, self.moves = (
+            np.asarray(crowd[k], np.int64).reshape(-1) for k in _PER_AGENT)
+        if any(a.size != len(self.names) for a in (self.stream, self.offset, self.moves)):
+            raise CrowdError(f"{path}: its per-agent arrays ({', '.join(_PER_AGENT)}) do "
+                             f"not hold one value for each of its {len(self.names)} agents")
         self._offsets = {}                   # offset animation path -> what it plays
         self._targets = {}                   # agent name -> its animation source
 
@@ -137,11 +148,17 @@ class _Chunk:
                 int(round(ref.layerOffset.offset)))
         return found
 
-    def moving(self, name) -> bool:
-        """Whether agent ``name``'s transform has time samples here (the export writes
-        both ops' samples or neither)."""
-        return bool(self.layer.ListTimeSamplesForPath(
-            Sdf.Path(f"/{ROOT}/Agents/{name}.{_XFORM[0]}")))
+    def static_sources(self, which) -> dict:
+        """``{(stream, offset): source}`` (:meth:`source`'s static form) of each pair the
+        agents at positions ``which`` play the whole chunk. A stream's layer and scope
+        are looked up once, from one of its agents; every offset of it lies beside."""
+        stream, offset = self.stream[which], self.offset[which]
+        streams, first = np.unique(stream, return_index=True)
+        layer = {int(k): self.source(self.names[int(which[i])])[1:3]
+                 for k, i in zip(streams.tolist(), first.tolist())}
+        pairs = np.unique(stream * _PAIR + offset)
+        return {(k // _PAIR, k % _PAIR): ("static", *layer[k // _PAIR], k % _PAIR)
+                for k in pairs.tolist()}
 
 
 def _open(real, shown):
@@ -193,10 +210,20 @@ def stitch(chunks, path, progress=None) -> StitchResult:
     first, last = parts[0], parts[-1]
     fps, n = float(first.settings["fps"]), int(first.settings["substeps"])
     with files:
-        sources = {name: [c.source(name) for c in parts] for name in first.names}
+        # the agents that play one (stream, offset) in every chunk share an offset
+        # animation and are touched no further (their prims, copied, already point at
+        # it); only the others are read agent by agent
+        streams = np.stack([c.stream for c in parts])
+        offsets_all = np.stack([c.offset for c in parts])
+        shared = (streams[0] >= 0) & (streams == streams[0]).all(0) & \
+            (offsets_all == offsets_all[0]).all(0)
+        own_at = np.flatnonzero(~shared)
+        own_names = [first.names[i] for i in own_at.tolist()]
+        sources = {name: [c.source(name) for c in parts] for name in own_names}
+        pairs = [c.static_sources(np.flatnonzero(c.stream >= 0)) for c in parts]
         merged = {}                          # chunk stream/unique layer -> merged asset
         joints = {}                          # merged asset -> joints
-        groups = _animation_layers(parts, sources)
+        groups = _animation_layers(parts, sources, pairs)
         for j, ((kind, name), found) in enumerate(groups.items()):
             layer = _joined(found, files.format, fps)
             files.save(layer, f"{kind}/{name}")
@@ -206,17 +233,18 @@ def stitch(chunks, path, progress=None) -> StitchResult:
             if progress is not None:
                 progress(kind, j + 1, len(groups))
 
-        static = {name: s[0] for name, s in sources.items()
-                  if all(x[0] == "static" and merged[x[1]] == merged[s[0][1]]
-                         and x[3] == s[0][3] for x in s)}
-        own_names = [name for name in first.names if name not in static]
+        static_at = np.flatnonzero(shared)
+        static = first.static_sources(static_at) if static_at.size else {}
 
         main = new_layer(files.format, fps, first.first, last.last,
                          default_prim=ROOT, comment="crowd shot stitched from chunks by "
                                                     "crowd_addon.usd")
         main.customLayerData = {"crowd": {
             **_shot_settings(parts), "firstFrame": first.first, "lastFrame": last.last,
-            "chunks": Vt.StringArray([_relative(c.path, files.directory) for c in parts])}}
+            "chunks": Vt.StringArray([_relative(c.path, files.directory) for c in parts]),
+            **per_agent_settings(np.where(shared, streams[0], -1),
+                                 np.where(shared, offsets_all[0], -1),
+                                 np.stack([c.moves for c in parts]).any(0))}}
         crowd = Sdf.PrimSpec(main, ROOT, Sdf.SpecifierDef, "Xform")
         Sdf.CopySpec(first.layer, f"/{ROOT}/Agents", main, f"/{ROOT}/Agents")
         _rebase(main, first, files)          # before anything of ours is in the layer
@@ -241,8 +269,8 @@ def stitch(chunks, path, progress=None) -> StitchResult:
         if progress is not None:
             progress("agent animations", len(own_names), len(own_names))
 
-        offsets = _offset_animations(crowd, static, merged, files)
-        moving = _agents(main, parts, sources, static, merged, offsets, own_names, files)
+        _offset_animations(crowd, static, merged, files)
+        moving = _agents(main, parts, own_names)
         files.save(main)
         if progress is not None:
             progress("layout", len(first.names), len(first.names))
@@ -253,16 +281,18 @@ def stitch(chunks, path, progress=None) -> StitchResult:
     return StitchResult(
         path=files.path, layers_dir=files.layers_dir, files=dict(files.written),
         frames=(first.first, last.last), chunks=[c.path for c in parts],
-        agents=len(first.names), shared_agents=len(static), clip_agents=len(own_names),
+        agents=len(first.names), shared_agents=int(static_at.size), clip_agents=len(own_names),
         moving_agents=moving, seconds=time.perf_counter() - t0)
 
 
-def _animation_layers(parts, sources) -> dict:
+def _animation_layers(parts, sources, pairs) -> dict:
     """``{(kind, name): [(chunk, layer file)]}`` of the stream and unique layers the
-    chunks read, in chunk order (kind ``streams`` or ``uniques``, name the file stem)."""
+    chunks read, in chunk order (kind ``streams`` or ``uniques``, name the file stem):
+    those of the (stream, offset) pairs agents play a whole chunk (``pairs``, per chunk)
+    and of the clip sets of the agents in ``sources``."""
     out = {}
     for k, c in enumerate(parts):
-        found = set()
+        found = {s[1] for s in pairs[k].values()}
         for per_chunk in sources.values():
             s = per_chunk[k]
             if s[0] == "static":
@@ -324,7 +354,7 @@ def _shot_settings(parts) -> dict:
     chunks' (each measures the same number of frames), or none when a chunk lacks it
     or measured with other neighbours."""
     out = {k: v for k, v in parts[0].settings.items()
-           if k not in ("repetition", "repetitionK")}
+           if k not in ("repetition", "repetitionK", *_PER_AGENT)}
     values = [c.settings.get("repetition") for c in parts]
     ks = {c.settings.get("repetitionK") for c in parts}
     if None not in values and len(ks) == 1:
@@ -380,7 +410,7 @@ def _offset_animations(crowd, static, merged, files) -> dict:
     offset): path}``."""
     streams = define(crowd, "Streams", "Scope")
     out = {}
-    for _, real, scope_name, o in sorted(static.values(), key=lambda s: (s[2], s[3])):
+    for _, real, scope_name, o in sorted(set(static.values()), key=lambda s: (s[2], s[3])):
         key = (merged[real], o)
         if key in out:
             continue
@@ -392,28 +422,26 @@ def _offset_animations(crowd, static, merged, files) -> dict:
     return out
 
 
-def _agents(main, parts, sources, static, merged, offsets, own_names, files) -> int:
-    """Point each copied agent prim at its animation, move its references to the
-    stitched stage's folder, and join the transforms of agents that moved. Returns
-    how many moved."""
+def _agents(main, parts, own_names) -> int:
+    """Point each copied agent prim with clips at its animation, and join the
+    transforms of agents that moved. Returns how many moved. A shared agent's prim,
+    copied from the first chunk, already points where the stitched stage keeps its
+    offset animation (``/Crowd/Streams/<stream>/offset_<o>``, as every export)."""
     first = parts[0]
-    own = set(own_names)
     moved = 0
     with Sdf.ChangeBlock():
-        for name, (kind, *rest) in zip(first.names, (sources[n][0] for n in first.names)):
-            if name in own:
-                target = Sdf.Path(f"/{ROOT}/AgentAnimations/{name}")
-            else:
-                _, real, _, o = static[name]
-                target = offsets[(merged[real], o)]
-            if kind == "clips" or target != first.target(name):
-                prim = main.GetPrimAtPath(f"/{ROOT}/Agents/{name}")
-                prim.relationships["skel:animationSource"].targetPathList.explicitItems = \
-                    [target]
-            if any(c.moving(name) for c in parts):
-                _join_moves(main, Sdf.Path(f"/{ROOT}/Agents/{name}"), parts, name)
-                moved += 1
+        for name in own_names:
+            _point(main, name, Sdf.Path(f"/{ROOT}/AgentAnimations/{name}"))
+        for i in np.flatnonzero(np.stack([c.moves for c in parts]).any(0)).tolist():
+            name = first.names[i]
+            _join_moves(main, Sdf.Path(f"/{ROOT}/Agents/{name}"), parts, name)
+            moved += 1
     return moved
+
+
+def _point(main, name, target):
+    prim = main.GetPrimAtPath(f"/{ROOT}/Agents/{name}")
+    prim.relationships["skel:animationSource"].targetPathList.explicitItems = [target]
 
 
 def _rebase(main, first, files):

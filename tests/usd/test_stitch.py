@@ -160,3 +160,33 @@ def test_crowd_stitch_creates_its_folder_and_removes_it_when_it_fails(tmp_path, 
         capsys.readouterr().err
     assert json.loads(capsys.readouterr().out)["frames"] == [FIRST, LAST]
     assert len(read(out, [FIRST, LAST])[1]) == len(read(chunks[0], [FIRST])[1])
+
+
+def test_the_stitch_reads_what_each_chunk_records_per_agent(tmp_path):
+    """Each export records per agent the stream and offset it plays the whole shot
+    (-1 where it changes) and whether it moves; the stitch finds its shared agents from
+    them (no agent read one by one) and records the same for the whole shot as the
+    single export does. A chunk without them is refused by name."""
+    from pxr import Sdf
+    whole, chunks = export_chunks(tmp_path)
+    result = stitch(chunks, tmp_path / "stitched.usdc")
+
+    def arrays(path):
+        crowd = Sdf.Layer.FindOrOpen(str(path)).customLayerData["crowd"]
+        return {k: np.array(crowd[k]) for k in ("agentStream", "agentOffset", "agentMoves")}
+    want, got = arrays(whole.path), arrays(result.path)
+    for k in want:
+        np.testing.assert_array_equal(got[k], want[k], err_msg=k)
+    assert (want["agentStream"] >= 0).sum() == result.shared_agents > 0
+    assert result.clip_agents == (want["agentStream"] < 0).sum() > 0
+    assert result.moving_agents == want["agentMoves"].sum() > 0
+    # a chunk written before the arrays were recorded
+    layer = Sdf.Layer.FindOrOpen(str(chunks[1]))
+    data = dict(layer.customLayerData)
+    crowd = dict(data["crowd"])
+    del crowd["agentMoves"]
+    data["crowd"] = crowd
+    layer.customLayerData = data
+    layer.Save()
+    with pytest.raises(CrowdError, match="lack \\['agentMoves'\\].*export the chunk again"):
+        stitch(chunks, tmp_path / "again.usdc")
