@@ -9,6 +9,7 @@
 void main()
 {
   crowd_vertex(instance_agent(gl_InstanceID));
+  v_shadow = vec3(0.0);
   vec2 pixel = vec2(gl_VertexID, gl_InstanceID) + 0.5;
   gl_Position = vec4(pixel / vec2(u_capture_size) * 2.0 - 1.0, 0.0, 1.0);
 }

@@ -5,8 +5,8 @@
  * facing the ground a third of it, so undersides and backs read as shaded instead
  * of flat.
  *
- * Shadows (SHADOWS 1): `shadow_view_tex` holds the sun's view-projection matrix (4
- * RGBA32F texels, its columns) and `shadow_tex` the depth the sun sees through it
+ * Shadows (SHADOWS 1): `v_shadow` is where the fragment falls in the sun's shadow
+ * map (sun_coords.glsl, per vertex) and `shadow_tex` the depth the sun sees there
  * (crowd_addon/gpu/shadows.py). SHADOWS 0 (no shadows, and the shadow map's own
  * pass) reads neither: the sun is never hidden.
  *
@@ -19,15 +19,11 @@
 
 const float SHADOW_BIAS = 0.0015;       /* in the map's 0..1 depth */
 
-float sun_visibility(vec3 world)
+/* How much of the sun reaches a fragment at `p`: its shadow-map coordinates
+ * (sun_coords.glsl, interpolated from the vertices). */
+float sun_visibility(vec3 p)
 {
 #if SHADOWS
-  mat4 m = mat4(texelFetch(shadow_view_tex, ivec2(0, 0), 0),
-                texelFetch(shadow_view_tex, ivec2(1, 0), 0),
-                texelFetch(shadow_view_tex, ivec2(2, 0), 0),
-                texelFetch(shadow_view_tex, ivec2(3, 0), 0));
-  vec4 c = m * vec4(world, 1.0);
-  vec3 p = c.xyz / c.w * 0.5 + 0.5;
   if (any(lessThan(p, vec3(0.0))) || any(greaterThan(p, vec3(1.0)))) {
     return 1.0;
   }
@@ -51,7 +47,7 @@ void main()
   }
   float diffuse = max(dot(n, normalize(u_light.xyz)), 0.0);
   if (diffuse > 0.0) {
-    diffuse *= sun_visibility(v_world);
+    diffuse *= sun_visibility(v_shadow);
   }
   float sky = mix(1.0 / 3.0, 1.0, 0.5 + 0.5 * n.z);
   vec3 lit = v_color * (u_light.w * sky + (1.0 - u_light.w) * diffuse);

@@ -14,11 +14,13 @@ void main()
   int instance = gl_InstanceID * u_draw.w + copy.x;
   if (instance >= u_draw.y) {
     v_world = vec3(0.0);
+    v_shadow = vec3(0.0);
     v_normal = vec3(0.0, 0.0, 1.0);
     v_color = vec3(0.0);
     gl_Position = vec4(2.0, 2.0, 2.0, 1.0);
     return;
   }
   crowd_vertex(instance_agent(instance));
+  v_shadow = sun_coords(v_world);
   gl_Position = u_view_proj * vec4(v_world, 1.0);
 }

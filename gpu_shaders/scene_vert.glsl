@@ -6,6 +6,7 @@
 void main()
 {
   v_world = pos;
+  v_shadow = sun_coords(pos);
   v_normal = nor;
   v_color = col;
   gl_Position = u_view_proj * vec4(pos, 1.0);

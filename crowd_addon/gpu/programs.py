@@ -84,11 +84,12 @@ CROWD_DRAW = ProgramSpec(
     name="crowd_draw",
     vertex=("block_layout.glsl", "pose_layout.glsl", "pose_rows.glsl", "agents.glsl",
             "skinning.glsl", "looks.glsl", "look_at.glsl", "crowd_vertex.glsl",
-            "crowd_vert.glsl"),
+            "sun_coords.glsl", "crowd_vert.glsl"),
     fragment=("crowd_frag.glsl",),
     vertex_in=((0, "VEC3", "pos"), (1, "VEC3", "nor"), (2, "UVEC4", "bone_idx"),
                (3, "VEC4", "bone_w"), (6, "VEC4", "col"), (7, "UINT", "look_depth")),
     interfaces=(Interface("crowd_iface", (("smooth", "VEC3", "v_world"),
+                                          ("smooth", "VEC3", "v_shadow"),
                                           ("smooth", "VEC3", "v_normal"),
                                           ("flat", "VEC3", "v_color"))),),
     push_constants=(("MAT4", "u_view_proj"), ("IVEC4", "u_pose_layout"),
@@ -106,7 +107,7 @@ CROWD_DRAW = ProgramSpec(
 #: world-space triangles, lit by the crowd's own fragment stage.
 SCENE_DRAW = ProgramSpec(
     name="scene_draw",
-    vertex=("scene_vert.glsl",),
+    vertex=("sun_coords.glsl", "scene_vert.glsl"),
     fragment=CROWD_DRAW.fragment,
     vertex_in=((0, "VEC3", "pos"), (1, "VEC3", "nor"), (2, "VEC3", "col")),
     interfaces=CROWD_DRAW.interfaces,

@@ -93,10 +93,12 @@ layout(location = 1) in vec3 in_normal;
 layout(location = 2) in vec3 in_color;
 uniform mat4 u_view_proj;
 smooth out vec3 v_world;
+smooth out vec3 v_shadow;
 smooth out vec3 v_normal;
 flat out vec3 v_color;
 void main() {
   v_world = in_world; v_normal = in_normal; v_color = in_color;
+  v_shadow = vec3(0.0);
   gl_Position = u_view_proj * vec4(in_world, 1.0);
 }
 """
