@@ -38,7 +38,7 @@ MIN_BYTES = 4096
 #: columns of a row the hash reads (evenly spaced)
 HASH_COLUMNS = 64
 #: rows :meth:`Packed.unpack_into` gathers at a time (a few MB: kept in cache)
-_BLOCK = 1024
+_BLOCK = 256
 _MULTIPLIERS = (np.random.default_rng(0x5EED).integers(1, 2 ** 63, HASH_COLUMNS,
                                                        dtype=np.uint64) | np.uint64(1))
 
@@ -86,13 +86,18 @@ class Packed:
             dest[...] = self.unpack()
             return
         p = self.parts
-        distinct = np.repeat(p["fill"][None], p["rows"].shape[0], axis=0)
-        distinct[:, p["columns"]] = p["rows"]
+        fill, columns, packed, index = p["fill"], p["columns"], p["rows"], p["index"]
         rows = dest.reshape(-1, *dest.shape[-2:])           # a view, or a copy...
-        distinct = distinct.reshape(-1, *dest.shape[-2:])
-        index = p["index"]
+        distinct = np.repeat(fill[None], packed.shape[0], axis=0)
+        distinct[:, columns] = packed
+        # a block of rows at a time through one buffer: gathered in cache, then written
+        block = np.empty((min(_BLOCK, index.size), fill.size), fill.dtype)
+        # each pose's bones copied as whole records (a padded layout's bones lie apart)
+        into, whole = _records(rows), _records(block.reshape(block.shape[0], *rows.shape[1:]))
         for start in range(0, index.size, _BLOCK):
-            rows[start:start + _BLOCK] = distinct[index[start:start + _BLOCK]]
+            n = min(_BLOCK, index.size - start)
+            np.take(distinct, index[start:start + n], axis=0, out=block[:n])
+            into[start:start + n] = whole[:n]
         if not np.shares_memory(rows, dest):                 # ...written back
             dest[...] = rows.reshape(dest.shape)
 
@@ -154,6 +159,11 @@ class Packed:
                     columns.max() >= width or (np.diff(columns.astype(np.int64)) <= 0).any())):
                 raise ValueError("its columns are not increasing columns of its rows")
         return cls(codec, dtype, shape, dict(parts))
+
+
+def _records(a: np.ndarray) -> np.ndarray:
+    """``a`` (its last axis contiguous) as one record per last-axis row, a view."""
+    return a.view(np.uint8).view(np.dtype((np.void, a.shape[-1] * a.itemsize)))[..., 0]
 
 
 def pack(a: np.ndarray) -> Packed:

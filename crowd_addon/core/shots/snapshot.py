@@ -139,10 +139,12 @@ class Snapshot:
         return int(sum(p.nbytes for p in self.packed.values()))
 
     def state(self) -> dict:
-        """The nested state the crowd's parts restore from: new arrays, and the packed
-        pose arrays as they are (``np.asarray`` unpacks one;
+        """The nested state the crowd's parts restore from (they copy it in, and keep
+        no reference): raw arrays as kept (read-only), narrowed integers widened, and
+        the packed pose arrays as they are (``np.asarray`` unpacks one;
         :func:`~..base.state.assign` unpacks it into its place)."""
-        return _nested({k: p if p.codec == "rows" and p.ndim >= 3 else p.unpack()
+        return _nested({k: _view(p.parts["data"]) if p.codec == "raw"
+                        else p if p.codec == "rows" and p.ndim >= 3 else p.unpack()
                         for k, p in self.packed.items()}, self.values)
 
     def header(self) -> dict:
@@ -189,6 +191,12 @@ class Snapshot:
                     os.unlink(tmp)
                 except OSError:
                     pass
+
+
+def _view(a: np.ndarray) -> np.ndarray:
+    v = a.view()
+    v.flags.writeable = False
+    return v
 
 
 def array_digest(a: np.ndarray) -> str:
