@@ -8,8 +8,8 @@ bones' translations never change, idle transition slots hold the same start pose
 survive):
 
 * ``raw``: the array itself (``data``);
-* ``ints``: an integer or boolean array in the narrowest integer type that holds its
-  smallest and largest values (``data``), widened back on unpack;
+* ``ints``: an integer array in the narrowest integer type that holds its smallest
+  and largest values (``data``), widened back on unpack;
 * ``rows``: a float array as rows (a pose: the last two axes of an array of three or
   more, else everything after the first axis): the distinct rows, only in the columns
   where they differ (``rows``, ``(U, len(columns))``), which row each row is
@@ -82,7 +82,7 @@ class Packed:
         if dest.shape != self.shape or dest.dtype != self.dtype:
             raise ValueError(f"{self.dtype.str} {list(self.shape)} cannot go into "
                              f"{dest.dtype.str} {list(dest.shape)}")
-        if self.codec != "rows" or dest.ndim < 3:
+        if self.codec != "rows" or dest.ndim < 3 or dest.strides[-1] != dest.itemsize:
             dest[...] = self.unpack()
             return
         p = self.parts
@@ -151,8 +151,8 @@ class Packed:
             if index.dtype.kind != "u" or columns.dtype.kind != "u" or index.ndim != 1 \
                     or columns.ndim != 1:
                 raise ValueError("its index and columns must be 1-D unsigned integers")
-            if width == 0 or index.size * width != size or (index.size and index.max() >=
-                                                            rows.shape[0]):
+            if width != _row_width(shape) or index.size * width != size or (
+                    index.size and index.max() >= rows.shape[0]):
                 raise ValueError(f"its index does not pick {size} values from "
                                  f"{rows.shape[0]} rows of {width}")
             if rows.shape[1] != columns.size or (columns.size and (
@@ -183,6 +183,14 @@ def pack(a: np.ndarray) -> Packed:
         if packed is not None:
             return packed
     return Packed("raw", a.dtype, shape, {"data": np.array(a, copy=True)})
+
+
+def _row_width(shape) -> int:
+    """Values in one row of an array of ``shape`` (:func:`_row_view`)."""
+    shape = tuple(shape)
+    if len(shape) >= 3:
+        return shape[-2] * shape[-1]
+    return int(np.prod(shape[1:], dtype=np.int64)) if len(shape) == 2 else 1
 
 
 def _row_view(a: np.ndarray) -> np.ndarray:
