@@ -11,7 +11,7 @@ from crowd_addon.core import CrowdError
 from crowd_addon.core.shots import packed as P
 from crowd_addon.core.shots.snapshot import HEADER, load_snapshot
 
-from .test_snapshot import play, poses_now, show_crowd
+from .test_snapshot import play, poses_now, saved, show_crowd  # noqa: F401 (saved: a fixture)
 
 
 def same_bits(a, b):
@@ -132,13 +132,10 @@ def test_version_2_files_with_whole_arrays_are_read(tmp_path):
         np.testing.assert_array_equal(a, b)
 
 
-def test_damaged_packed_parts_are_named_and_change_nothing(tmp_path):
-    crowd = show_crowd()
-    play(crowd, 10)
-    crowd.snapshot().save(tmp_path / "good.npz")
-    play(crowd, 14)
+def test_damaged_packed_parts_are_named_and_change_nothing(saved, tmp_path):
+    crowd, good = saved
     before = poses_now(crowd)
-    with np.load(tmp_path / "good.npz") as z:
+    with np.load(good) as z:
         index = z["streams.history:index"].copy()
     far = index.copy()
     far[0] = index.max() + 1                            # a row past the distinct rows
@@ -151,13 +148,13 @@ def test_damaged_packed_parts_are_named_and_change_nothing(tmp_path):
     def parts_lie(head, members):                       # the header agrees with the lie
         head["arrays"]["streams.history"]["parts"]["index"]["shape"] = [5]
         members["streams.history:index"] = index[:5]
-    cases = [(_rewrite(tmp_path / "good.npz", tmp_path / "far.npz",
+    cases = [(_rewrite(good, tmp_path / "far.npz",
                        **{"streams.history:index": far}), "'streams.history' .*index"),
-             (_rewrite(tmp_path / "good.npz", tmp_path / "zip.npz", codec("zip")),
+             (_rewrite(good, tmp_path / "zip.npz", codec("zip")),
               "'streams.history' needs a codec"),
-             (_rewrite(tmp_path / "good.npz", tmp_path / "ints.npz", codec("ints")),
+             (_rewrite(good, tmp_path / "ints.npz", codec("ints")),
               "'streams.history' needs a codec .* and its parts"),
-             (_rewrite(tmp_path / "good.npz", tmp_path / "short.npz", parts_lie),
+             (_rewrite(good, tmp_path / "short.npz", parts_lie),
               "'streams.history' .*index")]
     for path, message in cases:
         with pytest.raises(CrowdError, match=message) as err:
