@@ -130,6 +130,11 @@ def add_shot_arguments(parser) -> None:
                              "frame instead of simulating from the start frame, and leave "
                              "one there at the last frame for the next chunk (the folder "
                              "is created if missing)")
+    parser.add_argument("--animation-only", action="store_true",
+                        help="for a chunk after a shot's first: write only what crowd "
+                             "stitch reads (no agent prims, characters or offset "
+                             "animations; not a stage to open on its own), which makes "
+                             "the chunk several times cheaper (docs/snapshots.md)")
     add_repetition_arguments(parser)
     parser.add_argument("--json", action="store_true",
                         help="print the summary as one JSON object")

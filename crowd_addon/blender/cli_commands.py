@@ -76,7 +76,8 @@ def crowd_command(argv) -> int:
             _, result = export_shot(shot, args.out, agents=args.agents, layout=args.layout,
                                     snapshots=args.snapshots,
                                     progress=progress_printer("crowd export"),
-                                    repetition=repetition_settings(args))
+                                    repetition=repetition_settings(args),
+                                    animation_only=args.animation_only)
     except CrowdError as exc:
         print(f"crowd {args.command}: error: {exc}", file=sys.stderr)
         return getattr(exc, "exit_code", 2)        # 3: a crowd script not trusted

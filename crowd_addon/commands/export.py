@@ -74,7 +74,7 @@ def _run_export(args) -> int:
         source, args.frames, args.out, args.snapshots, progress=progress,
         on_bake=lambda done, total, message: print(f"crowd export: {message}",
                                                    file=sys.stderr, flush=True),
-        repetition=repetition_settings(args))
+        repetition=repetition_settings(args), animation_only=args.animation_only)
     if args.json:
         print(json.dumps({**dataclasses.asdict(result), "bytes": result.bytes}))
         return 0
@@ -89,7 +89,9 @@ def _run_export(args) -> int:
         f"{result.clip_agents:,} changing animation on value clips ({result.blend_frames:,} "
         f"blend frames), {result.moving_agents:,} moving",
         f"  {result.stream_animations:,} stream animations, {result.characters} "
-        f"character layer{'s' if result.characters != 1 else ''}",
+        f"character layer{'s' if result.characters != 1 else ''}"
+        + ("; animation only: for crowd stitch, not a stage to open on its own"
+           if args.animation_only else ""),
         f"  {s['total']:.1f} s (simulate {s['simulate']:.1f} s, author "
         f"{s['author']:.1f} s, write {s['write']:.1f} s)"]
         + ([f"  {describe(result.repetition)}"] if result.repetition else [])
@@ -108,6 +110,9 @@ def _run_farm_export(args, source, progress) -> int:
     if args.snapshots is not None:
         raise CrowdError("--workers keeps its snapshots beside its chunks "
                          "(<out stem>.chunks/snapshots); leave out --snapshots")
+    if args.animation_only:
+        raise CrowdError("--workers writes its chunks after the first animation-only "
+                         "itself; leave out --animation-only")
     # opened here once: the shot's frames (a .blend's scene range), its crowd script
     # checked before any task (nothing is baked or built here)
     with source.quietly():

@@ -49,7 +49,7 @@ def write_shot_snapshots(source: ShotSource, folder, frames, every, progress=Non
 
 
 def export_chunk(source: ShotSource, frames, out, snapshots=None, progress=None,
-                 on_bake=None, repetition=RepetitionSettings()):
+                 on_bake=None, repetition=RepetitionSettings(), animation_only=False):
     """Export ``frames`` of ``source``'s shot to ``out`` exactly as ``crowd export``
     does, starting from the latest snapshot in ``snapshots`` before the first frame
     (and leaving one at the last). Returns ``(config, ExportResult)``: the crowd's
@@ -57,9 +57,11 @@ def export_chunk(source: ShotSource, frames, out, snapshots=None, progress=None,
     export`` runs, and a worker for each chunk. ``frames``
     None: a .blend's scene range (a configuration needs them); ``on_bake(done, total,
     message)``: the .blend's bake steps; ``repetition``: the repetition metric's
-    settings (None: not measured)."""
+    settings (None: not measured); ``animation_only``: a chunk after the shot's first,
+    written only for the stitch (no agent prims)."""
     from ..usd.shot_export import export_shot
     with source.quietly():
         shot = source.open(frames, on_bake)
         return export_shot(shot, out, agents=source.agents, layout=source.layout,
-                           snapshots=snapshots, progress=progress, repetition=repetition)
+                           snapshots=snapshots, progress=progress, repetition=repetition,
+                           animation_only=animation_only)

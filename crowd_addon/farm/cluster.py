@@ -219,8 +219,8 @@ def _submit(client, shot, workers, k) -> dict:
                           key=f"crowd-snapshots-{tag}", retries=1, pure=False)
     names = [f"chunk {j} (frames {a}-{b})" for j, (a, b) in enumerate(ranges)]
     chunks = [client.submit(run_chunk, shot.source, (a, b), chunk_path(shot.out, j, (a, b)),
-                            snaps_dir, names[j], log, snaps, key=f"crowd-chunk-{tag}-{j}",
-                            retries=1, pure=False)
+                            snaps_dir, names[j], log, snaps, j > 0,
+                            key=f"crowd-chunk-{tag}-{j}", retries=1, pure=False)
               for j, (a, b) in enumerate(ranges)]
     stitched = client.submit(run_stitch, shot.out, chunks, log, key=f"crowd-stitch-{tag}",
                              pure=False)

@@ -32,16 +32,18 @@ def run_snapshots(source, folder, frames, every, log):
     return files, time.perf_counter() - t, time.process_time() - cpu
 
 
-def run_chunk(source, frames, out, snapshots, name, log, _after=None):
+def run_chunk(source, frames, out, snapshots, name, log, _after=None, animation_only=False):
     """A worker's task: :func:`export_chunk`, each attempt logged in ``log``
-    (``_after``: the snapshot pass's result, which Dask passes once it is done); its
-    summary's ``cpu`` is the CPU seconds of the worker's process."""
+    (``_after``: the snapshot pass's result, which Dask passes once it is done;
+    ``animation_only``: every chunk but the shot's first); its summary's ``cpu`` is the
+    CPU seconds of the worker's process."""
     _without_blender_scripts()
     t, cpu = time.perf_counter(), time.process_time()
     where = _where()
     try:
         os.makedirs(os.path.dirname(out), exist_ok=True)
-        _, result = export_chunk(source, frames, out, snapshots)
+        _, result = export_chunk(source, frames, out, snapshots,
+                                 animation_only=animation_only)
     except BaseException as e:
         log_line(log, f"{name}: failed on {where} after {time.perf_counter() - t:.1f} s: "
                   f"{type(e).__name__}: {e}", e)

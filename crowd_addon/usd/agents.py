@@ -3,11 +3,13 @@
 ::
 
     def Xform "Crowd"                                   (defaultPrim)
-        def Scope "Streams"
+        def Scope "Streams"                   (in the main layer)
             def Scope "<stream>"
                 def SkelAnimation "offset_<O>"   references streams/<stream> with
                                                  layer offset +O (paper's (SI, O))
-        def Scope "Agents"
+        def Scope "Agents"                    (in the sublayer layout.<ext>; the
+                                              transforms of the agents that move are
+                                              time-sampled on overs in the main layer)
             def SkelRoot "agent_<id>" (instanceable, SkelBindingAPI,
                                        references characters/<body>: its skeleton,
                                        mesh variant and props)
@@ -45,7 +47,7 @@ from .character import palette_primvar
 from .layers import apply_api, attribute, define, relationship
 
 __all__ = ["ROOT", "author_offset_animations", "author_agents", "author_agent_animations",
-           "agent_names"]
+           "author_moves", "agent_names"]
 
 ROOT = "Crowd"
 _T = Sdf.ValueTypeNames
@@ -137,10 +139,6 @@ def author_agents(root: Sdf.PrimSpec, shot, names, character_assets, sources,
                         _author_colours(Sdf.PrimSpec(prim, mesh, Sdf.SpecifierOver),
                                         colours, _T.Color3fArray, _one_colour)
         yield "layout", min(a + _LAYOUT_CHUNK, len(agents)), len(agents)
-    moving = np.flatnonzero(shot.moving)
-    if moving.size:
-        with Sdf.ChangeBlock():
-            _author_moves(parent, shot, names, moving)
 
 
 def _author_colours(prim, colours, value_type, value):
@@ -172,15 +170,22 @@ def _tinted(shot, tints) -> list:
     return out
 
 
-def _author_moves(parent, shot, names, moving):
-    layer = parent.layer
+def author_moves(root: Sdf.PrimSpec, shot, names) -> None:
+    """The transforms of the agents that move, time-sampled at each shot frame, on an
+    ``over`` of each under ``root`` (the main layer's ``/Crowd``): stronger than the
+    layout's values, and where a stitch reads them (without opening the layout)."""
+    moving = np.flatnonzero(shot.moving)
+    if not moving.size:
+        return
+    parent = Sdf.PrimSpec(root, "Agents", Sdf.SpecifierOver)
+    layer = root.layer
     pos, head = shot.agent_transforms(moving)
     degrees = np.degrees(head.astype(np.float64))
     frames = [float(f) for f in shot.frames]
     for j, i in enumerate(moving.tolist()):
-        base = parent.path.AppendChild(names[i])
-        t_path = base.AppendProperty("xformOp:translate")
-        r_path = base.AppendProperty("xformOp:rotateZ")
+        prim = Sdf.PrimSpec(parent, names[i], Sdf.SpecifierOver)
+        t_path = attribute(prim, "xformOp:translate", _T.Float3).path
+        r_path = attribute(prim, "xformOp:rotateZ", _T.Double).path
         for k, f in enumerate(frames):
             layer.SetTimeSample(t_path, f, Gf.Vec3f(*pos[k, j].tolist()))
             layer.SetTimeSample(r_path, f, float(degrees[k, j]))

@@ -50,10 +50,16 @@ from ..core.meshes.mesh import Look, tint_weight
 from .layers import apply_api, attribute, connect, define, new_layer, relationship
 from .naming import joint_paths, unique_identifiers
 
-__all__ = ["character_layer", "palette_primvar", "tint_primvar", "tinted_looks", "SKELETON_PRIM"]
+__all__ = ["character_layer", "joint_tokens", "palette_primvar", "tint_primvar", "tinted_looks", "SKELETON_PRIM"]
 
 SKELETON_PRIM = "Skeleton"
 _T = Sdf.ValueTypeNames
+
+
+def joint_tokens(skeleton) -> Vt.TokenArray:
+    """The joint path tokens of ``skeleton`` (core Skeleton), shared by its character
+    and every animation of it."""
+    return Vt.TokenArray(joint_paths(skeleton.bone_names, skeleton.parents))
 
 
 def character_layer(skeleton, mesh, fmt: str, fps: float, root_name: str, textures=None,
@@ -73,7 +79,7 @@ def character_layer(skeleton, mesh, fmt: str, fps: float, root_name: str, textur
     colour as the fallback."""
     layer = new_layer(fmt, fps, 0, 0, default_prim=root_name,
                       comment=f"crowd character {skeleton.name!r}")
-    joints = Vt.TokenArray(joint_paths(skeleton.bone_names, skeleton.parents))
+    joints = joint_tokens(skeleton)
     with Sdf.ChangeBlock():
         root = define(layer, root_name, "SkelRoot")
         info = {"skeleton": skeleton.name, "mesh": mesh.name}

@@ -4,12 +4,20 @@
 simulated once by :func:`crowd_addon.core.shots.recorder.record`; nothing here runs a
 crowd) as::
 
-    shot.usdc                         layout: offset animations, agents (main layer)
+    shot.usdc                         offset animations, the transforms of agents that
+                                      move; the shot's settings (main layer)
+    shot.layers/vN/layout.usdc        the agents (sublayer of the main layer)
     shot.layers/vN/characters/*.usdc  one SkelRoot + Skeleton + Mesh per body (a character,
                                       or its mesh variant and props)
     shot.layers/vN/streams/*.usdc     one baked SkelAnimation per stream used
     shot.layers/vN/agents.usdc        own animations of agents that are not static
                                       (sublayer of the main layer; only if any)
+
+An *animation-only* export (``animation_only=True``, a chunk of a shot after its first,
+docs/snapshots.md) writes no layout, characters or offset animations: only what a
+stitch reads from such a chunk (streams, uniques, blend banks, the agents' own
+animations, the moving agents' transforms and the per-agent arrays). It is not a stage
+to look at on its own.
 
 :func:`export_steps` is the same export one unit of work per ``next()`` (a stream
 layer, a batch of agents' own animations, the layout...), for a caller that must stay
@@ -36,9 +44,9 @@ from ..core.base.errors import CrowdError
 from ..core.shots.recording import Recording
 from ..core.variety.repetition import RepetitionSettings, recording_repetition_steps
 from .agents import (ROOT, agent_names, author_agent_animations, author_agents,
-                     author_offset_animations)
+                     author_moves, author_offset_animations)
 from .animation import author_animation
-from .character import character_layer, tinted_looks
+from .character import character_layer, joint_tokens, tinted_looks
 from .clips import PRIM, bank_layer, bank_layout, clip_sets, manifest_layer
 from .files import ExportFiles
 from .layers import new_layer
@@ -121,7 +129,8 @@ class ExportResult:
 
 
 def export_crowd(recording, path, agents=None, progress=None, layout="instanced",
-                 camera=None, repetition=RepetitionSettings()) -> ExportResult:
+                 camera=None, repetition=RepetitionSettings(),
+                 animation_only=False) -> ExportResult:
     """Write ``recording`` to UsdSkel in one call (:func:`export_steps` to the end).
 
     Parameters
@@ -141,6 +150,8 @@ def export_crowd(recording, path, agents=None, progress=None, layout="instanced"
         measured from (default: one framing the exported agents).
     repetition : :class:`~crowd_addon.core.variety.repetition.RepetitionSettings` of the
         metric (stage ``repetition``, one step a frame measured), or None to skip it.
+    animation_only : write only what a stitch reads from a chunk after the shot's
+        first (no layout, characters or offset animations; see the module's notes).
 
     Raises
     ------
@@ -148,7 +159,7 @@ def export_crowd(recording, path, agents=None, progress=None, layout="instanced"
     export at ``path`` is left as it was. An exception raised by ``progress`` stops
     the export the same way.
     """
-    steps = export_steps(recording, path, agents, layout, camera, repetition)
+    steps = export_steps(recording, path, agents, layout, camera, repetition, animation_only)
     try:
         while True:
             try:
@@ -162,7 +173,7 @@ def export_crowd(recording, path, agents=None, progress=None, layout="instanced"
 
 
 def export_steps(recording, path, agents=None, layout="instanced", camera=None,
-                 repetition=RepetitionSettings()):
+                 repetition=RepetitionSettings(), animation_only=False):
     """The export of :func:`export_crowd` as a generator yielding ``(stage, done,
     total)`` after each unit of work and returning the :class:`ExportResult`
     (``StopIteration.value``). The recording, ``path``, ``agents`` and ``layout`` are
@@ -177,7 +188,8 @@ def export_steps(recording, path, agents=None, layout="instanced", camera=None,
     measure = None if repetition is None else recording_repetition_steps(
         recording, _view_projection(recording, ids, camera, repetition), agents=ids,
         settings=repetition)
-    return _steps(recording, ids, meshes, ExportFiles(path), layout, measure)
+    return _steps(recording, ids, meshes, ExportFiles(path), layout, measure,
+                  bool(animation_only))
 
 
 def _view_projection(rec, ids, camera, settings) -> np.ndarray:
@@ -206,13 +218,16 @@ def check_export(config, path, agents=None, layout="instanced") -> None:
     _bodies(config, np.where(st >= 0, of_stream[st], of_unique[un]), ids)
 
 
-def _steps(rec, ids, meshes, files, layout, measure):
+def _steps(rec, ids, meshes, files, layout, measure, animation_only):
     t0 = time.perf_counter()
     out = _Output(files)
     with files:
         shot = Shot(rec, ids)
-        joints_of, char_assets, tints, meshes_of = _write_characters(out, rec, meshes)
-        yield "characters", len(meshes), len(meshes)
+        if animation_only:
+            joints_of, char_assets, tints, meshes_of = _joints(rec, meshes), {}, {}, {}
+        else:
+            joints_of, char_assets, tints, meshes_of = _write_characters(out, rec, meshes)
+            yield "characters", len(meshes), len(meshes)
         stream_names, stream_assets = yield from _write_streams(out, rec, shot, joints_of)
         clip_assets = yield from _write_clip_layers(out, rec, shot, joints_of, stream_names,
                                                     stream_assets)
@@ -222,16 +237,25 @@ def _steps(rec, ids, meshes, files, layout, measure):
         yield "layout", 0, ids.size
         layer = new_layer(files.format, rec.fps, rec.first, rec.last, default_prim=ROOT,
                           comment="crowd shot written by crowd_addon.usd")
-        layer.customLayerData = {"crowd": _settings(rec, shot, layout, measured)}
+        layer.customLayerData = {"crowd": _settings(rec, shot, layout, measured, stream_assets,
+                                                    animation_only)}
         if own_paths:
             layer.subLayerPaths.append(files.asset_path("agents"))
+        offsets = {}
         with Sdf.ChangeBlock():
             root = Sdf.PrimSpec(layer, ROOT, Sdf.SpecifierDef, "Xform")
-            offsets = author_offset_animations(root, shot, stream_names, stream_assets)
-        yield from author_agents(root, shot, names, char_assets,
-                                 _sources(shot, offsets, own_paths),
-                                 meshes_of=meshes_of if layout == "blender" else None,
-                                 tints=tints)
+            if not animation_only:
+                offsets = author_offset_animations(root, shot, stream_names, stream_assets)
+            author_moves(root, shot, names)
+        if not animation_only:
+            agents = new_layer(files.format, rec.fps, rec.first, rec.last,
+                               comment="the shot's agents, written by crowd_addon.usd")
+            yield from author_agents(Sdf.PrimSpec(agents, ROOT, Sdf.SpecifierOver), shot,
+                                     names, char_assets, _sources(shot, offsets, own_paths),
+                                     meshes_of=meshes_of if layout == "blender" else None,
+                                     tints=tints)
+            out.save(agents, "layout")
+            layer.subLayerPaths.append(files.asset_path("layout"))
         out.save(layer)
         files.commit()
     author = time.perf_counter() - t0 - out.write
@@ -287,7 +311,8 @@ def _write_characters(out, rec, bodies) -> tuple:
     mesh, its lightest LOD as a proxy, and its props), named after the skeleton (plus
     the variant and props, for a body with them), and a copy of each texture their
     looks use (``textures/``, so the export stands on its own on another machine);
-    returns ``(joints_of, asset_of, tints_of, meshes_of)``, keyed by skeleton index and
+    returns ``(joints_of, asset_of, tints_of, meshes_of)`` (``asset_of``: from the
+    layout layer), keyed by skeleton index and
     by body index (``tints_of[b]``: the looks agents' colours tint, :func:`tinted_looks`;
     ``meshes_of[b]``: the names of the character's Mesh prims)."""
     cfg = rec.config
@@ -308,13 +333,21 @@ def _write_characters(out, rec, bodies) -> tuple:
             cfg.skeletons[skeleton_names[k]], levels[0], out.files.format, rec.fps, name,
             textures, proxies[-1] if proxies else None, palette, props, bodies[b].variant)
         out.save(layer, f"characters/{name}")
-        asset_of[b] = out.files.asset_path(f"characters/{name}")
+        asset_of[b] = out.files.layer_path(f"characters/{name}")
         tints_of[b] = tinted_looks([*levels[0].looks, *(look for p in props
                                                          for look in p.mesh.looks)],
                                    palette)
         meshes_of[b] = [c.name for c in layer.GetPrimAtPath(f"/{name}").nameChildren
                         if c.typeName == "Mesh"]
     return joints_of, asset_of, tints_of, meshes_of
+
+
+def _joints(rec, bodies) -> dict:
+    """``{skeleton index: joints}`` of the skeletons of ``bodies``, as their character
+    layers name them (an animation-only export writes no character layers)."""
+    cfg = rec.config
+    skeletons = list(cfg.skeletons.values())
+    return {b.skeleton: joint_tokens(skeletons[b.skeleton]) for b in bodies.values()}
 
 
 def _body_file(cfg, body) -> str:
@@ -485,18 +518,26 @@ def _sources(shot, offsets, own_paths) -> list:
 
 
 #: what an export records per agent in its settings (:func:`per_agent_settings`)
-PER_AGENT = ("agentStream", "agentOffset", "agentMoves")
+PER_AGENT = ("agentStream", "agentOffset", "agentMoves", "agentPosition", "agentHeading")
 
 
-def per_agent_settings(stream, offset, moves) -> dict:
+def per_agent_settings(stream, offset, moves, position, heading) -> dict:
     """The per-agent arrays a crowd export records in its settings (``agentStream``,
     ``agentOffset``: the stream and offset each agent plays the whole shot, -1 where it
-    changes; ``agentMoves``: 1 where it moves), what :func:`stitch` reads."""
-    return {k: Vt.IntArray.FromNumpy(np.ascontiguousarray(v, np.int32))
+    changes; ``agentMoves``: 1 where it moves; ``agentPosition`` (float3) and
+    ``agentHeading`` (radians): where it stands at the first frame), what
+    :func:`~.stitch.stitch` reads."""
+    ints = {k: Vt.IntArray.FromNumpy(np.ascontiguousarray(v, np.int32))
             for k, v in zip(PER_AGENT, (stream, offset, np.asarray(moves, np.int32)))}
+    return {**ints,
+            "agentPosition": Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(position,
+                                                                          np.float32)),
+            "agentHeading": Vt.FloatArray.FromNumpy(np.ascontiguousarray(heading,
+                                                                         np.float32))}
 
 
-def _settings(rec, shot, layout, measured=None) -> dict:
+def _settings(rec, shot, layout, measured=None, stream_assets=None,
+              animation_only=False) -> dict:
     cfg = rec.config
     seen = {} if measured is None or measured.value is None else {
         "repetition": float(measured.value), "repetitionK": measured.settings.k}
@@ -506,4 +547,9 @@ def _settings(rec, shot, layout, measured=None) -> dict:
             "firstFrame": int(rec.first), "lastFrame": int(rec.last),
             "writer": "crowd_addon.usd", "version": FORMAT_VERSION, "layout": layout,
             "substeps": int(rec.substeps), "configDigest": config_digest(cfg),
-            **per_agent_settings(shot.stream, shot.offset, shot.moving)}
+            "animationOnly": bool(animation_only),
+            # each stream's layer (asset path from the main layer; "": not written)
+            "streamLayers": Vt.StringArray([(stream_assets or {}).get(s, "")
+                                            for s in range(len(rec.stream_names))]),
+            **per_agent_settings(shot.stream, shot.offset, shot.moving, shot.position,
+                                 shot.heading)}

@@ -22,11 +22,12 @@ __all__ = ["export_shot", "snapshot_shot"]
 
 
 def export_shot(shot, out, agents=None, layout="instanced", snapshots=None, progress=None,
-                repetition=RepetitionSettings()):
+                repetition=RepetitionSettings(), animation_only=False):
     """Export ``shot`` (``config``, ``frames``, ``crowd()``, ``metric_view()``) to ``out``.
     ``snapshots``: a snapshot folder to start from and leave the last frame in;
     ``progress(stage, done, total)``; ``repetition``: the metric's settings (None: not
-    measured). Returns ``(config, ExportResult)``."""
+    measured); ``animation_only``: a chunk after the shot's first, for a stitch
+    (:func:`~.export.export_crowd`). Returns ``(config, ExportResult)``."""
     folder = writable_dir(os.path.dirname(os.path.abspath(out)))
     with folders_made(folder):                      # gone again if the export fails
         config = shot.config                        # a .blend's bake runs here
@@ -38,7 +39,8 @@ def export_shot(shot, out, agents=None, layout="instanced", snapshots=None, prog
             snaps.recorded()
         camera, settings = shot.metric_view(repetition)
         result = export_crowd(recording, out, agents=agents, progress=progress,
-                              layout=layout, camera=camera, repetition=settings)
+                              layout=layout, camera=camera, repetition=settings,
+                              animation_only=animation_only)
         if snaps is not None:
             result = dataclasses.replace(result, started_from=snaps.started_from,
                                          snapshot=snaps.keep())

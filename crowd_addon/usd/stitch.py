@@ -2,33 +2,33 @@
 
 A long shot can be exported in chunks: ``crowd export --frames A-B --snapshots DIR``
 starts each chunk from the snapshot before it (docs/snapshots.md), so chunks can run
-in separate processes or on separate machines. :func:`stitch` joins the chunks'
-stages into one that reads back as the export of the whole range would:
+in separate processes or on separate machines. The first chunk is exported whole; the
+others need only their animation (``--animation-only``: no agent prims, characters or
+offset animations). :func:`stitch` joins them into one stage that reads back as the
+export of the whole range would, writing little of its own:
 
-- streams and uniques: one layer each. Its time samples are the chunks' samples in
-  frame order, each frame taken from the first chunk that has it (the history frames
-  that chunks share are equal: the same simulation);
-- an agent that plays the same ``(stream, offset)`` in every chunk keeps a shared
-  offset animation of the joined stream;
-- every other agent gets one value-clip set: the chunks' pieces one after another. A
-  chunk in which it was static is one stream piece. Blends are read from the chunks'
-  blend banks where they are; they are not copied;
-- agent transforms: time samples over the whole shot for an agent that moved in any
-  chunk;
+- the agents: the first chunk's layout layer, read where it is (a sublayer), with
+  overs for the agents that change what they play and for those that move;
+- a stream that agents play at one offset the whole shot: a small layer of value
+  clips over the chunks' layers of it (each chunk's also holds the M - 1 frames
+  before it, so an offset never reads across a switch), which their shared offset
+  animations reference, as in every export;
+- every other agent: one value-clip set, the chunks' pieces one after another, each
+  reading the chunk's own layers (streams, uniques, blend banks); nothing is copied;
+- agents that move: their transforms over the whole shot, from each chunk's samples
+  or, where it stood still in a chunk, from the place the chunk recorded;
 - event tags: the chunks' lists of each stream joined.
 
-Value clips rather than sublayers: a sublayer cannot give an attribute's samples for
-only part of the time (the strongest layer's samples win at every time), while clips
-switch layers at given times, which is what the export already does for agents.
-
-The stitched stage reads the chunks' character layers and blend banks: keep the chunk
-files where they are (relative paths, so the stitched shot and its chunks can move
-together). It registers itself with each chunk (``<chunk>.layers/readers/``,
-usd/references.py), so re-exporting a chunk in place keeps the layer version the
-stitched stage reads until no stage reads it. Checked before anything is written,
-each problem named: every chunk is a crowd export of the same configuration
-(``configDigest``), agents, layout and samples per frame; their frame ranges follow
-each other with no gap or overlap.
+What the stitch knows of each agent it reads from the arrays every export records
+(stream, offset, moves, place: :data:`~.export.PER_AGENT`), never agent prim by agent
+prim. The stitched stage reads the chunks' layers: keep the chunk files where they are
+(relative paths, so the stitched shot and its chunks can move together). It registers
+itself with each chunk (``<chunk>.layers/readers/``, usd/references.py), so
+re-exporting a chunk in place keeps the layer version the stitched stage reads until
+no stage reads it. Checked before anything is written, each problem named: every
+chunk is a crowd export of the same configuration (``configDigest``), agents, layout
+and samples per frame; their frame ranges follow each other with no gap or overlap;
+the first holds the agents.
 """
 
 from __future__ import annotations
@@ -38,20 +38,20 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-from pxr import Sdf, Tf, UsdUtils, Vt
+from pxr import Gf, Sdf, Tf, Vt
 
 from ..core.base.errors import CrowdError
-from .agents import ROOT
+from .agents import ROOT, agent_names
 from .clips import PRIM, manifest_layer
 from .export import PER_AGENT as _PER_AGENT, per_agent_settings
 from .files import ExportFiles
-from .layers import attribute, define, new_layer
+from .layers import attribute, define, new_layer, relationship
 from .references import register_reader
 
 __all__ = ["stitch", "StitchResult"]
 
-_CHANNELS = ("translations", "rotations", "scales")
 _XFORM = ("xformOp:translate", "xformOp:rotateZ")
+_XFORM_TYPES = (Sdf.ValueTypeNames.Float3, Sdf.ValueTypeNames.Double)
 _SAME = ("M", "NT", "fps", "seed", "streams", "uniques", "agents", "layout", "substeps",
          "version", "configDigest")
 _PAIR = 1 << 20                               # (stream, offset) as one int
@@ -82,7 +82,7 @@ class StitchResult:
 
 
 class _Chunk:
-    """One chunk's main layer, its agents sublayer, and where their assets are."""
+    """One chunk's main layer, its settings, and where its layers are."""
 
     def __init__(self, path):
         self.path = os.path.abspath(os.fspath(path))
@@ -94,71 +94,63 @@ class _Chunk:
         if not isinstance(crowd, dict) or crowd.get("writer") != "crowd_addon.usd":
             raise CrowdError(f"{path}: not a crowd export (no customLayerData crowd written "
                              "by crowd_addon.usd)")
-        missing = [k for k in ("firstFrame", "lastFrame", *_SAME, *_PER_AGENT)
-                   if k not in crowd]
+        if "chunks" in crowd:
+            raise CrowdError(f"{path}: a stitched stage, not a chunk: stitch its chunks "
+                             "instead")
+        missing = [k for k in ("firstFrame", "lastFrame", *_SAME, *_PER_AGENT,
+                               "streamLayers") if k not in crowd]
         if missing:
             raise CrowdError(f"{path}: its crowd settings lack {missing} (exported by an "
                              "older version? export the chunk again)")
         self.settings = crowd
         self.first, self.last = int(crowd["firstFrame"]), int(crowd["lastFrame"])
         self.layers_root = f"{os.path.splitext(self.path)[0]}.layers"
-        self.own = None
+        self.own = self.layout = None
         for sub in self.layer.subLayerPaths:
-            self.own = _open(self.resolve(sub), path)
-            self.own_dir = os.path.dirname(self.own.realPath)
-        agents = self.layer.GetPrimAtPath(f"/{ROOT}/Agents")
-        self.names = list(agents.nameChildren.keys()) if agents else []
-        #: per agent (in :attr:`names` order) the stream and offset it plays the whole
-        #: chunk (-1: it changes), and whether it moves: what the export recorded
+            real = self.resolve(sub)
+            stem = os.path.splitext(os.path.basename(real))[0]
+            if stem == "agents":
+                self.own = _open(real, path)
+                self.own_dir = os.path.dirname(real)
+            elif stem == "layout":
+                self.layout = real
+        #: per agent the stream and offset it plays the whole chunk (-1: it changes),
+        #: whether it moves, and where it stands at the chunk's first frame: what the
+        #: export recorded
         self.stream, self.offset, self.moves = (
-            np.asarray(crowd[k], np.int64).reshape(-1) for k in _PER_AGENT)
-        if any(a.size != len(self.names) for a in (self.stream, self.offset, self.moves)):
+            np.asarray(crowd[k], np.int64).reshape(-1) for k in _PER_AGENT[:3])
+        self.position = np.asarray(crowd["agentPosition"], np.float32).reshape(-1, 3)
+        self.heading = np.asarray(crowd["agentHeading"], np.float32).reshape(-1)
+        n = int(crowd["agents"])
+        if any(a.shape[0] != n for a in (self.stream, self.offset, self.moves,
+                                         self.position, self.heading)):
             raise CrowdError(f"{path}: its per-agent arrays ({', '.join(_PER_AGENT)}) do "
-                             f"not hold one value for each of its {len(self.names)} agents")
-        self._offsets = {}                   # offset animation path -> what it plays
-        self._targets = {}                   # agent name -> its animation source
+                             f"not hold one value for each of its {n} agents")
+        self.stream_layers = [self.resolve(a) if a else None for a in crowd["streamLayers"]]
 
     def resolve(self, asset, base=None) -> str:
         return os.path.normpath(os.path.join(base or self.dir, asset))
 
-    def agent(self, name) -> Sdf.PrimSpec:
-        return self.layer.GetPrimAtPath(f"/{ROOT}/Agents/{name}")
+    def stream_layer(self, s) -> str:
+        """The file of stream ``s``'s layer (CrowdError when the chunk wrote none)."""
+        real = self.stream_layers[s] if 0 <= s < len(self.stream_layers) else None
+        if real is None:
+            raise CrowdError(f"{self.path}: its settings name no layer for stream {s}, "
+                             "which an agent plays (export the chunk again)")
+        return real
 
-    def target(self, name) -> Sdf.Path:
-        """Agent ``name``'s ``skel:animationSource`` target."""
-        found = self._targets.get(name)
-        if found is None:
-            rel = self.agent(name).relationships["skel:animationSource"]
-            found = self._targets[name] = rel.targetPathList.explicitItems[0]
-        return found
-
-    def source(self, name):
-        """What agent ``name`` plays: ``("static", stream layer, prim name, offset)`` or
-        ``("clips", its clip set dict, its joints)``."""
-        target = self.target(name)
-        if self.own is not None and target.HasPrefix(f"/{ROOT}/AgentAnimations"):
-            spec = self.own.GetPrimAtPath(target)
-            return ("clips", dict(spec.GetInfo("clips")["default"]),
-                    spec.attributes["joints"].default)
-        found = self._offsets.get(target)
-        if found is None:
-            ref = self.layer.GetPrimAtPath(target).referenceList.prependedItems[0]
-            found = self._offsets[target] = (
-                "static", self.resolve(ref.assetPath), target.GetParentPath().name,
-                int(round(ref.layerOffset.offset)))
-        return found
-
-    def static_sources(self, which) -> dict:
-        """``{(stream, offset): source}`` (:meth:`source`'s static form) of each pair the
-        agents at positions ``which`` play the whole chunk. A stream's layer and scope
-        are looked up once, from one of its agents; every offset of it lies beside."""
-        stream, offset = self.stream[which], self.offset[which]
-        streams, first = np.unique(stream, return_index=True)
-        layer = {int(k): self.source(self.names[int(which[i])])[1:3]
-                 for k, i in zip(streams.tolist(), first.tolist())}
-        pairs = np.unique(stream * _PAIR + offset)
-        return {(k // _PAIR, k % _PAIR): ("static", *layer[k // _PAIR], k % _PAIR)
-                for k in pairs.tolist()}
+    def source(self, i, name):
+        """What agent ``i`` (prim ``name``) plays in this chunk: ``("static", stream
+        layer file, offset)`` or ``("clips", its clip set dict, its joints)``."""
+        if self.stream[i] >= 0:
+            return ("static", self.stream_layer(int(self.stream[i])), int(self.offset[i]))
+        spec = self.own.GetPrimAtPath(f"/{ROOT}/AgentAnimations/{name}") \
+            if self.own is not None else None
+        if spec is None:
+            raise CrowdError(f"{self.path}: agent {name} changes what it plays but has no "
+                             "animation of its own (export the chunk again)")
+        return ("clips", dict(spec.GetInfo("clips")["default"]),
+                spec.attributes["joints"].default)
 
 
 def _open(real, shown):
@@ -181,9 +173,6 @@ def _check(chunks):
                 raise CrowdError(f"stitch: {c.path} has {key} = {c.settings[key]!r}, "
                                  f"{first.path} {first.settings[key]!r}: chunks must come "
                                  "from one crowd configuration, exported alike")
-        if c.names != first.names:
-            raise CrowdError(f"stitch: {c.path} does not export the same agents as "
-                             f"{first.path}")
     for a, b in zip(chunks, chunks[1:]):
         if b.first != a.last + 1:
             what = "overlap" if b.first <= a.last else "leave a gap"
@@ -208,72 +197,75 @@ def stitch(chunks, path, progress=None) -> StitchResult:
         raise CrowdError(f"stitch: the output {path} is one of the chunks; write the "
                          "stitched stage beside them")
     first, last = parts[0], parts[-1]
+    if first.layout is None:
+        raise CrowdError(f"stitch: {first.path} is the shot's first chunk and holds no "
+                         "agents (exported --animation-only): export the first chunk whole")
     fps, n = float(first.settings["fps"]), int(first.settings["substeps"])
+    names = agent_names(np.arange(first.stream.size))
+    layers = _Layers()
     with files:
         # the agents that play one (stream, offset) in every chunk share an offset
-        # animation and are touched no further (their prims, copied, already point at
-        # it); only the others are read agent by agent
+        # animation of a stream layer joined from the chunks' by value clips; only the
+        # others are read agent by agent
         streams = np.stack([c.stream for c in parts])
         offsets_all = np.stack([c.offset for c in parts])
         shared = (streams[0] >= 0) & (streams == streams[0]).all(0) & \
             (offsets_all == offsets_all[0]).all(0)
         own_at = np.flatnonzero(~shared)
-        own_names = [first.names[i] for i in own_at.tolist()]
-        sources = {name: [c.source(name) for c in parts] for name in own_names}
-        pairs = [c.static_sources(np.flatnonzero(c.stream >= 0)) for c in parts]
-        merged = {}                          # chunk stream/unique layer -> merged asset
-        joints = {}                          # merged asset -> joints
-        groups = _animation_layers(parts, sources, pairs)
-        for j, ((kind, name), found) in enumerate(groups.items()):
-            layer = _joined(found, files.format, fps)
-            files.save(layer, f"{kind}/{name}")
-            joints[f"{kind}/{name}"] = layer.GetAttributeAtPath(f"/{PRIM}.joints").default
-            for _, real in found:
-                merged[real] = f"{kind}/{name}"
-            if progress is not None:
-                progress(kind, j + 1, len(groups))
-
         static_at = np.flatnonzero(shared)
-        static = first.static_sources(static_at) if static_at.size else {}
+        used = np.unique(streams[0][static_at]).tolist()
+        joined = {}                          # stream -> (scope name, asset path)
+        if used:
+            files.save(manifest_layer(files.format, fps), "manifest")
+        for j, s in enumerate(used):
+            stem = os.path.splitext(os.path.basename(first.stream_layer(s)))[0]
+            files.save(_joined(parts, s, files, fps, n, layers), f"streams/{stem}")
+            joined[s] = (stem, files.asset_path(f"streams/{stem}"))
+            if progress is not None:
+                progress("streams", j + 1, len(used))
 
         main = new_layer(files.format, fps, first.first, last.last,
                          default_prim=ROOT, comment="crowd shot stitched from chunks by "
                                                     "crowd_addon.usd")
+        positions = np.stack([c.position for c in parts])
+        headings = np.stack([c.heading for c in parts])
+        moving = np.stack([c.moves for c in parts]).astype(bool).any(0) | \
+            (positions != positions[0]).any((0, 2)) | (headings != headings[0]).any(0)
         main.customLayerData = {"crowd": {
             **_shot_settings(parts), "firstFrame": first.first, "lastFrame": last.last,
             "chunks": Vt.StringArray([_relative(c.path, files.directory) for c in parts]),
+            "streamLayers": Vt.StringArray([joined[s][1] if s in joined else ""
+                                            for s in range(len(first.stream_layers))]),
             **per_agent_settings(np.where(shared, streams[0], -1),
-                                 np.where(shared, offsets_all[0], -1),
-                                 np.stack([c.moves for c in parts]).any(0))}}
+                                 np.where(shared, offsets_all[0], -1), moving,
+                                 first.position, first.heading)}}
         crowd = Sdf.PrimSpec(main, ROOT, Sdf.SpecifierDef, "Xform")
-        Sdf.CopySpec(first.layer, f"/{ROOT}/Agents", main, f"/{ROOT}/Agents")
-        _rebase(main, first, files)          # before anything of ours is in the layer
-        if own_names:
-            files.save(manifest_layer(files.format, fps), "manifest")
+        _offset_animations(crowd, streams[0][static_at], offsets_all[0][static_at], joined)
+        if own_at.size:
+            if not used:
+                files.save(manifest_layer(files.format, fps), "manifest")
             own = new_layer(files.format, fps, first.first, last.last,
                             comment="animations of agents that change: value clips over "
                                     "the stitched chunks")
-            root = Sdf.PrimSpec(own, ROOT, Sdf.SpecifierOver)
-            scope = define(root, "AgentAnimations", "Scope")
+            scope = define(Sdf.PrimSpec(own, ROOT, Sdf.SpecifierOver), "AgentAnimations",
+                           "Scope")
             with Sdf.ChangeBlock():
-                for name in own_names:
-                    clips, agent_joints = _clip_set(parts, sources[name], merged, files, n)
-                    prim = define(scope, name, "SkelAnimation")
-                    attribute(prim, "joints", _T.TokenArray,
-                              agent_joints if agent_joints is not None
-                              else joints[clips.pop("_stream")], uniform=True)
-                    clips.pop("_stream", None)
+                for i in own_at.tolist():
+                    clips, joints = _clip_set(parts, i, names[i], files, n, layers)
+                    prim = define(scope, names[i], "SkelAnimation")
+                    attribute(prim, "joints", _T.TokenArray, joints, uniform=True)
                     prim.SetInfo("clips", {"default": clips})
             files.save(own, "agents")
             main.subLayerPaths.append(files.asset_path("agents"))
         if progress is not None:
-            progress("agent animations", len(own_names), len(own_names))
-
-        _offset_animations(crowd, static, merged, files)
-        moving = _agents(main, parts, own_names)
+            progress("agent animations", int(own_at.size), int(own_at.size))
+        # the agents themselves: the first chunk's layout, read where it is
+        main.subLayerPaths.append(_relative(first.layout, files.directory))
+        _agents(crowd, parts, names, own_at[first.stream[own_at] >= 0],
+                np.flatnonzero(moving))
         files.save(main)
         if progress is not None:
-            progress("layout", len(first.names), len(first.names))
+            progress("layout", len(names), len(names))
         for c in parts:                      # before the commit: no moment unprotected
             if os.path.isdir(c.layers_root):
                 register_reader(c.layers_root, files.path)
@@ -281,65 +273,56 @@ def stitch(chunks, path, progress=None) -> StitchResult:
     return StitchResult(
         path=files.path, layers_dir=files.layers_dir, files=dict(files.written),
         frames=(first.first, last.last), chunks=[c.path for c in parts],
-        agents=len(first.names), shared_agents=int(static_at.size), clip_agents=len(own_names),
-        moving_agents=moving, seconds=time.perf_counter() - t0)
+        agents=len(names), shared_agents=int(static_at.size), clip_agents=int(own_at.size),
+        moving_agents=int(moving.sum()), seconds=time.perf_counter() - t0)
 
 
-def _animation_layers(parts, sources, pairs) -> dict:
-    """``{(kind, name): [(chunk, layer file)]}`` of the stream and unique layers the
-    chunks read, in chunk order (kind ``streams`` or ``uniques``, name the file stem):
-    those of the (stream, offset) pairs agents play a whole chunk (``pairs``, per chunk)
-    and of the clip sets of the agents in ``sources``."""
-    out = {}
-    for k, c in enumerate(parts):
-        found = {s[1] for s in pairs[k].values()}
-        for per_chunk in sources.values():
-            s = per_chunk[k]
-            if s[0] == "static":
-                found.add(s[1])
-            else:
-                base = c.own_dir
-                found.update(c.resolve(a.path, base) for a in s[1]["assetPaths"])
-        for real in sorted(found):
-            kind = os.path.basename(os.path.dirname(real))
-            if kind in ("streams", "uniques"):
-                stem = os.path.splitext(os.path.basename(real))[0]
-                out.setdefault((kind, stem), []).append((c, real))
-    return out
+class _Layers:
+    """Chunk layers opened once each (stream layers, for their joints and events)."""
+
+    def __init__(self):
+        self._open = {}
+
+    def __call__(self, real) -> Sdf.Layer:
+        layer = self._open.get(real)
+        if layer is None:
+            layer = self._open[real] = _open(real, real)
+        return layer
+
+    def joints(self, real):
+        return self(real).GetAttributeAtPath(f"/{PRIM}.joints").default
 
 
-def _joined(sources, fmt, fps):
-    """One animation layer with the samples of ``sources`` (chunk, layer file) in frame
-    order: everything of the first, then of each next only the times after those
-    already there (a chunk's history frames repeat the one before's)."""
-    layers = [(c, _open(real, real)) for c, real in sources]
-    start = min(l.startTimeCode for _, l in layers)
-    end = max(l.endTimeCode for _, l in layers)
-    first = layers[0][1]
-    out = new_layer(fmt, fps, start, end, default_prim=PRIM, comment=first.comment)
-    Sdf.CopySpec(first, f"/{PRIM}", out, f"/{PRIM}")
-    prim = out.GetPrimAtPath(f"/{PRIM}")
-    events = _events(prim)
-    covered = layers[0][0].last
-    with Sdf.ChangeBlock():
-        for c, layer in layers[1:]:
-            for channel in _CHANNELS:
-                path = prim.path.AppendProperty(channel)
-                have = out.ListTimeSamplesForPath(path)
-                after = have[-1] if have else float("-inf")
-                for t in layer.ListTimeSamplesForPath(path):
-                    if t > after:
-                        out.SetTimeSample(path, t, layer.QueryTimeSample(path, t))
-            more = [e for e in _events(layer.GetPrimAtPath(f"/{PRIM}")) if e[1] > covered]
-            events += more
-            covered = c.last
-    if events:
-        data = dict(prim.customData)
-        crowd = dict(data.get("crowd", {}))
-        crowd["eventNames"] = Vt.StringArray([e[0] for e in events])
-        crowd["eventFrames"] = Vt.DoubleArray([e[1] for e in events])
-        data["crowd"] = crowd
-        prim.customData = data
+def _joined(parts, s, files, fps, n, layers):
+    """Stream ``s``'s layer over the whole shot: no samples of its own, value clips
+    over the chunks' layers of it, each from half a sample before its chunk's first
+    frame (each chunk's layer also holds the M - 1 frames before it, so every time an
+    offset reads lies in the active one), and the chunks' event tags joined."""
+    h = 0.5 / n
+    reals = [c.stream_layer(s) for c in parts]
+    head = layers(reals[0])
+    start, end = head.startTimeCode, layers(reals[-1]).endTimeCode
+    out = new_layer(files.format, fps, start, end, default_prim=PRIM, comment=head.comment)
+    prim = define(out, PRIM, "SkelAnimation")
+    attribute(prim, "joints", _T.TokenArray, layers.joints(reals[0]), uniform=True)
+    events, covered = [], float("-inf")
+    for c, real in zip(parts, reals):
+        events += [e for e in _events(layers(real).GetPrimAtPath(f"/{PRIM}")) if e[1] > covered]
+        covered = c.last
+    data = dict(head.GetPrimAtPath(f"/{PRIM}").customData)
+    crowd = dict(data.get("crowd", {}))
+    crowd["eventNames"] = Vt.StringArray([e[0] for e in events])
+    crowd["eventFrames"] = Vt.DoubleArray([e[1] for e in events])
+    data["crowd"] = crowd
+    prim.customData = data
+    here = os.path.join(files.layers_dir, "streams")
+    prim.SetInfo("clips", {"default": {
+        "assetPaths": Sdf.AssetPathArray([_relative(r, here) for r in reals]),
+        "primPath": f"/{PRIM}",
+        "active": Vt.Vec2dArray([(start if k == 0 else c.first - h, float(k))
+                                 for k, c in enumerate(parts)]),
+        "times": Vt.Vec2dArray([(start, start), (end, end)]),
+        "manifestAssetPath": Sdf.AssetPath(f"../manifest{files.ext}")}})
     return out
 
 
@@ -354,7 +337,8 @@ def _shot_settings(parts) -> dict:
     chunks' (each measures the same number of frames), or none when a chunk lacks it
     or measured with other neighbours."""
     out = {k: v for k, v in parts[0].settings.items()
-           if k not in ("repetition", "repetitionK", *_PER_AGENT)}
+           if k not in ("repetition", "repetitionK", "streamLayers", *_PER_AGENT)}
+    out["animationOnly"] = False
     values = [c.settings.get("repetition") for c in parts]
     ks = {c.settings.get("repetitionK") for c in parts}
     if None not in values and len(ks) == 1:
@@ -367,114 +351,80 @@ def _relative(real, directory) -> str:
     return rel if rel.startswith(".") else f"./{rel}"
 
 
-def _clip_set(parts, sources, merged, files, n) -> tuple:
-    """The value-clip set of one agent over all chunks, and its joints (None when no
-    chunk gave it its own animation: then ``clips["_stream"]`` names a stream layer
-    whose joints it has)."""
+def _clip_set(parts, i, name, files, n, layers) -> tuple:
+    """The value-clip set of agent ``i`` (prim ``name``) over all chunks, and its
+    joints. A chunk in which it is static is one piece of that chunk's stream layer;
+    otherwise its own clips in that chunk, read where they are."""
     h = 0.5 / n
     assets, active, times = [], [], []
-    agent_joints, stream = None, None
+    joints = None
 
-    def index(asset):
+    def index(real):
+        asset = _relative(real, files.layers_dir)
         if asset not in assets:
             assets.append(asset)
         return float(assets.index(asset))
 
-    for c, s in zip(parts, sources):
+    for c in parts:
+        s = c.source(i, name)
         if s[0] == "static":
-            _, real, _, o = s
-            stream = merged[real]
-            i = index(files.layer_path(stream))
+            _, real, o = s
+            k = index(real)
+            if joints is None:
+                joints = layers.joints(real)
             a, b = c.first - h, c.last + 1 - h
-            active.append((a, i))
+            active.append((a, k))
             times += [(a, a - o), (b, b - o)]
             continue
-        clips, agent_joints = s[1], s[2]
-        remap = []
-        for asset in clips["assetPaths"]:
-            real = c.resolve(asset.path, c.own_dir)
-            remap.append(index(files.layer_path(merged[real]) if real in merged
-                               else _relative(real, files.layers_dir)))
-        active += [(t, remap[int(i)]) for t, i in clips["active"]]
+        clips, joints = s[1], s[2]
+        remap = [index(c.resolve(asset.path, c.own_dir)) for asset in clips["assetPaths"]]
+        active += [(t, remap[int(k)]) for t, k in clips["active"]]
         times += [(t, u) for t, u in clips["times"]]
-    out = {"assetPaths": Sdf.AssetPathArray(assets), "primPath": f"/{PRIM}",
-           "active": Vt.Vec2dArray(active), "times": Vt.Vec2dArray(times),
-           "manifestAssetPath": Sdf.AssetPath(files.layer_path("manifest"))}
-    if agent_joints is None:
-        out["_stream"] = stream
-    return out, agent_joints
+    return {"assetPaths": Sdf.AssetPathArray(assets), "primPath": f"/{PRIM}",
+            "active": Vt.Vec2dArray(active), "times": Vt.Vec2dArray(times),
+            "manifestAssetPath": Sdf.AssetPath(files.layer_path("manifest"))}, joints
 
 
-def _offset_animations(crowd, static, merged, files) -> dict:
-    """Offset animations of the agents static over the whole shot: ``{(stream asset,
-    offset): path}``."""
-    streams = define(crowd, "Streams", "Scope")
-    out = {}
-    for _, real, scope_name, o in sorted(set(static.values()), key=lambda s: (s[2], s[3])):
-        key = (merged[real], o)
-        if key in out:
-            continue
-        scope = streams.nameChildren.get(scope_name) or define(streams, scope_name, "Scope")
-        prim = define(scope, f"offset_{o}", "SkelAnimation")
-        prim.referenceList.Prepend(Sdf.Reference(files.asset_path(merged[real]),
-                                                 layerOffset=Sdf.LayerOffset(o, 1.0)))
-        out[key] = prim.path
-    return out
-
-
-def _agents(main, parts, own_names) -> int:
-    """Point each copied agent prim with clips at its animation, and join the
-    transforms of agents that moved. Returns how many moved. A shared agent's prim,
-    copied from the first chunk, already points where the stitched stage keeps its
-    offset animation (``/Crowd/Streams/<stream>/offset_<o>``, as every export)."""
-    first = parts[0]
-    moved = 0
+def _offset_animations(crowd, streams, offsets, joined) -> None:
+    """One offset animation per ``(stream, offset)`` of the agents static over the
+    whole shot, where the first chunk's layout points them
+    (``/Crowd/Streams/<stream>/offset_<o>``), referencing the joined stream layer."""
+    scope = define(crowd, "Streams", "Scope")
+    pairs = np.unique(np.asarray(streams, np.int64) * _PAIR + offsets)
     with Sdf.ChangeBlock():
-        for name in own_names:
-            _point(main, name, Sdf.Path(f"/{ROOT}/AgentAnimations/{name}"))
-        for i in np.flatnonzero(np.stack([c.moves for c in parts]).any(0)).tolist():
-            name = first.names[i]
-            _join_moves(main, Sdf.Path(f"/{ROOT}/Agents/{name}"), parts, name)
-            moved += 1
-    return moved
+        for key in pairs.tolist():
+            s, o = divmod(key, _PAIR)
+            name, asset = joined[s]
+            parent = scope.nameChildren.get(name) or define(scope, name, "Scope")
+            prim = define(parent, f"offset_{o}", "SkelAnimation")
+            prim.referenceList.Prepend(Sdf.Reference(asset, layerOffset=Sdf.LayerOffset(o, 1.0)))
 
 
-def _point(main, name, target):
-    prim = main.GetPrimAtPath(f"/{ROOT}/Agents/{name}")
-    prim.relationships["skel:animationSource"].targetPathList.explicitItems = [target]
-
-
-def _rebase(main, first, files):
-    """The asset paths of the agents copied from ``first`` (their characters),
-    relative to the stitched stage's folder: one C++ walk over the layer, not an
-    edit per agent."""
-    if os.path.normpath(first.dir) == os.path.normpath(files.directory):
-        return
-    rebased = {}
-
-    def rebase(asset):
-        if asset not in rebased:
-            rebased[asset] = _relative(first.resolve(asset), files.directory)
-        return rebased[asset]
-    UsdUtils.ModifyAssetPaths(main, rebase)
-
-
-def _join_moves(main, path, parts, name):
-    """Time samples of an agent's transform over the whole shot (some chunk has
-    some): each chunk's, or its value at the chunk's first and last frame where that
-    chunk has none."""
-    agent = f"/{ROOT}/Agents/{name}"
-    for op in _XFORM:
-        dst = path.AppendProperty(op)
-        for t in main.ListTimeSamplesForPath(dst):
-            main.EraseTimeSample(dst, t)
-        for c in parts:
-            src = Sdf.Path(f"{agent}.{op}")
-            samples = c.layer.ListTimeSamplesForPath(src)
-            if samples:
-                for t in samples:
-                    main.SetTimeSample(dst, t, c.layer.QueryTimeSample(src, t))
-            else:
-                value = c.layer.GetAttributeAtPath(src).default
+def _agents(crowd, parts, names, repoint, moving) -> None:
+    """Overs of the first chunk's agents: those of ``repoint`` (static in the first
+    chunk, on value clips here) play their own animation; those of ``moving`` get
+    their transforms over the whole shot, each chunk's samples or, where it stood
+    still in a chunk, its place there at that chunk's first and last frame."""
+    agents = Sdf.PrimSpec(crowd, "Agents", Sdf.SpecifierOver)
+    with Sdf.ChangeBlock():
+        for i in repoint.tolist():
+            prim = Sdf.PrimSpec(agents, names[i], Sdf.SpecifierOver)
+            relationship(prim, "skel:animationSource",
+                         Sdf.Path(f"/{ROOT}/AgentAnimations/{names[i]}"))
+        main = crowd.layer
+        for i in moving.tolist():
+            prim = agents.nameChildren.get(names[i]) or \
+                Sdf.PrimSpec(agents, names[i], Sdf.SpecifierOver)
+            dst = [attribute(prim, op, t).path for op, t in zip(_XFORM, _XFORM_TYPES)]
+            for c in parts:
+                src = [Sdf.Path(f"/{ROOT}/Agents/{names[i]}.{op}") for op in _XFORM]
+                if c.moves[i]:
+                    for d, p in zip(dst, src):
+                        for t in c.layer.ListTimeSamplesForPath(p):
+                            main.SetTimeSample(d, t, c.layer.QueryTimeSample(p, t))
+                    continue
+                values = (Gf.Vec3f(*c.position[i].tolist()),
+                          float(np.degrees(np.float64(c.heading[i]))))
                 for t in sorted({float(c.first), float(c.last)}):
-                    main.SetTimeSample(dst, t, value)
+                    for d, v in zip(dst, values):
+                        main.SetTimeSample(d, t, v)

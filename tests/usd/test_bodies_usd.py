@@ -84,7 +84,8 @@ def agent_prim(stage, a):
 
 
 def reference(stage, a):
-    (ref,) = agent_prim(stage, a).GetPrimStack()[0].referenceList.prependedItems
+    (ref,) = next(s for s in agent_prim(stage, a).GetPrimStack()      # the layout's
+                  if s.referenceList.prependedItems).referenceList.prependedItems
     return ref.assetPath
 
 
@@ -101,7 +102,7 @@ def test_each_agent_references_the_layer_of_its_body(shot, crowd):
     for a in range(view.agent_count):
         body = view.bodies[view.agent_body[a]]
         name = body_file(cfg, body)
-        assert reference(stage, a) == f"./shot.layers/v1/characters/{name}.usda", (a, body.name)
+        assert reference(stage, a) == f"./characters/{name}.usda", (a, body.name)
         used.add(name)
     layers = {f.split("/")[-1][:-len(".usda")] for f in result.files if "/characters/" in f}
     assert layers == used                      # one layer per body used, no other
@@ -234,6 +235,6 @@ def test_the_same_seed_exports_the_same_bodies_and_another_seed_does_not(shot,
     other = [reference(stage3, a) for a in range(n)]
     assert sum(x != y for x, y in zip(other, refs)) > n // 4
     view = Crowd(other_cfg, skinning="gpu").view
-    assert other == [f"./shot.layers/v1/characters/"
+    assert other == [f"./characters/"
                      f"{body_file(other_cfg, view.bodies[view.agent_body[a]])}.usda"
                      for a in range(n)]

@@ -59,7 +59,8 @@ def test_usdchecker_would_notice_a_broken_binding(shot, tmp_path):
 def test_every_layer_shares_units_axis_and_time(shot):
     result, path = shot
     assert set(result.files) == {
-        "shot.usda", "shot.layers/v1/agents.usda", "shot.layers/v1/characters/fan.usda",
+        "shot.usda", "shot.layers/v1/agents.usda", "shot.layers/v1/layout.usda",
+        "shot.layers/v1/characters/fan.usda",
         "shot.layers/v1/characters/kid.usda", "shot.layers/v1/streams/idle.usda",
         "shot.layers/v1/streams/cheer_loud.usda", "shot.layers/v1/streams/wave.usda",
         "shot.layers/v1/streams/kid_play.usda", "shot.layers/v1/uniques/solo.usda",
@@ -121,8 +122,9 @@ def test_agents_are_instances_of_two_characters(stage):
     assert all(agent_prim(stage, a).IsInstance() for a in range(N))
     assert len(stage.GetPrototypes()) == 2
     for a, character in ((0, "fan"), (FAN_AGENTS, "kid")):
-        (ref,) = agent_prim(stage, a).GetPrimStack()[0].referenceList.prependedItems
-        assert ref.assetPath == f"./shot.layers/v1/characters/{character}.usda"
+        (ref,) = next(s for s in agent_prim(stage, a).GetPrimStack()      # the layout's
+                      if s.referenceList.prependedItems).referenceList.prependedItems
+        assert ref.assetPath == f"./characters/{character}.usda"     # from layout.usda
 
 
 def test_only_moving_agents_have_time_sampled_transforms(stage):

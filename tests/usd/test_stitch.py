@@ -1,7 +1,8 @@
 """Chunks stitched into one stage (usd/stitch.py, ``crowd stitch``). The oracle is the
 single-process export of the whole range: pxr's UsdSkel joint transforms and the
 agents' transforms of every agent at every sample time equal it (to 1e-6), and so do
-the event tags of every stream animation."""
+the event tags of every stream animation. The chunks after the first are exported
+animation-only, as a farm does, unless a test says otherwise."""
 
 import json
 
@@ -15,24 +16,25 @@ from crowd_addon.core.shots.recorder import record
 from crowd_addon.usd import export_crowd
 from crowd_addon.usd.stitch import stitch
 
-from .conftest import FIRST, LAST, make_config, simulate
+from .conftest import FIRST, LAST, MOVING, make_config, simulate
 
 #: chunk ranges: blends, the queue, a cut and moves cross their boundaries
 CHUNKS = ((FIRST, 5), (6, 10), (11, LAST))
 
 
-def export_chunks(folder, substeps=1, fmt="usdc"):
+def export_chunks(folder, substeps=1, fmt="usdc", animation_only=True, sim=simulate):
     """The whole shot in one export, and in chunks each started from the snapshot
-    before it (taken from one run, restored into a fresh crowd per chunk)."""
+    before it (taken from one run, restored into a fresh crowd per chunk); the chunks
+    after the first ``animation_only``."""
     crowd = Crowd(make_config(), skinning="gpu", substeps=substeps)
     snaps = {}
     while crowd.frame < LAST:
         if crowd.frame + 1 in [a for a, _ in CHUNKS]:
             snaps[crowd.frame + 1] = crowd.snapshot()
-        simulate(crowd, crowd.frame + 1)
+        sim(crowd, crowd.frame + 1)
         crowd.step()
     whole = export_crowd(record(Crowd(make_config(), skinning="gpu", substeps=substeps),
-                                FIRST, LAST, before_step=simulate), folder / f"whole.{fmt}")
+                                FIRST, LAST, before_step=sim), folder / f"whole.{fmt}")
     paths = []
     for k, (a, b) in enumerate(CHUNKS):
         chunk = Crowd(make_config(), skinning="gpu", substeps=substeps)
@@ -40,7 +42,8 @@ def export_chunks(folder, substeps=1, fmt="usdc"):
             chunk.restore(snaps[a])
         path = folder / "chunks" / f"c{k}" / f"shot.{fmt}"
         path.parent.mkdir(parents=True)
-        export_crowd(record(chunk, a, b, before_step=simulate), path)
+        export_crowd(record(chunk, a, b, before_step=sim), path,
+                     animation_only=animation_only and k > 0)
         paths.append(path)
     return whole, paths
 
@@ -76,9 +79,11 @@ def stream_events(stage):
     return out
 
 
-@pytest.mark.parametrize("substeps, fmt", [(1, "usdc"), (2, "usda")])
-def test_stitched_chunks_read_back_as_the_whole_export(tmp_path, substeps, fmt):
-    whole, chunks = export_chunks(tmp_path, substeps, fmt)
+@pytest.mark.parametrize("substeps, fmt, animation_only",
+                         [(1, "usdc", True), (2, "usda", True), (1, "usdc", False)])
+def test_stitched_chunks_read_back_as_the_whole_export(tmp_path, substeps, fmt,
+                                                       animation_only):
+    whole, chunks = export_chunks(tmp_path, substeps, fmt, animation_only)
     result = stitch(list(reversed(chunks)), tmp_path / f"stitched.{fmt}")
     assert result.frames == (FIRST, LAST) and result.chunks == [str(p) for p in chunks]
     assert result.agents == whole.agents and result.moving_agents == whole.moving_agents
@@ -111,6 +116,41 @@ def test_the_stitched_stage_moves_with_its_chunks(tmp_path):
     _, got = read(tmp_path / "b" / "stitched.usdc", times)
     for name in want:
         np.testing.assert_allclose(got[name][0], want[name][0], atol=1e-6)
+
+
+def test_an_agent_placed_on_a_chunks_first_frame_moves_in_the_stitched_stage(tmp_path):
+    """Agent 10 is put elsewhere just before the last chunk's first frame: it stands
+    still in every chunk, yet not in the shot. Before the per-agent places were
+    recorded, the stitch kept it where the first chunk had it."""
+    def sim(crowd, frame):
+        simulate(crowd, frame)
+        if frame == CHUNKS[2][0]:
+            crowd.place_agents([10], position=crowd.view.agents.position[10] + (2.0, 0, 0),
+                               heading=crowd.view.agents.heading[10] + 1.0)
+    whole, chunks = export_chunks(tmp_path, sim=sim)
+    result = stitch(chunks, tmp_path / "stitched.usdc")
+    assert result.moving_agents == whole.moving_agents == len(MOVING) + 1
+    times = sample_times(1)
+    _, want = read(whole.path, times)
+    _, got = read(result.path, times)
+    np.testing.assert_allclose(got["agent_10"][1], want["agent_10"][1], atol=1e-6)
+    assert np.abs(want["agent_10"][1][0] - want["agent_10"][1][-1]).max() > 1.0
+
+
+def test_the_first_chunk_must_hold_the_agents(tmp_path):
+    """Only the first chunk's agents are read; a shot whose first chunk was exported
+    animation-only is refused by name, and nothing is written."""
+    _, chunks = export_chunks(tmp_path)
+    stitched = stitch(chunks, tmp_path / "stitched.usdc").path
+    with pytest.raises(CrowdError, match="a stitched stage, not a chunk"):
+        stitch([stitched], tmp_path / "twice.usdc")
+    again = export_crowd(record(Crowd(make_config(), skinning="gpu"), FIRST, CHUNKS[0][1],
+                                before_step=simulate), chunks[0], animation_only=True)
+    out = tmp_path / "again.usdc"
+    with pytest.raises(CrowdError, match="first chunk and holds no agents"):
+        stitch(chunks, out)
+    assert again.characters == 0 and not out.exists()
+    assert not (tmp_path / "twice.usdc").exists()
 
 
 def test_bad_chunk_sets_are_named_and_nothing_is_written(tmp_path):
@@ -173,7 +213,8 @@ def test_the_stitch_reads_what_each_chunk_records_per_agent(tmp_path):
 
     def arrays(path):
         crowd = Sdf.Layer.FindOrOpen(str(path)).customLayerData["crowd"]
-        return {k: np.array(crowd[k]) for k in ("agentStream", "agentOffset", "agentMoves")}
+        return {k: np.array(crowd[k]) for k in ("agentStream", "agentOffset", "agentMoves",
+                                                "agentPosition", "agentHeading")}
     want, got = arrays(whole.path), arrays(result.path)
     for k in want:
         np.testing.assert_array_equal(got[k], want[k], err_msg=k)
