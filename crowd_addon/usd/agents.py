@@ -40,19 +40,18 @@ with the same ``(stream, offset)`` share one offset animation, so there are at m
 from __future__ import annotations
 
 import numpy as np
-from pxr import Gf, Sdf, Vt
+from pxr import Gf, Sdf
 
 from ..core.meshes.mesh import tinted
 from .character import palette_primvar
-from .layers import apply_api, attribute, define, relationship
+from .layers import attribute, define, layer_from_text
+from .references import COMPOSITION_ONLY
 
-__all__ = ["ROOT", "author_offset_animations", "author_agents", "author_agent_animations",
+__all__ = ["ROOT", "author_offset_animations", "layout_layer", "author_agent_animations",
            "author_moves", "agent_names"]
 
 ROOT = "Crowd"
 _T = Sdf.ValueTypeNames
-_ORDER = Vt.TokenArray(["xformOp:translate", "xformOp:rotateZ"])
-_SCALED = Vt.TokenArray(["xformOp:translate", "xformOp:rotateZ", "xformOp:scale"])
 #: agent prims authored per step of the export
 _LAYOUT_CHUNK = 4096
 
@@ -84,18 +83,23 @@ def author_offset_animations(root: Sdf.PrimSpec, shot, stream_names, stream_asse
     return paths
 
 
-def author_agents(root: Sdf.PrimSpec, shot, names, character_assets, sources,
-                  meshes_of=None, tints=None):
-    """The agent prims: a generator yielding ``("layout", done, total)`` after each
-    batch of agents.
+def layout_layer(shot, names, character_assets, sources, fmt, fps, meshes_of=None,
+                 tints=None):
+    """The layout layer: the agent prims. A generator yielding ``("layout", done,
+    total)`` after each batch of agents and returning the layer.
+
+    The agents are written as text and read in by USD's own parser in one call:
+    authoring 65,000 agents spec by spec through Python costs ~3x more (~70 us an
+    agent, docs/performance.md). Every value is written exactly (a float32 as the
+    shortest text of its float64 value, which reads back to the same float32).
 
     Parameters
     ----------
-    root : the ``/Crowd`` prim spec.
     shot : the :class:`~.shot.Shot`.
-    names : prim name per exported agent.
-    character_assets : asset path per body index (``shot.agent_body``).
+    names : prim name per exported agent (identifiers).
+    character_assets : asset path per body index (``shot.agent_body``), from the layer.
     sources : ``skel:animationSource`` target (Sdf.Path) per exported agent.
+    fmt, fps : the layer's format and frame rate (:func:`~.layers.new_layer`).
     meshes_of : None: the agent prims are instanceable and carry their colour
         primvars, which the character's meshes inherit. Else, per body index, the
         names of the character's Mesh prims: the agents are not instanceable and each
@@ -106,54 +110,61 @@ def author_agents(root: Sdf.PrimSpec, shot, names, character_assets, sources,
         (:func:`~.character.tinted_looks`: ``[(primvar, colour)]``): each agent gets
         the look's colour tinted by its own (:func:`~crowd_addon.core.meshes.mesh.tinted`).
     """
-    with Sdf.ChangeBlock():
-        parent = define(root, "Agents", "Scope")
-    refs = {k: Sdf.Reference(a) for k, a in character_assets.items()}
+    instanced = meshes_of is None
+    head = {body: (f'            {"instanceable = true" if instanced else "instanceable = false"}'
+                   f'\n            prepend apiSchemas = ["SkelBindingAPI"]'
+                   f'\n            prepend references = @{asset}@')
+            for body, asset in character_assets.items()}
+    order = {False: '["xformOp:translate", "xformOp:rotateZ"]',
+             True: '["xformOp:translate", "xformOp:rotateZ", "xformOp:scale"]'}
     degrees = np.degrees(shot.heading.astype(np.float64)).tolist()
     has = (shot.palette >= 0).all(2)                     # (n, 4): palette colours set
     agents = list(zip(names, shot.agent_body.tolist(), sources, shot.position.tolist(),
                       degrees, shot.color.tolist(), shot.scale.tolist(), has.tolist(),
                       shot.palette.tolist(), _tinted(shot, tints or {})))
+    text = ['#usda 1.0\n\nover "Crowd"\n{\n    def Scope "Agents"\n    {\n']
     for a in range(0, len(agents), _LAYOUT_CHUNK):
-        with Sdf.ChangeBlock():
-            for name, body, source, position, heading, color, scale, has_c, pal, tint in \
-                    agents[a:a + _LAYOUT_CHUNK]:
-                prim = define(parent, name, "SkelRoot")
-                prim.instanceable = meshes_of is None
-                prim.referenceList.Prepend(refs[body])
-                apply_api(prim, "SkelBindingAPI")
-                relationship(prim, "skel:animationSource", source)
-                attribute(prim, "xformOp:translate", _T.Float3, Gf.Vec3f(*position))
-                attribute(prim, "xformOp:rotateZ", _T.Double, heading)
-                if scale != 1.0:
-                    attribute(prim, "xformOp:scale", _T.Float3, Gf.Vec3f(scale, scale, scale))
-                attribute(prim, "xformOpOrder", _T.TokenArray,
-                          _ORDER if scale == 1.0 else _SCALED, uniform=True)
-                colours = [("displayColor", color)]
-                colours += [(palette_primvar(c), pal[c]) for c, on in enumerate(has_c) if on]
-                colours += tint
-                if meshes_of is None:
-                    _author_colours(prim, colours, _T.Color3f, Gf.Vec3f)
-                else:
-                    for mesh in meshes_of[body]:
-                        _author_colours(Sdf.PrimSpec(prim, mesh, Sdf.SpecifierOver),
-                                        colours, _T.Color3fArray, _one_colour)
+        for name, body, source, position, heading, color, scale, has_c, pal, tint in \
+                agents[a:a + _LAYOUT_CHUNK]:
+            scaled = scale != 1.0
+            colours = [("displayColor", color)]
+            colours += [(palette_primvar(c), pal[c]) for c, on in enumerate(has_c) if on]
+            colours += tint
+            text.append(
+                f'        def SkelRoot "{name}" (\n{head[body]}\n        )\n        {{\n'
+                f'            rel skel:animationSource = <{source}>\n'
+                f'            float3 xformOp:translate = {_vec(position)}\n'
+                f'            double xformOp:rotateZ = {heading!r}\n'
+                + (f'            float3 xformOp:scale = {_vec((scale,) * 3)}\n'
+                   if scaled else '')
+                + f'            uniform token[] xformOpOrder = {order[scaled]}\n')
+            if instanced:
+                text += [_colour_line(c, rgb, "            ", c != "displayColor")
+                         for c, rgb in colours]
+            else:
+                lines = "".join(_colour_line(c, rgb, "                ", False)
+                                for c, rgb in colours)
+                text += [f'            over "{mesh}"\n            {{\n{lines}            }}\n'
+                         for mesh in meshes_of[body]]
+            text.append('        }\n')
         yield "layout", min(a + _LAYOUT_CHUNK, len(agents)), len(agents)
+    text.append('    }\n}\n')
+    layer = layer_from_text("".join(text), fmt, fps, shot.first, shot.last,
+                            comment="the shot's agents, written by crowd_addon.usd")
+    layer.customLayerData = {"crowd": {"writer": "crowd_addon.usd", "part": COMPOSITION_ONLY}}
+    return layer
 
 
-def _author_colours(prim, colours, value_type, value):
-    """The primvars ``colours`` (``[(name, (r, g, b))]``) on ``prim``, constant:
-    their interpolation is not authored (UsdGeom's fallback; one metadata call fewer
-    a primvar of 65k agents). displayColor is an array whatever ``value_type``."""
-    for name, rgb in colours:
-        if name == "displayColor":
-            attribute(prim, "primvars:displayColor", _T.Color3fArray, _one_colour(rgb))
-        else:
-            attribute(prim, f"primvars:{name}", value_type, value(*rgb))
+def _vec(xyz) -> str:
+    return f"({xyz[0]!r}, {xyz[1]!r}, {xyz[2]!r})"
 
 
-def _one_colour(*rgb):
-    return Vt.Vec3fArray([Gf.Vec3f(*rgb)])
+def _colour_line(name, rgb, indent, single) -> str:
+    """A constant colour primvar: ``color3f`` (``single``) or a one-element
+    ``color3f[]`` (displayColor is an array whatever the layout)."""
+    if single:
+        return f"{indent}color3f primvars:{name} = {_vec(rgb)}\n"
+    return f"{indent}color3f[] primvars:{name} = [{_vec(rgb)}]\n"
 
 
 def _tinted(shot, tints) -> list:

@@ -43,8 +43,8 @@ from ..core.authoring.config_io import config_digest
 from ..core.base.errors import CrowdError
 from ..core.shots.recording import Recording
 from ..core.variety.repetition import RepetitionSettings, recording_repetition_steps
-from .agents import (ROOT, agent_names, author_agent_animations, author_agents,
-                     author_moves, author_offset_animations)
+from .agents import (ROOT, agent_names, author_agent_animations, author_moves,
+                     author_offset_animations, layout_layer)
 from .animation import author_animation
 from .character import character_layer, joint_tokens, tinted_looks
 from .clips import PRIM, bank_layer, bank_layout, clip_sets, manifest_layer
@@ -185,7 +185,9 @@ def export_steps(recording, path, agents=None, layout="instanced", camera=None,
     check_layout(layout)
     ids = _agent_ids(agents, recording.agent_count)
     meshes = _bodies(recording.config, recording.agent_skeleton, ids)
-    measure = None if repetition is None else recording_repetition_steps(
+    # an animation-only chunk is not measured: the stitched shot takes the repetition
+    # metric of the chunks that were (the first)
+    measure = None if repetition is None or animation_only else recording_repetition_steps(
         recording, _view_projection(recording, ids, camera, repetition), agents=ids,
         settings=repetition)
     return _steps(recording, ids, meshes, ExportFiles(path), layout, measure,
@@ -248,12 +250,9 @@ def _steps(rec, ids, meshes, files, layout, measure, animation_only):
                 offsets = author_offset_animations(root, shot, stream_names, stream_assets)
             author_moves(root, shot, names)
         if not animation_only:
-            agents = new_layer(files.format, rec.fps, rec.first, rec.last,
-                               comment="the shot's agents, written by crowd_addon.usd")
-            yield from author_agents(Sdf.PrimSpec(agents, ROOT, Sdf.SpecifierOver), shot,
-                                     names, char_assets, _sources(shot, offsets, own_paths),
-                                     meshes_of=meshes_of if layout == "blender" else None,
-                                     tints=tints)
+            agents = yield from layout_layer(
+                shot, names, char_assets, _sources(shot, offsets, own_paths), files.format,
+                rec.fps, meshes_of=meshes_of if layout == "blender" else None, tints=tints)
             out.save(agents, "layout")
             layer.subLayerPaths.append(files.asset_path("layout"))
         out.save(layer)

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from pxr import Sdf
 
-__all__ = ["new_layer", "define", "attribute", "relationship", "apply_api", "connect"]
+__all__ = ["new_layer", "layer_from_text", "define", "attribute", "relationship", "apply_api", "connect"]
 
 _API_OPS = {}
 
@@ -18,7 +18,21 @@ def new_layer(fmt: str, fps: float, start: float, end: float, default_prim: str 
               comment: str = "") -> Sdf.Layer:
     """An anonymous layer of format ``fmt`` (``"usdc"`` or ``"usda"``) with the shared
     stage metadata and time range ``start .. end`` (frames)."""
+    return _stamp(Sdf.Layer.CreateAnonymous(f".{fmt}"), fps, start, end, default_prim,
+                  comment)
+
+
+def layer_from_text(text: str, fmt: str, fps: float, start: float, end: float,
+                    comment: str = "") -> Sdf.Layer:
+    """An anonymous layer of format ``fmt`` holding ``text`` (usda) as read by USD's
+    parser, with the shared stage metadata (:func:`new_layer`)."""
     layer = Sdf.Layer.CreateAnonymous(f".{fmt}")
+    if not layer.ImportFromString(text):
+        raise RuntimeError("USD could not read the text layer it was given")
+    return _stamp(layer, fps, start, end, None, comment)
+
+
+def _stamp(layer, fps, start, end, default_prim, comment) -> Sdf.Layer:
     layer.timeCodesPerSecond = float(fps)
     layer.framesPerSecond = float(fps)
     layer.startTimeCode = float(start)

@@ -27,12 +27,16 @@ import os
 from pxr import Sdf, Tf, UsdUtils
 
 __all__ = ["referenced_files", "stages_beside", "versions_in_use", "register_reader",
-           "READERS", "STAGE_EXTENSIONS"]
+           "READERS", "STAGE_EXTENSIONS", "COMPOSITION_ONLY"]
 
 #: the folder of a ``<stem>.layers/`` that lists the stages elsewhere reading it
 READERS = "readers"
 #: the files that are USD layers (and may name other files)
 STAGE_EXTENSIONS = (".usd", ".usda", ".usdc")
+#: ``customLayerData.crowd.part`` of a layer whose only asset paths are its sublayers,
+#: references and payloads (no value clips, no asset-valued attributes): an export's
+#: layout
+COMPOSITION_ONLY = "layout"
 
 
 def referenced_files(roots, stop=None) -> set:
@@ -76,6 +80,10 @@ def _assets(path) -> set:
         return set()
     if layer is None:
         return set()
+    if dict(layer.customLayerData).get("crowd", {}).get("part") == COMPOSITION_ONLY:
+        # a crowd export's layout: 65,000 references and nothing else, which USD
+        # lists in C++ (walking every field of it from Python takes ~5x longer)
+        return set(layer.GetCompositionAssetDependencies()) - {""}
     assets = set()
 
     def note(asset):

@@ -214,15 +214,11 @@ def stitch(chunks, path, progress=None) -> StitchResult:
         own_at = np.flatnonzero(~shared)
         static_at = np.flatnonzero(shared)
         used = np.unique(streams[0][static_at]).tolist()
-        joined = {}                          # stream -> (scope name, asset path)
+        joined = {}                          # stream -> (scope name, prim in "streams")
         if used:
             files.save(manifest_layer(files.format, fps), "manifest")
-        for j, s in enumerate(used):
-            stem = os.path.splitext(os.path.basename(first.stream_layer(s)))[0]
-            files.save(_joined(parts, s, files, fps, n, layers), f"streams/{stem}")
-            joined[s] = (stem, files.asset_path(f"streams/{stem}"))
-            if progress is not None:
-                progress("streams", j + 1, len(used))
+            files.save(_joined(parts, used, files, fps, n, layers, joined, progress),
+                       "streams")
 
         main = new_layer(files.format, fps, first.first, last.last,
                          default_prim=ROOT, comment="crowd shot stitched from chunks by "
@@ -234,13 +230,13 @@ def stitch(chunks, path, progress=None) -> StitchResult:
         main.customLayerData = {"crowd": {
             **_shot_settings(parts), "firstFrame": first.first, "lastFrame": last.last,
             "chunks": Vt.StringArray([_relative(c.path, files.directory) for c in parts]),
-            "streamLayers": Vt.StringArray([joined[s][1] if s in joined else ""
-                                            for s in range(len(first.stream_layers))]),
+
             **per_agent_settings(np.where(shared, streams[0], -1),
                                  np.where(shared, offsets_all[0], -1), moving,
                                  first.position, first.heading)}}
         crowd = Sdf.PrimSpec(main, ROOT, Sdf.SpecifierDef, "Xform")
-        _offset_animations(crowd, streams[0][static_at], offsets_all[0][static_at], joined)
+        _offset_animations(crowd, streams[0][static_at], offsets_all[0][static_at], joined,
+                           files.asset_path("streams"))
         if own_at.size:
             if not used:
                 files.save(manifest_layer(files.format, fps), "manifest")
@@ -278,10 +274,11 @@ def stitch(chunks, path, progress=None) -> StitchResult:
 
 
 class _Layers:
-    """Chunk layers opened once each (stream layers, for their joints and events)."""
+    """Chunk layers opened once each (stream layers, for their joints and events), and
+    the chunks' asset paths resolved once each."""
 
     def __init__(self):
-        self._open = {}
+        self._open, self._resolved, self._assets = {}, {}, {}
 
     def __call__(self, real) -> Sdf.Layer:
         layer = self._open.get(real)
@@ -292,37 +289,65 @@ class _Layers:
     def joints(self, real):
         return self(real).GetAttributeAtPath(f"/{PRIM}.joints").default
 
+    def resolve(self, chunk, asset) -> str:
+        """The file of ``asset``, a path in ``chunk``'s agents layer."""
+        key = (chunk.own_dir, asset)
+        found = self._resolved.get(key)
+        if found is None:
+            found = self._resolved[key] = chunk.resolve(asset, chunk.own_dir)
+        return found
 
-def _joined(parts, s, files, fps, n, layers):
-    """Stream ``s``'s layer over the whole shot: no samples of its own, value clips
-    over the chunks' layers of it, each from half a sample before its chunk's first
-    frame (each chunk's layer also holds the M - 1 frames before it, so every time an
-    offset reads lies in the active one), and the chunks' event tags joined."""
+    def asset(self, real, directory) -> str:
+        """``real`` as an asset path relative to ``directory``."""
+        key = (real, directory)
+        found = self._assets.get(key)
+        if found is None:
+            found = self._assets[key] = _relative(real, directory)
+        return found
+
+
+def _joined(parts, used, files, fps, n, layers, joined, progress):
+    """One layer of the streams of ``used`` over the whole shot, a prim each (named as
+    the stream's scope; ``joined[s]`` gets ``(name, its path)``): no samples of its
+    own, value clips over the chunks' layers of the stream, each from half a sample
+    before its chunk's first frame (each chunk's layer also holds the M - 1 frames
+    before it, so every time an offset reads lies in the active one), and the chunks'
+    event tags joined."""
     h = 0.5 / n
-    reals = [c.stream_layer(s) for c in parts]
-    head = layers(reals[0])
-    start, end = head.startTimeCode, layers(reals[-1]).endTimeCode
-    out = new_layer(files.format, fps, start, end, default_prim=PRIM, comment=head.comment)
-    prim = define(out, PRIM, "SkelAnimation")
-    attribute(prim, "joints", _T.TokenArray, layers.joints(reals[0]), uniform=True)
-    events, covered = [], float("-inf")
-    for c, real in zip(parts, reals):
-        events += [e for e in _events(layers(real).GetPrimAtPath(f"/{PRIM}")) if e[1] > covered]
-        covered = c.last
-    data = dict(head.GetPrimAtPath(f"/{PRIM}").customData)
-    crowd = dict(data.get("crowd", {}))
-    crowd["eventNames"] = Vt.StringArray([e[0] for e in events])
-    crowd["eventFrames"] = Vt.DoubleArray([e[1] for e in events])
-    data["crowd"] = crowd
-    prim.customData = data
-    here = os.path.join(files.layers_dir, "streams")
-    prim.SetInfo("clips", {"default": {
-        "assetPaths": Sdf.AssetPathArray([_relative(r, here) for r in reals]),
-        "primPath": f"/{PRIM}",
-        "active": Vt.Vec2dArray([(start if k == 0 else c.first - h, float(k))
-                                 for k, c in enumerate(parts)]),
-        "times": Vt.Vec2dArray([(start, start), (end, end)]),
-        "manifestAssetPath": Sdf.AssetPath(f"../manifest{files.ext}")}})
+    heads = [layers(parts[0].stream_layer(s)) for s in used]
+    start = min(l.startTimeCode for l in heads)
+    end = max(layers(parts[-1].stream_layer(s)).endTimeCode for s in used)
+    out = new_layer(files.format, fps, start, end,
+                    comment="crowd streams joined over the stitched chunks by value clips")
+    active = Vt.Vec2dArray([(start if k == 0 else c.first - h, float(k))
+                            for k, c in enumerate(parts)])
+    times = Vt.Vec2dArray([(start, start), (end, end)])
+    manifest = Sdf.AssetPath(files.layer_path("manifest"))
+    with Sdf.ChangeBlock():
+        for j, (s, head) in enumerate(zip(used, heads)):
+            reals = [c.stream_layer(s) for c in parts]
+            name = os.path.splitext(os.path.basename(reals[0]))[0]
+            prim = define(out, name, "SkelAnimation")
+            attribute(prim, "joints", _T.TokenArray, layers.joints(reals[0]), uniform=True)
+            events, covered = [], float("-inf")
+            for c, real in zip(parts, reals):
+                events += [e for e in _events(layers(real).GetPrimAtPath(f"/{PRIM}"))
+                           if e[1] > covered]
+                covered = c.last
+            data = dict(head.GetPrimAtPath(f"/{PRIM}").customData)
+            crowd = dict(data.get("crowd", {}))
+            crowd["eventNames"] = Vt.StringArray([e[0] for e in events])
+            crowd["eventFrames"] = Vt.DoubleArray([e[1] for e in events])
+            data["crowd"] = crowd
+            prim.customData = data
+            prim.SetInfo("clips", {"default": {
+                "assetPaths": Sdf.AssetPathArray([layers.asset(r, files.layers_dir)
+                                                  for r in reals]),
+                "primPath": f"/{PRIM}", "active": active, "times": times,
+                "manifestAssetPath": manifest}})
+            joined[s] = (name, prim.path)
+            if progress is not None:
+                progress("streams", j + 1, len(used))
     return out
 
 
@@ -334,14 +359,16 @@ def _events(prim) -> list:
 
 def _shot_settings(parts) -> dict:
     """The first chunk's settings, with the shot's repetition metric: the mean of the
-    chunks' (each measures the same number of frames), or none when a chunk lacks it
-    or measured with other neighbours."""
+    chunks' that measured it (each measures the same number of frames; an
+    animation-only chunk does not), or none when none did or they measured with other
+    neighbours."""
     out = {k: v for k, v in parts[0].settings.items()
            if k not in ("repetition", "repetitionK", "streamLayers", *_PER_AGENT)}
     out["animationOnly"] = False
-    values = [c.settings.get("repetition") for c in parts]
-    ks = {c.settings.get("repetitionK") for c in parts}
-    if None not in values and len(ks) == 1:
+    measured = [c for c in parts if c.settings.get("repetition") is not None]
+    values = [c.settings["repetition"] for c in measured]
+    ks = {c.settings.get("repetitionK") for c in measured}
+    if values and len(ks) == 1:
         out.update(repetition=sum(values) / len(values), repetitionK=ks.pop())
     return out
 
@@ -356,48 +383,50 @@ def _clip_set(parts, i, name, files, n, layers) -> tuple:
     joints. A chunk in which it is static is one piece of that chunk's stream layer;
     otherwise its own clips in that chunk, read where they are."""
     h = 0.5 / n
-    assets, active, times = [], [], []
+    assets, active, times = {}, [], []
     joints = None
 
-    def index(real):
-        asset = _relative(real, files.layers_dir)
-        if asset not in assets:
-            assets.append(asset)
-        return float(assets.index(asset))
+    def index(real) -> int:
+        return assets.setdefault(layers.asset(real, files.layers_dir), len(assets))
 
     for c in parts:
         s = c.source(i, name)
         if s[0] == "static":
             _, real, o = s
-            k = index(real)
             if joints is None:
                 joints = layers.joints(real)
             a, b = c.first - h, c.last + 1 - h
-            active.append((a, k))
-            times += [(a, a - o), (b, b - o)]
+            active.append(np.array([[a, index(real)]]))
+            times.append(np.array([[a, a - o], [b, b - o]]))
             continue
         clips, joints = s[1], s[2]
-        remap = [index(c.resolve(asset.path, c.own_dir)) for asset in clips["assetPaths"]]
-        active += [(t, remap[int(k)]) for t, k in clips["active"]]
-        times += [(t, u) for t, u in clips["times"]]
-    return {"assetPaths": Sdf.AssetPathArray(assets), "primPath": f"/{PRIM}",
-            "active": Vt.Vec2dArray(active), "times": Vt.Vec2dArray(times),
+        remap = np.array([index(layers.resolve(c, asset.path)) for asset in clips["assetPaths"]],
+                         np.float64)
+        act = np.array(clips["active"], np.float64).reshape(-1, 2)
+        act[:, 1] = remap[act[:, 1].astype(np.int64)]
+        active.append(act)
+        times.append(np.array(clips["times"], np.float64).reshape(-1, 2))
+    return {"assetPaths": Sdf.AssetPathArray(list(assets)), "primPath": f"/{PRIM}",
+            "active": Vt.Vec2dArray.FromNumpy(np.concatenate(active)),
+            "times": Vt.Vec2dArray.FromNumpy(np.concatenate(times)),
             "manifestAssetPath": Sdf.AssetPath(files.layer_path("manifest"))}, joints
 
 
-def _offset_animations(crowd, streams, offsets, joined) -> None:
+def _offset_animations(crowd, streams, offsets, joined, asset) -> None:
     """One offset animation per ``(stream, offset)`` of the agents static over the
     whole shot, where the first chunk's layout points them
-    (``/Crowd/Streams/<stream>/offset_<o>``), referencing the joined stream layer."""
+    (``/Crowd/Streams/<stream>/offset_<o>``), referencing the stream's prim in the
+    joined streams layer (``asset``)."""
     scope = define(crowd, "Streams", "Scope")
     pairs = np.unique(np.asarray(streams, np.int64) * _PAIR + offsets)
     with Sdf.ChangeBlock():
         for key in pairs.tolist():
             s, o = divmod(key, _PAIR)
-            name, asset = joined[s]
+            name, path = joined[s]
             parent = scope.nameChildren.get(name) or define(scope, name, "Scope")
             prim = define(parent, f"offset_{o}", "SkelAnimation")
-            prim.referenceList.Prepend(Sdf.Reference(asset, layerOffset=Sdf.LayerOffset(o, 1.0)))
+            prim.referenceList.Prepend(Sdf.Reference(asset, path,
+                                                     layerOffset=Sdf.LayerOffset(o, 1.0)))
 
 
 def _agents(crowd, parts, names, repoint, moving) -> None:

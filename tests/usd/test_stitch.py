@@ -218,6 +218,12 @@ def test_the_stitch_reads_what_each_chunk_records_per_agent(tmp_path):
     want, got = arrays(whole.path), arrays(result.path)
     for k in want:
         np.testing.assert_array_equal(got[k], want[k], err_msg=k)
+    # the repetition metric: measured by the first chunk only (the others are
+    # animation-only), and the stitched shot's is the first chunk's
+    settings = [dict(Sdf.Layer.FindOrOpen(str(p)).customLayerData["crowd"])
+                for p in (*chunks, result.path)]
+    assert [("repetition" in c) for c in settings] == [True, False, False, True]
+    assert settings[3]["repetition"] == settings[0]["repetition"]
     assert (want["agentStream"] >= 0).sum() == result.shared_agents > 0
     assert result.clip_agents == (want["agentStream"] < 0).sum() > 0
     assert result.moving_agents == want["agentMoves"].sum() > 0
