@@ -105,6 +105,30 @@ def test_blender_layout_imports_every_agent_animated_as_core(exported, truth):
     assert all(np.abs(world_vertices(agents[a]) - before[a]).max() > 1e-3 for a in before)
 
 
+def test_a_stitched_shot_imports_every_agent_animated_as_core(tmp_path, truth):
+    """A farm's output: the shot in three chunks (the first whole, the others
+    animation-only), stitched, with the Blender layout. Blender's importer reads the
+    first chunk's agents through the stitched stage, the shared agents' streams through
+    value clips over the chunks' layers under a layer offset, and every other agent's
+    clips across the chunk boundaries: every agent at every frame is core's."""
+    from usd.test_stitch import export_chunks
+
+    from crowd_addon.usd.stitch import stitch
+
+    _, chunks = export_chunks(tmp_path, layout="blender")
+    agents = import_agents(stitch(chunks, tmp_path / "stitched.usdc").path)
+    assert sorted(agents) == list(range(N))
+    scene = bpy.context.scene
+    worst = 0.0
+    for frame in range(FIRST, LAST + 1):
+        scene.frame_set(frame)
+        for a, obj in agents.items():
+            err = float(np.abs(world_vertices(obj) - core_vertices(truth, frame, a)).max())
+            assert err < TOLERANCE, (a, frame, err)
+            worst = max(worst, err)
+    print(f"worst vertex error {worst:.2e} m over {LAST - FIRST + 1} frames x {N} agents")
+
+
 def test_samples_between_frames_import_as_core_between_frames(tmp_path):
     """``--substeps 4``: Blender's importer keys the sub-frame samples, and the mesh it
     evaluates at ``F + k / 4`` (``frame_set(F, subframe=k / 4)``) is core's pose at that

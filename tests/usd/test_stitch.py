@@ -22,10 +22,11 @@ from .conftest import FIRST, LAST, MOVING, make_config, simulate
 CHUNKS = ((FIRST, 5), (6, 10), (11, LAST))
 
 
-def export_chunks(folder, substeps=1, fmt="usdc", animation_only=True, sim=simulate):
+def export_chunks(folder, substeps=1, fmt="usdc", animation_only=True, sim=simulate,
+                  layout="instanced"):
     """The whole shot in one export, and in chunks each started from the snapshot
     before it (taken from one run, restored into a fresh crowd per chunk); the chunks
-    after the first ``animation_only``."""
+    after the first ``animation_only``; all in ``layout``."""
     crowd = Crowd(make_config(), skinning="gpu", substeps=substeps)
     snaps = {}
     while crowd.frame < LAST:
@@ -34,7 +35,8 @@ def export_chunks(folder, substeps=1, fmt="usdc", animation_only=True, sim=simul
         sim(crowd, crowd.frame + 1)
         crowd.step()
     whole = export_crowd(record(Crowd(make_config(), skinning="gpu", substeps=substeps),
-                                FIRST, LAST, before_step=sim), folder / f"whole.{fmt}")
+                                FIRST, LAST, before_step=sim), folder / f"whole.{fmt}",
+                         layout=layout)
     paths = []
     for k, (a, b) in enumerate(CHUNKS):
         chunk = Crowd(make_config(), skinning="gpu", substeps=substeps)
@@ -42,7 +44,7 @@ def export_chunks(folder, substeps=1, fmt="usdc", animation_only=True, sim=simul
             chunk.restore(snaps[a])
         path = folder / "chunks" / f"c{k}" / f"shot.{fmt}"
         path.parent.mkdir(parents=True)
-        export_crowd(record(chunk, a, b, before_step=sim), path,
+        export_crowd(record(chunk, a, b, before_step=sim), path, layout=layout,
                      animation_only=animation_only and k > 0)
         paths.append(path)
     return whole, paths
