@@ -84,10 +84,11 @@ def _run_export(args) -> int:
         f"({result.bytes:,} B)",
         f"  frames {result.frames[0]}-{result.frames[1]} at {config.fps:g} fps"
         f"{f' ({result.substeps} samples a frame)' if result.substeps > 1 else ''}, "
-        f"{result.agents:,} agents: {result.shared_agents:,} on "
-        f"{result.offset_animations:,} shared offset animations, "
-        f"{result.clip_agents:,} changing animation on value clips ({result.blend_frames:,} "
-        f"blend frames), {result.moving_agents:,} moving",
+        f"{result.agents:,} agents: {result.shared_agents:,} "
+        + ("static (their offset animations are the stitch's), " if args.animation_only
+           else f"on {result.offset_animations:,} shared offset animations, ")
+        + f"{result.clip_agents:,} changing animation on value clips "
+        f"({result.blend_frames:,} blend frames), {result.moving_agents:,} moving",
         f"  {result.stream_animations:,} stream animations, {result.characters} "
         f"character layer{'s' if result.characters != 1 else ''}"
         + ("; animation only: for crowd stitch, not a stage to open on its own"

@@ -124,3 +124,42 @@ def test_python_m_crowd_addon_snapshot_help():
     run = subprocess.run([sys.executable, "-m", "crowd_addon", "snapshot", "--help"],
                          cwd=ROOT, capture_output=True, text=True, timeout=60)
     assert run.returncode == 0 and "--every N" in run.stdout and "--out DIR" in run.stdout
+
+
+def test_a_farm_by_hand_animation_only_chunks_stitched_equal_the_whole_export(
+        config_path, tmp_path, capsys):
+    """The commands a farm runs (docs/snapshots.md): one snapshot pass, the first chunk
+    whole, the others ``--animation-only`` (no agents, characters or offset
+    animations), ``crowd stitch``: the stitched stage's joints and transforms are the
+    single export's at every frame."""
+    from pxr import Sdf
+
+    from .test_stitch import read
+
+    snaps = tmp_path / "snaps"
+    assert main(["snapshot", "--config", str(config_path), "--frames", "1-30", "--every",
+                 "10", "--out", str(snaps)]) == 0
+    capsys.readouterr()
+    whole = export(config_path, tmp_path / "whole" / "shot.usdc", "1-30", capsys)
+    chunks = [export(config_path, tmp_path / f"c{k}" / "shot.usdc", f"{a}-{a + 9}", capsys,
+                     "--snapshots", str(snaps), *(("--animation-only",) if k else ()))
+              for k, a in enumerate((1, 11, 21))]
+    for k, chunk in enumerate(chunks):
+        names = {Path(f).name for f in chunk["files"]}
+        assert ("layout.usdc" in names) == (k == 0), names
+        assert (chunk["characters"] > 0) == (k == 0)
+        crowd = Sdf.Layer.FindOrOpen(chunk["path"]).customLayerData["crowd"]
+        assert crowd["animationOnly"] == (k > 0)
+    assert main(["stitch", "--out", str(tmp_path / "shot.usdc"),
+                 *(c["path"] for c in chunks)]) == 0
+    times = list(range(1, 31))
+    _, want = read(whole["path"], times)
+    _, got = read(tmp_path / "shot.usdc", times)
+    assert sorted(got) == sorted(want)
+    for name, (joints, world) in want.items():
+        np.testing.assert_allclose(got[name][0], joints, atol=1e-6, err_msg=name)
+        np.testing.assert_allclose(got[name][1], world, atol=1e-6, err_msg=name)
+    assert main(["export", "--config", str(config_path), "--out",
+                 str(tmp_path / "w.usdc"), "--frames", "1-30", "--workers", "2",
+                 "--animation-only"]) == 2
+    assert "leave out --animation-only" in capsys.readouterr().err
