@@ -9,10 +9,10 @@ export of the whole range would, writing little of its own:
 
 - the agents: the first chunk's layout layer, read where it is (a sublayer), with
   overs for the agents that change what they play and for those that move;
-- a stream that agents play at one offset the whole shot: a small layer of value
-  clips over the chunks' layers of it (each chunk's also holds the M - 1 frames
-  before it, so an offset never reads across a switch), which their shared offset
-  animations reference, as in every export;
+- a stream that agents play at one offset the whole shot: a prim of one ``streams``
+  layer holding only value clips over the chunks' layers of it (each chunk's also
+  holds the M - 1 frames before it, so an offset never reads across a switch), which
+  their shared offset animations reference with the offset, as in every export;
 - every other agent: one value-clip set, the chunks' pieces one after another, each
   reading the chunk's own layers (streams, uniques, blend banks); nothing is copied;
 - agents that move: their transforms over the whole shot, from each chunk's samples
@@ -230,7 +230,6 @@ def stitch(chunks, path, progress=None) -> StitchResult:
         main.customLayerData = {"crowd": {
             **_shot_settings(parts), "firstFrame": first.first, "lastFrame": last.last,
             "chunks": Vt.StringArray([_relative(c.path, files.directory) for c in parts]),
-
             **per_agent_settings(np.where(shared, streams[0], -1),
                                  np.where(shared, offsets_all[0], -1), moving,
                                  first.position, first.heading)}}
