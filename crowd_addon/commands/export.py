@@ -126,8 +126,9 @@ def _run_farm_export(args, source, progress) -> int:
         return 0
     s, sec = result.stitch, result.seconds
     print(f"wrote {s.path} ({s.layers_dir}) stitched from {len(result.chunks)} chunks in "
-          f"{chunk_folder(args.out)}: frames {s.frames[0]}-{s.frames[1]}, {s.agents:,} "
-          f"agents ({s.clip_agents:,} on value clips)\n"
+          f"{chunk_folder(args.out)} (the first whole, the others animation-only): frames "
+          f"{s.frames[0]}-{s.frames[1]}, {s.agents:,} agents ({s.clip_agents:,} on value "
+          f"clips)\n"
           f"  {sec['total']:.1f} s (snapshot pass {sec['snapshots']:.1f} s, slowest chunk "
           f"{sec['chunks']:.1f} s, stitch {sec['stitch']:.1f} s)")
     return 0
