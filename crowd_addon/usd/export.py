@@ -535,6 +535,17 @@ def per_agent_settings(stream, offset, moves, position, heading) -> dict:
                                                                          np.float32))}
 
 
+def _event_settings(rec, written) -> dict:
+    """The tags of the written streams, as their layers hold them, in three arrays
+    (``eventStream``, ``eventName``, ``eventFrame``): what a stitch joins without
+    opening every chunk's stream layers."""
+    s, names, frames = rec.stream_events
+    keep = np.isin(np.asarray(s, np.int64), np.fromiter(written, np.int64, len(written)))
+    return {"eventStream": Vt.IntArray.FromNumpy(np.ascontiguousarray(s[keep], np.int32)),
+            "eventName": Vt.StringArray([str(n) for n in np.asarray(names)[keep]]),
+            "eventFrame": Vt.DoubleArray([float(f) for f in np.asarray(frames)[keep]])}
+
+
 def _settings(rec, shot, layout, measured=None, stream_assets=None,
               animation_only=False) -> dict:
     cfg = rec.config
@@ -550,5 +561,6 @@ def _settings(rec, shot, layout, measured=None, stream_assets=None,
             # each stream's layer (asset path from the main layer; "": not written)
             "streamLayers": Vt.StringArray([(stream_assets or {}).get(s, "")
                                             for s in range(len(rec.stream_names))]),
+            **_event_settings(rec, stream_assets or {}),
             **per_agent_settings(shot.stream, shot.offset, shot.moving, shot.position,
                                  shot.heading)}

@@ -55,6 +55,8 @@ _XFORM_TYPES = (Sdf.ValueTypeNames.Float3, Sdf.ValueTypeNames.Double)
 _SAME = ("M", "NT", "fps", "seed", "streams", "uniques", "agents", "layout", "substeps",
          "version", "configDigest")
 _PAIR = 1 << 20                               # (stream, offset) as one int
+#: what an export records of its streams for a stitch (usd/export.py ``_settings``)
+_STREAMS = ("streamLayers", "eventStream", "eventName", "eventFrame")
 _T = Sdf.ValueTypeNames
 
 
@@ -98,7 +100,7 @@ class _Chunk:
             raise CrowdError(f"{path}: a stitched stage, not a chunk: stitch its chunks "
                              "instead")
         missing = [k for k in ("firstFrame", "lastFrame", *_SAME, *_PER_AGENT,
-                               "streamLayers") if k not in crowd]
+                               *_STREAMS) if k not in crowd]
         if missing:
             raise CrowdError(f"{path}: its crowd settings lack {missing} (exported by an "
                              "older version? export the chunk again)")
@@ -127,6 +129,13 @@ class _Chunk:
             raise CrowdError(f"{path}: its per-agent arrays ({', '.join(_PER_AGENT)}) do "
                              f"not hold one value for each of its {n} agents")
         self.stream_layers = [self.resolve(a) if a else None for a in crowd["streamLayers"]]
+        self._events = (np.asarray(crowd["eventStream"], np.int64).reshape(-1),
+                        list(crowd["eventName"]), list(crowd["eventFrame"]))
+
+    def events(self, s) -> list:
+        """``(name, frame)`` of the tags stream ``s``'s layer holds, in frame order."""
+        at, names, frames = self._events
+        return [(names[i], float(frames[i])) for i in np.flatnonzero(at == s).tolist()]
 
     def resolve(self, asset, base=None) -> str:
         return os.path.normpath(os.path.join(base or self.dir, asset))
@@ -141,7 +150,7 @@ class _Chunk:
 
     def source(self, i, name):
         """What agent ``i`` (prim ``name``) plays in this chunk: ``("static", stream
-        layer file, offset)`` or ``("clips", its clip set dict, its joints)``."""
+        layer file, offset)`` or ``("clips", its animation's prim spec)``."""
         if self.stream[i] >= 0:
             return ("static", self.stream_layer(int(self.stream[i])), int(self.offset[i]))
         spec = self.own.GetPrimAtPath(f"/{ROOT}/AgentAnimations/{name}") \
@@ -149,8 +158,7 @@ class _Chunk:
         if spec is None:
             raise CrowdError(f"{self.path}: agent {name} changes what it plays but has no "
                              "animation of its own (export the chunk again)")
-        return ("clips", dict(spec.GetInfo("clips")["default"]),
-                spec.attributes["joints"].default)
+        return ("clips", spec)
 
 
 def _open(real, shown):
@@ -273,11 +281,11 @@ def stitch(chunks, path, progress=None) -> StitchResult:
 
 
 class _Layers:
-    """Chunk layers opened once each (stream layers, for their joints and events), and
-    the chunks' asset paths resolved once each."""
+    """Chunk layers opened once each (a stream's, for its joints and the customData of
+    its prim), and the chunks' asset paths resolved once each."""
 
     def __init__(self):
-        self._open, self._resolved, self._assets = {}, {}, {}
+        self._open, self._resolved, self._assets, self._joints = {}, {}, {}, {}
 
     def __call__(self, real) -> Sdf.Layer:
         layer = self._open.get(real)
@@ -285,8 +293,14 @@ class _Layers:
             layer = self._open[real] = _open(real, real)
         return layer
 
-    def joints(self, real):
-        return self(real).GetAttributeAtPath(f"/{PRIM}.joints").default
+    def joints(self, chunk, s):
+        """The joints of stream ``s`` (the same in every chunk): read once, from
+        ``chunk``'s layer of it."""
+        found = self._joints.get(s)
+        if found is None:
+            found = self._joints[s] = self(chunk.stream_layer(s)).GetAttributeAtPath(
+                f"/{PRIM}.joints").default
+        return found
 
     def resolve(self, chunk, asset) -> str:
         """The file of ``asset``, a path in ``chunk``'s agents layer."""
@@ -311,11 +325,11 @@ def _joined(parts, used, files, fps, n, layers, joined, progress):
     own, value clips over the chunks' layers of the stream, each from half a sample
     before its chunk's first frame (each chunk's layer also holds the M - 1 frames
     before it, so every time an offset reads lies in the active one), and the chunks'
-    event tags joined."""
+    event tags joined (from what each chunk recorded of them)."""
     h = 0.5 / n
     heads = [layers(parts[0].stream_layer(s)) for s in used]
     start = min(l.startTimeCode for l in heads)
-    end = max(layers(parts[-1].stream_layer(s)).endTimeCode for s in used)
+    end = parts[-1].last + (n - 1) / n       # each stream layer's last sample
     out = new_layer(files.format, fps, start, end,
                     comment="crowd streams joined over the stitched chunks by value clips")
     active = Vt.Vec2dArray([(start if k == 0 else c.first - h, float(k))
@@ -327,11 +341,11 @@ def _joined(parts, used, files, fps, n, layers, joined, progress):
             reals = [c.stream_layer(s) for c in parts]
             name = os.path.splitext(os.path.basename(reals[0]))[0]
             prim = define(out, name, "SkelAnimation")
-            attribute(prim, "joints", _T.TokenArray, layers.joints(reals[0]), uniform=True)
+            attribute(prim, "joints", _T.TokenArray, layers.joints(parts[0], s),
+                      uniform=True)
             events, covered = [], float("-inf")
-            for c, real in zip(parts, reals):
-                events += [e for e in _events(layers(real).GetPrimAtPath(f"/{PRIM}"))
-                           if e[1] > covered]
+            for c in parts:                  # recorded by each chunk, history repeated
+                events += [e for e in c.events(s) if e[1] > covered]
                 covered = c.last
             data = dict(head.GetPrimAtPath(f"/{PRIM}").customData)
             crowd = dict(data.get("crowd", {}))
@@ -350,19 +364,13 @@ def _joined(parts, used, files, fps, n, layers, joined, progress):
     return out
 
 
-def _events(prim) -> list:
-    crowd = dict(prim.customData).get("crowd", {}) if prim else {}
-    return list(zip(list(crowd.get("eventNames", [])),
-                    [float(f) for f in crowd.get("eventFrames", [])]))
-
-
 def _shot_settings(parts) -> dict:
     """The first chunk's settings, with the shot's repetition metric: the mean of the
     chunks' that measured it (each measures the same number of frames; an
     animation-only chunk does not), or none when none did or they measured with other
     neighbours."""
     out = {k: v for k, v in parts[0].settings.items()
-           if k not in ("repetition", "repetitionK", "streamLayers", *_PER_AGENT)}
+           if k not in ("repetition", "repetitionK", *_STREAMS, *_PER_AGENT)}
     out["animationOnly"] = False
     measured = [c for c in parts if c.settings.get("repetition") is not None]
     values = [c.settings["repetition"] for c in measured]
@@ -393,12 +401,14 @@ def _clip_set(parts, i, name, files, n, layers) -> tuple:
         if s[0] == "static":
             _, real, o = s
             if joints is None:
-                joints = layers.joints(real)
+                joints = layers.joints(c, int(c.stream[i]))
             a, b = c.first - h, c.last + 1 - h
             active.append(np.array([[a, index(real)]]))
             times.append(np.array([[a, a - o], [b, b - o]]))
             continue
-        clips, joints = s[1], s[2]
+        clips = s[1].GetInfo("clips")["default"]
+        if joints is None:                   # one skeleton's: the same in every chunk
+            joints = s[1].attributes["joints"].default
         remap = np.array([index(layers.resolve(c, asset.path)) for asset in clips["assetPaths"]],
                          np.float64)
         act = np.array(clips["active"], np.float64).reshape(-1, 2)
