@@ -24,8 +24,7 @@ from pxr import Usd  # noqa: E402
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import crowd_scene as cs  # noqa: E402
-from test_usd_import import (TOLERANCE, core_vertices, imported_agents,  # noqa: E402
-                             world_vertices)
+from test_usd_import import assert_plays_as_core, imported_agents  # noqa: E402
 from usd.conftest import FIRST, LAST, core_truth, make_config, recording  # noqa: E402
 
 from crowd_addon.core.meshes.mesh import Look  # noqa: E402
@@ -94,13 +93,7 @@ def test_the_imported_crowd_plays_at_the_stages_rate_sharing_one_material_per_lo
     for obj in agents.values():
         assert [m.name for m in obj.data.materials] == ["Shirt.001", "Skin"]
     # and every agent where core's skinning puts it, at every frame of the shot
-    worst = 0.0
-    for frame in range(FIRST, LAST + 1):
-        scene.frame_set(frame)
-        for a, obj in agents.items():
-            err = float(np.abs(world_vertices(obj) - core_vertices(truth, frame, a)).max())
-            assert err < TOLERANCE, (a, frame, err)
-            worst = max(worst, err)
+    worst = assert_plays_as_core(agents, truth)
     print(f"worst vertex error {worst:.2e} m")
 
 
