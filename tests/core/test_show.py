@@ -167,6 +167,21 @@ def test_cues_leave_held_agents_alone_unless_they_interrupt():
     assert crowd.agents.kind[2] == STREAM and crowd.agents.ref[2] == 0
 
 
+def test_a_hold_that_ends_while_its_request_waits_leaves_the_agent_home():
+    """Agents still queued for the cue's blend when its hold ends never left home: they
+    stop waiting and play on untouched (no slot, no blend from a frozen pose to where
+    they are); the agents that did start go home through their slots."""
+    ids = np.arange(6)
+    cue = Cue("goal", 5, Action("stream", "cheer", duration=10, hold=4), agents=ids)
+    crowd = Crowd(make_config(Show((cue,)), slots=2))
+    got = poses(crowd, 30)
+    assert crowd.show.stats["goal"]["queued"] == 4
+    assert len(crowd.slots.queue) == 0 and crowd.slots.served == 4
+    quiet = by_hand({}, 30, slots=2)
+    assert np.array_equal(got[:, 2:], quiet[:, 2:])
+    assert not np.array_equal(got[:, :2], quiet[:, :2])
+
+
 def test_reactions_run_a_cue_on_the_agents_whose_event_fired_or_near_them():
     # agents on "cheer" clap at clip frame 3; the reaction sends them to "wave"
     starters = np.array([14])

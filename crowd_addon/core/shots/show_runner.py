@@ -308,6 +308,13 @@ class ShowRunner(ShowState):
             return
         self.held_until[ids] = _NEVER
         c = self.crowd
+        a = c.agents
+        kind = a.kind[ids]
+        home = (kind == self.home_kind[ids]) & (a.ref[ids] == self.home_ref[ids]) & \
+            ((kind != STREAM) | (a.offset[ids] == self.home_offset[ids]))
+        if home.any():      # never left (the cue's request still waited): no blend to
+            c.slots.queue.withdraw(np.unique(ids[home]))     # where they are; wait no more
+            ids = ids[~home]
         streamed = self.home_kind[ids] == STREAM
         grp = ids[streamed]                  # one request for every stream
         if grp.size:
