@@ -61,20 +61,21 @@ class ShotSource:
         return blender_output_to_stderr()
 
     def open(self, frames=None, on_bake=None, frames_needed: bool = True,
-             crowd_needed: bool = True):
+             crowd_needed: bool = True, reuse_bake=None, keep_bake=None):
         """The shot: :class:`ConfigShot` or :class:`~crowd_addon.blender.blend_shot.BlendShot`.
         ``frames`` (first, last), or None: a .blend's scene range (a configuration
         needs them when ``frames_needed``); ``on_bake(done, total, message)``: the
         .blend's bake steps and report notes; ``crowd_needed`` False: no crowd will be
-        built, so a .blend's crowd script is not checked. CrowdError names what is
-        wrong."""
+        built, so a .blend's crowd script is not checked; ``reuse_bake`` /
+        ``keep_bake``: a snapshot folder a .blend's bake is read from / kept in
+        (:mod:`crowd_addon.blender.bake_cache`). CrowdError names what is wrong."""
         if self.config is not None:
             if frames is None and frames_needed:
                 raise CrowdError("--frames FIRST-LAST is required with --config (a .blend "
                                  "gives its scene's frame range)")
             return ConfigShot(self, frames)
         from .blender.blend_shot import BlendShot
-        return BlendShot(self, frames, on_bake, crowd_needed)
+        return BlendShot(self, frames, on_bake, crowd_needed, reuse_bake, keep_bake)
 
 
 class ConfigShot:

@@ -60,9 +60,11 @@ class BlendShot:
     ``crowd_needed`` False (``crowd plan``: no crowd is built, so no script runs):
     the script is not checked."""
 
-    def __init__(self, source, frames=None, on_bake=None, crowd_needed: bool = True):
+    def __init__(self, source, frames=None, on_bake=None, crowd_needed: bool = True,
+                 reuse_bake=None, keep_bake=None):
         from .crowd_script import check_script
         self.source, self.on_bake = source, on_bake
+        self.reuse_bake, self.keep_bake = reuse_bake, keep_bake
         self.scene = open_scene(source.blend, source.scene)
         if crowd_needed:   # a script that would not run stops the command here
             check_script(self.scene, source.trust_scripts, source.ignore_scripts)
@@ -77,10 +79,18 @@ class BlendShot:
     def config(self):
         """The scene's CrowdConfig, baked as the panel bakes it; each note of its bake
         report goes to ``on_bake`` (``warning: ...`` / ``note: ...``), and with
-        ``strict`` warnings raise BakeWarnings (exit code 2)."""
+        ``strict`` warnings raise BakeWarnings (exit code 2). ``reuse_bake``: a
+        snapshot folder whose kept bake of this .blend is read instead of baking;
+        ``keep_bake``: one the bake is kept in (:mod:`.bake_cache`)."""
         from ..core.bake.bake_report import report_of
+        from .bake_cache import bake_key, load_baked, save_baked
         from .scene_config import config_from_scene
-        config = config_from_scene(self.scene, self.on_bake)
+        key = bake_key(self.scene) if self.reuse_bake or self.keep_bake else None
+        config = load_baked(self.reuse_bake, key) if self.reuse_bake else None
+        if config is None:
+            config = config_from_scene(self.scene, self.on_bake)
+            if self.keep_bake:
+                save_baked(self.keep_bake, key, config)
         report = report_of(config)
         if self.on_bake is not None:
             for note in report:

@@ -39,29 +39,32 @@ def chunk_path(out, k, frames) -> str:
 def write_shot_snapshots(source: ShotSource, folder, frames, every, progress=None,
                          on_bake=None) -> list:
     """Snapshots of ``source``'s crowd before each ``every``-frame chunk of ``frames``
-    into ``folder`` (created if missing); returns the files. What ``crowd snapshot``
+    into ``folder`` (created if missing), with a .blend's bake for the chunks
+    (:mod:`crowd_addon.blender.bake_cache`); returns the files. What ``crowd snapshot``
     runs, and a worker for a shot's snapshot pass. ``frames`` None: a .blend's scene
     range (a configuration needs them); ``on_bake(done, total, message)``: the .blend's
     bake steps."""
     from ..usd.shot_export import snapshot_shot
-    with source.quietly():
-        return snapshot_shot(source.open(frames, on_bake), folder, every, progress)
+    with source.quietly():          # a .blend's bake is kept for the chunks
+        return snapshot_shot(source.open(frames, on_bake, keep_bake=folder), folder,
+                             every, progress)
 
 
 def export_chunk(source: ShotSource, frames, out, snapshots=None, progress=None,
                  on_bake=None, repetition=RepetitionSettings(), animation_only=False):
     """Export ``frames`` of ``source``'s shot to ``out`` exactly as ``crowd export``
     does, starting from the latest snapshot in ``snapshots`` before the first frame
-    (and leaving one at the last). Returns ``(config, ExportResult)``: the crowd's
-    configuration and :class:`~crowd_addon.usd.export.ExportResult`. What ``crowd
-    export`` runs, and a worker for each chunk. ``frames``
+    (and leaving one at the last; a .blend's bake kept there is read, not baked
+    again). Returns ``(config, ExportResult)``: the crowd's configuration and
+    :class:`~crowd_addon.usd.export.ExportResult`. What ``crowd export`` runs, and a
+    worker for each chunk. ``frames``
     None: a .blend's scene range (a configuration needs them); ``on_bake(done, total,
     message)``: the .blend's bake steps; ``repetition``: the repetition metric's
     settings (None: not measured); ``animation_only``: a chunk after the shot's first,
     written only for the stitch (no agent prims)."""
     from ..usd.shot_export import export_shot
-    with source.quietly():
-        shot = source.open(frames, on_bake)
+    with source.quietly():          # a .blend's bake kept by the snapshot pass
+        shot = source.open(frames, on_bake, reuse_bake=snapshots)
         return export_shot(shot, out, agents=source.agents, layout=source.layout,
                            snapshots=snapshots, progress=progress, repetition=repetition,
                            animation_only=animation_only)

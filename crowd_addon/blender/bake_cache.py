@@ -1,0 +1,120 @@
+"""A .blend's baked crowd kept in its shot's snapshot folder, so a farm bakes it once.
+
+A chunked export of a .blend runs its snapshot pass and then each chunk in a process
+of its own (``crowd snapshot`` then ``crowd export --snapshots``, or the Dask farm's
+tasks), and each used to open the .blend and bake its Crowd settings again: about 4 s
+of CPU a chunk for the demo's stadium, the same clips every time. The snapshot pass
+now keeps the configuration it baked in the snapshot folder; a chunk of the same
+.blend reads it there instead of baking.
+
+Files, beside the snapshots (several shots may share a folder):
+``baked_<key[:16]>.json`` and ``.npz`` (the configuration,
+:func:`~crowd_addon.core.authoring.config_io.save_config`) and
+``baked_<key[:16]>.key.json``, written after them: the whole key, the
+configuration's digest and the bake report's notes (``--strict`` and the printed
+notes behave as after a bake).
+
+The key (:func:`bake_key`) is a SHA-256 of the .blend's path and bytes, the path and
+bytes of every library it links, the scene's name, Blender's version and the source
+of this extension: a chunk reads the bake only when nothing it was made from
+changed. A file that is missing, another key's, damaged, or whose configuration
+does not have the recorded digest is not used: the chunk bakes, as it did before.
+The snapshot pass always bakes and replaces the file.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import tempfile
+from functools import lru_cache
+
+from ..core.authoring.config_io import config_digest, load_config, save_config
+from ..core.bake.bake_report import BakeReport, Note
+from ..core.base.errors import CrowdError
+
+__all__ = ["bake_key", "load_baked", "save_baked"]
+
+
+def bake_key(scene) -> str:
+    """The key of ``scene``'s bake (module docstring); reads the .blend open here."""
+    import bpy
+    h = hashlib.sha256()
+    files = [bpy.data.filepath] + sorted(bpy.path.abspath(lib.filepath)
+                                         for lib in bpy.data.libraries)
+    for path in files:
+        h.update(f"{os.path.abspath(path)}\n".encode("utf-8"))
+        _update_with_file(h, path)
+    h.update(f"scene {scene.name}\nblender {bpy.app.version_string}\n"
+             f"code {_code_digest()}\n".encode("utf-8"))
+    return h.hexdigest()
+
+
+def _update_with_file(h, path):
+    try:
+        with open(path, "rb") as f:
+            for block in iter(lambda: f.read(1 << 20), b""):
+                h.update(block)
+    except OSError as e:            # a library gone: a key no earlier bake has
+        h.update(f"unreadable: {e}".encode("utf-8"))
+
+
+@lru_cache(maxsize=1)
+def _code_digest() -> str:
+    """SHA-256 of this extension's Python source (every module, by relative path)."""
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    h = hashlib.sha256()
+    for folder, dirs, names in sorted(os.walk(root)):
+        dirs.sort()
+        for name in sorted(n for n in names if n.endswith(".py")):
+            path = os.path.join(folder, name)
+            h.update(os.path.relpath(path, root).replace(os.sep, "/").encode("utf-8"))
+            _update_with_file(h, path)
+    return h.hexdigest()
+
+
+def _paths(folder, key) -> tuple:
+    stem = os.path.join(os.fspath(folder), f"baked_{key[:16]}")
+    return stem + ".json", stem + ".key.json"
+
+
+def save_baked(folder, key: str, config) -> None:
+    """Keep ``config`` (baked, its report in ``config.bake_report``) in ``folder``
+    under ``key``; the key file goes last, so a reader never pairs it with another
+    configuration. CrowdError when it cannot be written."""
+    path, key_path = _paths(folder, key)
+    report = getattr(config, "bake_report", None) or BakeReport()
+    save_config(config, path)
+    record = {"key": key, "digest": config_digest(config),
+              "notes": [[str(n), n.kind, n.severity] for n in report]}
+    fd, tmp = tempfile.mkstemp(prefix=".baked.", suffix=".tmp",
+                               dir=os.path.dirname(os.path.abspath(key_path)))
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(json.dumps(record, indent=1) + "\n")
+        os.replace(tmp, key_path)
+    except OSError as e:
+        raise CrowdError(f"{key_path}: cannot keep the bake: {e}") from None
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+
+
+def load_baked(folder, key: str):
+    """The configuration kept in ``folder`` under ``key`` with its bake report, or
+    None when there is none that can be trusted (module docstring)."""
+    path, key_path = _paths(folder, key)
+    try:
+        with open(key_path, encoding="utf-8") as f:
+            record = json.load(f)
+        if record.get("key") != key:
+            return None
+        config = load_config(path)
+        if config_digest(config) != record.get("digest"):
+            return None
+        notes = [Note(text, kind, severity) for text, kind, severity in record["notes"]]
+    except (OSError, ValueError, TypeError, KeyError, CrowdError):
+        return None
+    config.bake_report = BakeReport(notes)
+    return config
