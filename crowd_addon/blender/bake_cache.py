@@ -17,7 +17,9 @@ notes behave as after a bake).
 The key (:func:`bake_key`) is a SHA-256 of the .blend's path and bytes, the path and
 bytes of every library it links, the scene's name, Blender's version and the source
 of this extension: a chunk reads the bake only when nothing it was made from
-changed. A file that is missing, another key's, damaged, or whose configuration
+changed. Only a .blend opened from its file for the command (``--blend``) is kept
+or read: the .blend already open in a Blender session may hold changes not saved,
+so it is baked as it is. A file that is missing, another key's, damaged, or whose configuration
 does not have the recorded digest is not used: the chunk bakes, as it did before.
 The snapshot pass always bakes and replaces the file.
 """
@@ -38,7 +40,8 @@ __all__ = ["bake_key", "load_baked", "save_baked"]
 
 
 def bake_key(scene) -> str:
-    """The key of ``scene``'s bake (module docstring); reads the .blend open here."""
+    """The key of ``scene``'s bake (module docstring), of the .blend just opened here
+    from its file (so its bytes are what is baked)."""
     import bpy
     h = hashlib.sha256()
     files = [bpy.data.filepath] + sorted(bpy.path.abspath(lib.filepath)

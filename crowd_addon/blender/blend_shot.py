@@ -85,11 +85,12 @@ class BlendShot:
         from ..core.bake.bake_report import report_of
         from .bake_cache import bake_key, load_baked, save_baked
         from .scene_config import config_from_scene
-        key = bake_key(self.scene) if self.reuse_bake or self.keep_bake else None
-        config = load_baked(self.reuse_bake, key) if self.reuse_bake else None
+        key = bake_key(self.scene) if self.source.blend and (
+            self.reuse_bake or self.keep_bake) else None      # opened from its file
+        config = load_baked(self.reuse_bake, key) if self.reuse_bake and key else None
         if config is None:
             config = config_from_scene(self.scene, self.on_bake)
-            if self.keep_bake:
+            if self.keep_bake and key:
                 save_baked(self.keep_bake, key, config)
         report = report_of(config)
         if self.on_bake is not None:

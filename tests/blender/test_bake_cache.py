@@ -112,3 +112,16 @@ def test_a_chunk_from_the_kept_bake_equals_the_chunk_that_baked(tmp_path, monkey
     _, b = read(got.path, times)
     assert a.keys() == b.keys() and len(a) == 30
     assert max(float(np.abs(a[k][0] - b[k][0]).max()) for k in a) < 1e-6
+
+
+def test_the_blend_open_in_a_session_is_baked_as_it_is(tmp_path, monkeypatch):
+    """The scene already open (no --blend) may hold changes not saved: its bake is
+    neither kept nor read, since the file's bytes are not what is baked."""
+    blend = saved_crowd(tmp_path / "crowd.blend")
+    folder = tmp_path / "snaps"
+    folder.mkdir()
+    baked(blend, keep_bake=folder)
+    bpy.context.scene.crowd.seed = 9                # open, changed, not saved
+    shot = ShotSource().open((1, 8), reuse_bake=folder, keep_bake=folder)
+    monkeypatch.setattr(scene_config, "config_from_scene", lambda *a: "baked")
+    assert shot.config == "baked"
