@@ -19,9 +19,9 @@ bytes of every library it links, the scene's name, Blender's version and the sou
 of this extension: a chunk reads the bake only when nothing it was made from
 changed. Only a .blend opened from its file for the command (``--blend``) is kept
 or read: the .blend already open in a Blender session may hold changes not saved,
-so it is baked as it is. A file that is missing, another key's, damaged, or whose configuration
-does not have the recorded digest is not used: the chunk bakes, as it did before.
-The snapshot pass always bakes and replaces the file.
+so it is baked as it is. A file that is missing, another key's, damaged, or whose
+configuration does not have the recorded digest is not used: the chunk bakes, as
+it did before. The snapshot pass always bakes and replaces the file.
 """
 
 from __future__ import annotations
