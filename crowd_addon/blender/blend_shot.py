@@ -88,6 +88,9 @@ class BlendShot:
         key = bake_key(self.scene) if self.source.blend and (
             self.reuse_bake or self.keep_bake) else None      # opened from its file
         config = load_baked(self.reuse_bake, key) if self.reuse_bake and key else None
+        if config is not None and self.on_bake is not None:
+            self.on_bake(1, 1, f"the bake kept in {self.reuse_bake} by its snapshot pass "
+                               f"(the .blend is unchanged): not baked again")
         if config is None:
             config = config_from_scene(self.scene, self.on_bake)
             if self.keep_bake and key:

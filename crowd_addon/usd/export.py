@@ -140,7 +140,8 @@ def export_crowd(recording, path, agents=None, progress=None, layout="instanced"
     agents : None (all) or N, the first N agents (ids ``0 .. N-1``); more than the
         recording has is an error.
     progress : optional ``progress(stage, done, total)``: ``characters``, ``streams``,
-        ``uniques``, ``blends``, ``agent animations``, ``layout``.
+        ``uniques``, ``blends``, ``agent animations``, ``layout`` (not with
+        ``animation_only``).
     layout : ``"instanced"`` (default: agents are instanceable, so renderers share
         each character's prototype) or ``"blender"`` (agents are not instanceable:
         Blender's USD importer animates them only then; and their colour primvars are
@@ -236,7 +237,8 @@ def _steps(rec, ids, meshes, files, layout, measure, animation_only):
         names = agent_names(ids)
         own_paths = yield from _write_own_animations(out, shot, names, joints_of, clip_assets)
         measured = None if measure is None else (yield from _staged("repetition", measure))
-        yield "layout", 0, ids.size
+        if not animation_only:          # an animation-only chunk has no layout
+            yield "layout", 0, ids.size
         layer = new_layer(files.format, rec.fps, rec.first, rec.last, default_prim=ROOT,
                           comment="crowd shot written by crowd_addon.usd")
         layer.customLayerData = {"crowd": _settings(rec, shot, layout, measured, stream_assets,

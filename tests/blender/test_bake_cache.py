@@ -60,7 +60,11 @@ def test_a_kept_bake_is_read_instead_of_baking_with_its_report(tmp_path, monkeyp
     assert [p for p in kept if not p.endswith((".json", ".npz"))] == []
     assert len(kept) == 3                           # configuration, arrays, key
     refuse_to_bake(monkeypatch)
-    got = baked(blend, reuse_bake=folder)
+    said = []
+    got = ShotSource(blend=str(blend)).open(
+        (1, 8), lambda _d, _t, line: said.append(line), reuse_bake=folder).config
+    assert said[0].startswith(f"the bake kept in {folder} by its snapshot pass")
+    assert said[1:] == [n.line for n in want.bake_report]       # the notes, as baked
     assert config_digest(got) == config_digest(want)
     assert [(str(n), n.kind, n.severity) for n in got.bake_report] == \
         [(str(n), n.kind, n.severity) for n in want.bake_report]

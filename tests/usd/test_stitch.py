@@ -146,8 +146,11 @@ def test_the_first_chunk_must_hold_the_agents(tmp_path):
     stitched = stitch(chunks, tmp_path / "stitched.usdc").path
     with pytest.raises(CrowdError, match="a stitched stage, not a chunk"):
         stitch([stitched], tmp_path / "twice.usdc")
+    stages = set()
     again = export_crowd(record(Crowd(make_config(), skinning="gpu"), FIRST, CHUNKS[0][1],
-                                before_step=simulate), chunks[0], animation_only=True)
+                                before_step=simulate), chunks[0], animation_only=True,
+                         progress=lambda stage, done, total: stages.add(stage))
+    assert "streams" in stages and not {"layout", "characters"} & stages
     out = tmp_path / "again.usdc"
     with pytest.raises(CrowdError, match="first chunk and holds no agents"):
         stitch(chunks, out)
