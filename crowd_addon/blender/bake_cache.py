@@ -21,7 +21,9 @@ changed. Only a .blend opened from its file for the command (``--blend``) is kep
 or read: the .blend already open in a Blender session may hold changes not saved,
 so it is baked as it is. A file that is missing, another key's, damaged, or whose
 configuration does not have the recorded digest is not used: the chunk bakes, as
-it did before. The snapshot pass always bakes and replaces the file.
+it did before. The snapshot pass always bakes and replaces the file, and removes
+the bakes of the same .blend and scene kept under other keys (of an earlier
+version of the file).
 """
 
 from __future__ import annotations
@@ -36,7 +38,14 @@ from ..core.authoring.config_io import config_digest, load_config, save_config
 from ..core.bake.bake_report import BakeReport, Note
 from ..core.base.errors import CrowdError
 
-__all__ = ["bake_key", "load_baked", "save_baked"]
+__all__ = ["bake_key", "bake_of", "load_baked", "save_baked"]
+
+
+def bake_of(scene) -> str:
+    """What a kept bake is of: the .blend open here (its path) and ``scene``'s name. A
+    newer bake of the same replaces the older one in a folder."""
+    import bpy
+    return f"{os.path.abspath(bpy.data.filepath)} scene {scene.name}"
 
 
 def bake_key(scene) -> str:
@@ -82,14 +91,15 @@ def _paths(folder, key) -> tuple:
     return stem + ".json", stem + ".key.json"
 
 
-def save_baked(folder, key: str, config) -> None:
+def save_baked(folder, key: str, config, of: str) -> None:
     """Keep ``config`` (baked, its report in ``config.bake_report``) in ``folder``
     under ``key``; the key file goes last, so a reader never pairs it with another
-    configuration. CrowdError when it cannot be written."""
+    configuration. An earlier bake of the same (``of``: :func:`bake_of`) under
+    another key is removed. CrowdError when it cannot be written."""
     path, key_path = _paths(folder, key)
     report = getattr(config, "bake_report", None) or BakeReport()
     save_config(config, path)
-    record = {"key": key, "digest": config_digest(config),
+    record = {"key": key, "of": of, "digest": config_digest(config),
               "notes": [[str(n), n.kind, n.severity] for n in report]}
     fd, tmp = tempfile.mkstemp(prefix=".baked.", suffix=".tmp",
                                dir=os.path.dirname(os.path.abspath(key_path)))
@@ -102,6 +112,27 @@ def save_baked(folder, key: str, config) -> None:
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)
+    _forget_older(folder, key, of)
+
+
+def _forget_older(folder, key, of):
+    """Remove the bakes of ``of`` in ``folder`` kept under other keys (its key file
+    first, so none is read half removed)."""
+    for name in os.listdir(folder):
+        if not (name.startswith("baked_") and name.endswith(".key.json")) or \
+                name == os.path.basename(_paths(folder, key)[1]):
+            continue
+        key_path = os.path.join(folder, name)
+        try:
+            with open(key_path, encoding="utf-8") as f:
+                if json.load(f).get("of") != of:
+                    continue
+            stem = key_path[:-len(".key.json")]
+            for p in (key_path, stem + ".json", stem + ".npz"):
+                if os.path.exists(p):
+                    os.unlink(p)
+        except (OSError, ValueError, AttributeError):
+            continue                # not ours to judge: left as it is
 
 
 def load_baked(folder, key: str):

@@ -83,7 +83,7 @@ class BlendShot:
         snapshot folder whose kept bake of this .blend is read instead of baking;
         ``keep_bake``: one the bake is kept in (:mod:`.bake_cache`)."""
         from ..core.bake.bake_report import report_of
-        from .bake_cache import bake_key, load_baked, save_baked
+        from .bake_cache import bake_key, bake_of, load_baked, save_baked
         from .scene_config import config_from_scene
         key = bake_key(self.scene) if self.source.blend and (
             self.reuse_bake or self.keep_bake) else None      # opened from its file
@@ -94,7 +94,7 @@ class BlendShot:
         if config is None:
             config = config_from_scene(self.scene, self.on_bake)
             if self.keep_bake and key:
-                save_baked(self.keep_bake, key, config)
+                save_baked(self.keep_bake, key, config, bake_of(self.scene))
         report = report_of(config)
         if self.on_bake is not None:
             for note in report:

@@ -129,3 +129,21 @@ def test_the_blend_open_in_a_session_is_baked_as_it_is(tmp_path, monkeypatch):
     shot = ShotSource().open((1, 8), reuse_bake=folder, keep_bake=folder)
     monkeypatch.setattr(scene_config, "config_from_scene", lambda *a: "baked")
     assert shot.config == "baked"
+
+
+def test_a_new_bake_of_a_changed_blend_replaces_its_older_one(tmp_path):
+    """The snapshot pass of a .blend saved again keeps the new bake and removes the
+    older one of the same file and scene; another .blend's bake in the folder stays."""
+    blend, other = saved_crowd(tmp_path / "crowd.blend"), tmp_path / "other.blend"
+    folder = tmp_path / "snaps"
+    folder.mkdir()
+    baked(saved_crowd(other), keep_bake=folder)
+    baked(blend, keep_bake=folder)
+    kept = sorted(p.name for p in folder.glob("baked_*"))
+    assert len(kept) == 6
+    saved_crowd(blend, seed=4)
+    want = baked(blend, keep_bake=folder)
+    now = sorted(p.name for p in folder.glob("baked_*"))
+    assert len(now) == 6 and now != kept            # one replaced, the other's kept
+    assert config_digest(baked(blend, reuse_bake=folder)) == config_digest(want)
+    assert len(set(now) & set(kept)) == 3
