@@ -13,8 +13,11 @@ that deep in a 540-pixel image); LODs off: the full mesh for every agent. Prints
 * skinned vertices per second on a 2,000-agent full-mesh frame: a plain
   instanced-skinning prototype (per-instance attributes, no agent texture, no draw
   lists; moderngl only), this renderer's draw alone, and the real work (pose and
-  local-pose upload + instance updates + skinning-rows compute shader + draw); and
-  the vertex stage alone (rasterizer discard) of the prototype and the draw;
+  local-pose upload + instance updates + skinning-rows compute shader + agent gather
+  + draw); and the vertex stage alone (rasterizer discard) of the prototype and the
+  draw; with moderngl the same for a renderer reading its agents from the agent
+  textures (``agent_feed="texture"``, as Blender's ``gpu`` module must;
+  ``real_work_fraction_texture_feed``);
 * ms per frame for 1k / 10k / 65k agents (``--agents`` for others, 1M say) with LODs
   on and off (GPU side: sync +
   draw + finish; ``Crowd.step`` on the CPU is shown apart, see core_frame.py);
@@ -228,42 +231,58 @@ class Prototype:
 
 def throughput(backend, size, rounds, rng) -> dict:
     """Skinned vertices per second on the full-mesh throughput frame, best of
-    ``rounds`` interleaved rounds (the machine is shared: interleaving keeps the three
+    ``rounds`` interleaved rounds (the machine is shared: interleaving keeps the
     figures under the same load): the plain prototype, this renderer's draw alone,
-    and one real frame (request, step, sync, draw; the rate counts sync + draw)."""
-    crowd = build(THROUGHPUT_AGENTS, lods=False)
-    r = make_renderer(crowd.view, backend, size)
+    and one real frame (request, step, sync, draw; the rate counts sync + draw). With
+    moderngl the renderer feeds its agents as per-instance attributes (the default) and
+    a second one, of a second crowd driven alike, reads them from the agent textures
+    (``agent_feed="texture"``, Blender's way): the ``_texture`` figures."""
+    feeds = {"": {}}
+    if backend == "moderngl":
+        feeds["_texture"] = {"agent_feed": "texture"}
+    sides = {}
+    for suffix, kw in feeds.items():
+        crowd = build(THROUGHPUT_AGENTS, lods=False)
+        sides[suffix] = crowd, make_renderer(crowd.view, backend, size, **kw)
+    crowd, r = sides[""]
     print(f"gpu_frame: {backend} on {r.device}, {size[0]}x{size[1]}, {STREAMS} streams, "
           f"M={M}, {SLOTS} slots busy, {BONES} bones, GPU skinning", flush=True)
     camera = frame_crowd(crowd, aspect=size[0] / size[1])
-    frames(crowd, r, camera, 1, rng)                           # fill the slots, warm up
+    for c, rr in sides.values():
+        frames(c, rr, camera, 1, rng)                          # fill the slots, warm up
     ctx = getattr(r, "ctx", None)                 # a moderngl context: the prototype too
     proto = Prototype(ctx, crowd, camera, size) if ctx is not None else None
-    best = dict.fromkeys(("prototype", "draw_only", "real_work", "prototype_vertex_stage",
-                          "draw_vertex_stage"), 0.0)
+    best = dict.fromkeys(("prototype", "prototype_vertex_stage")
+                         + tuple(k + suffix for suffix in sides
+                                 for k in ("draw_only", "real_work", "draw_vertex_stage")), 0.0)
 
-    def draw_rate():
+    def draw_rate(rr):
         t = time.perf_counter()
-        r.render(camera)
-        r.finish()
-        return r.stats.vertices / (time.perf_counter() - t)
+        rr.render(camera)
+        rr.finish()
+        return rr.stats.vertices / (time.perf_counter() - t)
+
+    def keep(key, value):
+        best[key] = max(best[key], value)
 
     for _ in range(rounds):
         if proto is not None:
-            best["prototype"] = max(best["prototype"], proto.vertices / proto.seconds())
-        best["draw_only"] = max(best["draw_only"], draw_rate())
-        real = frames(crowd, r, camera, 1, rng, warm=0)
-        best["real_work"] = max(best["real_work"], real["vertices"] / real["gpu_ms"] * 1e3)
+            keep("prototype", proto.vertices / proto.seconds())
+        for suffix, (c, rr) in sides.items():
+            keep("draw_only" + suffix, draw_rate(rr))
+            real = frames(c, rr, camera, 1, rng, warm=0)
+            keep("real_work" + suffix, real["vertices"] / real["gpu_ms"] * 1e3)
         if proto is not None:          # the vertex stage alone: rasterizer discard
             ctx.enable(ctx.RASTERIZER_DISCARD)
-            best["prototype_vertex_stage"] = max(best["prototype_vertex_stage"],
-                                                 proto.vertices / proto.seconds())
-            best["draw_vertex_stage"] = max(best["draw_vertex_stage"], draw_rate())
+            keep("prototype_vertex_stage", proto.vertices / proto.seconds())
+            for suffix, (_, rr) in sides.items():
+                keep("draw_vertex_stage" + suffix, draw_rate(rr))
             ctx.disable(ctx.RASTERIZER_DISCARD)
     if proto is not None:
         proto.release()
     device = r.device
-    r.release()
+    for _, rr in sides.values():
+        rr.release()
     return best, device
 
 
@@ -516,6 +535,12 @@ def main(argv=None):
         print(f"  vertex stage alone (rasterizer discard): plain prototype "
               f"{best['prototype_vertex_stage'] / 1e6:.1f} M, this renderer's draw "
               f"{best['draw_vertex_stage'] / 1e6:.1f} M skinned vertices/s", flush=True)
+    texture = best.get("real_work_texture") or None
+    if texture:
+        print(f"  agents read from textures instead (agent_feed='texture', Blender's way): "
+              f"draw only {best['draw_only_texture'] / 1e6:.1f} M, real work "
+              f"{texture / 1e6:.1f} M = {texture / limit:.0%}, vertex stage "
+              f"{best['draw_vertex_stage_texture'] / 1e6:.1f} M", flush=True)
     table = sizes(backend, size, args.quick, rng, counts)
     big = table[65_000, True]
     ratio = big["bytes"] / big["minimum"]
@@ -539,6 +564,8 @@ def main(argv=None):
         "real_work_vertices_per_s": real, "real_work_fraction": real / limit,
         "vertex_stage_prototype_per_s": best["prototype_vertex_stage"] or None,
         "vertex_stage_draw_per_s": best["draw_vertex_stage"] or None,
+        "real_work_fraction_texture_feed": texture / limit if texture else None,
+        "vertex_stage_draw_texture_feed_per_s": best.get("draw_vertex_stage_texture") or None,
         "ms_per_frame": {f"{a}_{'lod' if lods else 'full'}": round(v["gpu_ms"], 2)
                          for (a, lods), v in table.items()},
         "step_ms_65k": round(big["step_ms"], 2),

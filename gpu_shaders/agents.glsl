@@ -34,11 +34,10 @@ int instance_agent(int instance)
   return texelFetch(agent_list_tex, linear_texel(u_draw.x + instance, width), 0).r;
 }
 
-Agent agent_record(int agent)
+/* The agent record of its first two texels `a`, `b` (however they were read: from
+ * agent_tex, or as per-instance attributes gathered from it, agent_gather_comp.glsl). */
+Agent agent_from_texels(vec4 a, vec4 b)
 {
-  ivec2 at = block_row_origin(agent, textureSize(agent_tex, 0).y, 3);
-  vec4 a = texelFetch(agent_tex, at, 0);
-  vec4 b = texelFetch(agent_tex, at + ivec2(1, 0), 0);
   int kind_offset = int(b.x);
   Agent r;
   r.position = a.xyz;
@@ -49,6 +48,13 @@ Agent agent_record(int agent)
   r.scale = b.z;
   r.color = unpack_rgb(b.w);
   return r;
+}
+
+Agent agent_record(int agent)
+{
+  ivec2 at = block_row_origin(agent, textureSize(agent_tex, 0).y, 3);
+  return agent_from_texels(texelFetch(agent_tex, at, 0),
+                           texelFetch(agent_tex, at + ivec2(1, 0), 0));
 }
 
 /* The agent's palette colour of column `column` (0..3) as packed by agent_record's

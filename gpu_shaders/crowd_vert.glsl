@@ -5,11 +5,15 @@
  * instance). Small LOD meshes are drawn as `copies` back-to-back copies per
  * instance (gl_VertexID / vertices picks the copy), so a CPU rasteriser pays its
  * per-instance cost once per several agents; copies past the draw's agent count
- * are moved outside the clip volume.
+ * are moved outside the clip volume. With AGENT_ATTRIBUTES (crowd_vertex.glsl) the
+ * draw's agents come as per-instance attributes, one an instance.
  */
 
 void main()
 {
+#if AGENT_ATTRIBUTES
+  crowd_vertex(agent_in_id);            /* one agent an instance: copies are 1 */
+#else
   ivec2 copy = divmod(gl_VertexID, u_draw.z);
   int instance = gl_InstanceID * u_draw.w + copy.x;
   if (instance >= u_draw.y) {
@@ -21,6 +25,7 @@ void main()
     return;
   }
   crowd_vertex(instance_agent(instance));
+#endif
   v_shadow = sun_coords(v_world);
   gl_Position = u_view_proj * vec4(v_world, 1.0);
 }

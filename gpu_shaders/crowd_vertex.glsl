@@ -32,9 +32,23 @@ vec3 agent_tint(vec3 base, vec3 tint)
 #define LOOKS 1
 #endif
 
+/* AGENT_ATTRIBUTES 1: the agent's texels come as per-instance vertex attributes
+ * (agent_in0..agent_in3 and agent_in_id, programs.AGENT_INPUTS: its two agent_tex
+ * texels, its palette texel, its look state texel and its id), gathered once a frame
+ * from agent_tex, look_tex and the draw list (agent_gather_comp.glsl), instead of read
+ * from those textures by every vertex (moderngl only: Blender's gpu module has no
+ * per-instance attributes). The values, so the pictures, are the same. */
+#ifndef AGENT_ATTRIBUTES
+#define AGENT_ATTRIBUTES 0
+#endif
+
 void crowd_vertex(int agent_id)
 {
+#if AGENT_ATTRIBUTES
+  Agent agent = agent_from_texels(agent_in0, agent_in1);
+#else
   Agent agent = agent_record(agent_id);
+#endif
   int row = agent_pose_row(agent.kind, agent.ref, agent.offset);
   vec3 p, n;
 #if INFLUENCES > 4
@@ -45,7 +59,11 @@ void crowd_vertex(int agent_id)
   vec4 weights2 = vec4(0.0);
 #endif
 #if LOOKS
+#if AGENT_ATTRIBUTES
+  vec4 look = agent_in3;
+#else
   vec4 look = look_texel(agent_id, 0);
+#endif
   float weight = look_weight(look);
   if (weight > 0.0) {
     skin_vertex_looking(agent_id, row, look_depth, bone_idx, bone_w, bones2, weights2, pos,
@@ -63,7 +81,11 @@ void crowd_vertex(int agent_id)
   v_color = agent_tint(col.rgb, agent.color);
   int column = int(col.a * 255.0 + 0.5);
   if (column < 4) {
+#if AGENT_ATTRIBUTES
+    float code = agent_in2[column];
+#else
     float code = agent_palette(agent_id, column);
+#endif
     if (code >= 0.0)
       v_color = unpack_rgb(code);
   }

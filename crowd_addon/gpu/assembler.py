@@ -67,6 +67,10 @@ def gl_sources(spec: ProgramSpec, defines: dict | None = None) -> dict:
     common = [f"uniform {_glsl(_TYPES, t, 'type')} {n};" for t, n in spec.push_constants]
     common += [f"layout(binding = {s}) uniform {_glsl(_SAMPLERS, t, 'sampler type')} {n};"
                for s, t, n in spec.samplers]
+    common += [f"layout(std430, binding = {s}) "
+               f"{_glsl(_QUALIFIERS, tuple(sorted(q)), 'buffer qualifiers')}buffer "
+               f"{n}_block {{ {_glsl(_TYPES, t, 'type')} {n}[]; }};"
+               for s, t, n, q in spec.storage_buffers]
     out = {}
     for stage, files in spec.stages().items():
         decl = list(common)
@@ -124,6 +128,9 @@ class BlenderShaderInfo:
 
 def blender_create_info(spec: ProgramSpec, defines: dict | None = None) -> BlenderShaderInfo:
     """The create-info calls for Blender's ``gpu`` module (sources without ``#version``)."""
+    if spec.storage_buffers:
+        raise CrowdError(f"shader program {spec.name!r}: Blender's gpu module declares no "
+                         f"storage buffers; it is a moderngl program")
     defs = _check_defines(spec, defines or {})
     calls = [("define", (k, v), {}) for k, v in defs.items()]
     calls += [("push_constant", (t, n), {}) for t, n in spec.push_constants]

@@ -18,20 +18,28 @@ import numpy as np
 from ..core.base.errors import CrowdError
 from .assembler import gl_sources
 from .frame_plan import DRAW_SAMPLERS, SKIN_SAMPLERS, TextureSpec
-from .programs import CROWD_DRAW, LOOK_TURNS, SCENE_DRAW, SKIN_ROWS, for_influences
+from .programs import (AGENT_GATHER, AGENT_INPUTS, AGENT_RECORD_TEXELS, CROWD_DRAW,
+                       GATHER_GROUP, LOOK_TURNS, SCENE_DRAW, SKIN_ROWS, for_influences,
+                       with_agent_attributes)
 from .renderer import CrowdRenderer
 
-__all__ = ["ModernGLRenderer", "GL_VERSION"]
+__all__ = ["ModernGLRenderer", "GL_VERSION", "AGENT_FEEDS"]
 
 GL_VERSION = 430
 _FORMATS = {"RGBA32F": (4, "f4"), "R32I": (1, "i4")}
+#: How a draw's vertex stage gets its agents' records: read from the agent textures by
+#: every vertex, or as per-instance vertex attributes gathered once a frame
+#: (docs/gpu.md, *Two feeds*).
+AGENT_FEEDS = ("attributes", "texture")
+_RECORD_BYTES = AGENT_RECORD_TEXELS * 16
 
 
 class _Mesh:
     """GL objects of one (skeleton, LOD) proxy: vertex arrays for drawing (indexed
     triangles, ``copies`` agents an instance; one per draw program variant, made when
-    first drawn: with and without shadows, sRGB-encoded or linear) and for
-    transform-feedback capture (the first copy's vertices, one agent an instance)."""
+    first drawn: with and without shadows, sRGB-encoded or linear, its agents read
+    from textures or fed as attributes) and for transform-feedback capture (the first
+    copy's vertices, one agent an instance)."""
 
     def __init__(self, ctx, buffers, copies, draw_program, capture_program):
         self.ctx, self.buffers, self.copies = ctx, buffers, copies
@@ -86,17 +94,28 @@ class ModernGLRenderer(CrowdRenderer):
         the mean of its k x k samples, by :meth:`read_image`). Not multisampling:
         llvmpipe rasterises a multisampled target's many sub-pixel crowd triangles at
         about 2.5 times the cost (docs/gpu.md, "Anti-aliasing").
+    agent_feed : how the draws of meshes drawn one agent an instance get their agents'
+        records (:data:`AGENT_FEEDS`): ``"attributes"`` (default), gathered once a frame
+        into per-instance vertex attributes, or ``"texture"``, read by every vertex from
+        the agent, look and list textures as Blender's ``gpu`` module must. The same
+        pictures; docs/gpu.md, *Two feeds*.
     """
 
     MAX_ROW_WRITES = 1024       # a few hundred small writes cost less than whole blocks
 
     def __init__(self, view, ctx, size=(640, 360), light=(0.4, -0.6, 0.8, 0.35),
-                 culling=True, owns_context=False, samples=0, shadows=False, lod=True):
+                 culling=True, owns_context=False, samples=0, shadows=False, lod=True,
+                 agent_feed="attributes"):
         import moderngl
         self._mgl = moderngl
         if ctx.version_code < GL_VERSION:
             raise CrowdError(f"moderngl renderer: needs OpenGL 4.3, the context has "
                              f"{ctx.version_code / 100:.1f}")
+        if agent_feed not in AGENT_FEEDS:
+            raise CrowdError(f"moderngl renderer: agent_feed must be one of "
+                             f"{', '.join(AGENT_FEEDS)}, got {agent_feed!r}")
+        self.agent_feed = agent_feed
+        self._records, self._records_fresh = None, False
         self.ctx, self._owns_context = ctx, bool(owns_context)
         self.size = (int(size[0]), int(size[1]))
         self._programs = {}
@@ -148,6 +167,7 @@ class ModernGLRenderer(CrowdRenderer):
 
     # ---------------------------------------------------------------- primitives
     def _create_texture(self, spec):
+        self._records_fresh = False
         components, dtype = _FORMATS[spec.format]
         tex = self.ctx.texture(spec.size, components, dtype=dtype)
         tex.filter = (self._mgl.NEAREST, self._mgl.NEAREST)
@@ -156,6 +176,7 @@ class ModernGLRenderer(CrowdRenderer):
         return tex
 
     def _write(self, texture, region) -> int:
+        self._records_fresh = False         # an agent, look or list texel may change
         texture.write(np.ascontiguousarray(region.data),
                       viewport=(region.x, region.y, region.width, region.height))
         return region.nbytes
@@ -184,8 +205,11 @@ class ModernGLRenderer(CrowdRenderer):
     def _create_mesh(self, buffers, copies):
         n = buffers.influences
         spec = for_influences(CROWD_DRAW, n)
-        return _Mesh(self.ctx, buffers, copies,
-                     lambda defines: self._program(spec, {"INFLUENCES": n, **defines}),
+
+        def draw_program(defines):
+            fed = with_agent_attributes(spec) if defines["AGENT_ATTRIBUTES"] else spec
+            return self._program(fed, {"INFLUENCES": n, **defines})
+        return _Mesh(self.ctx, buffers, copies, draw_program,
                      self._program(spec, {"INFLUENCES": n, "SHADOWS": 0, "ENCODE_SRGB": 0},
                                    True))
 
@@ -234,13 +258,49 @@ class ModernGLRenderer(CrowdRenderer):
 
     def _draw(self, mesh, draw):
         looks = int(self.draw_looks)           # LOOKS 0: no agent of this call looks
-        program, vao = mesh.draw({**self._fragment_defines(), "LOOKS": looks})
+        # one agent an instance: its record can be a per-instance attribute
+        fed = self.agent_feed == "attributes" and mesh.copies == 1
+        program, vao = mesh.draw({**self._fragment_defines(), "LOOKS": looks,
+                                  "AGENT_ATTRIBUTES": int(fed)})
         self._bind(program, draw.uniforms, self.textures["lists"])
+        if fed:
+            self._feed(vao, draw.uniforms["u_draw"][0])
+            self.stats.attribute_draws += 1
         if mesh.cull:
             self.ctx.enable(self._mgl.CULL_FACE)
         vao.render(self._mgl.TRIANGLES, instances=draw.instances)
         if mesh.cull:
             self.ctx.disable(self._mgl.CULL_FACE)
+
+    def _feed(self, vao, base):
+        """Bind the gathered records of the draw list entries from ``base`` on as
+        ``vao``'s per-instance :data:`~.programs.AGENT_INPUTS`."""
+        records = self._gathered()
+        for k, (slot, kind, _) in enumerate(AGENT_INPUTS):
+            cls, fmt = ("i", "i") if kind == "INT" else ("f", "4f")
+            vao.bind(slot, cls, records, fmt, offset=(base * AGENT_RECORD_TEXELS + k) * 16,
+                     stride=_RECORD_BYTES, divisor=1)
+
+    def _gathered(self):
+        """The records buffer (:data:`~.programs.AGENT_GATHER`), gathered again when an
+        agent, look or list texel was written since it last was: one compute pass a
+        frame over the entries of the draw lists, whatever the number of draws."""
+        lists = self.plan.lists
+        if self._records is None:
+            self._records = self.ctx.buffer(reserve=lists.width * lists.height
+                                            * _RECORD_BYTES)
+        if not self._records_fresh:
+            entries = max((g.base + g.count for g in lists.groups), default=0)
+            if entries:
+                prog = self._program(AGENT_GATHER, {})
+                _set_uniforms(prog, {"u_draw": (0, entries, 0, 0)})
+                for slot, _, name in AGENT_GATHER.samplers:
+                    self.textures[DRAW_SAMPLERS[name]].use(slot)
+                self._records.bind_to_storage_buffer(0)
+                prog.run(-(-entries // GATHER_GROUP))
+                self.ctx.memory_barrier()
+            self._records_fresh = True
+        return self._records
 
     def _capture(self, mesh, capture) -> np.ndarray:
         n, count = capture.agents.size, mesh.buffers.vertex_count
@@ -354,7 +414,7 @@ class ModernGLRenderer(CrowdRenderer):
         attached context belongs to its owner and stays)."""
         objects = [*self.textures.values(), self.fbo, self._resolved, *self._attachments,
                    *self._programs.values(), *self._lit, self._shadow_view,
-                   *(self._resolve or ())]
+                   *(self._resolve or ()), self._records]
         if self._shadow_map is not None:
             objects += [self._shadow_map.fbo, self._shadow_map.texture,
                         self._shadow_map.saved]

@@ -16,7 +16,8 @@ from importlib import resources
 
 __all__ = ["SHADER_DIR", "Interface", "ProgramSpec", "CROWD_DRAW", "SCENE_DRAW", "SKIN_ROWS",
            "ROW_UPLOAD", "LOOK_TURNS", "AGENT_TEXELS", "LOOK_TURN_TEXELS", "SKIN_GROUP",
-           "UPLOAD_GROUP", "LOOK_GROUP", "WIDE_INPUTS", "for_influences"]
+           "UPLOAD_GROUP", "LOOK_GROUP", "WIDE_INPUTS", "for_influences", "AGENT_GATHER",
+           "AGENT_INPUTS", "AGENT_RECORD_TEXELS", "GATHER_GROUP", "with_agent_attributes"]
 
 #: gpu_shaders/ (importlib.resources): the resource package beside crowd_addon, at the
 #: top of the repository, of a wheel and of the Blender extension (there it is
@@ -34,6 +35,11 @@ UPLOAD_GROUP = 64
 LOOK_TURN_TEXELS = 24
 #: Agents per compute work group of the look turns shader.
 LOOK_GROUP = 64
+#: vec4 per draw list entry in the gathered agent records (agent_gather_comp.glsl):
+#: the three agent texels, the look state texel and the agent id.
+AGENT_RECORD_TEXELS = 5
+#: Draw list entries per compute work group of the agent gather shader.
+GATHER_GROUP = 64
 
 
 @dataclass(frozen=True)
@@ -57,6 +63,8 @@ class ProgramSpec:
     with ``main`` last. ``vertex_in``/``fragment_out``: ``(slot, type, name)``;
     ``push_constants``: ``(type, name)``; ``samplers``: ``(slot, sampler type,
     name)``; ``images``: ``(slot, format, image type, name, qualifiers)``;
+    ``storage_buffers``: ``(slot, element type, name, qualifiers)``, an unsized array
+    of that type (OpenGL only: Blender's ``gpu`` module declares none);
     ``defines``: names the caller must give values for (e.g. ``MAX_BONES``).
     """
 
@@ -69,6 +77,7 @@ class ProgramSpec:
     push_constants: tuple = ()
     samplers: tuple = ()
     images: tuple = ()
+    storage_buffers: tuple = ()
     fragment_out: tuple = ()
     local_group_size: tuple = ()
     defines: tuple = ()
@@ -136,6 +145,21 @@ def _wide(spec: ProgramSpec) -> ProgramSpec:
     return replace(spec, name=f"{spec.name}_wide", vertex_in=spec.vertex_in + WIDE_INPUTS)
 
 
+#: The per-instance inputs of a draw program fed its agents as vertex attributes
+#: (``AGENT_ATTRIBUTES`` 1, gpu_shaders/crowd_vertex.glsl): the records
+#: :data:`AGENT_GATHER` writes, :data:`AGENT_RECORD_TEXELS` vec4 an instance.
+AGENT_INPUTS = ((8, "VEC4", "agent_in0"), (9, "VEC4", "agent_in1"), (10, "VEC4", "agent_in2"),
+                (11, "VEC4", "agent_in3"), (12, "INT", "agent_in_id"))
+
+
+@lru_cache(maxsize=None)
+def with_agent_attributes(spec: ProgramSpec) -> ProgramSpec:
+    """``spec`` (a draw program, :func:`for_influences` applied) reading each
+    instance's agent from :data:`AGENT_INPUTS`: ``_attr`` added to its name; compile it
+    with ``AGENT_ATTRIBUTES`` 1."""
+    return replace(spec, name=f"{spec.name}_attr", vertex_in=spec.vertex_in + AGENT_INPUTS)
+
+
 #: Local poses made skinning rows on the GPU, transition slots blended on the way
 #: (paper s.4.5).
 SKIN_ROWS = ProgramSpec(
@@ -174,4 +198,16 @@ LOOK_TURNS = ProgramSpec(
               (6, "FLOAT_2D", "look_target_tex"), (7, "FLOAT_2D", "look_chain_tex")),
     images=((0, "RGBA32F", "FLOAT_2D", "look_turn_img", ("WRITE",)),),
     local_group_size=(LOOK_GROUP,),
+)
+
+#: The draw lists' agent records gathered for the per-instance attribute feed
+#: (moderngl, :func:`with_agent_attributes`): ``u_draw = (0, entries, 0, 0)``.
+AGENT_GATHER = ProgramSpec(
+    name="agent_gather",
+    compute=("block_layout.glsl", "agents.glsl", "agent_gather_comp.glsl"),
+    push_constants=(("IVEC4", "u_draw"),),
+    samplers=((1, "FLOAT_2D", "agent_tex"), (2, "INT_2D", "agent_list_tex"),
+              (5, "FLOAT_2D", "look_tex")),
+    storage_buffers=((0, "VEC4", "records", ("WRITE",)),),
+    local_group_size=(GATHER_GROUP,),
 )
