@@ -49,7 +49,8 @@ for name in ("lod", "frame"):
     if lines:
         figures[name] = json.loads(lines[-1])
 keep = {"lod": ("lod_speedup_65k", "frame_ms_65k", "lod_image_error_max"),
-        "frame": ("device", "real_work_fraction", "ms_per_frame", "look_at_overhead",
+        "frame": ("device", "real_work_fraction", "real_work_fraction_texture_feed",
+                  "ms_per_frame", "look_at_overhead",
                   "look_at_ms_65k", "fps_65k_lod")}
 print(json.dumps({"device": figures["device"],
                   **{f"{n}.{k}": figures.get(n, {}).get(k) for n, ks in keep.items()
