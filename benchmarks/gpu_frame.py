@@ -6,9 +6,12 @@ the CPU uploads local poses, paper s.4.5),
 82-bone ``core.synthetic`` humanoid with ``humanoid_mesh``; agents on a 0.9 m grid
 seen by the camera that frames the whole crowd (``core.camera.frame_crowd``).
 LODs on: ``CrowdConfig.add_mesh``'s defaults -- the mesh (2,058 vertices), 25 % and
-6 % of its triangles and the 8-vertex card (``core.levels.card_lod``) -- switched at the
-default ``lod_distances`` (30, 90, 150 m in the 1080-pixel reference view, so half
-that deep in a 540-pixel image); LODs off: the full mesh for every agent. Prints:
+6 % of its triangles (1,135 and 639), a box per body part and the boxes joined, each
+kept only where its silhouette stays within a pixel of the full mesh's over the clips
+(this humanoid's box level departs 2 px at the 30 px it would switch in at, so the 6 %
+level is drawn down to 15 px, then the joined boxes, 168 vertices) -- switched by the
+agents' projected height (``core.lod.DEFAULT_LOD_PIXELS``); LODs off: the full mesh for
+every agent. Prints:
 
 * skinned vertices per second on a 2,000-agent full-mesh frame: a plain
   instanced-skinning prototype (per-instance attributes, no agent texture, no draw
@@ -62,7 +65,6 @@ sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
 from crowd_addon.core import ClipPlayer, Crowd, CrowdConfig  # noqa: E402
 from crowd_addon.core.runtime.look_at import LookRig, LookTarget  # noqa: E402
-from crowd_addon.core.meshes.levels import CARD  # noqa: E402
 from crowd_addon.core.authoring.synthetic import humanoid, humanoid_mesh, periodic_clip  # noqa: E402
 from crowd_addon.gpu.backends import BACKENDS, make_renderer  # noqa: E402
 from crowd_addon.gpu.programs import AGENT_TEXELS  # noqa: E402
@@ -98,7 +100,10 @@ def build(agents: int, lods: bool, looks: bool = False) -> Crowd:
     cfg.add_agents(agents, positions=np.c_[grid * 0.9, np.zeros(agents)],
                    headings=rng.uniform(-0.4, 0.4, agents) - np.pi / 2)
     mesh = humanoid_mesh(sk)
-    cfg.add_mesh(mesh, lods=(0.25, 0.06, CARD) if lods else ())
+    if lods:
+        cfg.add_mesh(mesh)
+    else:
+        cfg.add_mesh(mesh, lods=())
     return Crowd(cfg, skinning="gpu")
 
 
