@@ -149,7 +149,11 @@ class ModernGLRenderer(CrowdRenderer):
         except Exception as e:                        # moderngl raises plain Exception
             raise CrowdError(f"moderngl renderer: cannot create a headless {backend} "
                              f"OpenGL {GL_VERSION / 100:.1f} context ({e})") from None
-        return cls(view, ctx, size, owns_context=True, **kwargs)
+        try:
+            return cls(view, ctx, size, owns_context=True, **kwargs)
+        except BaseException:
+            ctx.release()                 # nobody else will
+            raise
 
     @classmethod
     def attach(cls, view, size=(640, 360), **kwargs):

@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core.base.errors import CrowdError
 from ..core.runtime.pose_storage import TextureRegion
 from .frame_plan import Draw, FramePlan, FrameStats, TextureSpec, gl_matrix
 from .programs import LOOK_GROUP
@@ -59,7 +60,8 @@ class CrowdRenderer:
     ----------
     view : the crowd's :class:`~crowd_addon.core.runtime.frame_view.FrameView` (``crowd.view``);
         call :meth:`sync` after each ``crowd.step()``. The renderer consumes the
-        crowd's upload regions and skinning batches: one renderer per crowd.
+        crowd's upload regions and skinning batches: one renderer per crowd (a sync
+        after another reader took them is a CrowdError: it would draw stale poses).
     max_texture_size : the GPU's largest texture side in texels.
     light : (x, y, z, ambient): direction towards the light and ambient level.
     culling : leave out agents outside the camera's view.
@@ -123,6 +125,7 @@ class CrowdRenderer:
         if work is not None:
             self._skin(work)
         self._looks_turned()
+        self._takes = view.takes                  # the crowd's changes seen so far
 
     # -------------------------------------------------------------------- frame
     def sync(self) -> FrameStats:
@@ -131,6 +134,11 @@ class CrowdRenderer:
         changed, and with GPU skinning the skinning-rows pass; returns the bytes
         sent (:attr:`stats`)."""
         plan, s = self.plan, FrameStats()
+        if self.view.takes != self._takes:
+            raise CrowdError("another renderer (or reader) of this crowd took its pose "
+                             "changes since this renderer last synced, so it would draw "
+                             "stale poses: a crowd's changes go to one renderer; release "
+                             "the other, or draw a second Crowd of the same configuration")
         written = self._write_rows(self.textures[plan.upload_target], plan.layout.height,
                                    plan.take_pose_regions())
         if plan.on_gpu:
@@ -146,6 +154,7 @@ class CrowdRenderer:
         if work is not None:
             s.batch_bytes, s.skinned_rows = self._skin(work), work.count
         self._looks_turned()
+        self._takes = self.view.takes
         self.stats = s
         return s
 

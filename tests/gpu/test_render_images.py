@@ -203,3 +203,27 @@ def test_palettes_colour_their_material_per_agent(gl, h, renderer):
         own, other = ((seen == 2).sum(), (seen == -2).sum()) if team[a] == 0 else \
             ((seen == -2).sum(), (seen == 2).sum())
         assert own >= 5 and own > 3 * other, (a, own, other)
+
+
+def test_a_renderer_refuses_to_sync_after_another_took_the_crowds_changes(h, renderer):
+    """A crowd's pose changes go to the renderer that takes them: a second renderer of
+    the same crowd that syncs too takes some of them, and the first would draw stale
+    poses (1,077 of 38,400 pixels off after one step, before this was refused). So the
+    first one's next sync is an error; the one that took them draws the crowd as core
+    skins it."""
+    from crowd_addon.core.base.errors import CrowdError
+    cfg = h.make_config(M=8, agents=12, lod_distances=(1e3, 2e3, 3e3))
+    crowd = h.Crowd(cfg)
+    first, second = renderer(crowd), renderer(crowd)
+    for r in (first, second):          # made at the same frame: both have everything
+        r.sync()
+    crowd.step()
+    second.sync()
+    crowd.step()
+    with pytest.raises(CrowdError, match="took its pose changes since this renderer last"):
+        first.sync()
+    second.sync()
+    everyone = np.arange(crowd.agents.count)
+    h.assert_close_relative(second.skinned_positions(everyone),
+                            h.world_reference(crowd, everyone, cfg.meshes["fan"][0]),
+                            rtol=1e-5)

@@ -6,7 +6,7 @@ layout and changes, the skinning mode, agents and what changed about them, poses
 demand and the event tags the streams crossed. Arrays it returns are read-only views
 or fresh copies; nothing here changes the simulation except the two ``take_*`` calls,
 which hand over (and so clear) what changed since the last take: a crowd has one GPU
-reader.
+reader (:attr:`FrameView.takes` lets a renderer tell when another took them).
 """
 
 from __future__ import annotations
@@ -24,6 +24,10 @@ class FrameView:
 
     def __init__(self, crowd):
         self._crowd = crowd
+        #: how many takes handed over changes (:meth:`take_upload_regions`,
+        #: :meth:`take_skinning_batch` returning rows): a renderer that finds more than
+        #: its own knows another reader took rows it never saw
+        self.takes = 0
 
     # ------------------------------------------------------------------- sizes
     @property
@@ -201,9 +205,13 @@ class FrameView:
     def take_upload_regions(self) -> list:
         """:class:`~.pose_storage.TextureRegion` rectangles of the CPU-side texture
         written since the last take (which they clear)."""
-        return self._crowd.storage.take_dirty_regions()
+        regions = self._crowd.storage.take_dirty_regions()
+        self.takes += bool(regions)
+        return regions
 
     def take_skinning_batch(self):
         """The pose rows the GPU must write now (:class:`~.skinning_modes.SkinningBatch`)
         with GPU skinning; rows pending since the last take. An error on the CPU mode."""
-        return self._crowd.skinning.take_batch()
+        batch = self._crowd.skinning.take_batch()
+        self.takes += bool(len(batch))
+        return batch
