@@ -136,10 +136,14 @@ class FramePlan:
         agent count must stay below it.
     lod : False draws every agent with its full mesh (``crowd preview --lod off``: the
         judge of what the levels lose).
+    copies : small meshes drawn as several copies an instance
+        (:func:`~.proxies.copies_per_instance`, for a draw that reads its agents from
+        textures); False: one agent an instance, every mesh (the agents fed as
+        per-instance attributes, docs/gpu.md, *Two feeds*).
     """
 
     def __init__(self, view, max_texture_size: int, max_int: int | None = None,
-                 lod: bool = True):
+                 lod: bool = True, copies: bool = True):
         lay = view.layout
         limit = int(max_texture_size)
         if max(lay.width, lay.height) > limit:
@@ -150,6 +154,7 @@ class FramePlan:
             raise CrowdError(f"this renderer draws at most {max_int - 1} agents, the crowd "
                              f"has {view.agent_count}")
         self.view, self.layout, self.max_texture_size = view, lay, limit
+        self.copies = bool(copies)
         self.on_gpu = bool(view.skinning.on_gpu)
         #: the texture core's upload regions go to
         self.upload_target = "local" if self.on_gpu else "pose"
@@ -201,8 +206,11 @@ class FramePlan:
 
     def meshes(self) -> dict:
         """``{(body, lod): (ProxyBuffers, copies an instance)}`` of every level."""
-        return {(k, lod): (buf, copies_per_instance(buf.vertex_count))
+        return {(k, lod): (buf, self._copies(buf))
                 for k, levels in enumerate(self.proxies) for lod, buf in enumerate(levels)}
+
+    def _copies(self, buf) -> int:
+        return copies_per_instance(buf.vertex_count) if self.copies else 1
 
     @property
     def batch_size(self) -> tuple:
@@ -307,7 +315,7 @@ class FramePlan:
     def _draw(self, group, lod: int, common: dict) -> Draw:
         """The instanced call drawing ``group``'s agents with level ``lod``."""
         buf = self.proxies[group.body][lod]
-        copies = copies_per_instance(buf.vertex_count)
+        copies = self._copies(buf)
         return Draw((group.body, lod), -(-group.count // copies), group.count,
                     group.count * buf.vertex_count,
                     {**common, "u_draw": (group.base, group.count, buf.vertex_count, copies)})

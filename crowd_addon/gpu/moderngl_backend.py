@@ -94,11 +94,12 @@ class ModernGLRenderer(CrowdRenderer):
         the mean of its k x k samples, by :meth:`read_image`). Not multisampling:
         llvmpipe rasterises a multisampled target's many sub-pixel crowd triangles at
         about 2.5 times the cost (docs/gpu.md, "Anti-aliasing").
-    agent_feed : how the draws of meshes drawn one agent an instance get their agents'
-        records (:data:`AGENT_FEEDS`): ``"attributes"`` (default), gathered once a frame
-        into per-instance vertex attributes, or ``"texture"``, read by every vertex from
-        the agent, look and list textures as Blender's ``gpu`` module must. The same
-        pictures; docs/gpu.md, *Two feeds*.
+    agent_feed : how the draws get their agents' records (:data:`AGENT_FEEDS`):
+        ``"attributes"`` (default), gathered once a frame into per-instance vertex
+        attributes, every mesh drawn one agent an instance; or ``"texture"``, read by
+        every vertex from the agent, look and list textures, small meshes drawn several
+        agents an instance, as Blender's ``gpu`` module must. The same pictures;
+        docs/gpu.md, *Two feeds*.
     """
 
     MAX_ROW_WRITES = 1024       # a few hundred small writes cost less than whole blocks
@@ -136,8 +137,9 @@ class ModernGLRenderer(CrowdRenderer):
             colour.filter = (moderngl.NEAREST, moderngl.NEAREST)
             self._attachments += (ctx.renderbuffer(self.size, 4),)
             self._resolved = ctx.framebuffer(color_attachments=[self._attachments[2]])
+        # fed as attributes, every mesh is drawn one agent an instance (no copies)
         super().__init__(view, ctx.info["GL_MAX_TEXTURE_SIZE"], light, culling,
-                         shadows=shadows, lod=lod)
+                         shadows=shadows, lod=lod, copies=agent_feed == "texture")
 
     # ------------------------------------------------------------------ contexts
     @classmethod
@@ -262,8 +264,7 @@ class ModernGLRenderer(CrowdRenderer):
 
     def _draw(self, mesh, draw):
         looks = int(self.draw_looks)           # LOOKS 0: no agent of this call looks
-        # one agent an instance: its record can be a per-instance attribute
-        fed = self.agent_feed == "attributes" and mesh.copies == 1
+        fed = self.agent_feed == "attributes"        # then every mesh has copies 1
         program, vao = mesh.draw({**self._fragment_defines(), "LOOKS": looks,
                                   "AGENT_ATTRIBUTES": int(fed)})
         self._bind(program, draw.uniforms, self.textures["lists"])

@@ -68,6 +68,9 @@ class CrowdRenderer:
     shadows : cast the sun's shadows (:mod:`.shadows`): the scene and the agents the
         camera draws, onto both.
     max_int : integers the backend's int texture writes keep exact (None: all int32).
+    lod : False: every agent drawn with its full mesh (:meth:`set_lod`).
+    copies : draw small meshes several agents an instance (:class:`~.frame_plan.FramePlan`;
+        False for a backend that feeds its agents as per-instance attributes).
 
     Attributes
     ----------
@@ -84,7 +87,7 @@ class CrowdRenderer:
     MAX_ROW_WRITES = None
 
     def __init__(self, view, max_texture_size, light=(0.4, -0.6, 0.8, 0.35), culling=True,
-                 max_int=None, shadows=False, lod=True):
+                 max_int=None, shadows=False, lod=True, copies=True):
         self.view = view
         self.culling = bool(culling)
         self.light = tuple(float(v) for v in light)
@@ -94,7 +97,7 @@ class CrowdRenderer:
         self._scene_bounds = None
         #: (sun matrix bytes, the map's depth with the scene alone) once drawn
         self._shadow_scene = None
-        self.plan = FramePlan(view, max_texture_size, max_int, lod=lod)
+        self.plan = FramePlan(view, max_texture_size, max_int, lod=lod, copies=copies)
         #: the highest bind-pose point of any proxy (metres): the shadow casters' reach
         self._tallest = self.plan.max_scale * max(
             (float(buf.extent[1, 2]) for levels in self.plan.proxies for buf in levels),

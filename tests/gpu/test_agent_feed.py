@@ -1,9 +1,10 @@
-"""The moderngl backend's two agent feeds (docs/gpu.md, *Two feeds*): a draw of a mesh
-drawn one agent an instance reads its agents' records as per-instance vertex
-attributes gathered once a frame (``agent_feed="attributes"``, the default), or from the
-agent, look and list textures (``"texture"``, Blender's only way). Same GLSL, same
-values: the images are identical, frame after frame while agents change, and equal
-the CPU-skinned reference."""
+"""The moderngl backend's two agent feeds (docs/gpu.md, *Two feeds*): the draws read
+their agents' records as per-instance vertex attributes gathered once a frame, every
+mesh drawn one agent an instance (``agent_feed="attributes"``, the default), or from
+the agent, look and list textures, small meshes drawn several agents an instance
+(``"texture"``, Blender's only way). Same GLSL, same values: the images are
+identical, frame after frame while agents change, and equal the CPU-skinned
+reference."""
 
 from dataclasses import replace
 
@@ -27,8 +28,8 @@ def differing(a, b, level=12):
 
 def dressed_config(h, agents=21, lod_distances=FAR):
     """82 bones, so the humanoid body has 2,058 vertices (one agent an instance), and
-    every fifth agent a slim variant of 197 (five an instance: texture-fed). Shirts in
-    two palette colours, every third agent unique, the body's LODs."""
+    every fifth agent a slim variant of 197 (five an instance when read from textures).
+    Shirts in two palette colours, every third agent unique, the body's LODs."""
     from crowd_addon.core.authoring.synthetic import humanoid_mesh
     cfg = h.make_config(M=8, agents=agents, bones=82, spacing=1.2, lod_distances=lod_distances)
     cfg.add_variant(humanoid_mesh(cfg.skeletons["fan"], sides=3, rings=1, name="slim"),
@@ -84,7 +85,10 @@ def test_the_attribute_feed_draws_the_cpu_reference_and_the_texture_feeds_image(
     step(pairs)
     got = images(pairs, camera)
     (fed, fed_draws), (tex, tex_draws) = got["attributes"], got["texture"]
-    assert r.stats.draws > fed_draws >= 1 and tex_draws == 0          # both kinds of draw
+    assert fed_draws == r.stats.draws == 2 and tex_draws == 0      # the body and the slim
+    slim = (1, 0)                                                  # (body, level)
+    assert pairs["texture"][1].meshes[slim].copies == 5
+    assert r.meshes[slim].copies == 1                  # fed: one agent an instance
     assert np.array_equal(fed, tex)
     reference = h.reference_image(gl, crowd, camera, r.light, SIZE)
     assert differing(fed, reference) < 0.002

@@ -15,15 +15,17 @@ def differing(a, b, level=12):
     return float((np.abs(a.astype(int) - b.astype(int)).max(-1) > level).mean())
 
 
-def render(renderer, crowd, camera):
-    r = renderer(crowd, SIZE)
+def render(renderer, crowd, camera, **kw):
+    r = renderer(crowd, SIZE, **kw)
     r.render(camera)
     return r.read_image(), r
 
 
-def test_render_matches_cpu_skinning_and_a_wrong_offset_shows(gl, h, renderer):
-    # 15 agents: an odd count leaves a spare mesh copy in the last instance; the
-    # reference draws the full mesh, so keep LOD 0 in this small image
+@pytest.mark.parametrize("feed", ["attributes", "texture"])
+def test_render_matches_cpu_skinning_and_a_wrong_offset_shows(gl, h, renderer, feed):
+    # 15 agents: read from textures (Blender's way), an odd count leaves a spare mesh
+    # copy in the last instance; the reference draws the full mesh, so keep LOD 0 in
+    # this small image
     far = (1e3, 2e3, 3e3)
     cfg = h.make_config(M=8, agents=15, spacing=0.9, lod_distances=far)
     wrong = h.make_config(M=8, agents=15, spacing=0.9, lod_distances=far)
@@ -33,8 +35,9 @@ def test_render_matches_cpu_skinning_and_a_wrong_offset_shows(gl, h, renderer):
         for _ in range(5):
             c.step()
     camera = frame_crowd(crowd, aspect=SIZE[0] / SIZE[1])
-    image, r = render(renderer, crowd, camera)
-    image0, _ = render(renderer, crowd0, camera)
+    image, r = render(renderer, crowd, camera, agent_feed=feed)
+    image0, _ = render(renderer, crowd0, camera, agent_feed=feed)
+    assert r.meshes[0, 0].copies == (1 if feed == "attributes" else 2)
     reference = h.reference_image(gl, crowd, camera, r.light, SIZE)
     assert differing(image, reference) < 0.002
     assert differing(image0, reference) > 0.02
