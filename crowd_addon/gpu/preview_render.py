@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import re
+import shutil
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -80,6 +82,24 @@ def _check(config, out_dir, frames, size, mp4, backend) -> Path:
         raise CrowdError("the crowd has no proxy mesh to draw its agents with "
                          "(CrowdConfig.add_mesh)")
     return writable_dir(out_dir)
+
+
+#: the frames a run writes into its folder (``frame_<F>.png``): a later run replaces them
+FRAME_NAME = re.compile(r"frame_-?\d+\.png")
+
+
+def _replace_frames(out: Path, staged: Path) -> list:
+    """Move the frames of a finished run from ``staged`` into ``out``, then remove the
+    frames of the run before that this one did not write (a folder holds one run's
+    sequence); returns the new frames' paths. Other files of ``out`` stay."""
+    names = sorted(os.listdir(staged))
+    for name in names:
+        os.replace(staged / name, out / name)
+    staged.rmdir()
+    for name in set(os.listdir(out)) - set(names):
+        if FRAME_NAME.fullmatch(name) and (out / name).is_file():
+            (out / name).unlink()
+    return [str(out / name) for name in names]
 
 
 def _missing_folders(path: Path) -> list:
@@ -157,6 +177,9 @@ def render_preview(config, out_dir, frames: int, start: int | None = None,
         measured = []
     mp4_path = out / "preview.mp4" if mp4 else None
     partial = out / ".preview.partial.mp4"
+    # the frames go to a folder of their own until the run is done, so a run that
+    # fails leaves the frames of the run before as they were
+    staged = out / f".frames.partial-{os.getpid()}"
     made = _missing_folders(out)
     pngs, uploads, first, writer, done = [], [], crowd.view.frame, None, False
     # a frame's PNG, MP4 frame and on_image run in a thread while the next frame is
@@ -169,7 +192,7 @@ def render_preview(config, out_dir, frames: int, start: int | None = None,
 
     def encode(frame, image):
         t = time.perf_counter()
-        path = str(write_png(out / f"frame_{frame:04d}.png", image, _PNG_LEVEL))
+        path = str(write_png(staged / f"frame_{frame:04d}.png", image, _PNG_LEVEL))
         if writer is not None:
             writer.send(image)
         if on_image is not None:
@@ -183,6 +206,8 @@ def render_preview(config, out_dir, frames: int, start: int | None = None,
     try:
         renderer.set_scene(scene)
         output_dir(out)
+        shutil.rmtree(staged, ignore_errors=True)       # a run of this process killed
+        staged.mkdir()
         writer = _mp4_writer(partial, (w, h), config.fps) if mp4 else None
         for i in range(int(frames)):
             t = time.perf_counter()
@@ -217,6 +242,7 @@ def render_preview(config, out_dir, frames: int, start: int | None = None,
             writer = None
             os.replace(partial, mp4_path)
             seconds["write"] += time.perf_counter() - t
+        pngs = _replace_frames(out, staged)
         done = True
     except OSError as e:
         raise CrowdError(f"output folder {out}: cannot write "
@@ -235,8 +261,7 @@ def render_preview(config, out_dir, frames: int, start: int | None = None,
             partial.unlink()
         renderer.release()
         if not done:                  # nothing half-written: this run's frames go
-            for png in pngs:
-                Path(png).unlink(missing_ok=True)
+            shutil.rmtree(staged, ignore_errors=True)
             for folder in made:
                 try:
                     folder.rmdir()

@@ -168,6 +168,54 @@ def test_a_failed_render_removes_its_frames(config_path, tmp_path, capsys, monke
     assert sorted(os.listdir(out_dir)) == ["notes.txt"]
 
 
+def _frames(folder):
+    return {name: (folder / name).read_bytes() for name in sorted(os.listdir(folder))
+            if name.startswith("frame_")}
+
+
+def test_a_failed_rerun_keeps_the_frames_of_the_run_before(config_path, tmp_path, capsys,
+                                                           monkeypatch):
+    """Before: the re-run wrote over the earlier frames one by one, then its clean-up
+    removed the ones it had written, so the earlier run lost frames 0 and 1."""
+    from crowd_addon.gpu import preview_render
+    out_dir = tmp_path / "shot"
+    size = ("--width", 32, "--height", 32)
+    assert run(capsys, "--config", config_path, "--out", out_dir, "--frames", 4, *size)[0] == 0
+    before = _frames(out_dir)
+    assert len(before) == 4
+    real, calls = preview_render.write_png, []
+
+    def failing(path, *a, **k):
+        calls.append(path)
+        if len(calls) == 3:
+            raise OSError(28, "No space left on device")
+        return real(path, *a, **k)
+
+    monkeypatch.setattr(preview_render, "write_png", failing)
+    code, _, err = run(capsys, "--config", config_path, "--out", out_dir, "--frames", 4,
+                       "--samples", 0, *size)
+    assert code == 2 and "No space left on device" in err
+    assert _frames(out_dir) == before
+    assert sorted(os.listdir(out_dir)) == sorted(before)          # no partial folder left
+
+
+def test_a_rerun_replaces_the_frames_of_the_run_before(config_path, tmp_path, capsys):
+    """The folder holds one run's frames: a shorter re-run leaves none of the longer
+    run's later frames beside its own (a sequence of two runs), and the user's own
+    files stay."""
+    out_dir = tmp_path / "shot"
+    size = ("--width", 32, "--height", 32)
+    assert run(capsys, "--config", config_path, "--out", out_dir, "--frames", 4, *size)[0] == 0
+    (out_dir / "notes.txt").write_text("mine")
+    assert run(capsys, "--config", config_path, "--out", out_dir, "--frames", 2,
+               "--samples", 0, *size)[0] == 0
+    assert sorted(os.listdir(out_dir)) == ["frame_0000.png", "frame_0001.png", "notes.txt"]
+    again = tmp_path / "again"
+    assert run(capsys, "--config", config_path, "--out", again, "--frames", 2,
+               "--samples", 0, *size)[0] == 0
+    assert _frames(out_dir) == _frames(again)                      # this run's frames
+
+
 def test_an_output_name_too_long_is_named(config_path, tmp_path, capsys):
     # before: OSError (File name too long) from the folder check (fuzz seed 1711)
     code, _, err = run(capsys, "--config", config_path, "--out", tmp_path / ("x" * 300),
