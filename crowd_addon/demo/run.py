@@ -22,6 +22,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import subprocess
@@ -64,10 +65,11 @@ def _bar(done, total, what, stream=sys.stderr, width=30):
     stream.flush()
 
 
-def _build_scene(path: Path, seats: int, log):
+def _build_scene(path: Path, seats: int, log, final: Path):
+    """The sample stadium with ``seats`` seats saved in ``path`` (to be ``final``)."""
     if SAMPLE_BUILDER is None or not SAMPLE_BUILDER.is_file():
         raise CrowdError(f"the stadium builder {SAMPLE_BUILDER or 'sample_scenes'} is missing")
-    log(f"building the stadium with {seats:,} seats -> {path}")
+    log(f"building the stadium with {seats:,} seats -> {final}")
     run = subprocess.run([sys.executable, str(SAMPLE_BUILDER), "--out", str(path),
                           "--seats", str(seats), "--quiet"], capture_output=True, text=True)
     if run.returncode != 0:
@@ -149,10 +151,57 @@ def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
         raise CrowdError(f"--layout must be one of {', '.join(USD_LAYOUTS)}, got {layout!r}")
     from ..core.base.files import output_dir
     out = output_dir(out_dir)
+    blend = out / "stadium.blend"
+    check_blend_is_the_demos(out)
+    # the new .blend is made and used under another name and takes the old one's place
+    # only when the run is done: a run that fails leaves the earlier run's as it was
+    partial = out / f".stadium.partial-{os.getpid()}.blend"
+    try:
+        summary = _run(out, partial, agents, frames, size, mp4, usd, log, layout)
+        os.replace(partial, blend)
+    finally:
+        partial.unlink(missing_ok=True)
+    summary["blend"] = str(blend)
+    summary["blend_sha256"] = _sha256(blend)
+    with open(out / "summary.json", "w", encoding="utf-8") as f:
+        json.dump(summary, f, indent=2)
+    return summary
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def check_blend_is_the_demos(out: Path) -> None:
+    """A CrowdError, before anything is written, when ``out`` holds a ``stadium.blend``
+    that the last demo run into ``out`` did not leave as it is (its ``summary.json``
+    keeps its SHA-256): saved from Blender since, or someone's own file. The demo
+    would replace it, and the edits would be lost."""
+    blend = out / "stadium.blend"
+    if not blend.exists():
+        return
+    try:
+        with open(out / "summary.json", encoding="utf-8") as f:
+            recorded = json.load(f).get("blend_sha256")
+    except (OSError, ValueError, AttributeError):
+        recorded = None
+    if recorded is None or recorded != _sha256(blend):
+        raise CrowdError(f"{blend} is not the file the last demo run left there (saved "
+                         f"from Blender since, or not the demo's): the demo would replace "
+                         f"it with a new stadium. Move it away or run the demo with another "
+                         f"--out; to render it as it is, use crowd preview --blend {blend}")
+
+
+def _run(out, blend, agents, frames, size, mp4, usd, log, layout) -> dict:
+    """The demo's work into ``out``, its stadium built and authored in ``blend``;
+    returns the summary (without the .blend's digest, which the caller adds)."""
     t0 = time.perf_counter()
     seconds = {}
-    blend = out / "stadium.blend"
-    _build_scene(blend, agents, log)
+    _build_scene(blend, agents, log, out / "stadium.blend")
     seconds["build_scene"] = time.perf_counter() - t0
 
     t = time.perf_counter()
@@ -233,8 +282,6 @@ def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
         seconds["repetition"] = time.perf_counter() - t
     seconds["total"] = time.perf_counter() - t0
     summary["seconds"] = {k: round(v, 2) for k, v in seconds.items()}
-    with open(out / "summary.json", "w", encoding="utf-8") as f:
-        json.dump(summary, f, indent=2)
     return summary
 
 

@@ -277,3 +277,50 @@ def test_the_demo_show_continues_exactly_from_a_snapshot(demo, slots):
         for g, p in rest.items():
             np.testing.assert_array_equal(p, poses[g], err_msg=f"snapshot {f}, frame {g}")
         assert rest_heard == [e for e in heard if e[1] > f]
+
+
+def test_the_summary_keeps_the_digest_of_the_blend_it_left(demo):
+    import hashlib
+    out, _ = demo
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["blend_sha256"] == hashlib.sha256((out / "stadium.blend").read_bytes()).hexdigest()
+    assert not [p for p in os.listdir(out) if p.startswith(".stadium.partial")]
+
+
+def test_a_rerun_refuses_to_replace_a_blend_saved_since(demo, tmp_path):
+    """Before: the demo built a new stadium.blend over the one the user had opened and
+    saved from Blender, and their edits were gone."""
+    import shutil
+    out = tmp_path / "again"
+    shutil.copytree(demo[0], out)
+    edited = (out / "stadium.blend").read_bytes() + b"saved from Blender"
+    (out / "stadium.blend").write_bytes(edited)
+    before = {p: (out / p).stat().st_mtime_ns for p in os.listdir(out)}
+    run = subprocess.run([sys.executable, "-m", "crowd_addon", "demo", "--out", str(out),
+                          "--agents", "10", "--frames", "1"], cwd=ROOT, capture_output=True,
+                         text=True, timeout=300)
+    assert run.returncode == 2
+    assert "stadium.blend is not the file the last demo run left there" in run.stderr
+    assert (out / "stadium.blend").read_bytes() == edited
+    assert {p: (out / p).stat().st_mtime_ns for p in os.listdir(out)} == before
+
+
+def test_a_failed_rerun_leaves_the_blend_and_summary_of_the_run_before(demo, tmp_path,
+                                                                      monkeypatch):
+    import shutil
+
+    from crowd_addon.core.base.errors import CrowdError
+    from crowd_addon.demo import run as demo_run
+    out = tmp_path / "again"
+    shutil.copytree(demo[0], out)
+    kept = {p: (out / p).read_bytes() for p in ("stadium.blend", "summary.json")}
+
+    def building_fails(path, seats, log, final):
+        path.write_bytes(b"half a stadium")
+        raise CrowdError("building the stadium failed: boom")
+    monkeypatch.setattr(demo_run, "_build_scene", building_fails)
+    with pytest.raises(CrowdError, match="boom"):
+        demo_run.run_demo(out, agents=10, frames=1, log=lambda msg: None)
+    assert {p: (out / p).read_bytes() for p in kept} == kept
+    assert not [p for p in os.listdir(out) if p.startswith(".stadium.partial")]
+    demo_run.check_blend_is_the_demos(out)        # a re-run may still replace it
