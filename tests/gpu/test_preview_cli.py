@@ -148,11 +148,9 @@ def test_a_crowd_refused_after_the_arguments_creates_no_folder(h, tmp_path, caps
     assert not out_dir.exists()
 
 
-def test_a_failed_render_removes_its_frames(config_path, tmp_path, capsys, monkeypatch):
+def fail_the_third_png(monkeypatch):
+    """Make the preview's third PNG write fail as a full disk does."""
     from crowd_addon.gpu import preview_render
-    out_dir = tmp_path / "shot"
-    out_dir.mkdir()
-    (out_dir / "notes.txt").write_text("mine")
     real, calls = preview_render.write_png, []
 
     def failing(path, *a, **k):
@@ -162,6 +160,13 @@ def test_a_failed_render_removes_its_frames(config_path, tmp_path, capsys, monke
         return real(path, *a, **k)
 
     monkeypatch.setattr(preview_render, "write_png", failing)
+
+
+def test_a_failed_render_removes_its_frames(config_path, tmp_path, capsys, monkeypatch):
+    out_dir = tmp_path / "shot"
+    out_dir.mkdir()
+    (out_dir / "notes.txt").write_text("mine")
+    fail_the_third_png(monkeypatch)
     code, _, err = run(capsys, "--config", config_path, "--out", out_dir, "--frames", 4,
                        "--width", 32, "--height", 32)
     assert code == 2 and "No space left on device" in err
@@ -177,21 +182,12 @@ def test_a_failed_rerun_keeps_the_frames_of_the_run_before(config_path, tmp_path
                                                            monkeypatch):
     """Before: the re-run wrote over the earlier frames one by one, then its clean-up
     removed the ones it had written, so the earlier run lost frames 0 and 1."""
-    from crowd_addon.gpu import preview_render
     out_dir = tmp_path / "shot"
     size = ("--width", 32, "--height", 32)
     assert run(capsys, "--config", config_path, "--out", out_dir, "--frames", 4, *size)[0] == 0
     before = _frames(out_dir)
     assert len(before) == 4
-    real, calls = preview_render.write_png, []
-
-    def failing(path, *a, **k):
-        calls.append(path)
-        if len(calls) == 3:
-            raise OSError(28, "No space left on device")
-        return real(path, *a, **k)
-
-    monkeypatch.setattr(preview_render, "write_png", failing)
+    fail_the_third_png(monkeypatch)
     code, _, err = run(capsys, "--config", config_path, "--out", out_dir, "--frames", 4,
                        "--samples", 0, *size)
     assert code == 2 and "No space left on device" in err
