@@ -25,6 +25,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import shutil
 import subprocess
 import sys
 import time
@@ -153,19 +154,39 @@ def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
     out = output_dir(out_dir)
     blend = out / "stadium.blend"
     check_blend_is_the_demos(out)
-    # the new .blend is made and used under another name and takes the old one's place
-    # only when the run is done: a run that fails leaves the earlier run's as it was
-    partial = out / f".stadium.partial-{os.getpid()}.blend"
+    # the new .blend, frames and contact sheet are made under other names and take the
+    # old ones' places only when the run is done (the USD export stages its own): a run
+    # that fails leaves the earlier run's as they were
+    pid = os.getpid()
+    staged = {"stadium.blend": out / f".stadium.partial-{pid}.blend",
+              "frames": out / f".frames.run-{pid}",
+              "contact_sheet.png": out / f".contact_sheet.partial-{pid}.png"}
     try:
-        summary = _run(out, partial, agents, frames, size, mp4, usd, log, layout)
-        os.replace(partial, blend)
+        summary = _run(out, staged, agents, frames, size, mp4, usd, log, layout)
+        for name, path in staged.items():
+            _take_place(path, out / name)
     finally:
-        partial.unlink(missing_ok=True)
+        for path in staged.values():
+            if path.is_dir():
+                shutil.rmtree(path, ignore_errors=True)
+            else:
+                path.unlink(missing_ok=True)
     summary["blend"] = str(blend)
     summary["blend_sha256"] = _sha256(blend)
     with open(out / "summary.json", "w", encoding="utf-8") as f:
         json.dump(summary, f, indent=2)
     return summary
+
+
+def _take_place(new: Path, old: Path) -> None:
+    """``new`` (a file or a folder) replaces ``old``."""
+    if new.is_dir() and old.is_dir():
+        gone = old.with_name(f".{old.name}.old-{os.getpid()}")
+        os.replace(old, gone)
+        os.replace(new, old)
+        shutil.rmtree(gone, ignore_errors=True)
+    else:
+        os.replace(new, old)
 
 
 def _sha256(path: Path) -> str:
@@ -196,9 +217,12 @@ def check_blend_is_the_demos(out: Path) -> None:
                          f"--out; to render it as it is, use crowd preview --blend {blend}")
 
 
-def _run(out, blend, agents, frames, size, mp4, usd, log, layout) -> dict:
-    """The demo's work into ``out``, its stadium built and authored in ``blend``;
-    returns the summary (without the .blend's digest, which the caller adds)."""
+def _run(out, staged, agents, frames, size, mp4, usd, log, layout) -> dict:
+    """The demo's work into ``out``, its stadium built and authored, its frames and
+    contact sheet written at the ``staged`` paths of ``stadium.blend``, ``frames`` and
+    ``contact_sheet.png``; returns the summary (naming the final paths, without the
+    .blend's digest, which the caller adds)."""
+    blend = staged["stadium.blend"]
     t0 = time.perf_counter()
     seconds = {}
     _build_scene(blend, agents, log, out / "stadium.blend")
@@ -241,12 +265,12 @@ def _run(out, blend, agents, frames, size, mp4, usd, log, layout) -> dict:
         # the goal's standing home end read as a change of texture
         beats = _beat_frames(crowd, crowd.frame, crowd.frame + frames - 1)
         sheet = ContactSheet(sorted(beats), scale=1, labels=beats)
-        preview = render_preview(crowd, out / "frames", frames, size=size, mp4=mp4,
+        preview = render_preview(crowd, staged["frames"], frames, size=size, mp4=mp4,
                                  camera=stadium.camera, scene=stadium.scene,
                                  light=stadium.light, repetition=None,   # measured below
                                  progress=lambda d, n: _bar(d, n, "render"),
                                  on_image=sheet.offer)
-        write_png(out / "contact_sheet.png", sheet.image())
+        write_png(staged["contact_sheet.png"], sheet.image())
     except BaseException:
         if export is not None:
             export.stop()
@@ -262,7 +286,8 @@ def _run(out, blend, agents, frames, size, mp4, usd, log, layout) -> dict:
                "upload_bytes_per_frame": preview.upload_bytes,
                "renderer": preview.device, **show_summary(crowd),
                "muted_cues": list(stadium.muted),
-               "pngs": len(preview.pngs), "mp4": preview.mp4,
+               "pngs": len(preview.pngs),
+               "mp4": preview.mp4 and str(out / "frames" / os.path.basename(preview.mp4)),
                "contact_sheet": str(out / "contact_sheet.png"),
                "contact_sheet_frames": sorted(sheet.frames),
                "contact_sheet_labels": {str(f): sheet.labels[f] for f in sorted(sheet.frames)}}

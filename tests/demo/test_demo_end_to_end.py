@@ -324,3 +324,31 @@ def test_a_failed_rerun_leaves_the_blend_and_summary_of_the_run_before(demo, tmp
     assert {p: (out / p).read_bytes() for p in kept} == kept
     assert not [p for p in os.listdir(out) if p.startswith(".stadium.partial")]
     demo_run.check_blend_is_the_demos(out)        # a re-run may still replace it
+
+
+def test_a_rerun_that_fails_late_leaves_the_frames_and_sheet_of_the_run_before(demo, tmp_path):
+    """The frames are drawn and the contact sheet made, then the USD export fails: the
+    earlier run's frames, contact sheet, .blend and summary are all still there as
+    they were (before, the frames and the sheet had been replaced by then)."""
+    import shutil
+    out = tmp_path / "again"
+    shutil.copytree(demo[0], out)
+
+    def snapshot():
+        return {str(p.relative_to(out)): p.read_bytes() for p in sorted(out.rglob("*"))
+                if p.is_file() and p.name != "stadium_crowd.json"
+                and p.suffix not in (".npz", ".usdc", ".usda")}
+    before = snapshot()
+    code = ("import sys\n"
+            "from crowd_addon.demo import run as r\n"
+            "from crowd_addon.core.base.errors import CrowdError\n"
+            "def boom(self):\n"
+            "    raise CrowdError('USD export: boom')\n"
+            "r._UsdExport.result = boom\n"
+            "r.run_demo(sys.argv[1], agents=10, frames=2, size=(64, 36), mp4=False,\n"
+            "           log=lambda m: None)\n")
+    run = subprocess.run([sys.executable, "-c", code, str(out)], cwd=ROOT,
+                         capture_output=True, text=True, timeout=600)
+    assert run.returncode != 0 and "USD export: boom" in run.stderr
+    assert snapshot() == before
+    assert not [p for p in os.listdir(out) if ".partial" in p or ".run-" in p]
