@@ -31,7 +31,7 @@ _FORMATS = {"RGBA32F": (4, "f4"), "R32I": (1, "i4")}
 #: every vertex, or as per-instance vertex attributes gathered once a frame
 #: (docs/gpu.md, *Two feeds*).
 AGENT_FEEDS = ("attributes", "texture")
-_RECORD_BYTES = AGENT_RECORD_TEXELS * 16
+_RECORD_BYTES = AGENT_RECORD_TEXELS * 16      # and 4 bytes of agent id, in a buffer apart
 
 
 class _Mesh:
@@ -116,7 +116,7 @@ class ModernGLRenderer(CrowdRenderer):
             raise CrowdError(f"moderngl renderer: agent_feed must be one of "
                              f"{', '.join(AGENT_FEEDS)}, got {agent_feed!r}")
         self.agent_feed = agent_feed
-        self._records, self._records_fresh = None, False
+        self._records, self._records_fresh = None, False    # (records, ids) buffers
         self.ctx, self._owns_context = ctx, bool(owns_context)
         self.size = (int(size[0]), int(size[1]))
         self._programs = {}
@@ -278,22 +278,25 @@ class ModernGLRenderer(CrowdRenderer):
             self.ctx.disable(self._mgl.CULL_FACE)
 
     def _feed(self, vao, base):
-        """Bind the gathered records of the draw list entries from ``base`` on as
-        ``vao``'s per-instance :data:`~.programs.AGENT_INPUTS`."""
-        records = self._gathered()
+        """Bind the gathered records and ids of the draw list entries from ``base`` on
+        as ``vao``'s per-instance :data:`~.programs.AGENT_INPUTS`."""
+        records, ids = self._gathered()
         for k, (slot, kind, _) in enumerate(AGENT_INPUTS):
-            cls, fmt = ("i", "i") if kind == "INT" else ("f", "4f")
-            vao.bind(slot, cls, records, fmt, offset=(base * AGENT_RECORD_TEXELS + k) * 16,
-                     stride=_RECORD_BYTES, divisor=1)
+            if kind == "INT":
+                vao.bind(slot, "i", ids, "i", offset=base * 4, stride=4, divisor=1)
+            else:
+                vao.bind(slot, "f", records, "4f", offset=base * _RECORD_BYTES + k * 16,
+                         stride=_RECORD_BYTES, divisor=1)
 
     def _gathered(self):
-        """The records buffer (:data:`~.programs.AGENT_GATHER`), gathered again when an
-        agent, look or list texel was written since it last was: one compute pass a
-        frame over the entries of the draw lists, whatever the number of draws."""
+        """The records and ids buffers (:data:`~.programs.AGENT_GATHER`), gathered again
+        when an agent, look or list texel was written since they last were: one compute
+        pass a frame over the entries of the draw lists, whatever the number of draws."""
         lists = self.plan.lists
         if self._records is None:
-            self._records = self.ctx.buffer(reserve=lists.width * lists.height
-                                            * _RECORD_BYTES)
+            capacity = lists.width * lists.height
+            self._records = (self.ctx.buffer(reserve=capacity * _RECORD_BYTES),
+                             self.ctx.buffer(reserve=capacity * 4))
         if not self._records_fresh:
             entries = max((g.base + g.count for g in lists.groups), default=0)
             if entries:
@@ -301,7 +304,8 @@ class ModernGLRenderer(CrowdRenderer):
                 _set_uniforms(prog, {"u_draw": (0, entries, 0, 0)})
                 for slot, _, name in AGENT_GATHER.samplers:
                     self.textures[DRAW_SAMPLERS[name]].use(slot)
-                self._records.bind_to_storage_buffer(0)
+                for binding, buffer in enumerate(self._records):
+                    buffer.bind_to_storage_buffer(binding)
                 prog.run(-(-entries // GATHER_GROUP))
                 self.ctx.memory_barrier()
             self._records_fresh = True
@@ -419,7 +423,7 @@ class ModernGLRenderer(CrowdRenderer):
         attached context belongs to its owner and stays)."""
         objects = [*self.textures.values(), self.fbo, self._resolved, *self._attachments,
                    *self._programs.values(), *self._lit, self._shadow_view,
-                   *(self._resolve or ()), self._records]
+                   *(self._resolve or ()), *(self._records or ())]
         if self._shadow_map is not None:
             objects += [self._shadow_map.fbo, self._shadow_map.texture,
                         self._shadow_map.saved]

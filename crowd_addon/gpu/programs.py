@@ -36,8 +36,9 @@ LOOK_TURN_TEXELS = 24
 #: Agents per compute work group of the look turns shader.
 LOOK_GROUP = 64
 #: vec4 per draw list entry in the gathered agent records (agent_gather_comp.glsl):
-#: the three agent texels, the look state texel and the agent id.
-AGENT_RECORD_TEXELS = 5
+#: the three agent texels and the look state texel (the agent id goes to an int
+#: buffer of its own).
+AGENT_RECORD_TEXELS = 4
 #: Draw list entries per compute work group of the agent gather shader.
 GATHER_GROUP = 64
 
@@ -147,7 +148,8 @@ def _wide(spec: ProgramSpec) -> ProgramSpec:
 
 #: The per-instance inputs of a draw program fed its agents as vertex attributes
 #: (``AGENT_ATTRIBUTES`` 1, gpu_shaders/crowd_vertex.glsl): the records
-#: :data:`AGENT_GATHER` writes, :data:`AGENT_RECORD_TEXELS` vec4 an instance.
+#: :data:`AGENT_GATHER` writes, :data:`AGENT_RECORD_TEXELS` vec4 an instance, then the
+#: agent's id from the ids buffer.
 AGENT_INPUTS = ((8, "VEC4", "agent_in0"), (9, "VEC4", "agent_in1"), (10, "VEC4", "agent_in2"),
                 (11, "VEC4", "agent_in3"), (12, "INT", "agent_in_id"))
 
@@ -208,6 +210,7 @@ AGENT_GATHER = ProgramSpec(
     push_constants=(("IVEC4", "u_draw"),),
     samplers=((1, "FLOAT_2D", "agent_tex"), (2, "INT_2D", "agent_list_tex"),
               (5, "FLOAT_2D", "look_tex")),
-    storage_buffers=((0, "VEC4", "records", ("WRITE",)),),
+    storage_buffers=((0, "VEC4", "records", ("WRITE",)),
+                     (1, "INT", "record_ids", ("WRITE",))),
     local_group_size=(GATHER_GROUP,),
 )
