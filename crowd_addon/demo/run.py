@@ -271,31 +271,32 @@ def _run(out, staged, agents, frames, size, mp4, usd, log, layout) -> dict:
                                  progress=lambda d, n: _bar(d, n, "render"),
                                  on_image=sheet.offer)
         write_png(staged["contact_sheet.png"], sheet.image())
-    except BaseException:
+        seconds["simulate_render"] = time.perf_counter() - t
+        for stage, key in (("simulate", "simulate"), ("sync", "upload"), ("render", "draw"),
+                           ("write", "encode")):
+            seconds[key] = preview.seconds.get(stage, 0.0)
+        step_ms = crowd.stats["ms_total"] / max(crowd.stats["steps"], 1)
+        summary = {"agents": cfg.agent_count, "streams": len(cfg.streams),
+                   "uniques": len(cfg.uniques), "characters": len(cfg.skeletons),
+                   "frames": frames, "ms_per_step": round(step_ms, 3),
+                   "upload_bytes_per_frame": preview.upload_bytes,
+                   "renderer": preview.device, **show_summary(crowd),
+                   "muted_cues": list(stadium.muted),
+                   "pngs": len(preview.pngs),
+                   "mp4": preview.mp4 and str(out / "frames" / os.path.basename(preview.mp4)),
+                   "contact_sheet": str(out / "contact_sheet.png"),
+                   "contact_sheet_frames": sorted(sheet.frames),
+                   "contact_sheet_labels": {str(f): sheet.labels[f]
+                                            for f in sorted(sheet.frames)}}
+        t = time.perf_counter()
+        if export is not None:
+            log("waiting for the USD export" if export.running else "the USD export is done")
+            res = export.result()
+    except BaseException:           # the export is stopped and its staging removed
         if export is not None:
             export.stop()
         raise
-    seconds["simulate_render"] = time.perf_counter() - t
-    for stage, key in (("simulate", "simulate"), ("sync", "upload"), ("render", "draw"),
-                       ("write", "encode")):
-        seconds[key] = preview.seconds.get(stage, 0.0)
-    step_ms = crowd.stats["ms_total"] / max(crowd.stats["steps"], 1)
-    summary = {"agents": cfg.agent_count, "streams": len(cfg.streams),
-               "uniques": len(cfg.uniques), "characters": len(cfg.skeletons),
-               "frames": frames, "ms_per_step": round(step_ms, 3),
-               "upload_bytes_per_frame": preview.upload_bytes,
-               "renderer": preview.device, **show_summary(crowd),
-               "muted_cues": list(stadium.muted),
-               "pngs": len(preview.pngs),
-               "mp4": preview.mp4 and str(out / "frames" / os.path.basename(preview.mp4)),
-               "contact_sheet": str(out / "contact_sheet.png"),
-               "contact_sheet_frames": sorted(sheet.frames),
-               "contact_sheet_labels": {str(f): sheet.labels[f] for f in sorted(sheet.frames)}}
-
-    t = time.perf_counter()
     if export is not None:
-        log("waiting for the USD export" if export.running else "the USD export is done")
-        res = export.result()
         seconds["usd"] = time.perf_counter() - t          # what the frames did not hide
         seconds["usd_beside"] = res["seconds"]
         summary.update(usd=res["path"], usd_layout=layout, usd_bytes=res["bytes"],
