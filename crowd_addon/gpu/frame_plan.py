@@ -50,9 +50,7 @@ class FrameStats:
     texture, draw list, skinning batch and looks texture bytes (the last only in a
     frame where a look started or stopped); ``skinned_rows``: pose rows the compute shader wrote;
     ``draws``, ``instances``, ``vertices``: instanced calls, agents and skinned
-    vertices of the last render; ``attribute_draws``: its instanced calls (the shadow
-    map's included) whose agents came as per-instance attributes (the moderngl
-    backend's ``agent_feed``). Bytes are what the backend sent (a backend without
+    vertices of the last render. Bytes are what the backend sent (a backend without
     partial texture writes adds a row number to each row).
     """
 
@@ -66,7 +64,6 @@ class FrameStats:
     draws: int = 0
     instances: int = 0
     vertices: int = 0
-    attribute_draws: int = 0
 
     @property
     def upload_bytes(self) -> int:

@@ -270,7 +270,6 @@ class ModernGLRenderer(CrowdRenderer):
         self._bind(program, draw.uniforms, self.textures["lists"])
         if fed:
             self._feed(vao, draw.uniforms["u_draw"][0])
-            self.stats.attribute_draws += 1
         if mesh.cull:
             self.ctx.enable(self._mgl.CULL_FACE)
         vao.render(self._mgl.TRIANGLES, instances=draw.instances)

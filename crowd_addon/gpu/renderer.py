@@ -196,7 +196,7 @@ class CrowdRenderer:
         transform shows them), to any other target linear (:attr:`encoding_srgb`)."""
         vp = np.asarray(camera.view_projection, np.float64)
         s = self.stats
-        s.draws = s.instances = s.vertices = s.attribute_draws = 0
+        s.draws = s.instances = s.vertices = 0
         self.encoding_srgb = target is None and self._owns_image()
         with self._bind_target(target, clear) as pixels_high:
             regions = self.plan.regroup(vp, pixels_high, self.culling)
