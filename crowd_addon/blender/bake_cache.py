@@ -31,12 +31,12 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import tempfile
 from functools import lru_cache
 
 from ..core.authoring.config_io import config_digest, load_config, save_config
 from ..core.bake.bake_report import BakeReport, Note
 from ..core.base.errors import CrowdError
+from ..core.base.files import write_atomic
 
 __all__ = ["bake_key", "bake_of", "load_baked", "save_baked"]
 
@@ -101,17 +101,8 @@ def save_baked(folder, key: str, config, of: str) -> None:
     save_config(config, path)
     record = {"key": key, "of": of, "digest": config_digest(config),
               "notes": [[str(n), n.kind, n.severity] for n in report]}
-    fd, tmp = tempfile.mkstemp(prefix=".baked.", suffix=".tmp",
-                               dir=os.path.dirname(os.path.abspath(key_path)))
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(json.dumps(record, indent=1) + "\n")
-        os.replace(tmp, key_path)
-    except OSError as e:
-        raise CrowdError(f"{key_path}: cannot keep the bake: {e}") from None
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+    text = (json.dumps(record, indent=1) + "\n").encode("utf-8")
+    write_atomic(key_path, lambda f: f.write(text), "the bake's key")
     _forget_older(folder, key, of)
 
 

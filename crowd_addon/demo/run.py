@@ -32,7 +32,9 @@ import time
 from importlib import resources
 from pathlib import Path
 
+from ..core.authoring.config_io import save_config
 from ..core.base.errors import CrowdError
+from ..core.base.files import output_dir, write_atomic
 from ..core.variety.repetition import RepetitionSettings, recording_repetition
 
 __all__ = ["run_demo", "show_summary", "USD_COUNTS", "SHEET_FRAMES"]
@@ -150,19 +152,23 @@ def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
     from ..core.authoring.config import USD_LAYOUTS
     if layout not in USD_LAYOUTS:
         raise CrowdError(f"--layout must be one of {', '.join(USD_LAYOUTS)}, got {layout!r}")
-    from ..core.base.files import output_dir
     out = output_dir(out_dir)
     blend = out / "stadium.blend"
     check_blend_is_the_demos(out)
     # the new .blend, frames and contact sheet are made under other names and take the
-    # old ones' places only when the run is done (the USD export stages its own): a run
+    # old ones' places only when the run is done (the configuration is saved then) (the USD export stages its own): a run
     # that fails leaves the earlier run's as they were
     pid = os.getpid()
     staged = {"stadium.blend": out / f".stadium.partial-{pid}.blend",
               "frames": out / f".frames.run-{pid}",
               "contact_sheet.png": out / f".contact_sheet.partial-{pid}.png"}
     try:
-        summary = _run(out, staged, agents, frames, size, mp4, usd, log, layout)
+        summary, cfg = _run(out, staged, agents, frames, size, mp4, usd, log, layout)
+        summary["blend"] = str(blend)
+        summary["blend_sha256"] = _sha256(staged["stadium.blend"])
+        # the configuration too only once the run is done (written atomically, with
+        # its arrays), then the staged files take their places and the summary last
+        save_config(cfg, out / "stadium_crowd.json")
         for name, path in staged.items():
             _take_place(path, out / name)
     finally:
@@ -171,10 +177,8 @@ def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
                 shutil.rmtree(path, ignore_errors=True)
             else:
                 path.unlink(missing_ok=True)
-    summary["blend"] = str(blend)
-    summary["blend_sha256"] = _sha256(blend)
-    with open(out / "summary.json", "w", encoding="utf-8") as f:
-        json.dump(summary, f, indent=2)
+    text = json.dumps(summary, indent=2).encode("utf-8")
+    write_atomic(out / "summary.json", lambda f: f.write(text), "the demo's summary")
     return summary
 
 
@@ -217,11 +221,12 @@ def check_blend_is_the_demos(out: Path) -> None:
                          f"--out; to render it as it is, use crowd preview --blend {blend}")
 
 
-def _run(out, staged, agents, frames, size, mp4, usd, log, layout) -> dict:
+def _run(out, staged, agents, frames, size, mp4, usd, log, layout) -> tuple:
     """The demo's work into ``out``, its stadium built and authored, its frames and
     contact sheet written at the ``staged`` paths of ``stadium.blend``, ``frames`` and
     ``contact_sheet.png``; returns the summary (naming the final paths, without the
-    .blend's digest, which the caller adds)."""
+    .blend's digest, which the caller adds) and the crowd's configuration (which the
+    caller saves once the run is done)."""
     blend = staged["stadium.blend"]
     t0 = time.perf_counter()
     seconds = {}
@@ -230,12 +235,10 @@ def _run(out, staged, agents, frames, size, mp4, usd, log, layout) -> dict:
 
     t = time.perf_counter()
     from ..blender.stadium import author_stadium
-    from ..core.authoring.config_io import save_config
     log("authoring the crowd and its show, baking its actions")
     stadium = author_stadium(blend, frames, size,
                              progress=lambda d, n, m: _bar(d + 1, n, "bake"))
     cfg = stadium.config
-    save_config(cfg, out / "stadium_crowd.json")
     seconds["bake"] = time.perf_counter() - t
     if stadium.muted:
         log(f"beats after the last of {frames} frames, muted: {', '.join(stadium.muted)}")
@@ -308,7 +311,7 @@ def _run(out, staged, agents, frames, size, mp4, usd, log, layout) -> dict:
         seconds["repetition"] = time.perf_counter() - t
     seconds["total"] = time.perf_counter() - t0
     summary["seconds"] = {k: round(v, 2) for k, v in seconds.items()}
-    return summary
+    return summary, cfg
 
 
 class _UsdExport:

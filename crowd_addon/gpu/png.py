@@ -2,16 +2,14 @@
 
 from __future__ import annotations
 
-import os
 import struct
-import tempfile
 import zlib
 from pathlib import Path
 
 import numpy as np
 
 from ..core.base.errors import CrowdError
-from ..core.base.files import file_mode
+from ..core.base.files import write_atomic
 
 __all__ = ["encode_png", "write_png"]
 
@@ -37,19 +35,8 @@ def encode_png(image: np.ndarray, level: int = 6) -> bytes:
 
 def write_png(path, image: np.ndarray, level: int = 6) -> Path:
     """Write ``image`` to ``path`` through a temporary file and a rename, so a failure
-    never leaves a half-written file."""
+    never leaves a half-written file (not synced: frames are many, and made again)."""
     path = Path(path)
     data = encode_png(image, level)
-    try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    except OSError as e:
-        raise CrowdError(f"PNG {path}: cannot write there ({e.strerror})") from None
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.chmod(tmp, file_mode(path))          # mkstemp's 0600 is for its secrecy
-        os.replace(tmp, path)
-    except OSError as e:
-        os.unlink(tmp)
-        raise CrowdError(f"PNG {path}: cannot write it ({e.strerror})") from None
+    write_atomic(path, lambda f: f.write(data), "the PNG", sync=False)
     return path

@@ -1,10 +1,13 @@
 """``core.files.folders_made``: an output folder a command creates is gone again when
-the command fails, and folders that were there are never touched."""
+the command fails, and folders that were there are never touched. ``write_atomic``:
+a file is replaced whole or not at all."""
+
+import os
 
 import pytest
 
 from crowd_addon.core.base.errors import CrowdError
-from crowd_addon.core.base.files import folders_made
+from crowd_addon.core.base.files import folders_made, write_atomic
 
 
 def test_the_folders_stay_when_the_block_succeeds(tmp_path):
@@ -36,3 +39,35 @@ def test_a_folder_under_a_file_is_a_named_error(tmp_path):
         with folders_made(tmp_path / "file" / "sub"):
             pass
     assert [p.name for p in tmp_path.iterdir()] == ["file"]
+
+
+def test_write_atomic_replaces_the_file_whole_keeping_its_permissions(tmp_path):
+    path = tmp_path / "summary.json"
+    path.write_bytes(b"old")
+    os.chmod(path, 0o640)
+    write_atomic(path, lambda f: f.write(b"new"), "the summary")
+    assert path.read_bytes() == b"new"
+    assert os.stat(path).st_mode & 0o777 == 0o640
+    assert os.listdir(tmp_path) == ["summary.json"]
+
+
+@pytest.mark.parametrize("sync", [True, False])
+def test_write_atomic_that_fails_part_way_leaves_the_old_file_and_no_temporary(tmp_path,
+                                                                               sync):
+    path = tmp_path / "summary.json"
+    path.write_bytes(b"old")
+
+    def half_then_full_disk(f):
+        f.write(b"half")
+        raise OSError(28, "No space left on device")
+    with pytest.raises(CrowdError, match=r"summary.json: cannot write the summary: No "
+                                         r"space left on device"):
+        write_atomic(path, half_then_full_disk, "the summary", sync=sync)
+    assert path.read_bytes() == b"old"
+    assert os.listdir(tmp_path) == ["summary.json"]
+
+
+def test_write_atomic_into_a_missing_folder_is_a_named_error(tmp_path):
+    with pytest.raises(CrowdError, match=r"gone/x.png: cannot write the PNG"):
+        write_atomic(tmp_path / "gone" / "x.png", lambda f: f.write(b"x"), "the PNG")
+    assert os.listdir(tmp_path) == []

@@ -328,16 +328,19 @@ def test_a_failed_rerun_leaves_the_blend_and_summary_of_the_run_before(demo, tmp
 
 def test_a_rerun_that_fails_late_leaves_the_frames_and_sheet_of_the_run_before(demo, tmp_path):
     """The frames are drawn and the contact sheet made, then the USD export fails: the
-    earlier run's frames, contact sheet, .blend and summary are all still there as
-    they were (before, the frames and the sheet had been replaced by then)."""
+    earlier run's frames, contact sheet, .blend, crowd configuration and summary are
+    all still there as they were (before, the frames and the sheet had been replaced
+    by then, and the configuration of the failed run's 10 agents written over the
+    earlier run's)."""
     import shutil
     out = tmp_path / "again"
     shutil.copytree(demo[0], out)
 
-    def snapshot():          # all but the configuration, written in place
+    def snapshot():
         return {str(p.relative_to(out)): p.read_bytes() for p in sorted(out.rglob("*"))
-                if p.is_file() and p.stem != "stadium_crowd"}
+                if p.is_file()}
     before = snapshot()
+    assert {"stadium_crowd.json", "stadium_crowd.npz", "summary.json"} <= set(before)
     # the USD export, a stand-in: it fails when its result is asked for, and says
     # whether the demo stopped it (the real one would still be writing; in CI it was,
     # and its hidden folder was left behind before the demo stopped it there too)

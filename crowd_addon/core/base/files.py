@@ -8,11 +8,12 @@ from __future__ import annotations
 
 import contextlib
 import os
+import tempfile
 from pathlib import Path
 
 from .errors import CrowdError
 
-__all__ = ["file_mode", "folders_made", "writable_dir", "output_dir"]
+__all__ = ["file_mode", "write_atomic", "folders_made", "writable_dir", "output_dir"]
 
 
 def file_mode(target) -> int:
@@ -24,6 +25,34 @@ def file_mode(target) -> int:
         mask = os.umask(0)
         os.umask(mask)
         return 0o666 & ~mask
+
+
+def write_atomic(path, write, what: str, sync: bool = True) -> None:
+    """Write file ``path`` whole or not at all: ``write(f)`` fills a temporary binary
+    file in the same folder, which is synced to disk (``sync``: a crash of the
+    machine then leaves the old file or the new one), given the permissions
+    ``file_mode`` gives and renamed over ``path``. On any error the temporary is removed, the file
+    that was at ``path`` stays as it was, and an OSError becomes a CrowdError
+    "``path``: cannot write ``what``: ..."."""
+    path = os.fspath(path)
+    tmp = None
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", suffix=".tmp",
+                                   dir=os.path.dirname(os.path.abspath(path)))
+        with os.fdopen(fd, "wb") as f:
+            write(f)
+            if sync:
+                f.flush()
+                os.fsync(f.fileno())
+        os.chmod(tmp, file_mode(path))          # mkstemp's 0600 is for its secrecy
+        os.replace(tmp, path)
+        tmp = None
+    except OSError as e:
+        raise CrowdError(f"{path}: cannot write {what}: {e.strerror or e}") from None
+    finally:
+        if tmp is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
 
 
 @contextlib.contextmanager

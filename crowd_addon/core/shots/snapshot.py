@@ -37,7 +37,6 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import tempfile
 import zipfile
 import zlib
 from dataclasses import dataclass, field
@@ -45,7 +44,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..base.errors import CrowdError
-from ..base.files import file_mode
+from ..base.files import write_atomic
 from .packed import PARTS, Packed, pack
 from .snapshot_checks import MAX_COUNT, check_header, check_values
 
@@ -170,27 +169,9 @@ class Snapshot:
         if not os.path.isdir(directory):
             raise CrowdError(f"{path}: directory {directory} does not exist")
         head = np.frombuffer(json.dumps(self.header()).encode("utf-8"), np.uint8)
-        tmp = None
-        try:
-            fd, tmp = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", suffix=".tmp",
-                                       dir=directory)
-            with os.fdopen(fd, "wb") as f:
-                np.savez(f, **{HEADER: head}, **{_member(k, n): a
-                                                   for k, p in self.packed.items()
-                                                   for n, a in p.parts.items()})
-                f.flush()
-                os.fsync(f.fileno())
-            os.chmod(tmp, file_mode(path))
-            os.replace(tmp, path)
-            tmp = None
-        except OSError as e:
-            raise CrowdError(f"{path}: cannot write the crowd snapshot: {e}") from e
-        finally:
-            if tmp is not None:
-                try:
-                    os.unlink(tmp)
-                except OSError:
-                    pass
+        write_atomic(path, lambda f: np.savez(f, **{HEADER: head}, **{
+            _member(k, n): a for k, p in self.packed.items() for n, a in p.parts.items()}),
+            "the crowd snapshot")
 
 
 def _view(a: np.ndarray) -> np.ndarray:
