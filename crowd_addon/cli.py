@@ -25,13 +25,18 @@ own command). Exit codes: 0 success, 2 bad input (usage
 errors and :class:`~crowd_addon.core.base.errors.CrowdError`, reported on stderr as
 ``crowd <command>: error: <message>``), 3 a .blend's crowd script that is not trusted
 here (:class:`~crowd_addon.core.base.errors.ScriptNotTrusted`, reported the same way;
-``--ignore-scripts`` goes on without it).
+``--ignore-scripts`` goes on without it), 130 interrupted (Ctrl-C), 143 stopped by
+SIGTERM (a farm queue or ``kill`` ending the job). Both stop the command the same way:
+the exception unwinds the work, so what it staged is removed, the processes it started
+are stopped and earlier outputs stay as they were (without a handler, SIGTERM would
+end the process on the spot, leaving its staging and its child processes behind).
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
 
 from .cli_args import parse_command
@@ -42,7 +47,16 @@ from .commands.planning import add_budget, add_plan
 from .commands.preview import add_preview
 from .core.base.errors import CrowdError
 
-__all__ = ["build_parser", "main"]
+__all__ = ["build_parser", "main", "console", "Terminated"]
+
+
+class Terminated(BaseException):
+    """SIGTERM, raised in the main thread of the ``crowd`` program so the command
+    unwinds as on Ctrl-C (not an Exception: no ``except Exception`` swallows it)."""
+
+
+def _terminated(signum, _frame):
+    raise Terminated(signum)
 
 
 #: One ``add_<command>`` per subcommand.
@@ -79,7 +93,17 @@ def console(argv=None) -> int:
     (SIGSEGV) in its C++ teardown at exit after our property groups were registered,
     when every file is already written, which would turn a finished run into a failed
     exit status. ``main`` itself returns normally (for callers in Python)."""
-    code = main(argv)
+    signal.signal(signal.SIGTERM, _terminated)
+    command = next((a for a in (sys.argv[1:] if argv is None else argv)
+                    if not a.startswith("-")), "")
+    try:
+        code = main(argv)
+    except (KeyboardInterrupt, Terminated) as stop:
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)     # once is enough: finish leaving
+        why, code = ("interrupted", 130) if isinstance(stop, KeyboardInterrupt) else \
+            ("stopped by SIGTERM", 128 + signal.SIGTERM)
+        print(f"crowd {command}: {why}: nothing of this run was kept; earlier outputs are "
+              f"as they were".replace("crowd : ", "crowd: "), file=sys.stderr)
     if "bpy" in sys.modules:
         sys.stdout.flush()
         sys.stderr.flush()

@@ -36,16 +36,12 @@ from ..core.authoring.config_io import save_config
 from ..core.base.errors import CrowdError
 from ..core.base.files import output_dir, write_atomic
 from ..core.variety.repetition import RepetitionSettings, recording_repetition
+from .usd_beside import UsdExport, usd_summary
 
-__all__ = ["run_demo", "show_summary", "USD_COUNTS", "SHEET_FRAMES"]
+__all__ = ["run_demo", "show_summary", "SHEET_FRAMES"]
 
 #: frames on the demo's contact sheet (``contact_sheet.png``), spread over the run
 SHEET_FRAMES = 6
-
-#: what the summary keeps of the USD export (``usd_export``): the counts a
-#: ``crowd export --blend`` of the saved file reports the same
-USD_COUNTS = ("frames", "agents", "shared_agents", "clip_agents", "blend_frames", "moving_agents",
-              "offset_animations", "stream_animations", "characters", "files")
 
 try:    # the sample_scenes resource package beside crowd_addon (repository, wheel)
     SAMPLE_BUILDER = resources.files(".".join(__name__.split(".")[:-3] + ["sample_scenes"])) \
@@ -154,23 +150,35 @@ def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
         raise CrowdError(f"--layout must be one of {', '.join(USD_LAYOUTS)}, got {layout!r}")
     out = output_dir(out_dir)
     blend = out / "stadium.blend"
-    check_blend_is_the_demos(out)
-    # the new .blend, frames and contact sheet are made under other names and take the
-    # old ones' places only when the run is done (the configuration is saved then) (the USD export stages its own): a run
-    # that fails leaves the earlier run's as they were
+    check_folder_is_the_demos(out)
+    # the new .blend, frames and contact sheet are made under other names, the stage is
+    # written but not committed: they take the old ones' places (and the configuration
+    # is saved) only when the run is done, so a run that fails leaves the earlier
+    # run's as they were
     pid = os.getpid()
     staged = {"stadium.blend": out / f".stadium.partial-{pid}.blend",
               "frames": out / f".frames.run-{pid}",
               "contact_sheet.png": out / f".contact_sheet.partial-{pid}.png"}
+    export = []                 # the USD export, once started: stopped if the run fails
     try:
-        summary, cfg = _run(out, staged, agents, frames, size, mp4, usd, log, layout)
+        summary, cfg = _run(out, staged, agents, frames, size, mp4, usd, log, layout, export)
         summary["blend"] = str(blend)
         summary["blend_sha256"] = _sha256(staged["stadium.blend"])
         # the configuration too only once the run is done (written atomically, with
-        # its arrays), then the staged files take their places and the summary last
+        # its arrays), then the stage, then the staged files take their places and the
+        # summary comes last
         save_config(cfg, out / "stadium_crowd.json")
-        for name, path in staged.items():
-            _take_place(path, out / name)
+        if export:
+            usd_summary(summary, export[0].commit(), layout)
+        os.replace(staged["stadium.blend"], blend)
+        os.replace(staged["contact_sheet.png"], out / "contact_sheet.png")
+        from ..gpu.preview_render import replace_frames
+        (out / "frames").mkdir(exist_ok=True)
+        replace_frames(out / "frames", staged["frames"])     # the user's files there stay
+    except BaseException:       # Ctrl-C and SIGTERM too: the export does not run on
+        if export:
+            export[0].stop()
+        raise
     finally:
         for path in staged.values():
             if path.is_dir():
@@ -182,17 +190,6 @@ def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
     return summary
 
 
-def _take_place(new: Path, old: Path) -> None:
-    """``new`` (a file or a folder) replaces ``old``."""
-    if new.is_dir() and old.is_dir():
-        gone = old.with_name(f".{old.name}.old-{os.getpid()}")
-        os.replace(old, gone)
-        os.replace(new, old)
-        shutil.rmtree(gone, ignore_errors=True)
-    else:
-        os.replace(new, old)
-
-
 def _sha256(path: Path) -> str:
     h = hashlib.sha256()
     with open(path, "rb") as f:
@@ -201,32 +198,46 @@ def _sha256(path: Path) -> str:
     return h.hexdigest()
 
 
-def check_blend_is_the_demos(out: Path) -> None:
-    """A CrowdError, before anything is written, when ``out`` holds a ``stadium.blend``
-    that the last demo run into ``out`` did not leave as it is (its ``summary.json``
-    keeps its SHA-256): saved from Blender since, or someone's own file. The demo
-    would replace it, and the edits would be lost."""
-    blend = out / "stadium.blend"
-    if not blend.exists():
+#: what a demo run leaves in its folder (``frames/`` holds its frames and MP4 among any
+#: files of the user's): a re-run replaces these and nothing else
+DEMO_OUTPUTS = ("stadium.blend", "summary.json", "contact_sheet.png", "frames", "stadium.usdc",
+                "stadium.layers", "stadium_crowd.json", "stadium_crowd.npz")
+
+
+def check_folder_is_the_demos(out: Path) -> None:
+    """A CrowdError, before anything is written, when ``out`` holds files the demo
+    would replace that the last demo run into ``out`` did not leave as they are:
+    names of :data:`DEMO_OUTPUTS` without the ``summary.json`` of a demo run (someone's
+    own folder, or a run of an older version), or a ``stadium.blend`` other than the
+    one that run left (its summary keeps its SHA-256: saved from Blender since). The
+    demo would replace them, and the work would be lost."""
+    present = [n for n in DEMO_OUTPUTS if (out / n).exists()]
+    if not present:
         return
     try:
         with open(out / "summary.json", encoding="utf-8") as f:
             recorded = json.load(f).get("blend_sha256")
     except (OSError, ValueError, AttributeError):
         recorded = None
-    if recorded is None or recorded != _sha256(blend):
+    blend = out / "stadium.blend"
+    if blend.exists() and recorded != _sha256(blend):
         raise CrowdError(f"{blend} is not the file the last demo run left there (saved "
                          f"from Blender since, or not the demo's): the demo would replace "
                          f"it with a new stadium. Move it away or run the demo with another "
                          f"--out; to render it as it is, use crowd preview --blend {blend}")
+    if recorded is None:
+        raise CrowdError(f"{out} holds {', '.join(present)}, which no demo run left there "
+                         f"(there is no demo summary.json beside them): the demo would "
+                         f"replace them. Run it with another --out")
 
 
-def _run(out, staged, agents, frames, size, mp4, usd, log, layout) -> tuple:
+def _run(out, staged, agents, frames, size, mp4, usd, log, layout, export) -> tuple:
     """The demo's work into ``out``, its stadium built and authored, its frames and
     contact sheet written at the ``staged`` paths of ``stadium.blend``, ``frames`` and
-    ``contact_sheet.png``; returns the summary (naming the final paths, without the
-    .blend's digest, which the caller adds) and the crowd's configuration (which the
-    caller saves once the run is done)."""
+    ``contact_sheet.png``, its USD export (appended to ``export``) written and waiting
+    to commit; returns the summary (naming the final paths, without the .blend's digest
+    and the stage's figures, which the caller adds) and the crowd's configuration
+    (which the caller saves once the run is done)."""
     blend = staged["stadium.blend"]
     t0 = time.perf_counter()
     seconds = {}
@@ -257,54 +268,44 @@ def _run(out, staged, agents, frames, size, mp4, usd, log, layout) -> tuple:
     seconds["record"] = time.perf_counter() - t
     # the repetition metric through the demo's camera, at the frames' size
     measure = RepetitionSettings(width=size[0], height=size[1])
-    export = _UsdExport(shot, out / "stadium.usdc", stadium.camera, measure, layout) \
-        if usd else None
+    if usd:
+        export.append(UsdExport(shot, out / "stadium.usdc", stadium.camera, measure, layout))
     log(f"simulating and rendering {frames} frames of {cfg.agent_count:,} agents"
         + (", exporting USD beside them" if usd else ""))
     t = time.perf_counter()
-    try:
-        crowd = Crowd(cfg, skinning="gpu")      # the same show, run again to be drawn
-        # the frames at their own size: at 65,000 fans a fan is ~10 px tall, and halved
-        # the goal's standing home end read as a change of texture
-        beats = _beat_frames(crowd, crowd.frame, crowd.frame + frames - 1)
-        sheet = ContactSheet(sorted(beats), scale=1, labels=beats)
-        preview = render_preview(crowd, staged["frames"], frames, size=size, mp4=mp4,
-                                 camera=stadium.camera, scene=stadium.scene,
-                                 light=stadium.light, repetition=None,   # measured below
-                                 progress=lambda d, n: _bar(d, n, "render"),
-                                 on_image=sheet.offer)
-        write_png(staged["contact_sheet.png"], sheet.image())
-        seconds["simulate_render"] = time.perf_counter() - t
-        for stage, key in (("simulate", "simulate"), ("sync", "upload"), ("render", "draw"),
-                           ("write", "encode")):
-            seconds[key] = preview.seconds.get(stage, 0.0)
-        step_ms = crowd.stats["ms_total"] / max(crowd.stats["steps"], 1)
-        summary = {"agents": cfg.agent_count, "streams": len(cfg.streams),
-                   "uniques": len(cfg.uniques), "characters": len(cfg.skeletons),
-                   "frames": frames, "ms_per_step": round(step_ms, 3),
-                   "upload_bytes_per_frame": preview.upload_bytes,
-                   "renderer": preview.device, **show_summary(crowd),
-                   "muted_cues": list(stadium.muted),
-                   "pngs": len(preview.pngs),
-                   "mp4": preview.mp4 and str(out / "frames" / os.path.basename(preview.mp4)),
-                   "contact_sheet": str(out / "contact_sheet.png"),
-                   "contact_sheet_frames": sorted(sheet.frames),
-                   "contact_sheet_labels": {str(f): sheet.labels[f]
-                                            for f in sorted(sheet.frames)}}
-        t = time.perf_counter()
-        if export is not None:
-            log("waiting for the USD export" if export.running else "the USD export is done")
-            res = export.result()
-    except BaseException:           # the export is stopped and its staging removed
-        if export is not None:
-            export.stop()
-        raise
-    if export is not None:
+    crowd = Crowd(cfg, skinning="gpu")      # the same show, run again to be drawn
+    # the frames at their own size: at 65,000 fans a fan is ~10 px tall, and halved
+    # the goal's standing home end read as a change of texture
+    beats = _beat_frames(crowd, crowd.frame, crowd.frame + frames - 1)
+    sheet = ContactSheet(sorted(beats), scale=1, labels=beats)
+    preview = render_preview(crowd, staged["frames"], frames, size=size, mp4=mp4,
+                             camera=stadium.camera, scene=stadium.scene,
+                             light=stadium.light, repetition=None,   # measured below
+                             progress=lambda d, n: _bar(d, n, "render"),
+                             on_image=sheet.offer)
+    write_png(staged["contact_sheet.png"], sheet.image())
+    seconds["simulate_render"] = time.perf_counter() - t
+    for stage, key in (("simulate", "simulate"), ("sync", "upload"), ("render", "draw"),
+                       ("write", "encode")):
+        seconds[key] = preview.seconds.get(stage, 0.0)
+    step_ms = crowd.stats["ms_total"] / max(crowd.stats["steps"], 1)
+    summary = {"agents": cfg.agent_count, "streams": len(cfg.streams),
+               "uniques": len(cfg.uniques), "characters": len(cfg.skeletons),
+               "frames": frames, "ms_per_step": round(step_ms, 3),
+               "upload_bytes_per_frame": preview.upload_bytes,
+               "renderer": preview.device, **show_summary(crowd),
+               "muted_cues": list(stadium.muted),
+               "pngs": len(preview.pngs),
+               "mp4": preview.mp4 and str(out / "frames" / os.path.basename(preview.mp4)),
+               "contact_sheet": str(out / "contact_sheet.png"),
+               "contact_sheet_frames": sorted(sheet.frames),
+               "contact_sheet_labels": {str(f): sheet.labels[f]
+                                        for f in sorted(sheet.frames)}}
+    t = time.perf_counter()
+    if export:
+        log("waiting for the USD export" if export[0].running else "the USD export is done")
+        export[0].written()
         seconds["usd"] = time.perf_counter() - t          # what the frames did not hide
-        seconds["usd_beside"] = res["seconds"]
-        summary.update(usd=res["path"], usd_layout=layout, usd_bytes=res["bytes"],
-                       usd_clip_agents=res["clip_agents"], usd_export=res["counts"])
-        summary["repetition"] = res["repetition"]
     else:
         summary["repetition"] = recording_repetition(
             shot, stadium.camera.view_projection, settings=measure).as_dict()
@@ -312,68 +313,3 @@ def _run(out, staged, agents, frames, size, mp4, usd, log, layout) -> tuple:
     seconds["total"] = time.perf_counter() - t0
     summary["seconds"] = {k: round(v, 2) for k, v in seconds.items()}
     return summary, cfg
-
-
-class _UsdExport:
-    """``export_crowd`` of ``shot`` in a process of its own (spawned: a fork would copy
-    Blender's and the GL driver's threads), started at once; :meth:`result` waits for
-    it and returns what the summary keeps, or raises its error as a CrowdError;
-    :meth:`stop` ends it (the demo failed or was interrupted) and removes what it had
-    staged: ``export_crowd`` writes its layers in a hidden folder before it moves them
-    into place, so no half-written stage is left behind."""
-
-    def __init__(self, shot, path, camera, measure, layout):
-        import multiprocessing
-        self._path = str(path)
-        ctx = multiprocessing.get_context("spawn")
-        self._recv, send = ctx.Pipe(duplex=False)
-        self._proc = ctx.Process(target=_export_in_child,
-                                 args=(send, shot, str(path), camera, measure, layout),
-                                 name="crowd demo USD export", daemon=True)
-        self._proc.start()
-        send.close()
-
-    @property
-    def running(self) -> bool:
-        return self._proc.is_alive() and not self._recv.poll()
-
-    def result(self) -> dict:
-        try:
-            kind, value = self._recv.recv()
-        except EOFError:
-            self._proc.join()
-            raise CrowdError(f"the USD export process ended without a result (exit code "
-                             f"{self._proc.exitcode})") from None
-        finally:
-            self._proc.join(timeout=60)
-        if kind == "error":
-            raise CrowdError(f"USD export: {value}")
-        return value
-
-    def stop(self):
-        from ..usd.files import remove_stale_temporaries
-        if self._proc.is_alive():
-            self._proc.terminate()
-        self._proc.join(timeout=10)
-        remove_stale_temporaries(os.path.dirname(self._path) or ".",
-                                 os.path.basename(self._path))
-
-
-def _export_in_child(send, shot, path, camera, measure, layout):
-    """The child's side of :class:`_UsdExport`: ``("done", summary)`` or ``("error",
-    message)`` down ``send``."""
-    try:
-        from ..usd.export import export_crowd
-        t = time.perf_counter()
-        res = export_crowd(shot, path, camera=camera, repetition=measure, layout=layout)
-        send.send(("done", {"path": str(res.path), "bytes": int(sum(res.files.values())),
-                            "clip_agents": res.clip_agents,
-                            "counts": {k: getattr(res, k) for k in USD_COUNTS},
-                            "repetition": res.repetition,
-                            "seconds": time.perf_counter() - t}))
-    except Exception as e:  # noqa: BLE001 - the parent names it
-        send.send(("error", f"{type(e).__name__}: {e}" if not isinstance(e, CrowdError)
-                   else str(e)))
-    finally:
-        send.close()
-

@@ -88,10 +88,11 @@ def _check(config, out_dir, frames, size, mp4, backend) -> Path:
 FRAME_NAME = re.compile(r"frame_-?\d+\.png")
 
 
-def _replace_frames(out: Path, staged: Path) -> list:
-    """Move the frames of a finished run from ``staged`` into ``out``, then remove the
-    frames of the run before that this one did not write (a folder holds one run's
-    sequence); returns the new frames' paths. Other files of ``out`` stay."""
+def replace_frames(out: Path, staged: Path) -> list:
+    """Move the files of a finished run (its frames, its MP4) from ``staged`` into
+    ``out``, then remove the frames of the run before that this one did not write (a
+    folder holds one run's sequence); returns the moved files' paths. Other files of
+    ``out`` stay, an earlier MP4 too when this run made none."""
     names = sorted(os.listdir(staged))
     for name in names:
         os.replace(staged / name, out / name)
@@ -176,10 +177,10 @@ def render_preview(config, out_dir, frames: int, start: int | None = None,
                                      repetition.frames))
         measured = []
     mp4_path = out / "preview.mp4" if mp4 else None
-    partial = out / ".preview.partial.mp4"
-    # the frames go to a folder of their own until the run is done, so a run that
-    # fails leaves the frames of the run before as they were
+    # the frames and the MP4 go to a folder of their own until the run is done, so a
+    # run that fails leaves the files of the run before as they were
     staged = out / f".frames.partial-{os.getpid()}"
+    partial = staged / ".preview.partial.mp4"
     made = _missing_folders(out)
     pngs, uploads, first, writer, done = [], [], crowd.view.frame, None, False
     # a frame's PNG, MP4 frame and on_image run in a thread while the next frame is
@@ -240,9 +241,10 @@ def render_preview(config, out_dir, frames: int, start: int | None = None,
             t = time.perf_counter()
             writer.close()
             writer = None
-            os.replace(partial, mp4_path)
+            os.replace(partial, staged / mp4_path.name)
             seconds["write"] += time.perf_counter() - t
-        pngs = _replace_frames(out, staged)
+        replace_frames(out, staged)
+        pngs = [str(out / os.path.basename(p)) for p in pngs]
         done = True
     except OSError as e:
         raise CrowdError(f"output folder {out}: cannot write "
@@ -257,8 +259,6 @@ def render_preview(config, out_dir, frames: int, start: int | None = None,
         pool.shutdown(wait=True)
         if writer is not None:
             writer.close()
-        if mp4 and partial.exists():
-            partial.unlink()
         renderer.release()
         if not done:                  # nothing half-written: this run's frames go
             shutil.rmtree(staged, ignore_errors=True)

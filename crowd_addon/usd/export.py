@@ -130,7 +130,7 @@ class ExportResult:
 
 def export_crowd(recording, path, agents=None, progress=None, layout="instanced",
                  camera=None, repetition=RepetitionSettings(),
-                 animation_only=False) -> ExportResult:
+                 animation_only=False, before_commit=None) -> ExportResult:
     """Write ``recording`` to UsdSkel in one call (:func:`export_steps` to the end).
 
     Parameters
@@ -153,6 +153,10 @@ def export_crowd(recording, path, agents=None, progress=None, layout="instanced"
         metric (stage ``repetition``, one step a frame measured), or None to skip it.
     animation_only : write only what a stitch reads from a chunk after the shot's
         first (no layout, characters or offset animations; see the module's notes).
+    before_commit : optional callable, called once everything is written and only
+        the commit is left (usd/files.py: the renames that put the export in place);
+        an exception from it stops the export as below (``crowd demo`` puts its
+        stage in place only when its frames are done).
 
     Raises
     ------
@@ -160,7 +164,8 @@ def export_crowd(recording, path, agents=None, progress=None, layout="instanced"
     export at ``path`` is left as it was. An exception raised by ``progress`` stops
     the export the same way.
     """
-    steps = export_steps(recording, path, agents, layout, camera, repetition, animation_only)
+    steps = export_steps(recording, path, agents, layout, camera, repetition, animation_only,
+                         before_commit)
     try:
         while True:
             try:
@@ -174,11 +179,11 @@ def export_crowd(recording, path, agents=None, progress=None, layout="instanced"
 
 
 def export_steps(recording, path, agents=None, layout="instanced", camera=None,
-                 repetition=RepetitionSettings(), animation_only=False):
+                 repetition=RepetitionSettings(), animation_only=False, before_commit=None):
     """The export of :func:`export_crowd` as a generator yielding ``(stage, done,
     total)`` after each unit of work and returning the :class:`ExportResult`
-    (``StopIteration.value``). The recording, ``path``, ``agents`` and ``layout`` are
-    checked when it is called (CrowdError). Closed before it is done, it removes its
+    (``StopIteration.value``), ``before_commit`` as there. The recording, ``path``,
+    ``agents`` and ``layout`` are checked when it is called (CrowdError). Closed before it is done, it removes its
     temporary files: nothing is written, a previous export is left as it was."""
     if not isinstance(recording, Recording):
         raise CrowdError(f"export: expected a Recording (crowd_addon.core.shots.recording), got "
@@ -192,7 +197,7 @@ def export_steps(recording, path, agents=None, layout="instanced", camera=None,
         recording, _view_projection(recording, ids, camera, repetition), agents=ids,
         settings=repetition)
     return _steps(recording, ids, meshes, ExportFiles(path), layout, measure,
-                  bool(animation_only))
+                  bool(animation_only), before_commit)
 
 
 def _view_projection(rec, ids, camera, settings) -> np.ndarray:
@@ -221,7 +226,7 @@ def check_export(config, path, agents=None, layout="instanced") -> None:
     _bodies(config, np.where(st >= 0, of_stream[st], of_unique[un]), ids)
 
 
-def _steps(rec, ids, meshes, files, layout, measure, animation_only):
+def _steps(rec, ids, meshes, files, layout, measure, animation_only, before_commit):
     t0 = time.perf_counter()
     out = _Output(files)
     with files:
@@ -258,6 +263,8 @@ def _steps(rec, ids, meshes, files, layout, measure, animation_only):
             out.save(agents, "layout")
             layer.subLayerPaths.append(files.asset_path("layout"))
         out.save(layer)
+        if before_commit is not None:
+            before_commit()
         files.commit()
     author = time.perf_counter() - t0 - out.write
     seconds = {"simulate": rec.seconds, "author": author, "write": out.write,

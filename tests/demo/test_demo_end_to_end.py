@@ -323,7 +323,7 @@ def test_a_failed_rerun_leaves_the_blend_and_summary_of_the_run_before(demo, tmp
         demo_run.run_demo(out, agents=10, frames=1, log=lambda msg: None)
     assert {p: (out / p).read_bytes() for p in kept} == kept
     assert not [p for p in os.listdir(out) if p.startswith(".stadium.partial")]
-    demo_run.check_blend_is_the_demos(out)        # a re-run may still replace it
+    demo_run.check_folder_is_the_demos(out)        # a re-run may still replace it
 
 
 def test_a_rerun_that_fails_late_leaves_the_frames_and_sheet_of_the_run_before(demo, tmp_path):
@@ -352,11 +352,11 @@ def test_a_rerun_that_fails_late_leaves_the_frames_and_sheet_of_the_run_before(d
             "    running = True\n"
             "    def __init__(self, shot, path, *a):\n"
             "        self.path = Path(path)\n"
-            "    def result(self):\n"
+            "    def written(self):\n"
             "        raise CrowdError('USD export: boom')\n"
             "    def stop(self):\n"
             "        (self.path.parent / 'export stopped').write_text('yes')\n"
-            "r._UsdExport = Export\n"
+            "r.UsdExport = Export\n"
             "r.run_demo(sys.argv[1], agents=10, frames=2, size=(64, 36), mp4=False,\n"
             "           log=lambda m: None)\n")
     run = subprocess.run([sys.executable, "-c", code, str(out)], cwd=ROOT,
@@ -366,3 +366,42 @@ def test_a_rerun_that_fails_late_leaves_the_frames_and_sheet_of_the_run_before(d
     (out / "export stopped").unlink()
     assert snapshot() == before
     assert not [p for p in os.listdir(out) if ".partial" in p or ".run-" in p]
+
+
+def test_the_demo_refuses_a_folder_of_someone_elses_files(tmp_path):
+    """Before: ``crowd demo --out`` into a folder of the user's replaced its ``frames/``
+    folder whole (the user's frames were gone) and wrote over ``contact_sheet.png``."""
+    out = tmp_path / "renders"
+    (out / "frames").mkdir(parents=True)
+    (out / "frames" / "shot010_0001.exr").write_text("weeks of work")
+    (out / "contact_sheet.png").write_text("mine")
+    run = subprocess.run([sys.executable, "-m", "crowd_addon", "demo", "--out", str(out),
+                          "--agents", "10", "--frames", "1"], cwd=ROOT, capture_output=True,
+                         text=True, timeout=300)
+    assert run.returncode == 2
+    assert (f"{out} holds contact_sheet.png, frames, which no demo run left there"
+            in run.stderr)
+    assert sorted(str(p.relative_to(out)) for p in out.rglob("*")) == [
+        "contact_sheet.png", "frames", "frames/shot010_0001.exr"]
+    assert (out / "frames" / "shot010_0001.exr").read_text() == "weeks of work"
+
+
+def test_a_rerun_replaces_its_own_frames_and_keeps_the_users_files_there(demo, tmp_path):
+    """A shorter re-run without an MP4: the earlier run's later frames go (they would
+    be mistaken for this run's), its MP4 and a file the user put in ``frames/`` stay
+    (before, the folder was replaced whole)."""
+    import shutil
+    out = tmp_path / "again"
+    shutil.copytree(demo[0], out)
+    assert (out / "frames" / "preview.mp4").is_file()
+    (out / "frames" / "notes.txt").write_text("mine")
+    run = subprocess.run([sys.executable, "-m", "crowd_addon", "demo", "--out", str(out),
+                          "--agents", "10", "--frames", "2", "--width", "64", "--height",
+                          "36", "--no-mp4", "--no-usd"], cwd=ROOT, capture_output=True,
+                         text=True, timeout=600)
+    assert run.returncode == 0, run.stderr[-3000:]
+    assert sorted(os.listdir(out / "frames")) == ["frame_0001.png", "frame_0002.png",
+                                                  "notes.txt", "preview.mp4"]
+    assert (out / "frames" / "notes.txt").read_text() == "mine"
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["agents"] == 10 and summary["pngs"] == 2

@@ -212,6 +212,39 @@ def test_a_rerun_replaces_the_frames_of_the_run_before(config_path, tmp_path, ca
     assert _frames(out_dir) == _frames(again)                      # this run's frames
 
 
+@pytest.mark.parametrize("signal_", ["SIGTERM", "SIGINT"])
+def test_a_run_stopped_by_a_signal_keeps_the_frames_of_the_run_before(config_path, tmp_path,
+                                                                      capsys, signal_):
+    """A farm queue or ``kill`` ends a job with SIGTERM, Ctrl-C sends SIGINT. Before,
+    SIGTERM ended the process on the spot: its staging folder stayed, and Ctrl-C
+    printed a traceback. Now both unwind as a failure does: exit 143 or 130, one line
+    on stderr, the earlier run's frames as they were, nothing of this run left."""
+    import signal
+    import time
+    out_dir = tmp_path / "shot"
+    size = ("--width", 32, "--height", 32)
+    assert run(capsys, "--config", config_path, "--out", out_dir, "--frames", 4, *size)[0] == 0
+    before = _frames(out_dir)
+    proc = subprocess.Popen([sys.executable, "-m", "crowd_addon", "preview", "--config",
+                             str(config_path), "--out", str(out_dir), "--frames", "100000",
+                             "--samples", "0", *map(str, size)], cwd=ROOT,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and not any(
+            (out_dir / n).is_dir() and len(os.listdir(out_dir / n)) > 2
+            for n in os.listdir(out_dir) if n.startswith(".frames.partial")):
+        time.sleep(0.05)                          # until it has drawn a few frames
+    proc.send_signal(getattr(signal, signal_))
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == {"SIGTERM": 143, "SIGINT": 130}[signal_], err[-2000:]
+    assert "Traceback" not in err
+    assert err.strip().splitlines()[-1] == (
+        f"crowd preview: {'stopped by SIGTERM' if signal_ == 'SIGTERM' else 'interrupted'}: "
+        "nothing of this run was kept; earlier outputs are as they were")
+    assert _frames(out_dir) == before
+    assert sorted(os.listdir(out_dir)) == sorted(before)          # no partial folder left
+
+
 def test_an_output_name_too_long_is_named(config_path, tmp_path, capsys):
     # before: OSError (File name too long) from the folder check (fuzz seed 1711)
     code, _, err = run(capsys, "--config", config_path, "--out", tmp_path / ("x" * 300),
