@@ -9,7 +9,8 @@ directory (``.shot.usdc.XXXX.tmp``, with an ``owner`` file naming the process).
 1. renames the finished layers to the new version folder, ``shot.layers/vN`` (the
    previous export, whose main layer names ``vN-1``, is untouched);
 2. renames the main layer into place: this one rename is the commit;
-3. removes the older versions that no stage reads.
+3. removes the older versions that no stage reads (only what exports write:
+   nothing else in ``shot.layers/`` is the export's to delete).
 
 A crash (or kill) before step 2 leaves the previous export whole; after it, the new
 one. A version is never changed once written, and is deleted only when no stage reads
@@ -24,6 +25,7 @@ no stage reads.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import shutil
@@ -33,12 +35,16 @@ import tempfile
 from pxr import Tf
 
 from ..core.base.errors import CrowdError
-from .references import READERS, versions_in_use
+from .references import versions_in_use
 
 __all__ = ["ExportFiles", "FORMATS", "remove_stale_temporaries"]
 
 #: file extension -> Sdf file format of every layer of the export
 FORMATS = {".usdc": "usdc", ".usd": "usdc", ".usda": "usda"}
+
+#: what exports wrote straight into ``<stem>.layers/`` before versions (2026-11-23):
+#: removed like an old version once no stage reads it
+_UNVERSIONED = frozenset({"characters", "streams", "agents.usdc", "agents.usda"})
 
 
 class ExportFiles:
@@ -161,23 +167,22 @@ class ExportFiles:
         self._remove_unread()
 
     def _remove_unread(self) -> None:
-        """Step 3: delete the older versions (and entries of an old layout) that no
-        stage reads (:func:`~crowd_addon.usd.references.versions_in_use`: the stages
-        beside the export and the readers registered in ``<stem>.layers/readers/``,
-        such as a stitched stage reading this chunk). A version above ours is another
-        export's, still committing, and left alone. When what is in use cannot be
-        told, nothing is deleted: a later export tries again."""
+        """Step 3: delete the older versions that no stage reads
+        (:func:`~crowd_addon.usd.references.versions_in_use`: the stages beside the
+        export and the readers registered in ``<stem>.layers/readers/``, such as a
+        stitched stage reading this chunk). Only what exports write is ever deleted:
+        version folders (``vN`` below ours: a version above is another export's, still
+        committing) and the entries of the layout before versions
+        (:data:`_UNVERSIONED`); any other file or folder in ``<stem>.layers/`` is not
+        the export's and stays. When what is in use cannot be told, nothing is
+        deleted: a later export tries again."""
         ours = int(self.version[1:])
         try:
             names = os.listdir(self.layers_root)
         except OSError:
             return
-        old = []
-        for name in names:
-            m = re.fullmatch(r"v(\d+)", name)
-            if name in (self.version, READERS) or (m and int(m.group(1)) > ours):
-                continue
-            old.append(name)
+        old = [n for n in names if n in _UNVERSIONED
+               or ((m := re.fullmatch(r"v(\d+)", n)) and int(m.group(1)) < ours)]
         if not old:
             return
         try:
@@ -191,7 +196,8 @@ class ExportFiles:
             if os.path.isdir(path) and not os.path.islink(path):
                 shutil.rmtree(path, ignore_errors=True)
             else:
-                _unlink(path)
+                with contextlib.suppress(OSError):
+                    os.unlink(path)
 
 
 def _step(name: str) -> None:
@@ -241,9 +247,3 @@ def _running(pid: int) -> bool:
         return True
     return True
 
-
-def _unlink(path):
-    try:
-        os.unlink(path)
-    except OSError:
-        pass

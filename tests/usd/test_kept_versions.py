@@ -98,3 +98,20 @@ def test_a_stage_beside_the_export_keeps_the_version_it_names(tmp_path):
     os.unlink(chunk.parent / "review.usda")
     reexport(chunk, 2)
     assert versions(chunk) == ["v3"]
+
+
+def test_only_version_folders_are_ever_removed(tmp_path):
+    """Before: every entry of ``shot.layers/`` but the new version and the readers was
+    removed, so notes or a folder a user kept there were deleted by the next export."""
+    shot = tmp_path / "shot.usdc"
+    crowd = Crowd(make_config(), skinning="gpu")
+    rec = record(crowd, crowd.frame, crowd.frame + 3)
+    export_crowd(rec, shot)
+    layers = tmp_path / "shot.layers"
+    (layers / "mine").mkdir()
+    (layers / "mine" / "reference_photo.txt").write_text("user file")
+    (layers / "NOTES.txt").write_text("user notes")
+    (layers / "v").mkdir()                               # not a version's name
+    export_crowd(rec, shot)
+    assert sorted(os.listdir(layers)) == ["NOTES.txt", "mine", "v", "v2"]
+    assert (layers / "mine" / "reference_photo.txt").read_text() == "user file"
