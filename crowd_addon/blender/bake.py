@@ -339,8 +339,15 @@ class _Playback:
         ad.use_nla = s["use_nla"]
         if not s["had_ad"]:
             obj.animation_data_clear()
+        obj.data.pose_position = s["pose_position"]
+        # back to the frame first: frame_set plays the action over the pose, so the pose
+        # values (a posing not keyed yet) are put back after it, as they were
+        self.scene.frame_set(s["frame"], subframe=s["subframe"])
         for prop, buf in s["pose"].items():
             obj.pose.bones.foreach_set(prop, buf)
-        obj.data.pose_position = s["pose_position"]
-        self.scene.frame_set(s["frame"], subframe=s["subframe"])
+        obj.update_tag()
+        # and evaluated, so the bones' matrices show that pose (as frame_set left them)
+        import bpy
+        layer = bpy.context.view_layer
+        (layer if bpy.context.scene == self.scene else self.scene.view_layers[0]).update()
         return False

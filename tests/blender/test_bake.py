@@ -204,7 +204,7 @@ def test_constraints_fall_back_to_frame_set_and_restore_the_scene(scene, blend):
     con = obj.pose.bones["hand.L"].constraints.new("DAMPED_TRACK")
     con.target = target
     scene.frame_set(7)
-    obj.pose.bones["arm.L"].rotation_euler = (0.1, 0.2, 0.3)     # not keyed: kept
+    obj.pose.bones["arm.L"].rotation_euler = (0.1, 0.2, 0.3)     # keyed: the action's at 7
     before = blend.pose_at(scene, obj, [b.name for b in obj.pose.bones], 7)
     result = bake_actions(obj, [action], fps=scene.render.fps)
     assert result.methods == {"Wave": "frame_set"}
@@ -213,6 +213,35 @@ def test_constraints_fall_back_to_frame_set_and_restore_the_scene(scene, blend):
     after = np.array([np.array(pb.matrix) for pb in obj.pose.bones])
     np.testing.assert_allclose(after, before, atol=1e-6)
     assert_matches_blender(blend, scene, obj, result, 0, np.arange(1, 21, 2), 1.0, 1.0)
+
+
+def test_a_frame_set_bake_keeps_a_pose_the_user_has_not_keyed_yet(scene, blend):
+    """The animator posed keyed bones at frame 7 without keying them yet; the bake
+    samples with frame_set (a constraint). Before: going back to frame 7 played the
+    action over the restored pose, and the posing was lost (as a failed bake did too);
+    the fast path already kept it."""
+    obj = blend.build_rig(scene)
+    action, _, _ = blend.rig_action(obj)
+    obj.pose.bones["hand.L"].constraints.new("LIMIT_ROTATION")
+    scene.frame_set(7)
+    posed = {"root": ("rotation_quaternion", (0.9, 0.1, 0.2, 0.3)),
+             "arm.L": ("rotation_euler", (0.1, 0.2, 0.3)),
+             "spine": ("location", (0.05, -0.02, 0.01))}
+    for bone, (prop, value) in posed.items():
+        setattr(obj.pose.bones[bone], prop, value)
+
+    def kept():
+        for bone, (prop, value) in posed.items():
+            np.testing.assert_allclose(tuple(getattr(obj.pose.bones[bone], prop)), value,
+                                       atol=1e-6, err_msg=f"{bone} {prop}")
+    result = bake_actions(obj, [action], fps=scene.render.fps)
+    assert result.methods == {"Wave": "frame_set"}
+    kept()
+    assert scene.frame_current == 7 and obj.animation_data.action == action
+    before = np.array([np.array(pb.matrix) for pb in obj.pose.bones])
+    blend.bpy.context.view_layer.update()                 # what Blender shows: the posing
+    np.testing.assert_allclose([np.array(pb.matrix) for pb in obj.pose.bones], before,
+                               atol=1e-6)
 
 
 def test_unkeyed_channels_keep_the_current_pose(scene, blend):
