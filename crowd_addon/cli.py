@@ -102,8 +102,8 @@ def console(argv=None) -> int:
         signal.signal(signal.SIGTERM, signal.SIG_IGN)     # once is enough: finish leaving
         why, code = ("interrupted", 130) if isinstance(stop, KeyboardInterrupt) else \
             ("stopped by SIGTERM", 128 + signal.SIGTERM)
-        print(f"crowd {command}: {why}: nothing of this run was kept; earlier outputs are "
-              f"as they were".replace("crowd : ", "crowd: "), file=sys.stderr)
+        print(f"crowd {command}: {why}; earlier outputs are as they "
+              f"were".replace("crowd : ", "crowd: "), file=sys.stderr)
     if "bpy" in sys.modules:
         sys.stdout.flush()
         sys.stderr.flush()

@@ -239,8 +239,8 @@ def test_a_run_stopped_by_a_signal_keeps_the_frames_of_the_run_before(config_pat
     assert proc.returncode == {"SIGTERM": 143, "SIGINT": 130}[signal_], err[-2000:]
     assert "Traceback" not in err
     assert err.strip().splitlines()[-1] == (
-        f"crowd preview: {'stopped by SIGTERM' if signal_ == 'SIGTERM' else 'interrupted'}: "
-        "nothing of this run was kept; earlier outputs are as they were")
+        f"crowd preview: {'stopped by SIGTERM' if signal_ == 'SIGTERM' else 'interrupted'}; "
+        "earlier outputs are as they were")
     assert _frames(out_dir) == before
     assert sorted(os.listdir(out_dir)) == sorted(before)          # no partial folder left
 
