@@ -237,7 +237,7 @@ def build_stadium(path, seats=DEFAULT_SEATS, bvh=mocap.BVH_PATH, log=print):
     seat_layout = layout.layout_seats(int(seats))
     stadium = _collection(scene, "Stadium")
     say(f"building the seats and stands: {' + '.join(map(str, seat_layout.rows))} rows")
-    seat_obj, stands = seat_objects(seat_layout, stadium)
+    seat_obj, stands = seat_objects(seat_layout, scene, stadium)
     _build_pitch(seat_layout.spec, stadium)
 
     say("building the fan rig, body and actions")

@@ -16,6 +16,7 @@ import bpy
 import numpy as np
 
 from ..core.meshes.mesh import Look
+from .owned import made, mark
 
 __all__ = ["mesh_looks", "plain_material", "principled"]
 
@@ -87,12 +88,16 @@ def principled(material):
 
 
 def plain_material(name: str, colour):
-    """Material ``name`` (made when missing) of one linear RGBA ``colour``, the same in
+    """The extension's material ``name`` of one linear RGBA ``colour``, the same in
     every engine and in the crowd's looks: its viewport colour (Workbench) and its
     Principled BSDF's *Base Color* (EEVEE, Cycles, :func:`mesh_looks`). Blender 5
     gives a new material a Principled BSDF of its own grey; setting the viewport
-    colour alone would leave that grey."""
-    mat = bpy.data.materials.get(name) or bpy.data.materials.new(name)
+    colour alone would leave that grey. The material this made before (marked:
+    :mod:`.owned`) is reused and recoloured; a material of the user's named ``name``
+    is left as it is, and a new one is made beside it (``name.001``)."""
+    what = f"material {name}"
+    mat = next((m for m in bpy.data.materials if made(m, what)), None) or \
+        mark(bpy.data.materials.new(name), what)
     mat.diffuse_color = colour
     if mat.node_tree is None:              # Blender before 5.0: nodes on request
         mat.use_nodes = True

@@ -4,9 +4,14 @@
 objects: "Seats", one vertex per seat with the POINT attributes ``heading`` (FLOAT,
 radians about +Z, facing the pitch centre for a character facing -Y) and ``section``,
 ``tier``, ``row``, ``seat``, ``team`` (INT) and the vertex groups "home" and "away";
-"Stands", the terraces and benches with the materials "concrete", "home" and "away".
-An object of that name already there keeps its place, transform and the agent
-sources that use it and gets the new mesh. The operator (Crowd tab > Agents) fills a
+"Stands", the terraces and benches with the materials "concrete", "home" and "away"
+(:func:`~.looks.plain_material`). The scene records the objects it made there (its
+custom properties :data:`SEATS_KEY` and :data:`STANDS_KEY`): making them again in that
+scene gives those objects the new meshes, and they keep their names, places,
+transforms and the agent sources that use them. Nothing else is taken over: an object
+of the user's named "Seats" or "Stands" (or one made before the scene recorded them,
+by an older version, or made in another scene) is left as it is, and the new object
+is named by Blender ("Seats.001"). The operator (Crowd tab > Agents) fills a
 :class:`~crowd_addon.core.authoring.seat_spec.SeatSpec` from its properties and calls it.
 """
 
@@ -22,7 +27,11 @@ from ..core.authoring.seat_spec import AWAY, HOME, SeatSpec, Tier, Tunnel
 from ..core.authoring.seats import generate_seats
 from .looks import plain_material
 
-__all__ = ["CLASSES", "STAND_COLOURS", "seat_objects", "spec_from_operator"]
+__all__ = ["CLASSES", "SEATS_KEY", "STANDS_KEY", "STAND_COLOURS", "seat_objects",
+           "spec_from_operator"]
+
+#: the scene's custom properties that point at the Seats and Stands objects made there
+SEATS_KEY, STANDS_KEY = "crowd_seats", "crowd_stands"
 
 #: the Stands' materials (linear RGBA), in the order of the core's face kinds
 STAND_COLOURS = {"concrete": (0.55, 0.55, 0.52, 1.0), "home": (0.30, 0.09, 0.09, 1.0),
@@ -49,13 +58,16 @@ def _mesh(name, vertices, corners=None, sizes=None):
     return me
 
 
-def _put(name, mesh, collection):
-    """Object ``name`` with ``mesh``: a new one linked to ``collection``, or the (mesh)
-    object already there with its old mesh replaced (and removed when unused)."""
-    obj = bpy.data.objects.get(name)
-    if obj is None:
+def _put(scene, key, name, mesh, collection):
+    """The object ``scene[key]`` points at, when it is still in ``scene``, with its old
+    mesh replaced by ``mesh`` (and removed when unused); else a new object ``name``
+    (Blender's unique name when that is taken) linked to ``collection`` and recorded
+    in ``scene[key]``."""
+    obj = scene.get(key)
+    if not isinstance(obj, bpy.types.Object) or scene.objects.get(obj.name) != obj:
         obj = bpy.data.objects.new(name, mesh)
         collection.objects.link(obj)
+        scene[key] = obj
         return obj
     old = obj.data
     obj.data = mesh
@@ -64,21 +76,17 @@ def _put(name, mesh, collection):
     return obj
 
 
-def seat_objects(layout, collection, seats_name="Seats", stands_name="Stands",
+def seat_objects(layout, scene, collection, seats_name="Seats", stands_name="Stands",
                  stands=True):
-    """The "Seats" (and, with ``stands``, "Stands") objects of ``layout``; returns
-    ``(seats, stands or None)``. New objects go to ``collection``."""
-    for name in (seats_name, stands_name) if stands else (seats_name,):
-        obj = bpy.data.objects.get(name)
-        if obj is not None and obj.type != "MESH":
-            raise CrowdError(f"generate seats: object {name!r} is not a mesh (it is "
-                             f"{obj.type.lower()})")
+    """The "Seats" (and, with ``stands``, "Stands") objects of ``layout`` in ``scene``
+    (see the module docstring); returns ``(seats, stands or None)``. New objects go to
+    ``collection``, a collection of ``scene``."""
     me = _mesh(seats_name, layout.position)
     for name, (field, kind) in SEAT_ATTRIBUTES.items():
         me.attributes.new(name, kind, "POINT").data.foreach_set(
             "value", np.ascontiguousarray(getattr(layout, field)))
     me.update()
-    seats = _put(seats_name, me, collection)
+    seats = _put(scene, SEATS_KEY, seats_name, me, collection)
     for group, team in (("home", HOME), ("away", AWAY)):
         old = seats.vertex_groups.get(group)
         if old is not None:
@@ -93,7 +101,7 @@ def seat_objects(layout, collection, seats_name="Seats", stands_name="Stands",
         me.materials.append(plain_material(name, colour))
     me.polygons.foreach_set("material_index", mesh.kind.astype(np.int32))
     me.update()
-    return seats, _put(stands_name, me, collection)
+    return seats, _put(scene, STANDS_KEY, stands_name, me, collection)
 
 
 def _angles(text):
@@ -127,7 +135,7 @@ class CROWD_OT_generate_seats(bpy.types.Operator):
     """Make a stadium's seats and stands round the pitch at the world origin: the
     "Seats" object, a point per seat (attributes heading, section, tier, row, seat,
     team; groups home and away) to use as an agent source, and the "Stands" mesh.
-    Objects of those names get the new meshes"""
+    Generating again in the scene gives the objects it made there the new meshes"""
 
     bl_idname = "crowd.generate_seats"
     bl_label = "Generate Seats"
@@ -220,7 +228,7 @@ class CROWD_OT_generate_seats(bpy.types.Operator):
         try:
             layout = generate_seats(spec_from_operator(self))
             collection = context.collection or context.scene.collection
-            seats, _ = seat_objects(layout, collection, stands=self.make_stands)
+            seat_objects(layout, context.scene, collection, stands=self.make_stands)
         except CrowdError as e:
             self.report({"ERROR"}, str(e))
             return {"CANCELLED"}

@@ -1,6 +1,7 @@
 """*Generate Seats* (crowd_addon/blender/seats_operator.py): the Seats and Stands
-meshes it makes hold what the core seat generator gives, and making them again
-replaces the meshes of the same objects.
+meshes it makes hold what the core seat generator gives, making them again in a scene
+replaces the meshes of the objects it made there, and nothing of the user's that
+bears their names is changed.
 
 Oracles: :func:`crowd_addon.core.authoring.seats.generate_seats` for the same spec, and Blender's
 own data read back (vertex positions, point attributes, vertex groups, polygons)."""
@@ -18,6 +19,7 @@ import crowd_scene as cs  # noqa: E402
 
 from crowd_addon.core.authoring.seat_spec import SeatSpec, Tier, Tunnel  # noqa: E402
 from crowd_addon.core.authoring.seats import generate_seats  # noqa: E402
+from crowd_addon.blender.seats_operator import STAND_COLOURS  # noqa: E402
 
 extension = cs.extension_fixture()
 
@@ -50,7 +52,7 @@ def _points(obj):
     return out
 
 
-def _check(expected, seats, stands):
+def _check(expected, seats, stands, home_material="home"):
     got = _points(seats)
     assert len(got["position"]) == len(expected)
     np.testing.assert_allclose(got["position"], expected.position, atol=1e-4)
@@ -78,7 +80,7 @@ def _check(expected, seats, stands):
     material = np.empty(len(me.polygons), np.int32)
     me.polygons.foreach_get("material_index", material)
     np.testing.assert_array_equal(material, mesh.kind)
-    assert [m.name for m in me.materials] == ["concrete", "home", "away"]
+    assert [m.name for m in me.materials] == ["concrete", home_material, "away"]
     assert not me.validate()                        # nothing to fix
 
 
@@ -123,9 +125,74 @@ def test_bad_input_is_reported_and_changes_nothing(scene):
         with pytest.raises(RuntimeError, match=words):
             bpy.ops.crowd.generate_seats(**props)
         assert bpy.data.objects["Seats"].data == mesh and len(mesh.vertices) == 300
-    bpy.data.objects.remove(seats)
-    empty = bpy.data.objects.new("Seats", None)
-    scene.collection.objects.link(empty)
-    with pytest.raises(RuntimeError, match=r"'Seats' is not a mesh \(it is empty\)"):
-        bpy.ops.crowd.generate_seats(seats=300)
-    assert "Stands" not in bpy.data.objects
+
+
+def test_the_users_objects_and_materials_of_the_same_names_are_left_alone(scene):
+    """Generate Seats makes its own objects and materials beside the user's "Seats",
+    "Stands" and "home" (before, it gave the user's objects its meshes, deleting the
+    Stands' own, rebuilt the Seats' vertex groups and recoloured the material), and
+    making them again replaces its own, not the user's."""
+    cube = bpy.data.objects.new("Stands", _box("MyStandsMesh"))
+    mine = bpy.data.objects.new("Seats", _box("MySeatsMesh"))
+    for obj in (cube, mine):
+        scene.collection.objects.link(obj)
+    mine.vertex_groups.new(name="home").add([0, 1], 0.5, "REPLACE")
+    red = bpy.data.materials.new("home")
+    red.diffuse_color = (1.0, 0.0, 0.0, 1.0)
+
+    def intact():
+        assert bpy.data.objects["Stands"] == cube and cube.data.name == "MyStandsMesh"
+        assert bpy.data.objects["Seats"] == mine and mine.data.name == "MySeatsMesh"
+        assert len(cube.data.vertices) == len(mine.data.vertices) == 8
+        assert [g.name for g in mine.vertex_groups] == ["home"]
+        assert [[(g.group, g.weight) for g in v.groups] for v in mine.data.vertices] == \
+            [[(0, 0.5)]] * 2 + [[]] * 6
+        assert tuple(red.diffuse_color) == (1.0, 0.0, 0.0, 1.0)
+
+    assert bpy.ops.crowd.generate_seats(seats=300) == {"FINISHED"}
+    intact()
+    seats, stands = bpy.data.objects["Seats.001"], bpy.data.objects["Stands.001"]
+    assert [m.name for m in stands.data.materials] == ["concrete", "home.001", "away"]
+    np.testing.assert_allclose(stands.data.materials[1].diffuse_color, STAND_COLOURS["home"],
+                               atol=1e-6)
+    _check(generate_seats(replace(DEFAULT, seats=300)), seats, stands, "home.001")
+    meshes, materials = len(bpy.data.meshes), len(bpy.data.materials)
+    assert bpy.ops.crowd.generate_seats(seats=200) == {"FINISHED"}      # again: its own
+    intact()
+    assert bpy.data.objects["Seats.001"] == seats and bpy.data.objects["Stands.001"] == stands
+    assert "Seats.002" not in bpy.data.objects and "Stands.002" not in bpy.data.objects
+    assert (len(bpy.data.meshes), len(bpy.data.materials)) == (meshes, materials)
+    _check(generate_seats(replace(DEFAULT, seats=200)), seats, stands, "home.001")
+
+
+def test_each_scene_gets_seats_of_its_own(scene):
+    """Generate Seats in a second scene makes that scene's objects and leaves the first
+    scene's as they were (before, it gave the first scene's objects the new meshes and
+    made nothing in the second); generating again in either replaces its own."""
+    assert bpy.ops.crowd.generate_seats(seats=300) == {"FINISHED"}
+    seats_a, stands_a = bpy.data.objects["Seats"], bpy.data.objects["Stands"]
+    mesh_a = seats_a.data
+    other = bpy.data.scenes.new("Other")
+    bpy.context.window.scene = other
+    assert bpy.ops.crowd.generate_seats(seats=500, make_stands=False) == {"FINISHED"}
+    (seats_b,) = other.objects
+    assert seats_b.name == "Seats.001" and len(seats_b.data.vertices) == 500
+    assert seats_a.data == mesh_a and len(mesh_a.vertices) == 300
+    assert set(scene.objects) == {seats_a, stands_a}
+    assert bpy.ops.crowd.generate_seats(seats=400) == {"FINISHED"}     # again, in Other
+    assert set(other.objects) - {seats_b} == {bpy.data.objects["Stands.001"]}
+    assert seats_b.name == "Seats.001" and len(seats_b.data.vertices) == 400
+    assert seats_a.data == mesh_a and len(mesh_a.vertices) == 300
+    bpy.context.window.scene = scene
+    assert bpy.ops.crowd.generate_seats(seats=200) == {"FINISHED"}     # and in the first
+    assert set(scene.objects) == {seats_a, stands_a} and len(seats_a.data.vertices) == 200
+    assert len(seats_b.data.vertices) == 400
+
+
+def _box(name):
+    """A mesh of the eight corners of a unit cube and its six faces."""
+    me = bpy.data.meshes.new(name)
+    me.from_pydata([(x, y, z) for x in (0, 1) for y in (0, 1) for z in (0, 1)], [],
+                   [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4),
+                    (1, 5, 7, 3)])
+    return me
