@@ -29,6 +29,7 @@ import hashlib
 
 import bpy
 
+from ..core.base.errors import CrowdError
 from .looks import principled
 
 __all__ = ["PREFIX", "crowd_material", "refresh_all", "remove_all"]
@@ -50,6 +51,9 @@ def crowd_material(name: str, column=None):
     key = PREFIX + name + ("" if column is None else f".{int(column)}")
     digest = _digest(source)
     old = bpy.data.materials.get(key)
+    if old is not None and _SOURCE not in old:
+        raise CrowdError(f"material {key!r} is not Render Crowd's; rename it to use "
+                         "Render Crowd")
     if old is not None and old.get(_SOURCE) == digest:
         return old
     copy = source.copy()
@@ -80,8 +84,9 @@ def refresh_all() -> None:
 
 
 def remove_all() -> list:
-    """The crowd copies, to remove with the rest of the render data."""
-    return [m for m in bpy.data.materials if m.name.startswith(PREFIX)]
+    """The crowd copies (not a material of the user's that bears the prefix), to
+    remove with the rest of the render data."""
+    return [m for m in bpy.data.materials if m.name.startswith(PREFIX) and _SOURCE in m]
 
 
 def _colour_rule(tree, socket, column) -> None:

@@ -43,6 +43,9 @@ storage's row versions say which rows were written since it was skinned: in a st
 that is one history slice of each stream (the agents of the other offsets moved on
 to pose meshes already made), the uniques and the transitions; the rest are left as
 they are (``RenderStats.skinned``).
+
+All of it is the extension's own, and only its own is reused, changed or removed
+(:mod:`.render_points`).
 """
 
 from __future__ import annotations
@@ -58,13 +61,14 @@ import bpy
 from ..core.base.errors import CrowdError
 from ..core.base.skinning import skin_vertices
 from .crowd_materials import crowd_material, refresh_all, remove_all as crowd_materials
+from .owned import made
 from .render_pieces import AIM_BITS, ShownPoses, agent_pieces, aim_codes, aimed_rows
+from .render_points import (NODE_GROUP, POINTS, POSES, RENDER, points_for, points_object,
+                            poses_collection)
 
-__all__ = ["POINTS", "POSES", "NODE_GROUP", "RenderStats", "sync", "forget", "remove"]
+__all__ = ["POINTS", "POSES", "NODE_GROUP", "RENDER", "RenderStats", "points_object", "sync",
+           "forget", "remove"]
 
-POINTS = "Crowd Render"
-POSES = "Crowd Poses"
-NODE_GROUP = "Crowd Render Instances"
 _POSE_PREFIX = "CrowdPose."
 _MESH_PREFIX = "CrowdPoseMesh."
 
@@ -80,90 +84,6 @@ class RenderStats:
     skinned: int = 0
     vertices: int = 0
     ms: float = 0.0
-
-
-def _node_group():
-    """The Geometry Nodes group: Instance on Points picking ``crowd_pose`` from the
-    pose collection, turned by ``crowd_heading`` and scaled by ``crowd_scale`` (a
-    group made by an older version, without the scale, is made again)."""
-    group = bpy.data.node_groups.get(NODE_GROUP)
-    if group is not None and group.nodes.get("crowd_scale") is not None:
-        return group
-    if group is not None:
-        bpy.data.node_groups.remove(group)
-    group = bpy.data.node_groups.new(NODE_GROUP, "GeometryNodeTree")
-    group.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
-    group.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
-    nodes, links = group.nodes, group.links
-    inp, out = nodes.new("NodeGroupInput"), nodes.new("NodeGroupOutput")
-    coll = nodes.new("GeometryNodeCollectionInfo")
-    coll.inputs["Collection"].default_value = _poses_collection()
-    coll.inputs["Separate Children"].default_value = True
-    coll.inputs["Reset Children"].default_value = True
-    coll.transform_space = "ORIGINAL"
-    pose = nodes.new("GeometryNodeInputNamedAttribute")
-    pose.data_type = "INT"
-    pose.inputs["Name"].default_value = "crowd_pose"
-    heading = nodes.new("GeometryNodeInputNamedAttribute")
-    heading.data_type = "FLOAT"
-    heading.inputs["Name"].default_value = "crowd_heading"
-    drawn = nodes.new("GeometryNodeInputNamedAttribute")
-    drawn.data_type = "BOOLEAN"
-    drawn.inputs["Name"].default_value = "crowd_drawn"
-    scale = nodes.new("GeometryNodeInputNamedAttribute")
-    scale.name = "crowd_scale"
-    scale.data_type = "FLOAT"
-    scale.inputs["Name"].default_value = "crowd_scale"
-    euler = nodes.new("ShaderNodeCombineXYZ")
-    inst = nodes.new("GeometryNodeInstanceOnPoints")
-    inst.inputs["Pick Instance"].default_value = True
-    links.new(inp.outputs[0], inst.inputs["Points"])
-    links.new(drawn.outputs["Attribute"], inst.inputs["Selection"])
-    links.new(coll.outputs[0], inst.inputs["Instance"])
-    links.new(pose.outputs["Attribute"], inst.inputs["Instance Index"])
-    links.new(heading.outputs["Attribute"], euler.inputs["Z"])
-    links.new(euler.outputs[0], inst.inputs["Rotation"])
-    links.new(scale.outputs["Attribute"], inst.inputs["Scale"])
-    links.new(inst.outputs[0], out.inputs[0])
-    return group
-
-
-def _poses_collection():
-    coll = bpy.data.collections.get(POSES)
-    return coll if coll is not None else bpy.data.collections.new(POSES)
-
-
-def _points_object(scene, count: int):
-    """The points object with ``count`` vertices and its modifier, linked to ``scene``."""
-    obj = bpy.data.objects.get(POINTS)
-    if obj is None:
-        obj = bpy.data.objects.new(POINTS, bpy.data.meshes.new(POINTS))
-    if obj.type != "MESH":
-        raise CrowdError(f"object {POINTS!r} exists and is not a mesh; rename it to use "
-                         "Render Crowd")
-    if obj.name not in scene.collection.objects:
-        scene.collection.objects.link(obj)
-    mesh = obj.data
-    if len(mesh.vertices) != count:
-        mesh.clear_geometry()
-        mesh.vertices.add(count)
-    for name, kind, domain in (("crowd_pose", "INT", "POINT"),
-                               ("crowd_drawn", "BOOLEAN", "POINT"),
-                               ("crowd_agent", "INT", "POINT"),
-                               ("crowd_prop", "INT", "POINT"),
-                               ("crowd_heading", "FLOAT", "POINT"),
-                               ("crowd_scale", "FLOAT", "POINT"),
-                               ("crowd_color", "FLOAT_COLOR", "POINT"),
-                               *((f"crowd_palette{c}", "FLOAT_COLOR", "POINT")
-                                 for c in range(4))):
-        if mesh.attributes.get(name) is None:
-            mesh.attributes.new(name, kind, domain)
-    mod = obj.modifiers.get("Crowd Instances")
-    if mod is None:
-        mod = obj.modifiers.new("Crowd Instances", "NODES")
-    if mod.node_group is None:
-        mod.node_group = _node_group()
-    return obj
 
 
 def _mesh_for(proxy, name: str, palette=()):
@@ -216,8 +136,13 @@ class _Existing:
 
     def __init__(self, coll):
         self.coll = coll
-        self.meshes = {m.name: m for m in bpy.data.meshes if m.name.startswith(_MESH_PREFIX)}
-        self.objects = {o.name: o for o in bpy.data.objects if o.name.startswith(_POSE_PREFIX)}
+        meshes = [m for m in bpy.data.meshes if m.name.startswith(_MESH_PREFIX)]
+        objects = [o for o in bpy.data.objects if o.name.startswith(_POSE_PREFIX)]
+        self.meshes = {m.name: m for m in meshes if _is_pose_mesh(m)}
+        self.objects = {o.name: o for o in objects if _is_pose(o)}
+        #: names of the user's data that bear a pose mesh's or pose object's name
+        self.foreign = {b.name for b in (*meshes, *objects)} - self.meshes.keys() \
+            - self.objects.keys()
         self.linked = set(coll.objects.keys())
         #: meshes replaced this sync, removed in one batch once every pose object in
         #: use shows its new mesh (removing a mesh removes the objects still using it)
@@ -227,6 +152,7 @@ class _Existing:
         """Pose object ``j``'s mesh: the one it has when it was made from ``made``
         (:func:`_made_from`), else a new one of ``proxy`` (``palette``: :func:`_mesh_for`'s)."""
         name = f"{_MESH_PREFIX}{j:06d}"
+        self._free(name)
         mesh = self.meshes.get(name)
         if mesh is not None and mesh.get(_MADE_FROM) == made:
             return mesh
@@ -247,11 +173,8 @@ class _Existing:
     def show(self, j: int, mesh) -> None:
         """Pose object ``j`` shows ``mesh`` and is in the pose collection."""
         name = f"{_POSE_PREFIX}{j:06d}"
+        self._free(name)
         obj = self.objects.get(name)
-        if obj is not None and obj.type != "MESH":
-            bpy.data.objects.remove(obj)
-            self.linked.discard(name)
-            obj = None
         if obj is None:
             obj = self.objects[name] = bpy.data.objects.new(name, mesh)
         elif obj.data != mesh:
@@ -259,6 +182,18 @@ class _Existing:
         if name not in self.linked:
             self.coll.objects.link(obj)
             self.linked.add(name)
+
+    def _free(self, name: str) -> None:
+        if name in self.foreign:
+            raise CrowdError(f"{name!r} is not Render Crowd's; rename it to use Render Crowd")
+
+
+def _is_pose_mesh(mesh) -> bool:
+    return mesh.name.startswith(_MESH_PREFIX) and _MADE_FROM in mesh
+
+
+def _is_pose(obj) -> bool:
+    return obj.name.startswith(_POSE_PREFIX) and obj.type == "MESH" and _MADE_FROM in obj.data
 
 
 #: Render Crowd's record of what its pose objects show (one set of them in a file)
@@ -293,7 +228,7 @@ def sync(scene, crowd) -> RenderStats:
     redo = ~kept | (was != version) | (row >= storage.slot_base)
     stats = RenderStats(agents=int(drawn[prop < 0].sum()), poses=int(keys.size))
     refresh_all()                               # material edits reach the next frame
-    coll = _poses_collection()
+    coll = poses_collection()
     existing = _Existing(coll)
     topo = (keys >> AIM_BITS) % (16 * len(levels))
     there = existing.indices()
@@ -339,7 +274,7 @@ def sync(scene, crowd) -> RenderStats:
     pose_index = np.zeros(n, np.int32)
     piece_real = pose_of_piece.reshape(-1) - offset
     pose_index[drawn] = j[piece_real[drawn]]
-    points = _points_object(scene, n)
+    points = points_for(scene, n)
     me = points.data
     a = crowd.agents
     me.vertices.foreach_set("co", np.ascontiguousarray(a.position[agent], np.float32).ravel())
@@ -377,16 +312,15 @@ def forget() -> None:
 def remove(scene) -> None:
     """Take the render data away: the points object, the pose objects and meshes, the
     crowd's material copies, the collection and the node group (one batch: removing
-    thousands of IDs one by one walks Blender's lists each time)."""
+    thousands of IDs one by one walks Blender's lists each time): Render Crowd's own,
+    nothing else (see the module docstring)."""
     forget()
-    ids = [o for o in bpy.data.objects if o.name == POINTS or o.name.startswith(_POSE_PREFIX)]
-    points = bpy.data.objects.get(POINTS)
-    if points is not None and points.type == "MESH":
-        ids.append(points.data)
-    ids += [m for m in bpy.data.meshes if m.name.startswith(_MESH_PREFIX)]
+    points = points_object()
+    ids = [] if points is None else [points, points.data]
+    ids += [o for o in bpy.data.objects if _is_pose(o)]
+    ids += [m for m in bpy.data.meshes if _is_pose_mesh(m)]
     ids += crowd_materials()
-    for name, data in ((POSES, bpy.data.collections), (NODE_GROUP, bpy.data.node_groups)):
-        if data.get(name) is not None:
-            ids.append(data[name])
+    ids += [b for data in (bpy.data.collections, bpy.data.node_groups) for b in data
+            if made(b, RENDER)]
     if ids:
         bpy.data.batch_remove(ids)

@@ -34,8 +34,9 @@ def crowd_objects(scene) -> set:
     """Names of the objects the scene's crowd settings use as templates: characters'
     armatures, bodies and LOD meshes, and agent sources; and Render Crowd's points
     object (its instances are the crowd itself)."""
-    from .render_crowd import POINTS
-    names = {POINTS}
+    from .render_points import points_object
+    points = points_object()
+    names = set() if points is None else {points.name}
     settings = getattr(scene, "crowd", None)
     if settings is None:
         return names

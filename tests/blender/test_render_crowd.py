@@ -60,14 +60,15 @@ def _instances(scene):
     """{agent: world vertices (V, 3)} of the evaluated Render Crowd instances (an
     instance's id counts the instanced points: agents whose ``crowd_drawn`` is set)."""
     depsgraph = bpy.context.evaluated_depsgraph_get()
-    points = bpy.data.objects[render_crowd.POINTS].data
+    points_obj = render_crowd.points_object()
+    points = points_obj.data
     drawn = np.zeros(len(points.vertices), bool)
     points.attributes["crowd_drawn"].data.foreach_get("value", drawn)
     agent_of = np.flatnonzero(drawn)
     out = {}
     for inst in depsgraph.object_instances:
         if inst.is_instance and inst.parent is not None and \
-                inst.parent.original.name == render_crowd.POINTS:
+                inst.parent.original == points_obj:
             mesh = inst.object.data
             co = np.empty(3 * len(mesh.vertices), np.float32)
             mesh.vertices.foreach_get("co", co)
@@ -164,6 +165,71 @@ def test_switching_off_removes_the_render_data(crowd_scene):
     assert not [m for m in bpy.data.meshes if m.name.startswith("CrowdPoseMesh.")]
     assert not [o for o in bpy.data.objects if o.name.startswith("CrowdPose.")]
     scene.crowd.render_crowd = True                       # and back, at once
+    _check_instances(scene, pv.crowd)
+
+
+def test_the_users_data_bearing_render_crowds_names_is_left_alone():
+    """Render Crowd makes, reuses and removes only its own data: the user's mesh
+    object "Crowd Render", collection "Crowd Poses", node group "Crowd Render
+    Instances" and material "CrowdMaterial.mine" come through switching on, frames and
+    switching off as they were (before, the object was taken over as the points
+    object, its mesh emptied, and deleted with the rest), while the crowd is made
+    beside them and made again each frame."""
+    preview.stop_all()
+    scene, _, _, _ = cs.walking_crowd()
+    me = bpy.data.meshes.new("UserMesh")
+    me.from_pydata([(0, 0, 0), (1, 0, 0), (0, 1, 0)], [], [(0, 1, 2)])
+    mine = bpy.data.objects.new(render_crowd.POINTS, me)
+    scene.collection.objects.link(mine)
+    coll = bpy.data.collections.new(render_crowd.POSES)
+    scene.collection.children.link(coll)
+    group = bpy.data.node_groups.new(render_crowd.NODE_GROUP, "GeometryNodeTree")
+    group.use_fake_user = True
+    material = bpy.data.materials.new("CrowdMaterial.mine")
+    material.use_fake_user = True
+
+    def intact():
+        assert bpy.data.objects[render_crowd.POINTS] == mine and mine.data == me
+        assert len(me.vertices) == 3 and len(me.polygons) == 1 and not mine.modifiers
+        assert not me.attributes.get("crowd_pose")
+        assert bpy.data.collections[render_crowd.POSES] == coll and not coll.objects
+        assert bpy.data.node_groups[render_crowd.NODE_GROUP] == group and not group.nodes
+        assert bpy.data.materials["CrowdMaterial.mine"] == material
+
+    assert bpy.ops.crowd.bake() == {"FINISHED"}
+    scene.crowd.render_crowd = True
+    pv = preview.get(scene)
+    assert pv.render_error == ""
+    intact()
+    points = render_crowd.points_object()
+    assert points != mine and points.name == f"{render_crowd.POINTS}.001"
+    _check_instances(scene, pv.crowd)
+    scene.frame_set(10)
+    assert pv.render_frame == 10 and render_crowd.points_object() == points
+    intact()
+    _check_instances(scene, pv.crowd)
+    scene.crowd.render_crowd = False
+    assert render_crowd.points_object() is None
+    assert not [o for o in bpy.data.objects if o.name.startswith("CrowdPose.")]
+    intact()
+
+
+def test_a_users_object_bearing_a_pose_objects_name_stops_render_crowd(crowd_scene):
+    """Render Crowd refuses to take over an object of the user's named as a pose object
+    (the pose objects' names give the instances' order): the error names it, and the
+    object stays, through switching off too."""
+    scene, pv = crowd_scene
+    scene.crowd.render_crowd = False
+    mine = bpy.data.objects.new("CrowdPose.000003", None)
+    scene.collection.objects.link(mine)
+    scene.crowd.render_crowd = True
+    assert pv.render_error == ("Render Crowd: 'CrowdPose.000003' is not Render Crowd's; "
+                               "rename it to use Render Crowd")
+    scene.crowd.render_crowd = False
+    assert bpy.data.objects["CrowdPose.000003"] == mine and mine.type == "EMPTY"
+    mine.name = "Mine"
+    scene.crowd.render_crowd = True
+    assert pv.render_error == ""
     _check_instances(scene, pv.crowd)
 
 
