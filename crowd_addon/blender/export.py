@@ -15,6 +15,7 @@ from bpy_extras.io_utils import ExportHelper
 
 from ..core.authoring.config import MAX_SUBSTEPS
 from ..core.base.errors import CrowdError
+from .operators import event_loop as _event_loop
 from .scene_export import export_scene, export_steps
 
 __all__ = ["CLASSES", "MENUS", "ExportJob", "menu_export", "CROWD_OT_export_usd"]
@@ -85,12 +86,6 @@ def _progress(stage, done, total):
     if lo is None or total <= 0:
         return None
     return lo + (hi - lo) * min(done, total) // total
-
-
-def _event_loop(context) -> bool:
-    """Whether a modal operator gets events here: a window, and not background mode
-    (the bpy module has a window but no event loop)."""
-    return context.window is not None and not bpy.app.background
 
 
 class CROWD_OT_export_usd(bpy.types.Operator, ExportHelper):

@@ -14,7 +14,7 @@ from . import preview, preview_variety, scene_config
 from .agents import agents_from_scene
 from .show_data import show_from_scene
 
-__all__ = ["CLASSES", "BakeJob"]
+__all__ = ["CLASSES", "BakeJob", "bake_now", "event_loop"]
 
 
 class BakeJob:
@@ -42,6 +42,41 @@ class BakeJob:
         self.steps.close()
 
 
+def event_loop(context) -> bool:
+    """Whether a modal operator gets events here: a window, and not background mode
+    (the bpy module has a window but no event loop)."""
+    return context.window is not None and not bpy.app.background
+
+
+def bake_now(op, context) -> set:
+    """Bake the context scene's crowd in one go and start the preview with it (Bake
+    without an event loop, Preview, Apply Plan): ``{"FINISHED"}``, or ``{"CANCELLED"}``
+    with the bake's error reported on ``op`` and nothing changed."""
+    wm = context.window_manager
+    job = BakeJob(context.scene)
+    wm.progress_begin(0, 1000)
+    try:
+        while job.step():
+            wm.progress_update(int(1000 * job.done / job.total))
+        return _start_baked(op, context, job.config)
+    except CrowdError as e:
+        op.report({"ERROR"}, str(e))
+        return {"CANCELLED"}
+    finally:
+        wm.progress_end()
+
+
+def _start_baked(op, context, config) -> set:
+    from ..core.bake.bake_report import WARNING, report_of
+    pv = preview.start(context.scene, config)
+    c = pv.crowd
+    for note in report_of(config):  # e.g. poses between frames that miss the action's
+        op.report({"WARNING" if note.severity == WARNING else "INFO"}, note)
+    op.report({"INFO"}, f"Crowd: {len(config.clips)} clips, {c.streams.count} streams, "
+                        f"{c.uniques.count} uniques, {c.agents.count} agents")
+    return {"FINISHED"}
+
+
 class CROWD_OT_bake(bpy.types.Operator):
     """Bake the crowd's actions into clips, place the agents and start the preview
     (Esc cancels; the previous crowd stays until the new one is complete)"""
@@ -54,21 +89,10 @@ class CROWD_OT_bake(bpy.types.Operator):
     _job = None
 
     def execute(self, context):
-        wm = context.window_manager
-        job = BakeJob(context.scene)
-        wm.progress_begin(0, 1000)
-        try:
-            while job.step():
-                wm.progress_update(int(1000 * job.done / job.total))
-            return self._finish(context, job.config, job.notes)
-        except CrowdError as e:
-            self.report({"ERROR"}, str(e))
-            return {"CANCELLED"}
-        finally:
-            wm.progress_end()
+        return bake_now(self, context)
 
     def invoke(self, context, event):
-        if context.window is None or bpy.app.background:
+        if not event_loop(context):
             return self.execute(context)
         self._job = BakeJob(context.scene)
         wm = context.window_manager
@@ -90,7 +114,7 @@ class CROWD_OT_bake(bpy.types.Operator):
             more = job.step()
             if not more:
                 self._end(context)
-                return self._finish(context, job.config, job.notes)
+                return _start_baked(self, context, job.config)
         except CrowdError as e:
             self._end(context)
             self.report({"ERROR"}, str(e))
@@ -107,16 +131,6 @@ class CROWD_OT_bake(bpy.types.Operator):
             self._timer = None
         wm.progress_end()
         context.workspace.status_text_set(None)
-
-    def _finish(self, context, config, notes=()):
-        from ..core.bake.bake_report import WARNING, report_of
-        pv = preview.start(context.scene, config)
-        c = pv.crowd
-        for note in report_of(config):  # e.g. poses between frames that miss the action's
-            self.report({"WARNING" if note.severity == WARNING else "INFO"}, note)
-        self.report({"INFO"}, f"Crowd: {len(config.clips)} clips, {c.streams.count} streams, "
-                              f"{c.uniques.count} uniques, {c.agents.count} agents")
-        return {"FINISHED"}
 
 
 class CROWD_OT_generate_agents(bpy.types.Operator):
@@ -158,12 +172,12 @@ class CROWD_OT_preview_toggle(bpy.types.Operator):
         if preview.get(context.scene) is not None:
             preview.stop(context.scene)
             return {"FINISHED"}
-        return bpy.ops.crowd.bake("EXEC_DEFAULT")
+        return bake_now(self, context)
 
     def invoke(self, context, event):
-        if preview.get(context.scene) is not None:
+        if preview.get(context.scene) is not None or not event_loop(context):
             return self.execute(context)
-        return bpy.ops.crowd.bake("INVOKE_DEFAULT")
+        return bpy.ops.crowd.bake("INVOKE_DEFAULT")     # modal: reports its own errors
 
 
 class _OnPreview:
@@ -224,7 +238,7 @@ class CROWD_OT_plan_variety(_OnPreview, bpy.types.Operator):
 
 class CROWD_OT_apply_plan(bpy.types.Operator):
     """Set the plan's M, stream copies and Spread offsets in the Crowd settings, then
-    bake"""
+    bake (when the bake fails the settings are put back)"""
 
     bl_idname = "crowd.apply_plan"
     bl_label = "Apply Plan"
@@ -237,11 +251,14 @@ class CROWD_OT_apply_plan(bpy.types.Operator):
 
     def execute(self, context):
         try:
-            preview_variety.apply_plan(context.scene)
+            undo = preview_variety.apply_plan(context.scene)
         except CrowdError as e:
             self.report({"ERROR"}, str(e))
             return {"CANCELLED"}
-        return bpy.ops.crowd.bake("EXEC_DEFAULT")
+        done = bake_now(self, context)
+        if done != {"FINISHED"}:
+            undo()                      # the bake failed: the settings as they were
+        return done
 
 
 CLASSES = (CROWD_OT_bake, CROWD_OT_generate_agents, CROWD_OT_preview_toggle,

@@ -72,19 +72,30 @@ def plan_variety(scene, region_data=None, region=None, progress=None):
 def apply_plan(scene):
     """Author the previewed plan in the scene: its M, each stream's copies and (for a
     Spread plan) Spread offsets on every agent source drawing offsets at random. Takes
-    effect at the next bake."""
+    effect at the next bake. Returns a function that puts back what it changed (Apply
+    Plan calls it when that bake fails)."""
     pv = running(scene)
     if pv.plan is None:
         raise CrowdError("no plan to apply: Plan Variety first")
     p, s = pv.plan.planned, scene.crowd
     copies = dict(zip(pv.plan.templates, p.template_copies))
-    s.max_offset = p.max_offset
+    changed = []                                    # (owner, property, value before)
+
+    def put(owner, name, value):
+        changed.append((owner, name, getattr(owner, name)))
+        setattr(owner, name, value)
+
+    put(s, "max_offset", p.max_offset)
     for c in s.characters:
         for anim in c.streams:
             if anim.name in copies:
-                anim.copies = copies[anim.name]
+                put(anim, "copies", copies[anim.name])
     if p.offset_mode == "SPREAD":
         for src in s.agent_sources:
             if src.offset_mode in ("UNIFORM", "NORMAL"):
-                src.offset_mode = "SPREAD"
-    return p
+                put(src, "offset_mode", "SPREAD")
+
+    def undo():
+        for owner, name, value in reversed(changed):
+            setattr(owner, name, value)
+    return undo

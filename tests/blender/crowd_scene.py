@@ -262,10 +262,10 @@ def init_gpu():
 
 class FakeBakeOperator:
     """Stands in for the modal bake operator's instance (no event loop in background
-    mode): the operator's own ``modal``/``_end``/``_finish`` run against it, and what it
-    reports is kept in ``reports`` as ``(kinds, message)``."""
+    mode): the operator's own ``modal``/``_end`` run against it, and what it reports is
+    kept in ``reports`` as ``(kinds, message)``."""
 
-    modal, _end, _finish = CROWD_OT_bake.modal, CROWD_OT_bake._end, CROWD_OT_bake._finish
+    modal, _end = CROWD_OT_bake.modal, CROWD_OT_bake._end
     _timer = None
 
     def __init__(self, scene):

@@ -459,3 +459,29 @@ def test_plan_variety_and_apply_it(running):
     assert len(baked.crowd.config.streams) == p.streams
     assert crowd_repetition(baked.crowd.view, np.eye(4),
                             settings=RepetitionSettings()).frames == (scene.frame_current,)
+
+
+def test_a_failed_bake_is_reported_by_apply_plan_and_preview_without_a_traceback(running):
+    """Apply Plan and Preview bake in one go: the bake's own error, no Python
+    traceback, and nothing changed (Apply Plan puts the plan's settings back)."""
+    scene, _rig, _walk, pv = running
+    cam = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
+    scene.collection.objects.link(cam)
+    cam.location, cam.rotation_euler = (4.0, -14.0, 9.0), (0.95, 0.0, 0.2)
+    scene.camera = cam
+    scene.crowd.plan_budget_mb, scene.crowd.plan_max_streams = 1.0, 4
+    scene.crowd.max_offset = 3                          # the plan's M is another
+    assert bpy.ops.crowd.plan_variety() == {"FINISHED"}
+    assert pv.plan.planned.max_offset != 3
+    before = settings_fingerprint(scene.crowd)
+    scene.crowd.agent_sources[0].object.data.clear_geometry()       # no agents to place
+
+    def fails(op):
+        with pytest.raises(RuntimeError) as err:
+            op()
+        assert "mesh 'Seats' has no vertices" in str(err.value)
+        return "Traceback" not in str(err.value)
+    assert fails(bpy.ops.crowd.apply_plan)
+    assert settings_fingerprint(scene.crowd) == before and preview.get(scene) is pv
+    preview.stop(scene)
+    assert fails(bpy.ops.crowd.preview_toggle) and preview.get(scene) is None
