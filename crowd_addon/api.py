@@ -10,8 +10,9 @@ The same :class:`CrowdHandle` works in two places:
       sim.advance_to(100)
 
 * in Blender, around the crowd the viewport preview runs for a scene (the handle
-  outlives re-bakes and file reloads: callbacks and parameters move to each new
-  crowd)::
+  outlives re-bakes, undo and reloads of the same file: callbacks and parameters move
+  to each new crowd; opening another file, or File > New, drops every scene's
+  handle; a previewed scene's handle follows the scene's renames)::
 
       api.on_event("cheer", react)            # the context scene's crowd
       api.transition_to_unique([3, 4], "wave", duration=6)
@@ -37,7 +38,8 @@ from .core.runtime.events import EventDispatcher
 from .core.shots.driver import FrameDriver
 
 __all__ = ["CrowdHandle", "wrap", "scene_crowd", "on_event", "off", "transition_to_streamed",
-           "transition_to_unique", "set_trigger", "set_parameter", "detach_all"]
+           "transition_to_unique", "set_trigger", "set_parameter", "detach_all",
+           "forget_scenes", "rename_scene"]
 
 log = logging.getLogger("crowd_addon.api")
 
@@ -175,16 +177,19 @@ def wrap(crowd) -> CrowdHandle:
 
 # ------------------------------------------------------------------- in Blender
 _SCENES: dict = {}
-#: ``() -> scene name`` of the context scene; the extension installs it when it registers
+#: ``() -> scene name`` of the context scene, and ``() -> None`` that brings the handles'
+#: names up to date with renames; the extension installs them when it registers
 #: (:func:`set_context_scene`), so this module needs no ``bpy``.
 _context_scene = None
+_follow_renames = None
 
 
-def set_context_scene(fn) -> None:
+def set_context_scene(fn, follow_renames=None) -> None:
     """Install ``fn() -> str | None`` (the context scene's name) used when a call names
-    no scene; None removes it."""
-    global _context_scene
-    _context_scene = fn
+    no scene, and ``follow_renames()`` run before any scene's handle is looked up (it
+    calls :func:`rename_scene` for scenes renamed since); None removes them."""
+    global _context_scene, _follow_renames
+    _context_scene, _follow_renames = fn, follow_renames
 
 
 def _scene_name(scene) -> str:
@@ -205,6 +210,8 @@ def scene_crowd(scene=None) -> CrowdHandle:
     """The handle of a scene's crowd (``scene``: a Scene, a scene name, or None for
     the context scene), created on first use. The viewport preview attaches each
     crowd it builds to it."""
+    if _follow_renames is not None:
+        _follow_renames()
     name = _scene_name(scene)
     handle = _SCENES.get(name)
     if handle is None:
@@ -217,6 +224,33 @@ def detach_all() -> None:
     callbacks and parameters stay for the next crowd."""
     for handle in _SCENES.values():
         handle.detach()
+
+
+def forget_scenes() -> None:
+    """Drop every scene's handle, its callbacks and parameters with it (the extension
+    does this before another file, or a new one, is loaded: they were for this file's
+    scenes)."""
+    detach_all()
+    _SCENES.clear()
+
+
+def rename_scene(old: str, new: str) -> None:
+    """Scene ``old`` is now called ``new``: its handle (callbacks, parameters, crowd)
+    goes with it. When ``new`` has a handle already (callbacks registered under that
+    name), that one stays and takes the crowd over; ``old``'s stays under ``old``."""
+    handle = _SCENES.pop(old, None)
+    if handle is None:
+        return
+    there = _SCENES.get(new)
+    if there is None:
+        handle.label = f"scene {new!r}"
+        _SCENES[new] = handle
+        return
+    _SCENES[old] = handle
+    crowd = handle.crowd
+    handle.detach()
+    if crowd is not None:
+        there.attach(crowd)
 
 
 def on_event(name, fn, scene=None) -> int:

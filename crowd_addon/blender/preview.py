@@ -1,12 +1,11 @@
 """Viewport preview: the scene's crowd advanced on frame change and drawn in the 3D view.
 
-One :class:`Preview` per scene (by name) holds the core ``Crowd`` built from the
-scene (:mod:`.scene_config`) and, once a viewport has drawn, a renderer in Blender's
-GPU context (``crowd_addon.gpu.backends.make_renderer(view, "viewport")`` chooses):
-
-the moderngl renderer in Blender's OpenGL context (drawing into the framebuffer the
-viewport has bound), the ``gpu``-module renderer on Metal or Vulkan; when it cannot be
-made or draw, :attr:`Preview.draw_error` says why (the panel shows it).
+One :class:`Preview` per scene holds the core ``Crowd`` built from the scene
+(:mod:`.scene_config`) and, once a viewport has drawn, a renderer in Blender's GPU
+context (:mod:`.preview_draw`). Previews are kept by the scene's ``session_uid``, which
+stays the same across renames and undo: a renamed scene keeps its preview, and its
+:mod:`crowd_addon.api` handle goes with it (:func:`follow_renames`); a new scene given
+the old name has none.
 
 The crowd follows ``scene.frame_current``; it keeps snapshots every few frames within
 the memory cap of the preferences (:mod:`.prefs`), so a jump to any frame (backwards,
@@ -14,19 +13,18 @@ or forwards past frames seen before) re-simulates only from the nearest snapshot
 (deterministic, ``Crowd.advance_to``), without reporting the replayed frames' events
 again. When a character's armature or an action the crowd was built from is
 deleted the preview pauses with a message instead of failing; undo that restores
-them resumes it. Nothing here keeps Blender data between calls, only names, so undo and file
-loads never leave dangling references; after a load the previews marked in the file
-(``scene.crowd.preview_enabled``) are rebuilt, or stopped with the reason. The
-previewed crowd's repetition metric and variety plan are :mod:`.preview_variety`'s.
+them resumes it. Nothing here keeps Blender data between calls, only names and ids, so
+undo and file loads never leave dangling references. After a file load, an undo or
+redo, and when the extension is registered, every scene whose flags say its preview
+runs (``preview_enabled``, or ``render_crowd``, which follows the preview's crowd) but
+has none is restarted, or its flags are turned off with the reason (:func:`restore`).
+The previewed crowd's repetition metric and variety plan are :mod:`.preview_variety`'s.
 """
 
 from __future__ import annotations
 
-import logging
 import time
 from dataclasses import dataclass
-
-import numpy as np
 
 import bpy
 
@@ -34,21 +32,21 @@ from .. import api
 from ..core.bake.bake_report import report_of
 from ..core.shots.crowd import Crowd
 from ..core.base.errors import CrowdError
-from . import prefs, scene_config, shared_gl
+from . import prefs, scene_config
+from .preview_draw import draw, release_renderer
 from .props import settings_fingerprint
 
-log = logging.getLogger("crowd_addon.preview")
-
 __all__ = ["Preview", "start", "stop", "stop_all", "get", "running", "check", "last_error",
-           "draw_scene", "draw_handle", "on_frame_change", "on_depsgraph_update", "on_undo",
-           "render_crowd_changed", "on_load_pre", "on_load_post"]
+           "follow_renames", "restore", "draw_scene", "draw_handle", "on_frame_change",
+           "on_depsgraph_update", "on_undo", "render_crowd_changed", "on_load_pre",
+           "on_load_post"]
 
 
 @dataclass
 class Preview:
     """The running preview of one scene (runtime only, never saved)."""
 
-    scene_name: str
+    scene_name: str                # the scene's name when last seen (it follows renames)
     crowd: Crowd
     armatures: tuple               # (character name, armature name) it was built from
     actions: tuple
@@ -85,20 +83,23 @@ class Preview:
         return ""
 
 
-_PREVIEWS: dict = {}
-_ERRORS: dict = {}
+_PREVIEWS: dict = {}               # scene.session_uid -> Preview
+_ERRORS: dict = {}                 # scene.session_uid -> why its preview stopped
 _DRAW = {"handle": None}
 
 
 def get(scene):
     """The scene's :class:`Preview` or None."""
-    return _PREVIEWS.get(scene.name)
+    pv = _PREVIEWS.get(scene.session_uid)
+    if pv is not None and pv.scene_name != scene.name:
+        _renamed(pv, scene.name)
+    return pv
 
 
 def running(scene):
     """The scene's :class:`Preview`, or a CrowdError when none runs (what measures
     its crowd needs one)."""
-    pv = _PREVIEWS.get(scene.name)
+    pv = get(scene)
     if pv is None:
         raise CrowdError("the preview is not running: start it to measure its crowd")
     return pv
@@ -106,7 +107,23 @@ def running(scene):
 
 def last_error(scene) -> str:
     """Why the scene's preview stopped or could not start ("" if it did not)."""
-    return _ERRORS.get(scene.name, "")
+    return _ERRORS.get(scene.session_uid, "")
+
+
+def follow_renames() -> None:
+    """Bring each preview's scene name, and the :mod:`crowd_addon.api` handle kept under
+    it, up to date with its scene's renames (the API runs this before it looks a
+    scene's handle up by name)."""
+    scenes = {s.session_uid: s for s in bpy.data.scenes}
+    for uid, pv in _PREVIEWS.items():
+        scene = scenes.get(uid)
+        if scene is not None and scene.name != pv.scene_name:
+            _renamed(pv, scene.name)
+
+
+def _renamed(pv, name):
+    old, pv.scene_name = pv.scene_name, name
+    api.rename_scene(old, name)
 
 
 def draw_handle():
@@ -134,11 +151,11 @@ def start(scene, config=None) -> Preview:
     pv.bake_report = report_of(config)
     if crowd.agents.count and not config.meshes:
         pv.draw_error = "no proxy mesh chosen: agents run but are not drawn"
-    old = _PREVIEWS.pop(scene.name, None)
+    old = _PREVIEWS.pop(scene.session_uid, None)
     if old is not None:
         _release(old)
-    _PREVIEWS[scene.name] = pv
-    _ERRORS.pop(scene.name, None)
+    _PREVIEWS[scene.session_uid] = pv
+    _ERRORS.pop(scene.session_uid, None)
     pv.handle.attach(crowd)
     _advance(scene, pv)
     if _DRAW["handle"] is None:
@@ -153,23 +170,14 @@ def _release(pv):
     handle = api.scene_crowd(pv.scene_name)
     if handle.crowd is pv.crowd:
         handle.detach()
-    _release_renderer(pv)
-
-
-def _release_renderer(pv):
-    if pv.renderer is not None:
-        renderer, pv.renderer = pv.renderer, None
-        try:
-            renderer.release()
-        except Exception as e:  # noqa: BLE001 - the GPU context may be gone already
-            log.warning("crowd preview of %r: renderer release failed: %s", pv.scene_name, e)
+    release_renderer(pv)
 
 
 def stop(scene) -> None:
     """Stop the scene's preview and forget its crowd (callbacks registered through
     :mod:`crowd_addon.api` stay for the next one). Render Crowd goes off with it: its
     data would stop following the frame and renders would show a frozen crowd."""
-    pv = _PREVIEWS.pop(scene.name, None)
+    pv = _PREVIEWS.pop(scene.session_uid, None)
     if pv is not None:
         _release(pv)
     if scene.crowd.preview_enabled:
@@ -231,7 +239,7 @@ def check(scene, settings=True):
     runs): what it lost (cheap, every frame) and, with ``settings``, whether the
     settings changed since the build (a walk over ``scene.crowd``, about 0.1 ms per
     stream: the panel does it when it redraws). Read-only."""
-    pv = _PREVIEWS.get(scene.name)
+    pv = get(scene)
     if pv is not None:
         if settings:
             pv.stale = settings_fingerprint(scene.crowd) != pv.fingerprint
@@ -273,15 +281,16 @@ def _sync_render(scene, pv, force=False):
 def render_crowd_changed(scene) -> None:
     """The Render Crowd switch changed: make the render data now, or remove it."""
     from . import render_crowd
-    pv = _PREVIEWS.get(scene.name)
+    pv = get(scene)
     if scene.crowd.render_crowd:
         if pv is not None:
             _sync_render(scene, pv, force=True)
             return
         try:                                # the render data follows the preview's crowd
             start(scene)
-        except CrowdError as e:
-            _ERRORS[scene.name] = f"Render Crowd needs the preview, which cannot start: {e}"
+        except CrowdError as e:             # the switch goes back off: nothing follows it
+            _ERRORS[scene.session_uid] = f"Render Crowd needs the preview, which cannot start: {e}"
+            scene.crowd.render_crowd = False
     else:
         with suspended():
             render_crowd.remove(scene)
@@ -291,105 +300,94 @@ def render_crowd_changed(scene) -> None:
 
 @bpy.app.handlers.persistent
 def on_frame_change(scene, *_):
-    pv = _PREVIEWS.get(scene.name)
+    pv = get(scene)
     if pv is not None and not suspended.depth:
         _advance(scene, pv)
 
 
 @bpy.app.handlers.persistent
 def on_depsgraph_update(scene, *_):
-    pv = _PREVIEWS.get(scene.name)
+    pv = get(scene)
     if pv is not None and not suspended.depth:
         _advance(scene, pv)          # pauses, or resumes what an edit restored
+
+
+def _has_viewport() -> bool:
+    """Whether a viewport can show a preview (not in background mode: ``blender -b``,
+    the ``bpy`` module)."""
+    return not bpy.app.background
+
+
+def restore(when: str) -> None:
+    """Start the preview of every scene whose flags say it runs but that has none, or
+    turn its flags off with the reason (:func:`last_error`, "preview stopped ``when``:
+    ..."). In background mode only Render Crowd's data (renders, ``blender -b -a``)
+    needs the crowd: a scene with only ``preview_enabled`` on is left as it is, flag
+    kept, so the file still opens with its preview in Blender's UI."""
+    for scene in bpy.data.scenes:
+        s = getattr(scene, "crowd", None)
+        if s is None or get(scene) is not None:
+            continue
+        if not (s.render_crowd or (s.preview_enabled and _has_viewport())):
+            continue
+        try:
+            start(scene)
+        except CrowdError as e:
+            s.preview_enabled = False
+            if s.render_crowd:
+                s.render_crowd = False            # its update removes the frozen data
+            _ERRORS[scene.session_uid] = f"preview stopped {when}: {e}"
 
 
 @bpy.app.handlers.persistent
 def on_undo(*_):
     """Undo/redo: drop previews of scenes that are gone, re-check the others (resume
-    when the undo restored what they lost), keep ``preview_enabled`` truthful, and let
-    Render Crowd skin every pose mesh again (an undo may bring them back as they were)."""
+    when the undo restored what they lost), keep ``preview_enabled`` truthful, let
+    Render Crowd skin every pose mesh again (an undo may bring them back as they were),
+    and :func:`restore` the previews the undone state's flags ask for."""
     from .render_crowd import forget
     forget()
-    for name in list(_PREVIEWS):
-        scene = bpy.data.scenes.get(name)
+    scenes = {s.session_uid: s for s in bpy.data.scenes}
+    for uid in list(_PREVIEWS):
+        scene = scenes.get(uid)
         if scene is None:
-            _release(_PREVIEWS.pop(name))
+            _release(_PREVIEWS.pop(uid))
             continue
         if not scene.crowd.preview_enabled:
             scene.crowd.preview_enabled = True
-        check(scene)
-        _advance(scene, _PREVIEWS[name])
+        pv = check(scene)
+        _advance(scene, pv)
     if not _PREVIEWS:
         _remove_draw_handler()
+    restore("after the undo")
 
 
 @bpy.app.handlers.persistent
-def on_load_pre(*_):
+def on_load_pre(filepath="", *_):
+    """Before a file load: stop every preview. Loading another file, or a new one, also
+    drops every scene's :mod:`crowd_addon.api` handle (its callbacks were for this
+    file's scenes); reloading this file (File > Revert, opening it again) keeps them."""
     from .crowd_script import forget_trusted_scripts
     stop_all()
     _ERRORS.clear()
+    if not (bpy.data.filepath and filepath == bpy.data.filepath):
+        api.forget_scenes()
     forget_trusted_scripts(unsaved_only=True)     # an unsaved file's trust ends with it
 
 
 @bpy.app.handlers.persistent
 def on_load_post(*_):
     """Rebuild the previews the loaded file had running (or whose crowd renders: Render
-    Crowd follows the preview), or stop them with the reason."""
-    for scene in bpy.data.scenes:
-        s = getattr(scene, "crowd", None)
-        if s is None or not (s.preview_enabled or s.render_crowd):
-            continue
-        try:
-            start(scene)
-        except CrowdError as e:
-            scene.crowd.preview_enabled = False
-            _ERRORS[scene.name] = f"preview stopped after loading the file: {e}"
+    Crowd follows the preview), or stop them with the reason (:func:`restore`)."""
+    restore("after loading the file")
 
 
 # -------------------------------------------------------------------------- drawing
-@dataclass(frozen=True)
-class _ViewCamera:
-    """What a renderer needs of a camera: ``view_projection`` (4, 4) world -> clip, kept
-    as tuples so that equal views compare equal (renderers redo per-view work only
-    when the view changes)."""
-
-    matrix: tuple
-
-    @property
-    def view_projection(self) -> np.ndarray:
-        return np.array(self.matrix, np.float64)
-
-
 def draw_scene(scene, view_matrix, projection_matrix) -> bool:
-    """Draw the scene's crowd into the framebuffer bound now, seen through the 4x4
-    world->view and view->clip matrices; returns whether anything was drawn. Errors
-    are kept in :attr:`Preview.draw_error` and stop further drawing (never raised)."""
-    pv = _PREVIEWS.get(scene.name)
-    if pv is None or pv.draw_error or pv.crowd.agents.count == 0:
-        return False
-    t0 = time.perf_counter()
-    try:
-        if pv.renderer is None:
-            from ..gpu.backends import make_renderer
-            pv.renderer = make_renderer(pv.crowd.view, "viewport")
-        view = np.array(view_matrix, np.float64)
-        cam = _ViewCamera(tuple(map(tuple, (np.array(projection_matrix, np.float64)
-                                            @ view).tolist())))
-        pv.renderer.sync()
-        mgl = getattr(pv.renderer, "ctx", None)
-        if mgl is None:
-            pv.renderer.render(cam, target=None, clear=None)
-        else:
-            shared = shared_gl.shared_context()
-            shared.before(mgl)
-            pv.renderer.render(cam, target=mgl.detect_framebuffer(), clear=None)
-            shared.after()
-    except Exception as e:  # noqa: BLE001 - a draw callback must never raise
-        pv.draw_error = f"cannot draw: {e}"
-        _release_renderer(pv)
-        return False
-    pv.draw_ms = (time.perf_counter() - t0) * 1e3
-    return True
+    """Draw the scene's crowd into the framebuffer bound now (:func:`.preview_draw.draw`);
+    False when no preview runs or nothing was drawn."""
+    pv = get(scene)
+    return pv is not None and draw(pv, view_matrix, projection_matrix)
 
 
 def _draw_callback():

@@ -15,8 +15,8 @@ animations (stream and unique names are unique across the scene, since the crowd
 plays them all). Agents come from agent sources (mesh vertices, a vertex group or
 instanced points, see :mod:`.agents`), which choose a character per agent and then
 one of that character's streams. Nothing here holds runtime state except
-``preview_enabled``, which :mod:`.preview` reads after a file load to restart the
-preview.
+``preview_enabled``, which :mod:`.preview` reads after a file load, an undo and
+registration to restart the preview.
 """
 
 import math
@@ -394,7 +394,8 @@ class CROWD_PG_settings(PropertyGroup):
                     "renders and playblasts show it; updated on every frame change")
     preview_enabled: BoolProperty(
         name="Preview", default=False, options=set(),
-        description="Whether the viewport preview runs (restarted after a file load)")
+        description="Whether the viewport preview runs (restarted after a file load or "
+                    "an undo; in background mode only when Render Crowd needs it)")
     repetition_neighbours: IntProperty(
         name="Neighbours", default=6, min=1, max=64,
         description="Repetition metric: screen-space neighbours each agent is compared "

@@ -5,8 +5,12 @@ panels, the File > Export and File > Import menu entries, the ``crowd`` command 
 Blender's ``-c`` option (:mod:`.cli_commands`), and the app handlers the preview needs (file load, frame
 change, depsgraph update, undo/redo; all persistent so they survive file loads). The
 viewport draw handler exists only while a preview runs; the bake's modal timer only
-while it bakes. :func:`unregister` stops every preview (removing the draw handler) and takes
-all of it away again, so register/unregister can alternate any number of times.
+while it bakes. Once registered it restarts the previews the open file's flags ask for
+(``preview.restore``, as opening the file does): disabling the extension leaves each
+scene's ``preview_enabled`` and ``render_crowd`` and any Render Crowd data in the file as
+they are, and enabling it again brings their crowds back to life instead of leaving the
+render data frozen. :func:`unregister` stops every preview (removing the draw handler)
+and takes all of it away again, so register/unregister can alternate any number of times.
 :func:`leftovers` lists anything of ours still registered (tests use it).
 """
 
@@ -50,7 +54,9 @@ def register():
         _remove_menu_entries(menu, fn)
         getattr(bpy.types, menu).append(fn)
     cli_commands.register_command()
-    api.set_context_scene(_context_scene_name)
+    api.set_context_scene(_context_scene_name, preview.follow_renames)
+    if isinstance(bpy.data, bpy.types.BlendData):   # not while Blender starts: load_post does
+        preview.restore("when the extension was enabled")
 
 
 def unregister():

@@ -183,3 +183,28 @@ def test_callbacks_on_the_preview_crowd_follow_the_frame(blender_crowd):
         assert list(res.started) == [0, 5]
     finally:
         api.off(handle)
+
+
+def test_callbacks_stay_with_their_file_and_go_when_another_opens(blender_crowd, tmp_path):
+    """Reloading the file keeps its callbacks; opening another file (or File > New)
+    drops them: they were for the first file's scenes."""
+    bpy, scene, preview = blender_crowd
+    mine, other = str(tmp_path / "mine.blend"), str(tmp_path / "other.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=other, copy=True)           # its own crowd
+    bpy.ops.wm.save_as_mainfile(filepath=mine)
+    got = []
+    api.on_event("*", lambda n, f, ids: got.append(f))
+
+    def play(path):
+        bpy.ops.wm.open_mainfile(filepath=path)
+        scene = bpy.context.scene
+        preview.start(scene)
+        for f in range(2, 20):
+            scene.frame_set(f)
+        return got
+    assert play(mine)                                    # File > Revert, or opened again
+    got.clear()
+    assert play(other) == []
+    api.on_event("*", lambda n, f, ids: got.append(f))
+    bpy.ops.wm.read_homefile(use_empty=True)              # File > New
+    assert api._SCENES == {}

@@ -243,7 +243,9 @@ def test_generate_agents_updates_the_running_crowd_without_a_bake(running):
     assert now.crowd.agents.count == 9 and now.crowd.config.clips is clips
 
 
-def test_settings_survive_save_and_reload_and_the_preview_restarts(running, tmp_path):
+def test_settings_survive_save_and_reload_and_the_preview_restarts(running, tmp_path,
+                                                                  monkeypatch):
+    monkeypatch.setattr(preview, "_has_viewport", lambda: True)    # opened in Blender's UI
     scene, _rig, _walk, pv = running
     s = scene.crowd
     anim = s.characters[0].streams[0]
@@ -459,6 +461,47 @@ def test_plan_variety_and_apply_it(running):
     assert len(baked.crowd.config.streams) == p.streams
     assert crowd_repetition(baked.crowd.view, np.eye(4),
                             settings=RepetitionSettings()).frames == (scene.frame_current,)
+
+
+def test_a_renamed_scene_keeps_its_one_preview_and_its_api_handle(running):
+    """Previews follow their scene, not its name: a rename keeps the one preview (and
+    the API callbacks registered for it); a new scene given the old name has none."""
+    from crowd_addon import api
+    scene, _rig, _walk, pv = running
+    got = []
+    api.on_event("step", lambda n, f, ids: got.append(f))         # for scene 'Scene'
+    scene.name = "Shot010"
+    assert api.scene_crowd().crowd is pv.crowd                      # asked before the preview
+    assert preview.get(scene) is pv and len(preview._PREVIEWS) == 1
+    for f in range(2, 15):
+        scene.frame_set(f)
+    assert pv.crowd.frame == 14 and got
+    new = bpy.data.scenes.new("Scene")
+    assert preview.get(new) is None and api.scene_crowd(new).crowd is None
+    handle = preview.draw_handle()
+    assert bpy.ops.crowd.preview_toggle() == {"FINISHED"}         # the panel's toggle: off
+    assert not preview._PREVIEWS and preview.draw_handle() is None
+    assert _handler_is_gone(handle) and not scene.crowd.preview_enabled
+
+
+def test_a_background_open_bakes_nothing_and_keeps_the_preview_flag(running, tmp_path,
+                                                                    monkeypatch):
+    """``blender -b shot.blend -c crowd export``: no viewport to show a preview, so
+    opening the file bakes nothing for one; the flag stays, so the file still opens
+    with its preview in Blender's UI."""
+    from crowd_addon.blender import scene_config
+    path = str(tmp_path / "shot.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bakes, real = [], scene_config.config_steps
+    monkeypatch.setattr(scene_config, "config_steps",
+                        lambda *a, **k: bakes.append(1) or real(*a, **k))
+    bpy.ops.wm.open_mainfile(filepath=path)
+    scene = bpy.context.scene
+    assert bpy.app.background and bakes == [] and preview.get(scene) is None
+    assert scene.crowd.preview_enabled
+    monkeypatch.setattr(preview, "_has_viewport", lambda: True)    # the same file in the UI
+    bpy.ops.wm.open_mainfile(filepath=path)
+    assert len(bakes) == 1 and preview.get(bpy.context.scene) is not None
 
 
 def test_a_failed_bake_is_reported_by_apply_plan_and_preview_without_a_traceback(running):

@@ -466,3 +466,69 @@ def test_the_crowd_materials_follow_their_source(crowd_scene):
     scene.crowd.render_crowd = False
     assert not [m for m in bpy.data.materials if m.name.startswith("CrowdMaterial.")]
     assert {"shirt", "trousers"} <= set(bpy.data.materials.keys())
+
+
+def _count_bakes(monkeypatch) -> list:
+    """A list that gets an item each time a crowd is baked from a scene."""
+    from crowd_addon.blender import scene_config
+    bakes, real = [], scene_config.config_steps
+    monkeypatch.setattr(scene_config, "config_steps",
+                        lambda *a, **k: bakes.append(1) or real(*a, **k))
+    return bakes
+
+
+def test_an_undo_that_brings_the_switch_back_brings_its_crowd_back(crowd_scene):
+    """Stopping the preview removes the render data; undoing an edit made before
+    restores the switch and the data as they were: the crowd runs again, so the data
+    follows the frame instead of rendering frozen."""
+    scene, _ = crowd_scene
+    bpy.ops.ed.undo_push(message="Render Crowd on")
+    scene.objects["Rig"].location.x = 3.0
+    bpy.ops.ed.undo_push(message="move the rig")
+    assert bpy.ops.crowd.preview_toggle() == {"FINISHED"}
+    assert bpy.data.objects.get(render_crowd.POINTS) is None
+    bpy.ops.ed.undo()
+    scene = bpy.context.scene
+    assert scene.crowd.render_crowd and bpy.data.objects.get(render_crowd.POINTS)
+    pv = preview.get(scene)
+    assert pv is not None and scene.crowd.preview_enabled
+    scene.frame_set(12)
+    assert pv.render_frame == 12
+    _check_instances(scene, pv.crowd)
+
+
+def test_enabling_the_extension_again_brings_the_render_crowd_back(crowd_scene):
+    """Disabling leaves the switch and the render data in the file as they are;
+    enabling again restarts the crowd they follow, as opening the file does."""
+    import crowd_addon
+    scene, _ = crowd_scene
+    crowd_addon.unregister()
+    try:
+        assert bpy.data.objects.get(render_crowd.POINTS) is not None
+    finally:
+        crowd_addon.register()
+    pv = preview.get(scene)
+    assert pv is not None and scene.crowd.render_crowd
+    scene.frame_set(12)
+    assert pv.render_frame == 12
+    _check_instances(scene, pv.crowd)
+
+
+def test_a_switch_that_cannot_start_goes_back_off_and_the_file_opens_without_a_bake(
+        crowd_scene, tmp_path, monkeypatch):
+    scene, _ = crowd_scene
+    path = str(tmp_path / "shot.blend")
+    bpy.data.objects.remove(scene.crowd.characters[0].armature)     # nothing can be built
+    bpy.ops.wm.save_as_mainfile(filepath=path)                      # saved with it on
+    bpy.ops.wm.open_mainfile(filepath=path)
+    scene = bpy.context.scene
+    assert not scene.crowd.render_crowd and not scene.crowd.preview_enabled
+    assert "no armature chosen" in preview.last_error(scene)
+    assert bpy.data.objects.get(render_crowd.POINTS) is None        # no frozen crowd left
+    scene.crowd.render_crowd = True                                 # the switch, by hand
+    assert not scene.crowd.render_crowd and preview.get(scene) is None
+    assert "Render Crowd needs the preview, which cannot start" in preview.last_error(scene)
+    bpy.ops.wm.save_mainfile()
+    bakes = _count_bakes(monkeypatch)
+    bpy.ops.wm.open_mainfile(filepath=path)
+    assert bakes == [] and not bpy.context.scene.crowd.render_crowd

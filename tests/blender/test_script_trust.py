@@ -57,7 +57,9 @@ def build(scene):
     return scene_config.build_crowd(scene, scene_config.config_from_scene(scene))[1]
 
 
-def test_trust_script_in_the_panel_then_opening_another_file_leaves_it_untrusted(tmp_path):
+def test_trust_script_in_the_panel_then_opening_another_file_leaves_it_untrusted(tmp_path,
+                                                                                monkeypatch):
+    monkeypatch.setattr(preview, "_has_viewport", lambda: True)    # opened in Blender's UI
     other = tmp_path / "other.blend"
     b = cs.scripted_blend(other, tmp_path, "other")
     preview.start(bpy.context.scene)            # saved with its preview on: File > Open
