@@ -136,13 +136,10 @@ class _Existing:
 
     def __init__(self, coll):
         self.coll = coll
-        meshes = [m for m in bpy.data.meshes if m.name.startswith(_MESH_PREFIX)]
-        objects = [o for o in bpy.data.objects if o.name.startswith(_POSE_PREFIX)]
-        self.meshes = {m.name: m for m in meshes if _is_pose_mesh(m)}
-        self.objects = {o.name: o for o in objects if _is_pose(o)}
-        #: names of the user's data that bear a pose mesh's or pose object's name
-        self.foreign = {b.name for b in (*meshes, *objects)} - self.meshes.keys() \
-            - self.objects.keys()
+        # by name only: whether one is Render Crowd's is asked of those a sync touches
+        # (:meth:`mesh`, :meth:`show`), not of all of them every frame
+        self.meshes = {m.name: m for m in bpy.data.meshes if m.name.startswith(_MESH_PREFIX)}
+        self.objects = {o.name: o for o in bpy.data.objects if o.name.startswith(_POSE_PREFIX)}
         self.linked = set(coll.objects.keys())
         #: meshes replaced this sync, removed in one batch once every pose object in
         #: use shows its new mesh (removing a mesh removes the objects still using it)
@@ -152,8 +149,9 @@ class _Existing:
         """Pose object ``j``'s mesh: the one it has when it was made from ``made``
         (:func:`_made_from`), else a new one of ``proxy`` (``palette``: :func:`_mesh_for`'s)."""
         name = f"{_MESH_PREFIX}{j:06d}"
-        self._free(name)
         mesh = self.meshes.get(name)
+        if mesh is not None and not _is_pose_mesh(mesh):
+            _not_ours(name)
         if mesh is not None and mesh.get(_MADE_FROM) == made:
             return mesh
         if mesh is not None:
@@ -173,8 +171,9 @@ class _Existing:
     def show(self, j: int, mesh) -> None:
         """Pose object ``j`` shows ``mesh`` and is in the pose collection."""
         name = f"{_POSE_PREFIX}{j:06d}"
-        self._free(name)
         obj = self.objects.get(name)
+        if obj is not None and not _is_pose(obj):
+            _not_ours(name)
         if obj is None:
             obj = self.objects[name] = bpy.data.objects.new(name, mesh)
         elif obj.data != mesh:
@@ -183,17 +182,18 @@ class _Existing:
             self.coll.objects.link(obj)
             self.linked.add(name)
 
-    def _free(self, name: str) -> None:
-        if name in self.foreign:
-            raise CrowdError(f"{name!r} is not Render Crowd's; rename it to use Render Crowd")
+
+def _not_ours(name: str):
+    raise CrowdError(f"{name!r} is not Render Crowd's; rename it to use Render Crowd")
 
 
 def _is_pose_mesh(mesh) -> bool:
-    return mesh.name.startswith(_MESH_PREFIX) and _MADE_FROM in mesh
+    return mesh.name.startswith(_MESH_PREFIX) and mesh.get(_MADE_FROM) is not None
 
 
 def _is_pose(obj) -> bool:
-    return obj.name.startswith(_POSE_PREFIX) and obj.type == "MESH" and _MADE_FROM in obj.data
+    return obj.name.startswith(_POSE_PREFIX) and obj.type == "MESH" \
+        and obj.data.get(_MADE_FROM) is not None
 
 
 #: Render Crowd's record of what its pose objects show (one set of them in a file)
