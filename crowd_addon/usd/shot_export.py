@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+from contextlib import nullcontext
 
 from ..core.base.files import folders_made, writable_dir
 from ..core.shots.recorder import record
@@ -29,26 +30,35 @@ def export_shot(shot, out, agents=None, layout="instanced", snapshots=None, prog
     measured); ``animation_only``: a chunk after the shot's first, for a stitch
     (:func:`~.export.export_crowd`). Returns ``(config, ExportResult)``."""
     folder = writable_dir(os.path.dirname(os.path.abspath(out)))
-    with folders_made(folder):                      # gone again if the export fails
+    # the output folder (and a snapshot folder) made here are gone again if it fails
+    with folders_made(folder), folders_made(snapshots, "snapshot folder") if snapshots \
+            else nullcontext():
         config = shot.config                        # a .blend's bake runs here
         check_export(config, out, agents, layout)   # before simulating
         crowd = shot.crowd()
         snaps = ShotSnapshots(snapshots, crowd, shot.frames[0]) if snapshots else None
         recording = record(crowd, *shot.frames, progress=progress)
+        kept = []
         if snaps is not None:
             snaps.recorded()
         camera, settings = shot.metric_view(repetition)
+        # the last frame's snapshot is written before the export is put in place: a
+        # snapshot that cannot be written fails the export with nothing replaced
         result = export_crowd(recording, out, agents=agents, progress=progress,
                               layout=layout, camera=camera, repetition=settings,
-                              animation_only=animation_only)
+                              animation_only=animation_only,
+                              before_commit=None if snaps is None else
+                              lambda: kept.append(snaps.keep()))
         if snaps is not None:
             result = dataclasses.replace(result, started_from=snaps.started_from,
-                                         snapshot=snaps.keep())
+                                         snapshot=kept[0])
     return config, result
 
 
 def snapshot_shot(shot, folder, every: int, progress=None) -> list:
     """Snapshots of ``shot``'s crowd before each ``every``-frame chunk of its frames in
-    ``folder`` (created if missing); returns the files written."""
-    folder = SnapshotFolder(folder, create=True)
-    return write_snapshots(shot.crowd(), folder, *shot.frames, every, progress)
+    ``folder`` (created if missing, and removed again when the run fails before it
+    wrote any); returns the files written."""
+    with folders_made(folder, "snapshot folder"):   # gone again if nothing was written
+        folder = SnapshotFolder(folder, create=True)
+        return write_snapshots(shot.crowd(), folder, *shot.frames, every, progress)

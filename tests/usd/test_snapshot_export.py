@@ -109,7 +109,7 @@ def test_snapshots_of_another_crowd_are_not_used(config_path, tmp_path, capsys):
     (["snapshot", "--frames", "9-5", "--every", "2", "--out", "{tmp}/s", "--config", "{cfg}"],
      "last frame 5 is before first frame 9"),
     (["export", "--frames", "3-5", "--out", "{tmp}/x.usdc", "--config", "{cfg}",
-      "--snapshots", "{cfg}"], "cannot create the snapshot folder"),
+      "--snapshots", "{cfg}"], "snapshot folder .*crowd.json: cannot create it"),
 ])
 def test_bad_input_is_named_and_writes_nothing(config_path, tmp_path, capsys, argv, message):
     argv = [a.format(tmp=tmp_path, cfg=config_path) for a in argv]
@@ -118,6 +118,37 @@ def test_bad_input_is_named_and_writes_nothing(config_path, tmp_path, capsys, ar
     assert "error:" in err and re.search(message, err), err
     assert not (tmp_path / "x.usdc").exists()
     assert not list(tmp_path.glob("s/*.npz"))
+
+
+def test_a_snapshot_that_cannot_be_written_leaves_the_earlier_export(config_path, tmp_path,
+                                                                     capsys):
+    """The snapshot an export leaves at its last frame cannot be written (a full disk):
+    before, the export was already in place when that failed, so the command reported
+    an error over a replaced stage; now the export is not put in place."""
+    out, snaps = tmp_path / "out" / "shot.usdc", tmp_path / "snaps"
+    first = export(config_path, out, "1-12", capsys, "--snapshots", str(snaps))
+    before = {p: p.read_bytes() for p in out.parent.rglob("*") if p.is_file()}
+    kept = Path(first["snapshot"])
+    kept.unlink()
+    kept.mkdir()                                   # the same file cannot be written now
+    assert main(["export", "--config", str(config_path), "--out", str(out), "--frames",
+                 "1-12", "--agents", "5", "--snapshots", str(snaps)]) == 2
+    assert "cannot write the crowd snapshot" in capsys.readouterr().err
+    assert {p: p.read_bytes() for p in out.parent.rglob("*") if p.is_file()} == before
+
+
+def test_a_failed_export_removes_the_snapshot_folder_it_made(config_path, tmp_path, capsys):
+    assert main(["export", "--config", str(config_path), "--out", str(tmp_path / "x.usdc"),
+                 "--frames=-3-5", "--snapshots", str(tmp_path / "new" / "snaps")]) == 2
+    assert "before the crowd's start frame" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+def test_a_failed_snapshot_run_removes_the_folder_it_made(tmp_path, capsys):
+    assert main(["snapshot", "--config", str(tmp_path / "nope.json"), "--out",
+                 str(tmp_path / "s4"), "--frames", "0-20", "--every", "5"]) == 2
+    assert "nope.json" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_python_m_crowd_addon_snapshot_help():

@@ -33,7 +33,7 @@ import tempfile
 import numpy as np
 
 from ..base.errors import CrowdError
-from ..base.files import file_mode
+from ..base.files import file_mode, npz_bytes
 from .codec import Decoder, LocatedError
 from .config import CrowdConfig
 from .config_codec import FORMAT, VERSION, decode_config, encode_config
@@ -112,8 +112,9 @@ def save_config(config: CrowdConfig, path) -> None:
         fd, tmp_npz = tempfile.mkstemp(prefix=f".{os.path.basename(npz_path)}.",
                                        suffix=".tmp", dir=directory)
         tmp.append(tmp_npz)
+        data = npz_bytes(arrays)
         with os.fdopen(fd, "wb") as f:
-            np.savez(f, **arrays)
+            f.write(data)
             f.flush()
             os.fsync(f.fileno())
         digest, size = _sha256(tmp_npz)

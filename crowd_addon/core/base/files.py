@@ -7,13 +7,17 @@ CrowdError naming what is wrong."""
 from __future__ import annotations
 
 import contextlib
+import io
 import os
 import tempfile
 from pathlib import Path
 
+import numpy as np
+
 from .errors import CrowdError
 
-__all__ = ["file_mode", "write_atomic", "folders_made", "writable_dir", "output_dir"]
+__all__ = ["file_mode", "write_atomic", "npz_bytes", "folders_made", "writable_dir",
+           "output_dir"]
 
 
 def file_mode(target) -> int:
@@ -55,12 +59,21 @@ def write_atomic(path, write, what: str, sync: bool = True) -> None:
                 os.unlink(tmp)
 
 
+def npz_bytes(arrays: dict) -> bytes:
+    """The ``.npz`` file of ``arrays`` (``np.savez``), made in memory: written to a file
+    directly, a failing write (a full disk) left numpy's zip writer half-closed, and its
+    clean-up printed a second traceback."""
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
+    return buf.getvalue()
+
+
 @contextlib.contextmanager
-def folders_made(folder):
+def folders_made(folder, what: str = "output folder"):
     """Create ``folder`` and its missing parents for the ``with`` block; when the block
     raises, remove the folders it created (deepest first, each only if empty) and let
     the exception go on. Folders that were there before are left alone. A folder that
-    cannot be created is a CrowdError naming it."""
+    cannot be created is a CrowdError naming it (as ``what``)."""
     folder = Path(folder)
     made, probe = [], folder
     while not probe.exists() and probe.parent != probe:
@@ -78,7 +91,7 @@ def folders_made(folder):
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         remove()
-        raise CrowdError(f"output folder {folder}: cannot create it "
+        raise CrowdError(f"{what} {folder}: cannot create it "
                          f"({e.strerror or e})") from None
     try:
         yield folder

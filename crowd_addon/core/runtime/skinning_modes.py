@@ -182,7 +182,7 @@ class GpuSkinning(_Mode):
 
     def bind(self, crowd):
         super().bind(crowd)
-        st, streams = crowd.storage, crowd.streams
+        streams = crowd.streams
         # row slice * S + s is stream s; unique rows follow
         self._row_skeleton = np.concatenate(
             [np.tile(streams.skeleton, streams.max_offset), crowd.uniques.skeleton]

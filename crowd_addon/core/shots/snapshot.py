@@ -44,7 +44,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..base.errors import CrowdError
-from ..base.files import write_atomic
+from ..base.files import npz_bytes, write_atomic
 from .packed import PARTS, Packed, pack
 from .snapshot_checks import MAX_COUNT, check_header, check_values
 
@@ -169,9 +169,9 @@ class Snapshot:
         if not os.path.isdir(directory):
             raise CrowdError(f"{path}: directory {directory} does not exist")
         head = np.frombuffer(json.dumps(self.header()).encode("utf-8"), np.uint8)
-        write_atomic(path, lambda f: np.savez(f, **{HEADER: head}, **{
-            _member(k, n): a for k, p in self.packed.items() for n, a in p.parts.items()}),
-            "the crowd snapshot")
+        data = npz_bytes({HEADER: head, **{_member(k, n): a for k, p in self.packed.items()
+                                           for n, a in p.parts.items()}})
+        write_atomic(path, lambda f: f.write(data), "the crowd snapshot")
 
 
 def _view(a: np.ndarray) -> np.ndarray:
