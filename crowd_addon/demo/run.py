@@ -34,7 +34,7 @@ from pathlib import Path
 
 from ..core.authoring.config_io import save_config
 from ..core.base.errors import CrowdError
-from ..core.base.files import output_dir, write_atomic
+from ..core.base.files import output_dir, remove_stale_staging, staging, write_atomic
 from ..core.variety.repetition import RepetitionSettings, recording_repetition
 from .usd_beside import UsdExport, usd_summary
 
@@ -148,6 +148,8 @@ def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
     from ..core.authoring.config import USD_LAYOUTS
     if layout not in USD_LAYOUTS:
         raise CrowdError(f"--layout must be one of {', '.join(USD_LAYOUTS)}, got {layout!r}")
+    from ..gpu.preview_render import check_size
+    check_size(size, mp4)                  # before the stadium is built, not after
     out = output_dir(out_dir)
     blend = out / "stadium.blend"
     check_folder_is_the_demos(out)
@@ -155,10 +157,11 @@ def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
     # written but not committed: they take the old ones' places (and the configuration
     # is saved) only when the run is done, so a run that fails leaves the earlier
     # run's as they were
-    pid = os.getpid()
-    staged = {"stadium.blend": out / f".stadium.partial-{pid}.blend",
-              "frames": out / f".frames.run-{pid}",
-              "contact_sheet.png": out / f".contact_sheet.partial-{pid}.png"}
+    names = {"stadium.blend": ("stadium.partial", ".blend"), "frames": ("frames.run", ""),
+             "contact_sheet.png": ("contact_sheet.partial", ".png")}
+    for stem, suffix in names.values():             # left by runs killed outright
+        remove_stale_staging(out, stem, suffix)
+    staged = {name: staging(out, stem, suffix) for name, (stem, suffix) in names.items()}
     export = []                 # the USD export, once started: stopped if the run fails
     try:
         summary, cfg = _run(out, staged, agents, frames, size, mp4, usd, log, layout, export)

@@ -25,7 +25,7 @@ import numpy as np
 from ..core.shots.crowd import Crowd
 from ..core.shots.driver import FrameDriver
 from ..core.base.errors import CrowdError
-from ..core.base.files import output_dir, writable_dir
+from ..core.base.files import output_dir, remove_stale_staging, staging, writable_dir
 from ..core.variety.repetition import RepetitionSettings, combine, crowd_repetition, measure_frames
 from .backends import BACKENDS, make_renderer
 from ..core.base.camera import frame_crowd
@@ -65,17 +65,22 @@ class PreviewResult:
     repetition: dict | None = None
 
 
-def _check(config, out_dir, frames, size, mp4, backend) -> Path:
-    if backend not in BACKENDS:
-        raise CrowdError(f"unknown backend {backend!r} (choose from {', '.join(BACKENDS)})")
-    if frames < 1:
-        raise CrowdError(f"frames must be at least 1, got {frames}")
+def check_size(size, mp4: bool) -> None:
+    """A CrowdError unless ``size`` (w, h) can be drawn, and encoded when ``mp4``."""
     w, h = size
     if not (1 <= w <= MAX_SIZE and 1 <= h <= MAX_SIZE):
         raise CrowdError(f"image size {w} x {h} must be 1..{MAX_SIZE} pixels a side")
     if mp4 and (w % 2 or h % 2):
         raise CrowdError(f"an MP4 (H.264, yuv420p) needs an even width and height, got "
                          f"{w} x {h}")
+
+
+def _check(config, out_dir, frames, size, mp4, backend) -> Path:
+    if backend not in BACKENDS:
+        raise CrowdError(f"unknown backend {backend!r} (choose from {', '.join(BACKENDS)})")
+    if frames < 1:
+        raise CrowdError(f"frames must be at least 1, got {frames}")
+    check_size(size, mp4)
     if config.agent_count == 0:
         raise CrowdError("the crowd has no agents to draw")
     if not config.meshes:
@@ -179,7 +184,7 @@ def render_preview(config, out_dir, frames: int, start: int | None = None,
     mp4_path = out / "preview.mp4" if mp4 else None
     # the frames and the MP4 go to a folder of their own until the run is done, so a
     # run that fails leaves the files of the run before as they were
-    staged = out / f".frames.partial-{os.getpid()}"
+    staged = staging(out, "frames.partial")
     partial = staged / ".preview.partial.mp4"
     made = _missing_folders(out)
     pngs, uploads, first, writer, done = [], [], crowd.view.frame, None, False
@@ -207,7 +212,7 @@ def render_preview(config, out_dir, frames: int, start: int | None = None,
     try:
         renderer.set_scene(scene)
         output_dir(out)
-        shutil.rmtree(staged, ignore_errors=True)       # a run of this process killed
+        remove_stale_staging(out, "frames.partial")     # runs killed outright
         staged.mkdir()
         writer = _mp4_writer(partial, (w, h), config.fps) if mp4 else None
         for i in range(int(frames)):

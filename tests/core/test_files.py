@@ -7,7 +7,8 @@ import os
 import pytest
 
 from crowd_addon.core.base.errors import CrowdError
-from crowd_addon.core.base.files import folders_made, write_atomic
+from crowd_addon.core.base.files import (folders_made, remove_stale_staging, staging,
+                                         write_atomic)
 
 
 def test_the_folders_stay_when_the_block_succeeds(tmp_path):
@@ -71,3 +72,26 @@ def test_write_atomic_into_a_missing_folder_is_a_named_error(tmp_path):
     with pytest.raises(CrowdError, match=r"gone/x.png: cannot write the PNG"):
         write_atomic(tmp_path / "gone" / "x.png", lambda f: f.write(b"x"), "the PNG")
     assert os.listdir(tmp_path) == []
+
+
+def test_stale_staging_of_a_gone_process_is_removed_a_live_ones_and_others_kept(tmp_path):
+    """A run killed outright leaves its staging; the next run removes it, but never a
+    live run's (here: this process's and its parent's), another host's or a file not
+    named so."""
+    import subprocess
+    import sys
+    gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                          capture_output=True, text=True, check=True).stdout.strip()
+    mine = staging(tmp_path, "frames.partial")
+    host = mine.name[len(".frames.partial-"):].rsplit("-", 1)[0]
+    dead = tmp_path / f".frames.partial-{host}-{gone}"
+    for d in (mine, dead, tmp_path / f".frames.partial-{host}-{os.getppid()}",
+              tmp_path / f".frames.partial-otherhost-{gone}", tmp_path / "frames.partial-1"):
+        d.mkdir()
+        (d / "frame_0000.png").write_bytes(b"x")
+    (tmp_path / f".stadium.partial-{host}-{gone}.blend").write_bytes(b"x")
+    remove_stale_staging(tmp_path, "frames.partial")
+    remove_stale_staging(tmp_path, "stadium.partial", ".blend")
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
+        [mine.name, f".frames.partial-{host}-{os.getppid()}", f".frames.partial-otherhost-{gone}",
+         "frames.partial-1"])

@@ -405,3 +405,15 @@ def test_a_rerun_replaces_its_own_frames_and_keeps_the_users_files_there(demo, t
     assert (out / "frames" / "notes.txt").read_text() == "mine"
     summary = json.loads((out / "summary.json").read_text())
     assert summary["agents"] == 10 and summary["pngs"] == 2
+
+
+def test_an_odd_size_for_the_mp4_is_refused_before_the_stadium_is_built(tmp_path):
+    """Before: the stadium was built and baked first, then the size refused, and the
+    output folder was left behind empty."""
+    out = tmp_path / "x3"
+    run = subprocess.run([sys.executable, "-m", "crowd_addon", "demo", "--out", str(out),
+                          "--agents", "10", "--frames", "4", "--width", "7", "--height", "5"],
+                         cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert run.returncode == 2
+    assert "an MP4 (H.264, yuv420p) needs an even width and height, got 7 x 5" in run.stderr
+    assert "building the stadium" not in run.stderr and not out.exists()

@@ -245,6 +245,24 @@ def test_a_run_stopped_by_a_signal_keeps_the_frames_of_the_run_before(config_pat
     assert sorted(os.listdir(out_dir)) == sorted(before)          # no partial folder left
 
 
+def test_a_rerun_removes_what_a_run_killed_outright_left(config_path, tmp_path, capsys):
+    """SIGKILL leaves no chance to clean up: before, its staging folder stayed in the
+    output folder for good."""
+    from crowd_addon.core.base.files import staging
+    out_dir = tmp_path / "shot"
+    size = ("--width", 32, "--height", 32)
+    assert run(capsys, "--config", config_path, "--out", out_dir, "--frames", 2, *size)[0] == 0
+    killed = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    left = out_dir / staging(out_dir, "frames.partial").name.replace(
+        f"-{os.getpid()}", f"-{killed.pid}")
+    left.mkdir()
+    (left / "frame_0000.png").write_bytes(b"half")
+    killed.kill()
+    killed.wait()
+    assert run(capsys, "--config", config_path, "--out", out_dir, "--frames", 2, *size)[0] == 0
+    assert sorted(os.listdir(out_dir)) == ["frame_0000.png", "frame_0001.png"]
+
+
 def test_an_output_name_too_long_is_named(config_path, tmp_path, capsys):
     # before: OSError (File name too long) from the folder check (fuzz seed 1711)
     code, _, err = run(capsys, "--config", config_path, "--out", tmp_path / ("x" * 300),

@@ -9,6 +9,9 @@ from __future__ import annotations
 import contextlib
 import io
 import os
+import re
+import shutil
+import socket
 import tempfile
 from pathlib import Path
 
@@ -16,8 +19,8 @@ import numpy as np
 
 from .errors import CrowdError
 
-__all__ = ["file_mode", "write_atomic", "npz_bytes", "folders_made", "writable_dir",
-           "output_dir"]
+__all__ = ["file_mode", "write_atomic", "npz_bytes", "staging", "remove_stale_staging",
+           "folders_made", "writable_dir", "output_dir"]
 
 
 def file_mode(target) -> int:
@@ -66,6 +69,48 @@ def npz_bytes(arrays: dict) -> bytes:
     buf = io.BytesIO()
     np.savez(buf, **arrays)
     return buf.getvalue()
+
+
+def staging(folder, stem: str, suffix: str = "") -> Path:
+    """This process's staging path ``folder/.STEM-HOST-PID SUFFIX`` (what a command
+    writes before its outputs take their places): named by host and process, so
+    :func:`remove_stale_staging` can tell a killed run's from a live one's."""
+    return Path(folder) / f".{stem}-{_host()}-{os.getpid()}{suffix}"
+
+
+def remove_stale_staging(folder, stem: str, suffix: str = "") -> None:
+    """Remove the :func:`staging` paths of ``stem`` in ``folder`` that a process of this
+    host left and that is gone (killed outright: SIGKILL, a crash, a power cut). A
+    live process's, another host's, and anything not named so are left alone."""
+    pattern = re.compile(re.escape(f".{stem}-{_host()}-") + r"(\d+)" + re.escape(suffix))
+    try:
+        names = os.listdir(folder)
+    except OSError:
+        return
+    for name in names:
+        m = pattern.fullmatch(name)
+        if m is None or _alive(int(m.group(1))):
+            continue
+        path = os.path.join(folder, name)
+        if os.path.isdir(path) and not os.path.islink(path):
+            shutil.rmtree(path, ignore_errors=True)
+        else:
+            with contextlib.suppress(OSError):
+                os.unlink(path)
+
+
+def _host() -> str:
+    return re.sub(r"[^A-Za-z0-9.]", "_", socket.gethostname()) or "host"
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:            # another user's
+        return True
+    return True
 
 
 @contextlib.contextmanager
