@@ -34,7 +34,8 @@ from pathlib import Path
 
 from ..core.authoring.config_io import save_config
 from ..core.base.errors import CrowdError
-from ..core.base.files import output_dir, remove_stale_staging, staging, write_atomic
+from ..core.base.files import (folders_made, remove_stale_staging, staging, writable_dir,
+                                write_atomic)
 from ..core.variety.repetition import RepetitionSettings, recording_repetition
 from .usd_beside import UsdExport, usd_summary
 
@@ -150,9 +151,17 @@ def run_demo(out_dir, agents: int = 2000, frames: int = 240, size=(960, 540),
         raise CrowdError(f"--layout must be one of {', '.join(USD_LAYOUTS)}, got {layout!r}")
     from ..gpu.preview_render import check_size
     check_size(size, mp4)                  # before the stadium is built, not after
-    out = output_dir(out_dir)
-    blend = out / "stadium.blend"
+    out = writable_dir(out_dir)             # checked here, made below
     check_folder_is_the_demos(out)
+    if not usd and (out / "stadium.usdc").exists():
+        log(f"--no-usd: {out / 'stadium.usdc'} is left as the earlier run wrote it")
+    with folders_made(out):                 # a folder made for a run that fails goes
+        return _run_into(out, agents, frames, size, mp4, usd, log, layout)
+
+
+def _run_into(out, agents, frames, size, mp4, usd, log, layout) -> dict:
+    """:func:`run_demo` into the folder ``out``, checked to be the demo's."""
+    blend = out / "stadium.blend"
     # the new .blend, frames and contact sheet are made under other names, the stage is
     # written but not committed: they take the old ones' places (and the configuration
     # is saved) only when the run is done, so a run that fails leaves the earlier

@@ -417,3 +417,16 @@ def test_an_odd_size_for_the_mp4_is_refused_before_the_stadium_is_built(tmp_path
     assert run.returncode == 2
     assert "an MP4 (H.264, yuv420p) needs an even width and height, got 7 x 5" in run.stderr
     assert "building the stadium" not in run.stderr and not out.exists()
+
+
+def test_a_first_run_that_fails_leaves_no_folder(tmp_path, monkeypatch):
+    """Before: the output folder the demo made stayed behind, empty, when it failed."""
+    from crowd_addon.core.base.errors import CrowdError
+    from crowd_addon.demo import run as demo_run
+
+    def building_fails(path, seats, log, final):
+        raise CrowdError("building the stadium failed: boom")
+    monkeypatch.setattr(demo_run, "_build_scene", building_fails)
+    with pytest.raises(CrowdError, match="boom"):
+        demo_run.run_demo(tmp_path / "new" / "demo", agents=10, frames=1, log=lambda m: None)
+    assert list(tmp_path.iterdir()) == []
