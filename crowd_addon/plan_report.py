@@ -4,18 +4,28 @@
 :class:`~crowd_addon.core.planning.variety_plan.VarietyPlan` (M, copies, offsets, streams,
 memory, metric), the default and the chosen one marked; :func:`plot` draws the metric
 against M, one line per copies count and offset mode, with the chosen point and the
-default marked, into a PNG (matplotlib, the ``plot`` extra).
+default marked, into an image file (matplotlib, the ``plot`` extra) whose format its
+extension names (:data:`PLOT_FORMATS`; :func:`plot_target` checks the name before any
+work).
 """
 
 from __future__ import annotations
 
+import io
+import os
+
 import numpy as np
 
 from .core.base.errors import CrowdError
+from .core.base.files import write_atomic
 
-__all__ = ["table", "plot", "summary_lines", "metric_text"]
+__all__ = ["table", "plot", "plot_target", "summary_lines", "metric_text", "PLOT_FORMATS"]
 
 _MB = 1e6
+
+#: The plot's file formats, by extension: matplotlib's that need no other program
+#: (its ``pgf`` needs LaTeX; ``raw``/``rgba`` are bare pixels no viewer opens).
+PLOT_FORMATS = ("png", "svg", "pdf", "eps", "jpg", "jpeg", "tif", "tiff")
 
 
 def metric_text(v) -> str:
@@ -57,8 +67,28 @@ def summary_lines(result) -> list:
     return lines + [f"  note: {n}" for n in result.notes]
 
 
+def plot_target(path) -> str:
+    """The file a plot named ``path`` goes to: ``path`` itself when its extension is one
+    of :data:`PLOT_FORMATS` (any case), ``path`` + ``.png`` when it has none. A folder,
+    a name ending in a separator and another extension are CrowdErrors naming it."""
+    path = os.fspath(path)
+    if path.endswith(("/", os.sep)) or os.path.isdir(path):
+        raise CrowdError(f"--plot {path}: is a folder (name the plot's file, e.g. "
+                         f"{os.path.join(path, 'plan.png')})")
+    ext = os.path.splitext(path)[1]
+    if not ext:
+        return plot_target(path + ".png")
+    if ext[1:].lower() not in PLOT_FORMATS:
+        raise CrowdError(f"--plot {path}: {ext!r} is no plot format; use "
+                         f"{', '.join('.' + f for f in PLOT_FORMATS)} (none: .png)")
+    return path
+
+
 def plot(result, path, title: str = "") -> str:
-    """Write the plot to ``path`` (PNG); returns the path."""
+    """Write the plot to the file :func:`plot_target` makes of ``path``, whole or not at
+    all (an earlier file there stays as it was when writing fails); returns that file's
+    path."""
+    path = plot_target(path)
     try:
         import matplotlib
         matplotlib.use("Agg")
@@ -101,10 +131,10 @@ def plot(result, path, title: str = "") -> str:
                           + ("" if result.settings.appearance else ", motion only"))
     ax.legend(fontsize=7, ncol=2)
     fig.tight_layout()
+    image = io.BytesIO()
     try:
-        fig.savefig(path)
-    except OSError as e:
-        raise CrowdError(f"cannot write the plot {path}: {e.strerror or e}") from None
+        fig.savefig(image, format=os.path.splitext(path)[1][1:].lower())
     finally:
         plt.close(fig)
-    return str(path)
+    write_atomic(path, lambda f: f.write(image.getbuffer()), "the plot")
+    return path

@@ -101,3 +101,58 @@ def test_bad_input_is_named(crowd_json, tmp_path, capsys):
     assert main(["plan", "--config", str(crowd_json),
                  "--plot", str(tmp_path / "missing" / "p.png")]) == 2
     assert "cannot write the plot" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("plot, message", [
+    ("plan.txt", "--plot {}: '.txt' is no plot format; use .png, .svg, .pdf"),
+    ("adir", "--plot {}: is a folder"),
+])
+def test_a_plot_name_it_cannot_write_is_refused_before_the_work(crowd_json, tmp_path, capsys,
+                                                                plot, message):
+    """Regression: --plot plan.txt ended, after the planning, in matplotlib's ValueError
+    traceback (exit 1); --plot DIR wrote DIR.png."""
+    (tmp_path / "adir").mkdir()
+    target = str(tmp_path / plot)
+    assert main(["plan", "--config", str(crowd_json), "--plot", target]) == 2
+    (line,) = capsys.readouterr().err.splitlines()        # no "candidates" progress
+    assert line.startswith(f"crowd plan: error: {message.format(target)}")
+    assert os.listdir(tmp_path) == ["adir"]
+    assert not os.listdir(tmp_path / "adir")
+
+
+def test_a_plot_without_extension_is_a_png_reported_by_its_name(crowd_json, tmp_path,
+                                                                 capsys):
+    """Regression: --plot myplot wrote myplot.png but printed "plot: myplot" (and
+    "plot": "myplot" in the JSON)."""
+    assert main(["plan", "--config", str(crowd_json), "--plot", str(tmp_path / "myplot"),
+                 "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["plot"] == str(tmp_path / "myplot.png")
+    assert os.listdir(tmp_path) == ["myplot.png"]
+    assert (tmp_path / "myplot.png").read_bytes().startswith(b"\x89PNG\r\n\x1a\n")
+    assert main(["plan", "--config", str(crowd_json), "--plot", str(tmp_path / "p.SVG")]) == 0
+    assert f"  plot: {tmp_path / 'p.SVG'}" in capsys.readouterr().out
+    assert (tmp_path / "p.SVG").read_bytes().lstrip().startswith(b"<?xml")
+
+
+def test_a_plot_that_fails_part_way_leaves_the_earlier_one_whole(crowd_json, tmp_path):
+    """Regression: the plot was written in place, so a write that failed part way (here
+    the 16 KiB file size limit of `ulimit -f 16`, as a full disk does) left plan.png
+    truncated. Now the earlier plot stays as it was and no temporary is left."""
+    import resource
+    import subprocess
+
+    png = tmp_path / "plan.png"
+    assert main(["plan", "--config", str(crowd_json), "--plot", str(png)]) == 0
+    earlier = png.read_bytes()
+    assert len(earlier) > 16 * 1024
+
+    def small_files():
+        resource.setrlimit(resource.RLIMIT_FSIZE, (16 * 1024, resource.RLIM_INFINITY))
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    run = subprocess.run([sys.executable, "-m", "crowd_addon", "plan", "--config",
+                          str(crowd_json), "--plot", str(png), "--budget-mb", "4"],
+                         capture_output=True, text=True, timeout=300, preexec_fn=small_files,
+                         cwd=root)
+    assert run.returncode == 2, run.stderr[-2000:]
+    assert f"crowd plan: error: {png}: cannot write the plot: File too large" in run.stderr
+    assert png.read_bytes() == earlier and os.listdir(tmp_path) == ["plan.png"]

@@ -118,6 +118,7 @@ def _run_budget(args) -> int:
 def add_plan(subparsers) -> None:
     from ..core.planning import budget as b
     from ..core.planning.variety_plan import MAX_STREAMS
+    from ..plan_report import PLOT_FORMATS
 
     p = subparsers.add_parser(
         "plan",
@@ -152,8 +153,10 @@ def add_plan(subparsers) -> None:
                    help="compare motion alone: agents alike when in step, whatever their "
                         "bodies and colours (what M, copies and offsets change; a crowd "
                         "whose looks never repeat measures 0 otherwise)")
-    p.add_argument("--plot", type=path_arg, default="plan.png", metavar="PNG",
-                   help="where to write the plot (default: %(default)s)")
+    p.add_argument("--plot", type=path_arg, default="plan.png", metavar="FILE",
+                   help="where to write the plot, in the format its extension names "
+                        f"({', '.join('.' + f for f in PLOT_FORMATS)}); a name without "
+                        "one gets .png (default: %(default)s)")
     p.add_argument("--no-plot", dest="plot", action="store_const", const=None,
                    help="write no plot")
     p.add_argument("--json", action="store_true",
@@ -172,8 +175,9 @@ def _run_plan(args) -> int:
     from ..core.planning.variety_plan import plan_input, plan_variety
     from ..core.base.camera import frame_positions
     from ..core.anim.sub_keys import SUB_KEYS, sub_key_bytes
-    from ..plan_report import plot, summary_lines, table
+    from ..plan_report import plot, plot_target, summary_lines, table
 
+    target = plot_target(args.plot) if args.plot else None     # refused before the work
     settings = RepetitionSettings(k=args.neighbours, appearance=not args.motion_only)
     printer = progress_printer("crowd plan")
     from ..shot_source import ShotSource
@@ -193,7 +197,7 @@ def _run_plan(args) -> int:
     result = plan_variety(plan_input(config), camera.view_projection, args.budget_mb * 1e6,
                           settings, args.max_streams,
                           progress=lambda done, total: printer("candidates", done, total))
-    written = plot(result, args.plot) if args.plot else None
+    written = plot(result, target) if target else None
     text = sys.stderr if args.json else sys.stdout     # --json: stdout is the JSON alone
     print(table(result), file=text)
     print("\n".join(summary_lines(result)), file=text)
