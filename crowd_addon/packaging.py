@@ -8,7 +8,8 @@ downloaded with ``pip download`` into a cache directory once; the extension is b
 in a staging copy of the sources by Blender's own extension tool (``blender_ext.py
 build``, shipped inside the ``bpy`` module), whose manifest gains the ``wheels`` and
 ``platforms`` fields, so the repository's ``blender_manifest.toml`` stays
-platform-neutral. The zip is written to a temporary name and renamed when complete.
+platform-neutral. The zip is written to a temporary name and renamed when complete;
+a failed build leaves no output folder it created.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ import sys
 import tempfile
 
 from .core.base.errors import CrowdError
+from .core.base.files import folders_made, write_atomic
 
 __all__ = ["WHEELS", "PLATFORMS", "PYTHONS", "fetch_wheels", "build_extension",
            "extension_tool", "REPO_ROOT"]
@@ -111,51 +113,58 @@ def build_extension(out_dir, wheel_cache=None, source=REPO_ROOT, progress=print,
                     split_platforms=False, offline=False) -> list:
     """Build the extension zip(s) into ``out_dir``; returns the zip paths. The wheels
     come from ``wheel_cache`` (default ``build/wheels``), downloaded into it when
-    missing, or with ``offline`` only from it (no network)."""
+    missing, or with ``offline`` only from it (no network). Each zip is written whole
+    or not at all; when the build fails, the output folders it created are removed."""
     out_dir = os.path.abspath(out_dir)
     if os.path.lexists(out_dir) and not os.path.isdir(out_dir):
         raise CrowdError(f"{out_dir}: exists and is not a folder (--out names the folder "
                          "the zip goes to)")
-    try:
-        os.makedirs(out_dir, exist_ok=True)
-    except OSError as e:
-        raise CrowdError(f"{out_dir}: cannot make the output folder ({e.strerror or e})") \
-            from None
     wheel_cache = wheel_cache or os.path.join(source, "build", "wheels")
-    wheels = fetch_wheels(wheel_cache, progress, download=not offline)
-    tool = extension_tool()
-    with tempfile.TemporaryDirectory(prefix="crowd_ext_") as stage:
-        pkg = os.path.join(stage, "crowd_animation")
-        os.makedirs(os.path.join(pkg, "wheels"))
-        ignore = shutil.ignore_patterns("__pycache__", "*.pyc", "*.egg-info")
-        for item in _SOURCES:
-            src = os.path.join(source, item)
-            if os.path.isdir(src):
-                shutil.copytree(src, os.path.join(pkg, item), ignore=ignore)
-            elif os.path.isfile(src):
-                shutil.copy2(src, pkg)
-        for w in wheels:
-            shutil.copy2(w, os.path.join(pkg, "wheels"))
-        with open(os.path.join(source, "blender_manifest.toml"), encoding="utf-8") as f:
-            manifest = _manifest_with_wheels(f.read(), wheels)
-        with open(os.path.join(pkg, "blender_manifest.toml"), "w", encoding="utf-8") as f:
-            f.write(manifest)
-        build_out = os.path.join(stage, "out")
-        os.makedirs(build_out)
-        cmd = [sys.executable, tool, "build", "--source-dir", pkg, "--output-dir", build_out]
-        if split_platforms:
-            cmd.append("--split-platforms")
-        progress("building with Blender's extension tool")
-        run = subprocess.run(cmd, capture_output=True, text=True)
-        if run.returncode != 0:
-            raise CrowdError(f"Blender's extension tool failed:\n{run.stdout}{run.stderr}")
-        zips = []
-        for z in sorted(glob.glob(os.path.join(build_out, "*.zip"))):
-            target = os.path.join(out_dir, os.path.basename(z))
-            tmp = target + ".tmp"
-            shutil.copyfile(z, tmp)
-            os.replace(tmp, target)
-            zips.append(target)
-    if not zips:
-        raise CrowdError("Blender's extension tool produced no zip")
+    with folders_made(out_dir):
+        wheels = fetch_wheels(wheel_cache, progress, download=not offline)
+        tool = extension_tool()
+        with tempfile.TemporaryDirectory(prefix="crowd_ext_") as stage:
+            zips = [_copy_zip(z, out_dir) for z in
+                    _build_zips(stage, source, wheels, tool, split_platforms, progress)]
+        if not zips:
+            raise CrowdError("Blender's extension tool produced no zip")
     return zips
+
+
+def _build_zips(stage, source, wheels, tool, split_platforms, progress) -> list:
+    """Stage the sources, wheels and manifest in ``stage`` and build the zip(s) there
+    with Blender's tool; returns their paths."""
+    pkg = os.path.join(stage, "crowd_animation")
+    os.makedirs(os.path.join(pkg, "wheels"))
+    ignore = shutil.ignore_patterns("__pycache__", "*.pyc", "*.egg-info")
+    for item in _SOURCES:
+        src = os.path.join(source, item)
+        if os.path.isdir(src):
+            shutil.copytree(src, os.path.join(pkg, item), ignore=ignore)
+        elif os.path.isfile(src):
+            shutil.copy2(src, pkg)
+    for w in wheels:
+        shutil.copy2(w, os.path.join(pkg, "wheels"))
+    with open(os.path.join(source, "blender_manifest.toml"), encoding="utf-8") as f:
+        manifest = _manifest_with_wheels(f.read(), wheels)
+    with open(os.path.join(pkg, "blender_manifest.toml"), "w", encoding="utf-8") as f:
+        f.write(manifest)
+    build_out = os.path.join(stage, "out")
+    os.makedirs(build_out)
+    cmd = [sys.executable, tool, "build", "--source-dir", pkg, "--output-dir", build_out]
+    if split_platforms:
+        cmd.append("--split-platforms")
+    progress("building with Blender's extension tool")
+    run = subprocess.run(cmd, capture_output=True, text=True)
+    if run.returncode != 0:
+        raise CrowdError(f"Blender's extension tool failed:\n{run.stdout}{run.stderr}")
+    return sorted(glob.glob(os.path.join(build_out, "*.zip")))
+
+
+def _copy_zip(built, out_dir) -> str:
+    """Copy the zip ``built`` into ``out_dir`` whole or not at all (a zip of that name
+    there stays as it was when the copy fails); returns its path there."""
+    target = os.path.join(out_dir, os.path.basename(built))
+    with open(built, "rb") as src:
+        write_atomic(target, lambda f: shutil.copyfileobj(src, f), "the extension zip")
+    return target

@@ -109,3 +109,43 @@ def test_wheels_folder_builds_without_network(extension_zip, tmp_path, monkeypat
                                          r"Python 3\.13"):
         packaging.build_extension(tmp_path / "dist2", wheel_cache=str(local), offline=True,
                                   progress=lambda *_: None)
+
+
+def test_a_failed_build_leaves_no_output_folder_it_made(tmp_path):
+    """Regression: `crowd build-extension --out newdist --wheels /nonexistent` named the
+    missing folder but left an empty newdist/ (and its missing parents) behind."""
+    from crowd_addon.core.base.errors import CrowdError
+
+    with pytest.raises(CrowdError, match="no such folder"):
+        packaging.build_extension(tmp_path / "new" / "dist", wheel_cache=str(tmp_path / "no"),
+                                  offline=True, progress=lambda *_: None)
+    assert os.listdir(tmp_path) == []
+
+
+def test_a_full_disk_keeps_the_earlier_zip_and_leaves_no_temporary(extension_zip, tmp_path,
+                                                                   monkeypatch):
+    """Regression: a full disk while the zip was copied out raised a raw OSError (exit 1,
+    a traceback) and left a partial crowd_animation-0.1.0.zip.tmp beside the zip."""
+    import shutil
+
+    from crowd_addon.core.base.errors import CrowdError
+
+    out = tmp_path / "dist"
+    out.mkdir()
+    earlier = out / os.path.basename(extension_zip)
+    earlier.write_bytes(b"the earlier zip")
+    real_copy = shutil.copyfileobj
+
+    def full_disk_for_zips(src, dst, *a):
+        if not str(getattr(src, "name", "")).endswith(".zip"):
+            return real_copy(src, dst, *a)
+        dst.write(src.read(65536))
+        raise OSError(28, "No space left on device")
+    monkeypatch.setattr(shutil, "copyfileobj", full_disk_for_zips)
+    cache = os.path.join(packaging.REPO_ROOT, "build", "wheels")   # filled by extension_zip
+    with pytest.raises(CrowdError, match=rf"{earlier.name}: cannot write the extension zip: "
+                                         r"No space left on device"):
+        packaging.build_extension(out, wheel_cache=cache, offline=True,
+                                  progress=lambda *_: None)
+    assert os.listdir(out) == [earlier.name]
+    assert earlier.read_bytes() == b"the earlier zip"
