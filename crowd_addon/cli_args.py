@@ -46,10 +46,14 @@ def positive_float(text: str) -> float:
     return value
 
 
+#: ``FIRST-LAST`` or one frame, either negative, blanks around them allowed.
+_FRAME_RANGE = re.compile(r"\s*(-?\d+)\s*(?:-\s*(-?\d+)\s*)?")
+
+
 def frame_range(text: str) -> tuple:
     """An argparse type: ``"FIRST-LAST"`` (e.g. ``1-300``, ``-10-20``) or ``"N"`` ->
     ``(first, last)`` ints, ``first <= last``."""
-    m = re.fullmatch(r"\s*(-?\d+)\s*(?:-\s*(-?\d+)\s*)?", text)
+    m = _FRAME_RANGE.fullmatch(text)
     if m is None:
         raise argparse.ArgumentTypeError(f"must be FIRST-LAST or a frame, got {text!r}")
     first = int(m.group(1))
@@ -185,12 +189,32 @@ def add_trust_argument(parser) -> None:
                              "stderr either way")
 
 
+def _frames_joined(argv) -> list:
+    """``argv`` with a negative frame range after ``--frames`` (``--frames -5-3``, or
+    an abbreviation of the option) joined to it as ``--frames=-5-3``: argparse takes a
+    word that starts with ``-`` and is not a plain negative number for an option, so
+    it would stop with "expected one argument". Nothing after ``--`` is touched."""
+    words = list(argv)
+    joined = []
+    while words:
+        word = words.pop(0)
+        if word == "--":
+            return joined + [word] + words
+        if (word.startswith("--f") and "--frames".startswith(word) and words
+                and words[0].startswith("-") and _FRAME_RANGE.fullmatch(words[0])):
+            word = f"{word}={words.pop(0)}"
+        joined.append(word)
+    return joined
+
+
 def parse_command(parser, argv):
-    """``(args, None)`` for ``argv`` parsed by ``parser`` (with subcommands in
-    ``command``), or ``(None, exit code)`` when there is nothing to run: ``--help``
-    (0), a usage error argparse has printed (2), no command (help printed, 2)."""
+    """``(args, None)`` for ``argv`` (None: ``sys.argv[1:]``) parsed by ``parser`` (with
+    subcommands in ``command``), or ``(None, exit code)`` when there is nothing to run:
+    ``--help`` (0), a usage error argparse has printed (2), no command (help printed,
+    2). A negative ``--frames`` value may follow the option as its own word
+    (``--frames -5-3``), as with ``=``."""
     try:
-        args = parser.parse_args(argv)
+        args = parser.parse_args(_frames_joined(sys.argv[1:] if argv is None else argv))
     except SystemExit as exc:
         return None, exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
     if args.command is None:

@@ -110,6 +110,38 @@ def test_bad_input_exits_2_and_writes_nothing(config_path, tmp_path, capsys, ext
     assert os.listdir(tmp_path) == []
 
 
+def test_negative_frame_range_may_follow_frames_as_its_own_word(tmp_path, capsys):
+    """Regression: ``--frames -5-3`` stopped with argparse's "argument --frames: expected
+    one argument" (a word starting with ``-`` taken for an option) in every command with
+    --frames; only ``--frames=-5-3`` worked. Both forms, an abbreviated option and a
+    single negative frame now reach the command; ``--`` ends the joining."""
+    from crowd_addon.blender.cli_commands import build_parser as blender_parser
+    from crowd_addon.cli import build_parser
+    from crowd_addon.cli_args import parse_command
+
+    cfg = make_config()
+    cfg.start_frame = -5
+    save_config(cfg, tmp_path / "early.json")
+    out = tmp_path / "shot.usda"
+    assert main(["export", "--config", str(tmp_path / "early.json"), "--out", str(out),
+                 "--frames", "-5-3", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["frames"] == [-5, 3]
+    stage = Usd.Stage.Open(str(out))
+    assert (stage.GetStartTimeCode(), stage.GetEndTimeCode()) == (-5, 3)
+    snapshot = ["snapshot", "--config", "c.json", "--out", "d", "--every", "2"]
+    for parser, argv in ((build_parser(), snapshot),
+                         (blender_parser(), ["export", "--out", "s.usdc"])):
+        for frames, expected in ((["--frames", "-5-3"], (-5, 3)),
+                                 (["--frames=-5-3"], (-5, 3)),
+                                 (["--fram", "-5--2"], (-5, -2)),
+                                 (["--frames", " -4 - 1 "], (-4, 1)),
+                                 (["--frames", "-7"], (-7, -7))):
+            args, code = parse_command(parser, argv + frames)
+            assert code is None and args.frames == expected, frames
+    assert parse_command(build_parser(), snapshot + ["--frames", "--", "-5-3"]) == (None, 2)
+    assert "argument --frames: expected one argument" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("option, value, message", [
     # before: a NUL raised a bare ValueError (traceback), an empty --config fell back to
     # the .blend path ("no .blend is open") after importing bpy (found by test_fuzz.py)
