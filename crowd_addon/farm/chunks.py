@@ -1,20 +1,22 @@
 """A shot's chunked export in one process (its crowd from a
 :class:`~crowd_addon.shot_source.ShotSource`): its chunks (:func:`chunk_ranges`,
-beside the output in :func:`chunk_folder`) and the two steps a process runs for it: the snapshot pass
+beside the output in :func:`chunk_folder`), the checks before any of it runs
+(:func:`chunked_output`) and the two steps a process runs for it: the snapshot pass
 (:func:`write_shot_snapshots`, ``crowd snapshot``) and one chunk's export
 (:func:`export_chunk`, ``crowd export``). What a Dask worker runs too (:mod:`.tasks`).
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 
 from ..core.base.errors import CrowdError
 from ..core.variety.repetition import RepetitionSettings
 from ..shot_source import ShotSource
 
-__all__ = ["chunk_ranges", "chunk_folder", "chunk_path", "write_shot_snapshots",
-           "export_chunk"]
+__all__ = ["chunk_ranges", "chunk_folder", "chunk_path", "chunked_output",
+           "write_shot_snapshots", "export_chunk"]
 
 
 def chunk_ranges(first: int, last: int, size: int) -> list:
@@ -34,6 +36,25 @@ def chunk_folder(out) -> str:
 def chunk_path(out, k, frames) -> str:
     ext = os.path.splitext(os.fspath(out))[1]
     return os.path.join(chunk_folder(out), f"c{k:04d}_{frames[0]}-{frames[1]}", f"shot{ext}")
+
+
+@contextlib.contextmanager
+def chunked_output(source: ShotSource, out, frames):
+    """``out``'s folder, made for the ``with`` block (removed again if it raises and
+    nothing else is in it), once what the chunked export of ``frames`` of ``source``'s
+    shot to ``out`` would refuse is checked, before any task runs or anything is
+    written: all that ``crowd export`` checks first
+    (:func:`~crowd_addon.usd.shot_export.checked_output`: the output, the agent count,
+    the layout, the meshes, the frames against the crowd's start frame), then that its
+    chunk folder can be made. A .blend's configuration is baked by the snapshot pass,
+    so only its output and layout are checked here (the rest on the workers). Raises
+    CrowdError."""
+    from ..core.base.files import writable_dir
+    from ..usd.shot_export import checked_output
+    shot = source.open(frames) if source.config is not None else None
+    with checked_output(out, source.agents, source.layout, shot):
+        writable_dir(chunk_folder(out))
+        yield
 
 
 def write_shot_snapshots(source: ShotSource, folder, frames, every, progress=None,

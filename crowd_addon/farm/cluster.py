@@ -18,7 +18,8 @@ from dataclasses import dataclass, field
 
 from ..core.base.errors import CrowdError, ScriptNotTrusted
 from ..shot_source import ShotSource
-from .chunks import chunk_folder, chunk_path, chunk_ranges
+from ..usd.files import remove_stale_temporaries
+from .chunks import chunk_folder, chunk_path, chunk_ranges, chunked_output
 from .tasks import log_line, run_chunk, run_snapshots, run_stitch
 
 __all__ = ["FarmShot", "FarmResult", "farm_export", "farm_export_shots", "summary"]
@@ -107,10 +108,12 @@ class FarmShot:
 def farm_export(source: ShotSource, out, frames, workers: int = 2, scheduler=None,
                 chunk_frames: int | None = None, progress=None) -> FarmResult:
     """Export ``frames`` of ``source``'s shot to ``out`` in chunks on a Dask cluster
-    and stitch them (the module docstring; :func:`farm_export_shots` for one shot).
-    Raises CrowdError naming what failed."""
-    (result,) = farm_export_shots([FarmShot(source, out, frames, chunk_frames)], workers,
-                                  scheduler, progress)
+    and stitch them (the module docstring; :func:`farm_export_shots` for one shot),
+    once the shot is checked as ``crowd export`` checks it (:func:`.chunks.chunked_output`:
+    nothing is written when it is refused). Raises CrowdError naming what failed."""
+    with chunked_output(source, out, frames):
+        (result,) = farm_export_shots([FarmShot(source, out, frames, chunk_frames)],
+                                      workers, scheduler, progress)
     if isinstance(result, CrowdError):
         raise result
     return result
@@ -126,7 +129,10 @@ def farm_export_shots(shots, workers: int = 2, scheduler=None, progress=None) ->
     single-threaded processes, closed at the end. ``progress("chunks", done, total)``
     over every shot's chunks. Returns per shot a :class:`FarmResult`, or a CrowdError
     naming what failed (its snapshot pass, each chunk that failed twice, or its
-    stitch); a failed shot writes no stage, so one already at its output is kept."""
+    stitch); a failed shot writes no stage, so one already at its output is kept. The
+    caller has checked each shot (:func:`.chunks.chunked_output`). Once the cluster is
+    closed, what its killed exports left (a worker stopped mid-chunk by Ctrl-C, SIGTERM
+    or a lost worker) is removed from every chunk folder and the output's folder."""
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise CrowdError(f"--workers must be at least 1, got {workers!r}")
     try:
@@ -180,9 +186,21 @@ def _run_shots(client, cluster, shots, workers, progress, logs, t0) -> list:
     finally:
         client.close()
         if cluster is not None:
-            cluster.close()
+            cluster.close()         # waits until its worker processes are gone
         _forget_closed_servers()
+        _remove_stale_exports(shots, workers)
     return results
+
+
+def _remove_stale_exports(shots, workers):
+    """The hidden temporary folders (usd/files.py) of every chunk's and every stitched
+    stage's export in the run whose process is gone: a worker killed mid-export when
+    the cluster closed never removed its own."""
+    for shot in shots:
+        paths = [chunk_path(shot.out, j, frames)
+                 for j, frames in enumerate(_chunks(shot, workers)[1])]
+        for path in [shot.out, *paths]:
+            remove_stale_temporaries(os.path.dirname(path), os.path.basename(path))
 
 
 def _forget_closed_servers():
@@ -207,8 +225,7 @@ def _submit(client, shot, workers, k) -> dict:
     """Submit one shot's tasks: snapshots, chunks (after the snapshots), stitch (after
     the chunks)."""
     first, last = int(shot.frames[0]), int(shot.frames[1])
-    size = shot.chunk_frames or max(1, math.ceil((last - first + 1) / workers))
-    ranges = chunk_ranges(first, last, size)
+    size, ranges = _chunks(shot, workers)
     folder = chunk_folder(shot.out)
     snaps_dir = os.path.join(folder, "snapshots")
     log = os.path.join(folder, "attempts.log")
@@ -226,6 +243,14 @@ def _submit(client, shot, workers, k) -> dict:
                              pure=False)
     return {"shot": shot, "names": names, "snapshots": snaps, "chunks": chunks,
             "stitch": stitched, "before": before}
+
+
+def _chunks(shot, workers) -> tuple:
+    """``(size, [(a, b)])``: a shot's chunk length (``chunk_frames``, or one chunk per
+    worker) and its chunks."""
+    first, last = int(shot.frames[0]), int(shot.frames[1])
+    size = shot.chunk_frames or max(1, math.ceil((last - first + 1) / workers))
+    return size, chunk_ranges(first, last, size)
 
 
 def _collect(plan, t0):

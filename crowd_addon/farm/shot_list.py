@@ -1,15 +1,17 @@
 """``crowd farm``'s shot list: a JSON file of shots read into :class:`~.cluster.FarmShot`
-objects, every problem a CrowdError naming the file, the shot and the key
-(docs/snapshots.md).
+objects, every problem a CrowdError naming the file, the shot and the key, each shot
+checked before anything runs (docs/snapshots.md).
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 
 from ..core.base.errors import CrowdError
 from ..shot_source import ShotSource
+from .chunks import chunked_output
 from .cluster import FarmShot
 
 __all__ = ["load_shot_list"]
@@ -26,7 +28,9 @@ def load_shot_list(path) -> list:
     """The :class:`FarmShot` list of a shot list file (docs/snapshots.md): JSON
     ``{"shots": [{"config" | "blend": ..., "frames": "FIRST-LAST", "out": ..., ...}]}``,
     paths relative to the file's folder. Every problem is a CrowdError naming the
-    file, the shot and the key."""
+    file, the shot and the key; each shot is checked as ``crowd export`` checks its
+    shot before anything runs (:func:`.chunks.chunked_output`), its output's folder
+    made (none when a shot is refused)."""
     from ..cli_args import frame_range
     from ..core.authoring.config import MAX_SUBSTEPS, USD_LAYOUTS
     path = os.fspath(path)
@@ -41,7 +45,7 @@ def load_shot_list(path) -> list:
     if not isinstance(shots, list) or not shots:
         raise CrowdError(f'{path}: needs {{"shots": [...]}} with at least one shot')
     base = os.path.dirname(os.path.abspath(path))
-    out, outs = [], set()
+    out, outs = [], {}
     for i, shot in enumerate(shots):
         where = f"{path}: shot {i}"
         if not isinstance(shot, dict):
@@ -72,9 +76,18 @@ def load_shot_list(path) -> list:
             if key in shot and shot[key] < 1:
                 raise CrowdError(f"{where}: {key!r} must be at least 1")
         target = os.path.normpath(os.path.join(base, shot["out"]))
-        if target in outs:
-            raise CrowdError(f"{where}: 'out' {shot['out']!r} is another shot's output too")
-        outs.add(target)
+        stem = os.path.splitext(target)[0]      # <stem>.layers and <stem>.chunks are its
+        if stem in outs:
+            j, other, other_target = outs[stem]
+            if other_target == target:
+                raise CrowdError(f"{where}: 'out' {shot['out']!r} is another shot's output "
+                                 f"too (shot {j}'s {other!r})")
+            raise CrowdError(f"{where}: 'out' {shot['out']!r} and shot {j}'s {other!r} "
+                             f"differ only by extension: both would write "
+                             f"{os.path.basename(stem)}.layers/ and "
+                             f"{os.path.basename(stem)}.chunks/ in "
+                             f"{os.path.dirname(stem)}; give them different names")
+        outs[stem] = (i, shot["out"], target)
 
         def at(key):
             return os.path.normpath(os.path.join(base, shot[key])) if key in shot else None
@@ -85,4 +98,10 @@ def load_shot_list(path) -> list:
                             substeps=shot.get("substeps", 1),
                             strict=shot.get("strict", False))
         out.append(FarmShot(source, target, frames, shot.get("chunk_frames")))
+    with contextlib.ExitStack() as made:    # a bad shot leaves no folder made for the others
+        for i, (shot, given) in enumerate(zip(out, shots)):
+            try:
+                made.enter_context(chunked_output(shot.source, shot.out, shot.frames))
+            except CrowdError as e:
+                raise CrowdError(f"{path}: shot {i} ('out' {given['out']!r}): {e}") from None
     return out

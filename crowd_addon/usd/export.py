@@ -41,6 +41,7 @@ from ..core.meshes.bodies import crowd_bodies, prop_names
 from ..core.authoring.config import USD_LAYOUTS, validate_config
 from ..core.authoring.config_io import config_digest
 from ..core.base.errors import CrowdError
+from ..core.shots.recorder import check_frames
 from ..core.shots.recording import Recording
 from ..core.variety.repetition import RepetitionSettings, recording_repetition_steps
 from .agents import (ROOT, agent_names, author_agent_animations, author_moves,
@@ -209,14 +210,22 @@ def _view_projection(rec, ids, camera, settings) -> np.ndarray:
     return camera.view_projection
 
 
-def check_export(config, path, agents=None, layout="instanced") -> None:
+def check_export(config, path, agents=None, layout="instanced", frames=None) -> None:
     """Check, before recording ``config``'s shot, what :func:`export_steps` would
     refuse: the output (extension, folder, writable), the agent count, the layout and
-    a proxy mesh for every exported agent's character. Raises CrowdError."""
+    a proxy mesh for every exported agent's character; with ``frames`` (first, last),
+    that they start at or after the crowd's start frame, as the recording needs.
+    ``config`` None (a .blend's, known only once baked): the output and the layout
+    only. Raises CrowdError."""
     check_layout(layout)
-    validate_config(config)
+    if config is not None:
+        validate_config(config)
     with ExportFiles(path):
         pass
+    if config is None:
+        return
+    if frames is not None:
+        check_frames(*frames, config.start_frame)
     ids = _agent_ids(agents, config.agent_count)
     names = list(config.skeletons)
     st = np.asarray(config.agent_stream, np.int64)

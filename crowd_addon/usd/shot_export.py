@@ -9,9 +9,9 @@ fails, so a failed export leaves nothing.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import os
-from contextlib import nullcontext
 
 from ..core.base.files import folders_made, writable_dir
 from ..core.shots.recorder import record
@@ -19,7 +19,7 @@ from ..core.shots.snapshot_store import ShotSnapshots, SnapshotFolder, write_sna
 from ..core.variety.repetition import RepetitionSettings
 from .export import check_export, export_crowd
 
-__all__ = ["export_shot", "snapshot_shot"]
+__all__ = ["export_shot", "checked_output", "snapshot_shot"]
 
 
 def export_shot(shot, out, agents=None, layout="instanced", snapshots=None, progress=None,
@@ -29,12 +29,9 @@ def export_shot(shot, out, agents=None, layout="instanced", snapshots=None, prog
     ``progress(stage, done, total)``; ``repetition``: the metric's settings (None: not
     measured); ``animation_only``: a chunk after the shot's first, for a stitch
     (:func:`~.export.export_crowd`). Returns ``(config, ExportResult)``."""
-    folder = writable_dir(os.path.dirname(os.path.abspath(out)))
     # the output folder (and a snapshot folder) made here are gone again if it fails
-    with folders_made(folder), folders_made(snapshots, "snapshot folder") if snapshots \
-            else nullcontext():
-        config = shot.config                        # a .blend's bake runs here
-        check_export(config, out, agents, layout)   # before simulating
+    with checked_output(out, agents, layout, shot) as config, \
+            folders_made(snapshots, "snapshot folder") if snapshots else contextlib.nullcontext():
         crowd = shot.crowd()
         snaps = ShotSnapshots(snapshots, crowd, shot.frames[0]) if snapshots else None
         recording = record(crowd, *shot.frames, progress=progress)
@@ -53,6 +50,23 @@ def export_shot(shot, out, agents=None, layout="instanced", snapshots=None, prog
             result = dataclasses.replace(result, started_from=snaps.started_from,
                                          snapshot=kept[0])
     return config, result
+
+
+@contextlib.contextmanager
+def checked_output(out, agents=None, layout="instanced", shot=None):
+    """``out``'s folder, made for the ``with`` block (the folders made are removed
+    again when the block raises), once what an export of ``shot`` to ``out`` would
+    refuse is checked, before anything is simulated: the folder can be made and
+    written (:func:`~crowd_addon.core.base.files.writable_dir`), then
+    :func:`~.export.check_export` (the output, the agent count, the layout, the
+    meshes, the frames against the crowd's start frame). Yields ``shot``'s
+    configuration (a .blend's is baked here). ``shot`` None: the output and the
+    layout only (a farm's .blend shot, baked on a worker)."""
+    folder = writable_dir(os.path.dirname(os.path.abspath(out)))
+    with folders_made(folder):
+        config = None if shot is None else shot.config
+        check_export(config, out, agents, layout, None if shot is None else shot.frames)
+        yield config
 
 
 def snapshot_shot(shot, folder, every: int, progress=None) -> list:

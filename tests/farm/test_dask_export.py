@@ -115,21 +115,23 @@ def test_a_failing_chunk_is_retried_once_named_and_the_old_stage_kept(shot, clus
 
 
 def test_a_shot_list_runs_every_shot_on_one_cluster(shot, cluster, tmp_path, capsys):
-    """Two shots and one whose configuration is missing: the two are written (the
-    first equals the single export), the third is named and writes nothing."""
+    """Two shots and one whose snapshot folder cannot be made: the two are written
+    (the first equals the single export), the third is named and writes nothing."""
     tmp, config, whole = shot
     shots = tmp_path / "shots.json"
     shots.write_text(json.dumps({"shots": [
         {"config": str(config), "frames": f"{FRAMES[0]}-{FRAMES[1]}", "out": "a/shot.usdc",
          "chunk_frames": 15},
         {"config": str(config), "frames": "5-24", "out": "b/shot.usda", "substeps": 2},
-        {"config": "missing.json", "frames": "1-10", "out": "c/shot.usdc"}]}))
+        {"config": str(config), "frames": "1-10", "out": "c/shot.usdc"}]}))
+    (tmp_path / "c" / "shot.chunks").mkdir(parents=True)
+    (tmp_path / "c" / "shot.chunks" / "snapshots").write_text("in the way")
     assert main(["farm", str(shots), "--scheduler", cluster.scheduler_address,
                  "--json"]) == 2
     captured = capsys.readouterr()
     a, b, c = json.loads(captured.out)["shots"]
     assert a["frames"] == list(FRAMES) and len(a["chunk_exports"]) == 3
-    assert b["frames"] == [5, 24] and "missing.json" in c["error"]
+    assert b["frames"] == [5, 24] and "cannot create the snapshot folder" in c["error"]
     assert "crowd farm: error:" in captured.err and "snapshot pass failed" in captured.err
     assert "crowd farm: chunks" in captured.err
     same_shot(tmp_path / "a" / "shot.usdc", whole)

@@ -23,7 +23,7 @@ from ..base.errors import CrowdError
 from .driver import FrameDriver
 from .recording import TARGET_FIELDS, Recording
 
-__all__ = ["Recorder", "record", "MAX_PREROLL", "MAX_BYTES"]
+__all__ = ["Recorder", "record", "check_frames", "MAX_PREROLL", "MAX_BYTES"]
 
 
 class Recorder:
@@ -38,7 +38,7 @@ class Recorder:
     def __init__(self, crowd, first, last):
         t = time.perf_counter()
         view = crowd.view
-        self.first, self.last = _check_frames(first, last, view.config.start_frame)
+        self.first, self.last = check_frames(first, last, view.config.start_frame)
         _check_cost(view, self.first, self.last)
         self.crowd = crowd
         if view.frame > self.first:
@@ -305,7 +305,9 @@ def _check_cost(view, first, last):
               "left (crowd export --frames A-B --snapshots DIR, then crowd stitch)")
 
 
-def _check_frames(first, last, start) -> tuple:
+def check_frames(first, last, start) -> tuple:
+    """``(first, last)`` as ints, checked to be a frame range that starts at or after
+    the crowd's ``start`` frame (CrowdError otherwise)."""
     for f in (first, last):
         if isinstance(f, bool) or not isinstance(f, Integral):
             raise CrowdError(f"record: frames must be whole numbers, got {first!r}, "
