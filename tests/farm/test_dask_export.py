@@ -131,7 +131,7 @@ def test_a_shot_list_runs_every_shot_on_one_cluster(shot, cluster, tmp_path, cap
     captured = capsys.readouterr()
     a, b, c = json.loads(captured.out)["shots"]
     assert a["frames"] == list(FRAMES) and len(a["chunk_exports"]) == 3
-    assert b["frames"] == [5, 24] and "cannot create the snapshot folder" in c["error"]
+    assert b["frames"] == [5, 24] and "snapshots: cannot create it" in c["error"]
     assert "crowd farm: error:" in captured.err and "snapshot pass failed" in captured.err
     assert "crowd farm: chunks" in captured.err
     same_shot(tmp_path / "a" / "shot.usdc", whole)

@@ -58,10 +58,10 @@ def test_a_failing_shot_prints_its_named_error_and_no_dask_traceback(config, tmp
     assert main(["farm", str(shots), "--workers", "1"]) == 2
     line = only_our_error(capfd.readouterr().err, "farm")
     assert "c/shot.usdc: the snapshot pass failed twice" in line
-    assert "cannot create the snapshot folder" in line
+    assert "snapshots: cannot create it" in line
     log = (chunks / "attempts.log").read_text()
     assert log.count("snapshots: failed on") == 2
-    assert "Traceback" in log and "cannot create the snapshot folder" in log
+    assert "Traceback" in log and "snapshots: cannot create it" in log
     assert not (tmp_path / "c" / "shot.usdc").exists()
 
 
