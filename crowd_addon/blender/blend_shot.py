@@ -48,7 +48,7 @@ def open_scene(blend: str | None = None, scene: str | None = None):
                          f"{[s.name for s in bpy.data.scenes]})")
     if not hasattr(found, "crowd"):             # outside an installed extension
         from .registration import register
-        register()
+        register(restore=False)             # the command builds the crowd: one bake
     return found
 
 

@@ -41,7 +41,10 @@ def _ours(fn, wanted) -> bool:
                             and getattr(fn, "__qualname__", None) == wanted.__qualname__)
 
 
-def register():
+def register(restore: bool = True):
+    """Register everything (the module docstring). ``restore`` False: the open file's
+    previews are not restarted (a ``crowd`` command that opened a .blend and builds
+    its crowd itself: starting them would bake it a second time)."""
     for cls in CLASSES:
         bpy.utils.register_class(cls)
     bpy.types.Scene.crowd = bpy.props.PointerProperty(type=props.CROWD_PG_settings)
@@ -55,7 +58,7 @@ def register():
         getattr(bpy.types, menu).append(fn)
     cli_commands.register_command()
     api.set_context_scene(_context_scene_name, preview.follow_renames)
-    if isinstance(bpy.data, bpy.types.BlendData):   # not while Blender starts: load_post does
+    if restore and isinstance(bpy.data, bpy.types.BlendData):   # at start: load_post does
         preview.restore("when the extension was enabled")
 
 

@@ -306,7 +306,7 @@ def author_stadium(blend, frames=240, size=(960, 540), progress=None) -> Stadium
     and save the file with its Crowd settings. Returns the :class:`Stadium`."""
     from .registration import register, unregister
     bpy.ops.wm.open_mainfile(filepath=str(blend))
-    register()
+    register(restore=False)                 # it bakes the crowd itself below
     try:
         stadium = stadium_config(bpy.context.scene, frames, size, progress=progress)
         bpy.context.preferences.filepaths.save_version = 0  # no stadium.blend1 backup

@@ -9,6 +9,7 @@ writes into an offscreen buffer.
 
 import os
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -502,6 +503,35 @@ def test_a_background_open_bakes_nothing_and_keeps_the_preview_flag(running, tmp
     monkeypatch.setattr(preview, "_has_viewport", lambda: True)    # the same file in the UI
     bpy.ops.wm.open_mainfile(filepath=path)
     assert len(bakes) == 1 and preview.get(bpy.context.scene) is not None
+
+
+OPEN_FOR_A_COMMAND = """
+import sys
+import bpy
+from crowd_addon.blender import blend_shot, scene_config
+bakes, real = [], scene_config.config_steps
+scene_config.config_steps = lambda *a, **k: bakes.append(1) or real(*a, **k)
+scene = blend_shot.open_scene(sys.argv[1], None)
+print(len(bakes), scene.crowd.render_crowd)
+"""
+
+
+def test_a_command_opening_a_render_crowd_file_bakes_it_only_itself(running, tmp_path):
+    """``crowd export --blend`` of a file with Render Crowd on: the command opens the
+    file with the bpy module, registers the extension and bakes the crowd it exports.
+    Registering also restarted the file's crowds (for Render Crowd), a bake nobody
+    used (and a crowd script run before the command could check its trust)."""
+    import subprocess
+    import sys
+    scene = running[0]
+    scene.crowd.render_crowd = True
+    path = str(tmp_path / "shot.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    run = subprocess.run([sys.executable, "-c", OPEN_FOR_A_COMMAND, path],
+                         cwd=str(Path(__file__).resolve().parents[2]), capture_output=True,
+                         text=True, timeout=300)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert run.stdout.split()[-2:] == ["0", "True"]
 
 
 def test_a_failed_bake_is_reported_by_apply_plan_and_preview_without_a_traceback(running):
