@@ -59,6 +59,19 @@ def _terminated(signum, _frame):
     raise Terminated(signum)
 
 
+def _stop_of(exc):
+    """The KeyboardInterrupt or :class:`Terminated` that ``exc`` is, or that it was
+    raised while handling (a stop that lands inside a lock's wait can leave the lock
+    broken, and the error it raises then replaces the stop), else None."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, (KeyboardInterrupt, Terminated)):
+            return exc
+        seen.add(id(exc))
+        exc = exc.__context__
+    return None
+
+
 #: One ``add_<command>`` per subcommand.
 _COMMANDS = (add_budget, add_plan, add_export, add_snapshot, add_stitch, add_farm, add_preview,
              add_demo, add_build_extension)
@@ -98,7 +111,10 @@ def console(argv=None) -> int:
                     if not a.startswith("-")), "")
     try:
         code = main(argv)
-    except (KeyboardInterrupt, Terminated) as stop:
+    except BaseException as exc:            # noqa: BLE001 - re-raised unless a stop
+        stop = _stop_of(exc)
+        if stop is None:
+            raise
         signal.signal(signal.SIGTERM, signal.SIG_IGN)     # once is enough: finish leaving
         why, code = ("interrupted", 130) if isinstance(stop, KeyboardInterrupt) else \
             ("stopped by SIGTERM", 128 + signal.SIGTERM)
