@@ -311,6 +311,11 @@ def test_a_saved_file_renders_its_crowd_after_loading(crowd_scene, tmp_path):
     preview.stop_all()
     bpy.ops.wm.open_mainfile(filepath=path)
     scene = bpy.context.scene
+    _follows_the_frame(scene)
+
+
+def _follows_the_frame(scene):
+    """The scene's crowd runs and its render data follows the frame."""
     pv = preview.get(scene)
     assert pv is not None and scene.crowd.render_crowd
     scene.frame_set(12)
@@ -490,11 +495,8 @@ def test_an_undo_that_brings_the_switch_back_brings_its_crowd_back(crowd_scene):
     bpy.ops.ed.undo()
     scene = bpy.context.scene
     assert scene.crowd.render_crowd and bpy.data.objects.get(render_crowd.POINTS)
-    pv = preview.get(scene)
-    assert pv is not None and scene.crowd.preview_enabled
-    scene.frame_set(12)
-    assert pv.render_frame == 12
-    _check_instances(scene, pv.crowd)
+    assert scene.crowd.preview_enabled
+    _follows_the_frame(scene)
 
 
 def test_enabling_the_extension_again_brings_the_render_crowd_back(crowd_scene):
@@ -507,11 +509,7 @@ def test_enabling_the_extension_again_brings_the_render_crowd_back(crowd_scene):
         assert bpy.data.objects.get(render_crowd.POINTS) is not None
     finally:
         crowd_addon.register()
-    pv = preview.get(scene)
-    assert pv is not None and scene.crowd.render_crowd
-    scene.frame_set(12)
-    assert pv.render_frame == 12
-    _check_instances(scene, pv.crowd)
+    _follows_the_frame(scene)
 
 
 def test_a_switch_that_cannot_start_goes_back_off_and_the_file_opens_without_a_bake(
