@@ -93,11 +93,11 @@ def _check(config, out_dir, frames, size, mp4, backend) -> Path:
 FRAME_NAME = re.compile(r"frame_-?\d+\.png")
 
 
-def replace_frames(out: Path, staged: Path) -> list:
+def replace_frames(out: Path, staged: Path) -> None:
     """Move the files of a finished run (its frames, its MP4) from ``staged`` into
     ``out``, then remove the frames of the run before that this one did not write (a
-    folder holds one run's sequence); returns the moved files' paths. Other files of
-    ``out`` stay, an earlier MP4 too when this run made none."""
+    folder holds one run's sequence). Other files of ``out`` stay, an earlier MP4 too
+    when this run made none."""
     names = sorted(os.listdir(staged))
     for name in names:
         os.replace(staged / name, out / name)
@@ -105,7 +105,6 @@ def replace_frames(out: Path, staged: Path) -> list:
     for name in set(os.listdir(out)) - set(names):
         if FRAME_NAME.fullmatch(name) and (out / name).is_file():
             (out / name).unlink()
-    return [str(out / name) for name in names]
 
 
 def _missing_folders(path: Path) -> list:
